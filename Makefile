@@ -1,0 +1,39 @@
+# Serra: every target creates and uses .venv by itself.
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+
+.PHONY: run test bench images lint clean venv
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[dev,training]'
+	touch $(STAMP)
+
+venv: $(STAMP)
+
+## run: the main end-to-end job on embedded defaults
+run: $(STAMP)
+	$(PY) -m gateway demo
+
+## test: the whole suite (CI calls this)
+test: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(PY) -m pytest -q
+
+## bench: speed and memory, side by side with peers; JSON in bench/results/
+bench: $(STAMP)
+	$(PY) -m pip install --quiet -e '.[bench]'
+	$(PY) tests/bench/run.py
+
+## images: MCU firmware bundle and gateway bundle in images/build/
+images: $(STAMP)
+	$(PY) images/build.py
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+
+clean:
+	rm -rf $(VENV) images/build bench/results .pytest_cache .ruff_cache

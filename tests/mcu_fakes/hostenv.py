@@ -7,7 +7,7 @@ import shutil
 import subprocess
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 MCU = ROOT / "mcu"
 FAKES = ROOT / "tests" / "mcu_fakes"
 

@@ -1,0 +1,73 @@
+"""Minute aggregates with QC flags, computed incrementally from newly stored samples.
+
+Late samples (resends after an outage) mark their minute for recomputation, so a minute row is
+always the aggregate of everything stored for it.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+
+from gateway.protocol import CHANNELS, ST_PARTIAL
+from gateway.store.db import transaction
+
+QC_MISSING = 1  # no valid sample in the minute
+QC_PARTIAL = 2  # some samples of the minute were missing or partial on this channel
+QC_SPIKE = 4  # step from the previous minute larger than physically plausible
+QC_STUCK = 8  # identical value for STUCK_MINUTES minutes in a row (a frozen sensor)
+QC_NAMES = {QC_MISSING: "missing", QC_PARTIAL: "partial", QC_SPIKE: "spike", QC_STUCK: "stuck"}
+
+MAX_STEP = {"t_in": 5.0, "rh_in": 25.0, "t_out": 5.0, "rh_out": 25.0, "i_glob": 1200.0,
+            "wind": 30.0}
+STUCK_MINUTES = 30
+STUCK_CHANNELS = ("t_in", "rh_in", "t_out", "rh_out")
+
+_SEL = ", ".join(f"{c}, {c}_st" for c in CHANNELS)
+_MIN_COLS = ["device_id", "minute", "n"] + [x for c in CHANNELS for x in (c, f"{c}_qc")]
+_UPSERT = (f"INSERT OR REPLACE INTO minute ({', '.join(_MIN_COLS)}) "
+           f"VALUES ({', '.join('?' * len(_MIN_COLS))})")
+
+
+def _minute_row(conn: sqlite3.Connection, dev: int, minute: int) -> list:
+    rows = conn.execute(f"SELECT {_SEL} FROM samples WHERE device_id=? AND t>=? AND t<?",
+                        (dev, minute, minute + 60)).fetchall()
+    out: list = [dev, minute, len(rows)]
+    for i, name in enumerate(CHANNELS):
+        vals = [r[2 * i] for r in rows if r[2 * i] is not None]
+        flags = 0
+        if not vals:
+            flags |= QC_MISSING
+        if any(r[2 * i + 1] >= ST_PARTIAL for r in rows):
+            flags |= QC_PARTIAL
+        mean = sum(vals) / len(vals) if vals else None
+        if mean is not None and name in MAX_STEP:
+            prev = conn.execute(f"SELECT {name} FROM minute WHERE device_id=? AND minute=?",
+                                (dev, minute - 60)).fetchone()
+            if prev and prev[0] is not None and abs(mean - prev[0]) > MAX_STEP[name]:
+                flags |= QC_SPIKE
+        if mean is not None and name in STUCK_CHANNELS:
+            hist = conn.execute(
+                f"SELECT {name} FROM minute WHERE device_id=? AND minute<? AND minute>=?",
+                (dev, minute, minute - 60 * (STUCK_MINUTES - 1))).fetchall()
+            if len(hist) == STUCK_MINUTES - 1 and all(h[0] == mean for h in hist):
+                flags |= QC_STUCK
+        out += (mean, flags)
+    return out
+
+
+def aggregate(conn: sqlite3.Connection) -> int:
+    """Recompute the minutes touched by samples stored since the last call; returns how many."""
+    last = int((conn.execute("SELECT value FROM meta WHERE name='agg_rowid'").fetchone()
+                or ("0",))[0])
+    top = conn.execute("SELECT max(rowid) FROM samples").fetchone()[0] or 0
+    if top <= last:
+        return 0
+    touched = sorted(conn.execute(
+        "SELECT DISTINCT device_id, CAST(t / 60 AS INTEGER) * 60 FROM samples "
+        "WHERE rowid>? AND rowid<=?", (last, top)).fetchall(), key=lambda r: (r[0], r[1]))
+    with transaction(conn):
+        for dev, minute in touched:
+            conn.execute(_UPSERT, _minute_row(conn, dev, minute))
+        conn.execute("INSERT OR REPLACE INTO meta (name, value) VALUES ('agg_rowid', ?)",
+                     (str(top),))
+    return len(touched)

@@ -1,0 +1,157 @@
+"""Store: batching writer, device state, keys file, aggregates with QC, outbox, retention."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+from gateway.protocol import CHANNELS, ST_OK, ST_PARTIAL, ST_TIMEOUT, Record
+from gateway.store import Store, retention
+from gateway.store import aggregate as agg
+from gateway.store.keys import KeyFileError, load_keys, parse_keys, write_keys
+from gateway.store.outbox import Outbox
+
+T0 = 1_700_000_000.0 // 60 * 60  # a minute boundary
+OKV = (21.5, 65.0, 12.0, 80.0, 432.1, 3.4, 0.0)
+
+
+def rec(seq: int, dev: int = 7, boot: int = 1, values=OKV, status=(ST_OK,) * 7,
+        age_ms: int = 0) -> Record:
+    return Record(dev, boot, seq, seq * 10_000, age_ms, 10.0, tuple(values), tuple(status))
+
+
+def test_write_batch_durable_and_idempotent(tmp_path: Path) -> None:
+    s = Store(tmp_path / "g.db")
+    assert s.conn.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    assert s.write_batch([(rec(i), T0 + i) for i in range(5)]) == 5
+    # Re-writing the same records stores nothing twice.
+    assert s.write_batch([(rec(i), T0 + 10 + i) for i in range(3, 7)]) == 2
+    assert s.conn.execute("SELECT count(*) FROM samples").fetchone()[0] == 7
+    assert s.device_states()[7].max_seq == 6
+    assert s.stored_seqs(7, 1, 4) == {5, 6}
+    s.close()
+    # Reopened: everything is there (real file, committed).
+    s2 = Store(tmp_path / "g.db")
+    row = s2.conn.execute("SELECT t_in, t_in_st, t, t_recv FROM samples WHERE seq=2").fetchone()
+    assert row == (21.5, 0, T0 + 2, T0 + 2)
+    assert s2.integrity_ok()
+
+
+def test_wall_time_is_reception_minus_age(tmp_path: Path) -> None:
+    s = Store(tmp_path / "g.db")
+    s.write_batch([(rec(0, age_ms=90_500), T0 + 100)])
+    assert s.conn.execute("SELECT t FROM samples").fetchone()[0] == pytest.approx(T0 + 9.5)
+
+
+def test_device_state_follows_new_boot_not_old(tmp_path: Path) -> None:
+    s = Store(tmp_path / "g.db")
+    s.write_batch([(rec(50, boot=1), T0), (rec(3, boot=2), T0 + 1)])
+    assert s.device_states()[7] == (2, 3)
+    s.write_batch([(rec(60, boot=1), T0 + 2)])  # an old boot must not move the state back
+    assert s.device_states()[7] == (2, 3)
+    s.write_batch([(rec(9, boot=2), T0 + 3), (rec(1, boot=3), T0 + 4)])
+    assert s.device_states()[7] == (3, 1)
+
+
+def test_missing_values_stored_as_null_with_code(tmp_path: Path) -> None:
+    s = Store(tmp_path / "g.db")
+    vals = (None, None, 12.0, 80.0, 0.0, 0.0, 1.0)
+    s.write_batch([(rec(0, values=vals, status=(ST_TIMEOUT, ST_TIMEOUT) + (ST_OK,) * 5), T0)])
+    assert s.conn.execute("SELECT t_in, t_in_st, rain FROM samples").fetchone() == (
+        None, ST_TIMEOUT, 1.0)
+
+
+def test_keys_file_permissions_and_errors(tmp_path: Path) -> None:
+    p = tmp_path / "keys"
+    write_keys(p, {7: bytes(32), 9: bytes(range(32))})
+    assert load_keys(p) == {7: bytes(32), 9: bytes(range(32))}
+    os.chmod(p, 0o644)
+    with pytest.raises(KeyFileError, match="chmod 600"):
+        load_keys(p)
+    with pytest.raises(KeyFileError, match=r"k:2: key of device 8 is not hexadecimal"):
+        parse_keys("7 " + "00" * 32 + "\n8 zz\n", "k")
+    with pytest.raises(KeyFileError, match=r"k:3: device 7 listed twice"):
+        parse_keys("7 " + "00" * 32 + "\n# c\n7 " + "11" * 32, "k")
+    with pytest.raises(KeyFileError, match=r"k:1: key of device 7 has 4 bytes"):
+        parse_keys("7 00112233", "k")
+    with pytest.raises(KeyFileError, match=r"k:1: device id 'x' is not an integer"):
+        parse_keys("x 00", "k")
+
+
+def _minute(s: Store, m: int, col: str):
+    return s.conn.execute(f"SELECT {col}, {col}_qc, n FROM minute WHERE minute=?",
+                          (int(T0) + 60 * m,)).fetchone()
+
+
+def test_minute_aggregates_and_qc(tmp_path: Path) -> None:
+    s = Store(tmp_path / "g.db")
+    # Minute 0: two good samples; minute 1: one partial, one timed-out t_in.
+    s.write_batch([(rec(0, values=(20.0,) + OKV[1:]), T0 + 10),
+                   (rec(1, values=(22.0,) + OKV[1:]), T0 + 40),
+                   (rec(2, status=(ST_PARTIAL,) + (ST_OK,) * 6), T0 + 70),
+                   (rec(3, values=(None,) + OKV[1:], status=(ST_TIMEOUT,) + (ST_OK,) * 6),
+                    T0 + 100)])
+    assert agg.aggregate(s.conn) == 2
+    assert _minute(s, 0, "t_in") == (21.0, 0, 2)
+    assert _minute(s, 1, "t_in") == (21.5, agg.QC_PARTIAL, 2)
+    # Minute 2: only failed reads -> missing; minute 3: a 10 K jump -> spike.
+    s.write_batch([(rec(4, values=(None,) + OKV[1:], status=(ST_TIMEOUT,) + (ST_OK,) * 6),
+                    T0 + 130), (rec(5, values=(31.5,) + OKV[1:]), T0 + 150)])
+    s.write_batch([(rec(6, values=(45.0,) + OKV[1:]), T0 + 190)])
+    assert agg.aggregate(s.conn) == 2
+    assert _minute(s, 2, "t_in") == (31.5, agg.QC_PARTIAL | agg.QC_SPIKE, 2)  # 10 K in 1 min
+    assert _minute(s, 3, "t_in")[1] == agg.QC_SPIKE
+    assert _minute(s, 3, "rh_in")[1] == 0
+    # A late resend for minute 0 recomputes it.
+    s.write_batch([(rec(7, values=(24.0,) + OKV[1:], age_ms=200_000), T0 + 250)])
+    assert agg.aggregate(s.conn) == 1
+    assert _minute(s, 0, "t_in") == (pytest.approx(22.0), 0, 3)
+    assert agg.aggregate(s.conn) == 0
+
+
+def test_qc_missing_and_stuck(tmp_path: Path) -> None:
+    s = Store(tmp_path / "g.db")
+    miss = (None,) * 7
+    s.write_batch([(rec(0, values=miss, status=(ST_TIMEOUT,) * 7), T0 + 5)])
+    agg.aggregate(s.conn)
+    for c in CHANNELS:
+        assert _minute(s, 0, c)[1] & agg.QC_MISSING
+    s.write_batch([(rec(i), T0 + 60 * i + 5) for i in range(1, agg.STUCK_MINUTES + 2)])
+    agg.aggregate(s.conn)
+    assert not _minute(s, agg.STUCK_MINUTES - 1, "t_in")[1] & agg.QC_STUCK
+    assert _minute(s, agg.STUCK_MINUTES + 1, "t_in")[1] & agg.QC_STUCK
+    assert not _minute(s, agg.STUCK_MINUTES + 1, "i_glob")[1] & agg.QC_STUCK
+
+
+def test_outbox_bounded_with_alarm(tmp_path: Path) -> None:
+    s = Store(tmp_path / "g.db")
+    ob = Outbox(s.conn, max_rows=10, alarm_fraction=0.5)
+    for i in range(4):
+        ob.put("serra/x", f"{i}")
+    assert not ob.alarm
+    ob.put("serra/x", "4")
+    assert ob.alarm
+    for i in range(5, 15):
+        ob.put("serra/x", f"{i}")
+    assert ob.pending() == 10 and ob.dropped == 5
+    batch = ob.peek(3)
+    assert [p for _, _, p in batch] == ["5", "6", "7"]
+    ob.mark_sent([i for i, _, _ in batch])
+    assert ob.pending() == 7
+
+
+def test_retention_and_capacity(tmp_path: Path) -> None:
+    s = Store(tmp_path / "g.db")
+    s.write_batch([(rec(i), T0 - 86400 * 10 + i) for i in range(3)] +
+                  [(rec(10 + i), T0 + i) for i in range(3)])
+    s.add_estimates([(T0 - 86400 * 10, "online", "c_solar", 0.5, "1"),
+                     (T0, "online", "c_solar", 0.6, "1")])
+    pol = retention.Policy(samples_days=5, estimates_days=5)
+    out = retention.apply(s.conn, pol, now=T0)
+    assert out["samples"] == 3 and out["estimates"] == 1
+    assert s.estimates("c_solar") == [(T0, "online", 0.6)]
+    assert retention.capacity_alarms(tmp_path / "g.db", pol) == []
+    tiny = retention.Policy(max_db_bytes=1000)
+    assert "limit" in retention.capacity_alarms(tmp_path / "g.db", tiny)[0]

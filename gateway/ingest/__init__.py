@@ -1,0 +1,1 @@
+"""Ingest: receive packets (UDP, serial), validate them, store them durably, then acknowledge."""

@@ -1,0 +1,185 @@
+"""Transport-independent ingest: validate, de-duplicate, batch, commit, then acknowledge.
+
+A packet is acknowledged only after the transaction holding it has committed, so an ack always
+means durable. Duplicates (resends after a lost ack) are acknowledged again without storing.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Callable, Hashable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+from gateway import protocol as p
+from gateway.ingest.counters import Counters, RateLimitedLog
+from gateway.store import Store
+
+log = logging.getLogger("serra.ingest")
+
+Send = Callable[[bytes, Hashable], None]
+
+# Sequence numbers older than max_seq - WINDOW are replays. The firmware ring holds far fewer
+# unacknowledged records (128), so a genuine resend is always inside the window.
+WINDOW = 1024
+
+
+@dataclass(slots=True)
+class _Dev:
+    key: bytes
+    boot: int = -1
+    max_seq: int = -1
+    seen: set[int] = field(default_factory=set)  # committed seqs of `boot` inside the window
+
+
+@dataclass(slots=True)
+class _Pending:
+    rec: p.Record
+    t_recv: float
+    waiters: list[tuple[Send, Hashable]]
+
+
+class IngestCore:
+    def __init__(self, store: Store, keys: dict[int, bytes], *, max_pending: int = 50_000,
+                 batch_delay: float = 0.0, alarm_fraction: float = 0.8) -> None:
+        self.store = store
+        self.counters = Counters()
+        self.rlog = RateLimitedLog(log)
+        self.max_pending = max_pending
+        self.alarm_at = int(max_pending * alarm_fraction)
+        self.batch_delay = batch_delay
+        self.devs: dict[int, _Dev] = {d: _Dev(k) for d, k in keys.items()}
+        for dev, st in store.device_states().items():
+            d = self.devs.get(dev)
+            if d is not None:
+                d.boot, d.max_seq = st.boot, st.max_seq
+                d.seen = store.stored_seqs(dev, st.boot, st.max_seq - WINDOW)
+        self._pending: dict[tuple[int, int, int], _Pending] = {}
+        self._queue: list[tuple[int, int, int]] = []
+        self._wake = asyncio.Event()
+        # SQLite work runs in one dedicated thread so the event loop keeps receiving.
+        self._exec = ThreadPoolExecutor(1, thread_name_prefix="serra-store")
+        self.alarm = False
+
+    # -- receiving ------------------------------------------------------------------------
+    def _reject(self, reason: str, detail: str, peer: Hashable) -> None:
+        self.counters[reason] += 1
+        self.rlog.warning(reason, "packet from %s rejected: %s %s", peer, reason, detail)
+
+    def handle(self, data: bytes, peer: Hashable, send: Send) -> None:
+        """Process one datagram/frame; never raises on any input."""
+        try:
+            self._handle(data, peer, send)
+        except Exception:  # a bug must not stop ingest; counted and logged
+            self.counters["internal_error"] += 1
+            log.exception("internal error on packet %s from %s", bytes(data[:80]).hex(), peer)
+
+    def _handle(self, data: bytes, peer: Hashable, send: Send) -> None:
+        try:
+            dev_id = p.peek_device(data)
+        except p.ProtocolError as e:
+            return self._reject(e.reason, e.detail, peer)
+        d = self.devs.get(dev_id)
+        if d is None:
+            return self._reject("unknown_device", f"device {dev_id}", peer)
+        try:
+            p.verify(data, d.key)
+        except p.ProtocolError as e:
+            return self._reject(e.reason, f"device {dev_id}", peer)
+        try:
+            rec = p.parse_fields(data)
+        except p.ProtocolError as e:
+            # Authenticated, so the firmware is told to drop the record instead of resending it.
+            self._reject(e.reason, f"device {dev_id}: {e.detail}", peer)
+            boot, seq = int.from_bytes(data[8:12], "big"), int.from_bytes(data[12:16], "big")
+            self._send(send, peer, p.encode_ack(dev_id, boot, seq, p.ACK_REJECTED,
+                                                p.REASON_CODES[e.reason], d.key))
+            return None
+        if rec.boot < d.boot:
+            return self._reject("replay_old_boot", f"device {dev_id} boot {rec.boot} < "
+                                f"{d.boot}", peer)
+        if rec.boot == d.boot:
+            if rec.seq <= d.max_seq - WINDOW:
+                return self._reject("replay_old_seq", f"device {dev_id} seq {rec.seq}", peer)
+            if rec.seq in d.seen:
+                self.counters["duplicate"] += 1
+                self._send(send, peer, p.encode_ack(dev_id, rec.boot, rec.seq, p.ACK_DUPLICATE,
+                                                    0, d.key))
+                return None
+        k = (dev_id, rec.boot, rec.seq)
+        pend = self._pending.get(k)
+        if pend is not None:  # resent while its batch is being committed: ack after commit
+            self.counters["duplicate"] += 1
+            pend.waiters.append((send, peer))
+            return None
+        if len(self._pending) >= self.max_pending:
+            # No ack: the firmware keeps the record and resends it later.
+            return self._reject("overload", f"{len(self._pending)} records waiting", peer)
+        if rec.boot > d.boot:
+            d.boot, d.max_seq, d.seen = rec.boot, -1, set()
+        if rec.seq > d.max_seq:
+            d.max_seq = rec.seq
+        self._pending[k] = _Pending(rec, time.time(), [(send, peer)])
+        self._queue.append(k)
+        self._wake.set()
+        alarm = len(self._pending) >= self.alarm_at
+        if alarm and not self.alarm:
+            log.warning("ingest queue at %d/%d records: the store is not keeping up",
+                        len(self._pending), self.max_pending)
+        self.alarm = alarm
+
+    def _send(self, send: Send, peer: Hashable, pkt: bytes) -> None:
+        try:
+            send(pkt, peer)
+        except Exception as e:  # a lost ack only costs a resend
+            self.counters["ack_send_failed"] += 1
+            self.rlog.warning("ack_send_failed", "ack to %s failed: %s", peer, e)
+
+    # -- committing -----------------------------------------------------------------------
+    async def run_writer(self) -> None:
+        loop = asyncio.get_running_loop()
+        while True:
+            await self._wake.wait()
+            if self.batch_delay:
+                await asyncio.sleep(self.batch_delay)  # let a batch build up: fewer commits
+            self._wake.clear()
+            await self._commit(loop)
+
+    async def _commit(self, loop: asyncio.AbstractEventLoop) -> None:
+        keys, self._queue = self._queue, []
+        if not keys:
+            return
+        items = [(self._pending[k].rec, self._pending[k].t_recv) for k in keys]
+        try:
+            await loop.run_in_executor(self._exec, self.store.write_batch, items)
+        except Exception as e:
+            # Nothing acknowledged, nothing lost: the senders still hold these records.
+            self.counters["store_error"] += len(keys)
+            log.error("store write of %d records failed: %s", len(keys), e)
+            for k in keys:
+                self._pending.pop(k, None)
+            return
+        self.counters["stored"] += len(keys)
+        for k in keys:
+            pend = self._pending.pop(k)
+            d = self.devs[k[0]]
+            if d.boot == k[1]:
+                d.seen.add(k[2])
+                if len(d.seen) > 2 * WINDOW:
+                    lo = d.max_seq - WINDOW
+                    d.seen = {s for s in d.seen if s > lo}
+            ack = p.encode_ack(k[0], k[1], k[2], p.ACK_STORED, 0, d.key)
+            for send, peer in pend.waiters:
+                self._send(send, peer, ack)
+
+    async def drain(self) -> None:
+        """Commit whatever is queued (graceful shutdown)."""
+        await self._commit(asyncio.get_running_loop())
+
+    def run_in_store_thread(self, fn, *args):  # noqa: ANN001, ANN201 - thin helper
+        return asyncio.get_running_loop().run_in_executor(self._exec, fn, *args)
+
+    def close(self) -> None:
+        self._exec.shutdown(wait=True)

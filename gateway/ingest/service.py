@@ -1,0 +1,160 @@
+"""The ingest service: UDP and/or serial in, SQLite out, periodic aggregation and retention.
+
+    python -m gateway.ingest.service --db serra.db --keys keys.txt --listen 127.0.0.1:5683
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import logging
+import signal
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from gateway.ingest.core import IngestCore
+from gateway.ingest.udp import UdpServer
+from gateway.store import Store, aggregate, retention
+from gateway.store.keys import KeyFileError, load_keys
+
+log = logging.getLogger("serra.ingest")
+
+DEFAULT_PORT = 5683
+
+
+@dataclass
+class IngestConfig:
+    db: Path
+    keys: Path
+    listen: tuple[str, int] | None = ("0.0.0.0", DEFAULT_PORT)
+    serial: str | None = None
+    baudrate: int = 115200
+    batch_delay: float = 0.0  # extra wait to grow a batch (commits are already grouped)
+    max_pending: int = 50_000
+    maintenance_every: float = 10.0  # aggregation, retention, capacity alarms [s]
+    stats_every: float = 60.0
+    policy: retention.Policy = field(default_factory=retention.Policy)
+
+
+def parse_hostport(text: str) -> tuple[str, int]:
+    host, sep, port = text.rpartition(":")
+    if not sep or not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise argparse.ArgumentTypeError(f"expected HOST:PORT, got {text!r}")
+    return host.strip("[]") or "0.0.0.0", int(port)
+
+
+def _maintenance(store: Store, policy: retention.Policy) -> None:
+    aggregate.aggregate(store.conn)
+    retention.apply(store.conn, policy)
+    retention.capacity_alarms(store.path, policy)
+
+
+@dataclass
+class Running:
+    """Handed to serve()'s on_ready callback: live objects for status views and tests."""
+
+    core: IngestCore
+    store: Store
+    udp_address: tuple[str, int] | None
+
+
+async def serve(config: IngestConfig,
+                on_ready: Callable[[Running], None] | None = None) -> None:
+    """Run until cancelled. Prints one 'listening' line per transport (tests read the port)."""
+    keys = load_keys(config.keys)
+    store = Store(config.db)
+    core = IngestCore(store, keys, max_pending=config.max_pending,
+                      batch_delay=config.batch_delay)
+    transports: list = []
+    try:
+        if config.listen is not None:
+            udp = UdpServer(core, *config.listen)
+            udp.start()
+            transports.append(udp)
+            print(f"serra-ingest listening udp {udp.address[0]}:{udp.address[1]}", flush=True)
+        if config.serial:
+            from gateway.ingest.serial import SerialTransport
+
+            ser = SerialTransport(core, config.serial, config.baudrate)
+            ser.start()
+            transports.append(ser)
+            print(f"serra-ingest listening serial {config.serial}", flush=True)
+        log.info("%d device keys, store %s", len(keys), config.db)
+        if on_ready is not None:
+            on_ready(Running(core, store, transports[0].address if config.listen else None))
+        writer = asyncio.create_task(core.run_writer())
+        loop = asyncio.get_running_loop()
+        t_stats = loop.time()
+        while True:
+            await asyncio.sleep(config.maintenance_every)
+            if writer.done():
+                writer.result()  # surface a writer crash
+            await core.run_in_store_thread(_maintenance, store, config.policy)
+            if loop.time() - t_stats >= config.stats_every:
+                t_stats = loop.time()
+                log.info("ingest counters %s", core.counters.snapshot())
+    finally:
+        for t in transports:
+            t.close()
+        with contextlib.suppress(Exception):
+            await core.drain()
+        core.close()
+        store.close()
+        log.info("ingest stopped; counters %s", core.counters.snapshot())
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="python -m gateway.ingest.service",
+                                 description="Serra ingest: kit packets in, durable store out.")
+    ap.add_argument("--db", type=Path, required=True, help="SQLite store (created if absent)")
+    ap.add_argument("--keys", type=Path, required=True,
+                    help="device keys file, mode 600: '<device_id> <hex key>' per line")
+    ap.add_argument("--listen", type=parse_hostport, default=None,
+                    help=f"UDP HOST:PORT (default 0.0.0.0:{DEFAULT_PORT} unless --serial only)")
+    ap.add_argument("--serial", default=None,
+                    help="pyserial URL of a board on USB, e.g. /dev/ttyUSB0 or loop://")
+    ap.add_argument("--baudrate", type=int, default=115200)
+    ap.add_argument("--retention-days", type=float, default=retention.Policy.samples_days,
+                    help="keep raw samples this many days (minute aggregates are kept longer)")
+    ap.add_argument("--max-db-mb", type=float, default=retention.Policy.max_db_bytes / 2**20,
+                    help="alarm when the database reaches 80 %% of this size")
+    ap.add_argument("--maintenance-every", type=float, default=10.0, help=argparse.SUPPRESS)
+    ap.add_argument("-v", "--verbose", action="store_true")
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    listen = args.listen
+    if listen is None and not args.serial:
+        listen = ("0.0.0.0", DEFAULT_PORT)
+    cfg = IngestConfig(
+        db=args.db, keys=args.keys, listen=listen, serial=args.serial, baudrate=args.baudrate,
+        maintenance_every=args.maintenance_every,
+        policy=retention.Policy(samples_days=args.retention_days,
+                                max_db_bytes=int(args.max_db_mb * 2**20)))
+    try:
+        load_keys(cfg.keys)  # fail early with a clear message
+    except (KeyFileError, OSError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+
+    async def _run() -> None:
+        task = asyncio.ensure_future(serve(cfg))
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            loop.add_signal_handler(sig, task.cancel)
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+
+    asyncio.run(_run())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

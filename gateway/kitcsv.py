@@ -1,0 +1,208 @@
+"""The kit CSV: the one measured-data format every tool reads and writes.
+
+Spec: docs/data-format.md (copied from ../shared/DATA_FORMAT.md). Reading is strict: a bad
+cell is an error naming the file, the line and the column, never a silent guess.
+"""
+
+from __future__ import annotations
+
+import csv
+import logging
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Column:
+    """One kit CSV column: name, unit and the physically possible range."""
+
+    name: str
+    unit: str
+    lower: float
+    upper: float
+    meaning: str
+
+
+COLUMNS: dict[str, Column] = {
+    c.name: c
+    for c in (
+        Column("t_in", "°C", -40.0, 70.0, "inside air temperature"),
+        Column("rh_in", "%", 0.0, 100.0, "inside relative humidity"),
+        Column("t_out", "°C", -50.0, 60.0, "outside air temperature"),
+        Column("rh_out", "%", 0.0, 100.0, "outside relative humidity"),
+        Column("i_glob", "W m-2", -10.0, 1500.0, "outside global solar radiation"),
+        Column("wind", "m s-1", 0.0, 75.0, "outside wind speed"),
+        Column("i_in", "W m-2", -10.0, 1500.0, "global radiation under the cover"),
+        Column("t_soil", "°C", -30.0, 80.0, "soil surface temperature"),
+        Column("vent_roof", "%", 0.0, 100.0, "roof vent opening"),
+        Column("vent_side", "%", 0.0, 100.0, "side vent opening"),
+        Column("lai", "m2 m-2", 0.0, 15.0, "leaf area index"),
+        Column("co2_in", "ppm", 0.0, 10000.0, "inside CO2 concentration"),
+        Column("co2_out", "ppm", 0.0, 10000.0, "outside CO2 concentration"),
+        Column("rain", "0/1", 0.0, 1.0, "rain detector"),
+    )
+}
+TEMPERATURE_COLUMNS = ("t_in", "t_out", "t_soil")
+AIR_TEMPERATURE_REQUIRED = ("t_in", "t_out", "rh_in", "i_glob", "wind")
+
+
+class KitCsvError(ValueError):
+    """A kit CSV file that cannot be read; the message names file, line and column."""
+
+
+@dataclass
+class KitData:
+    """Samples of a kit CSV as read: irregular times allowed, NaN where a cell was empty.
+
+    ``time`` holds UTC instants as numpy datetime64[s]; ``columns`` maps a kit column name to a
+    float array of the same length.
+    """
+
+    time: np.ndarray
+    columns: dict[str, np.ndarray]
+    source: str = "<memory>"
+    notices: list[str] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.time)
+
+    def seconds(self) -> np.ndarray:
+        """Sample times as float seconds since the Unix epoch."""
+        return self.time.astype("datetime64[s]").astype(np.int64).astype(float)
+
+
+def parse_time(text: str) -> np.datetime64:
+    """ISO 8601 with an explicit UTC offset or ``Z`` → datetime64[s] in UTC."""
+    stamp = datetime.fromisoformat(text.strip())
+    if stamp.tzinfo is None:
+        raise ValueError("no UTC offset (write e.g. 2020-03-27T00:01:00Z)")
+    stamp = stamp.astimezone(UTC).replace(tzinfo=None)
+    return np.datetime64(stamp, "s")
+
+
+def read_kit_csv(path: str | Path, required: Iterable[str] = ()) -> KitData:
+    """Read and validate a kit CSV.
+
+    Raises KitCsvError naming ``file:line`` and the column for: a missing required column, an
+    unparsable time or number, a time not after the previous one, a value outside the column's
+    physical range (with a hint when a temperature looks like kelvin or RH like a fraction).
+    Unknown columns are ignored with a notice (logged and kept in ``KitData.notices``).
+    """
+    path = Path(path)
+    try:
+        handle = path.open(newline="", encoding="utf-8")
+    except OSError as exc:
+        raise KitCsvError(f"{path}: cannot open: {exc.strerror}") from exc
+    with handle:
+        reader = csv.reader(handle)
+        try:
+            header = [h.strip() for h in next(reader)]
+        except StopIteration:
+            raise KitCsvError(f"{path}: empty file, expected a header row") from None
+        except UnicodeDecodeError as exc:
+            raise KitCsvError(f"{path}: not UTF-8 text ({exc.reason})") from None
+        if not header or header[0] != "time":
+            raise KitCsvError(f"{path}:1: the first column must be 'time', found {header[:1]}")
+        if len(set(header)) != len(header):
+            dup = sorted({h for h in header if header.count(h) > 1})
+            raise KitCsvError(f"{path}:1: duplicate column(s) {', '.join(dup)}")
+        missing = [c for c in required if c not in header]
+        if missing:
+            raise KitCsvError(f"{path}:1: missing required column(s) {', '.join(missing)}")
+        notices = []
+        known = [(i, h) for i, h in enumerate(header) if h in COLUMNS]
+        extra = [h for h in header[1:] if h not in COLUMNS]
+        if extra:
+            notices.append(f"{path}: ignoring unknown column(s) {', '.join(extra)}")
+            log.warning(notices[-1])
+        times: list[np.datetime64] = []
+        values: dict[str, list[float]] = {h: [] for _, h in known}
+        previous = None
+        for row in reader:
+            line = reader.line_num
+            if not row or (len(row) == 1 and not row[0].strip()):
+                continue
+            if len(row) != len(header):
+                raise KitCsvError(
+                    f"{path}:{line}: {len(row)} cells, the header has {len(header)}"
+                )
+            try:
+                stamp = parse_time(row[0])
+            except ValueError as exc:
+                raise KitCsvError(f"{path}:{line}: column time: bad time {row[0]!r}: {exc}") from None
+            if previous is not None and stamp <= previous:
+                raise KitCsvError(
+                    f"{path}:{line}: column time: {row[0]} is not after the previous row "
+                    f"({previous}Z); rows must be in time order"
+                )
+            previous = stamp
+            times.append(stamp)
+            for i, name in known:
+                values[name].append(_parse_cell(path, line, name, row[i]))
+    if not times:
+        raise KitCsvError(f"{path}: no data rows")
+    return KitData(
+        time=np.array(times, dtype="datetime64[s]"),
+        columns={k: np.array(v, dtype=float) for k, v in values.items()},
+        source=str(path),
+        notices=notices,
+    )
+
+
+def _parse_cell(path: Path, line: int, name: str, cell: str) -> float:
+    cell = cell.strip()
+    if not cell:
+        return math.nan
+    try:
+        value = float(cell)
+    except ValueError:
+        raise KitCsvError(f"{path}:{line}: column {name}: not a number: {cell!r}") from None
+    if not math.isfinite(value):
+        raise KitCsvError(f"{path}:{line}: column {name}: {cell!r} (leave the cell empty)")
+    col = COLUMNS[name]
+    if not col.lower <= value <= col.upper:
+        hint = ""
+        if name in TEMPERATURE_COLUMNS and 200.0 < value < 400.0:
+            hint = " (looks like kelvin: the kit CSV wants °C)"
+        elif name.startswith("rh_") and value > 100.0:
+            hint = " (relative humidity cannot exceed 100 %)"
+        raise KitCsvError(
+            f"{path}:{line}: column {name}: {value:g} {col.unit} outside the physical range "
+            f"[{col.lower:g}, {col.upper:g}]{hint}"
+        )
+    return value
+
+
+def format_time(t: np.datetime64) -> str:
+    """datetime64 (UTC) → ISO 8601 with a ``Z``."""
+    return str(np.datetime64(t, "s")) + "Z"
+
+
+def write_kit_csv(
+    path: str | Path, time: np.ndarray, columns: Mapping[str, np.ndarray], digits: int = 6
+) -> Path:
+    """Write a kit CSV; NaN becomes an empty cell. Only kit columns are accepted."""
+    unknown = [c for c in columns if c not in COLUMNS]
+    if unknown:
+        raise ValueError(f"not kit CSV columns: {', '.join(unknown)} (see docs/data-format.md)")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    names = [c for c in COLUMNS if c in columns]
+    data = [np.asarray(columns[c], dtype=float) for c in names]
+    stamps = np.asarray(time, dtype="datetime64[s]")
+    with path.open("w", newline="", encoding="utf-8") as handle:
+        out = csv.writer(handle, lineterminator="\n")
+        out.writerow(["time", *names])
+        for i, stamp in enumerate(stamps):
+            out.writerow(
+                [str(stamp) + "Z"]
+                + [("" if not math.isfinite(v[i]) else f"{v[i]:.{digits}g}") for v in data]
+            )
+    return path

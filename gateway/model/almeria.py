@@ -1,0 +1,172 @@
+"""The pseudo-physical model of the Almería greenhouse (thesis §III.2.3, III.23–III.35).
+
+    C_ter dT_in/dt = Q_sol + Q_cnv_ss - Q_cnd_cnv - Q_trp - Q_vent          (III.23)
+    C_ter = c_p rho V / A                                                   (III.24)
+
+Ten parameters with the hard bounds of table 13 and the variation ratios of table 12, except
+the ventilation coefficients, which follow the standard Kittas/Boulard convention
+(MODEL_NOTES §3): the discharge coefficient C_d is dimensionless around 0.6–0.8 rather than the
+thesis's 15–35e-4, and the wind coefficient C_w is the usual pressure coefficient.
+Defaults: the offline-calibrated values of table 8 (ventilation: literature values).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gateway.greenhouse import Greenhouse
+from gateway.model import psychrometrics as psy
+from gateway.model.model import Model, RadiationSubmodel
+from gateway.model.terms import (
+    ALWAYS,
+    CROP_DAY,
+    CROP_NIGHT,
+    SUNLIT,
+    VENTS_OPEN,
+    FluxTerm,
+    Index,
+    Parameter,
+)
+
+C_TSW = Parameter("c_tsw", "-", 0.1, 1.0, 0.56, None, SUNLIT, "cover solar transmission")
+
+
+class AirSolarAbsorption(FluxTerm):
+    name = "q_sol"
+    equation = "III.25, III.35"
+    description = "short-wave radiation absorbed by the air: C_asw C_tsw I_out"
+    requires = ("i_glob",)
+    uses = ("c_tsw",)
+    parameters = (
+        Parameter("c_asw", "-", 0.1, 0.9, 0.42, 0.02, SUNLIT, "air short-wave absorption"),
+    )
+
+    def coefficients(self, p, x, t_in, t: Index):
+        return p["c_asw"] * p["c_tsw"] * x["i_glob"][t], 0.0
+
+
+class SoilConvection(FluxTerm):
+    name = "q_cnv_ss"
+    equation = "III.26"
+    description = "convection from the soil surface: C_cnv_ss (T_ss - T_in)"
+    requires = ("t_soil",)
+    parameters = (
+        Parameter("c_cnv_ss", "W m-2 K-1", 1.0, 100.0, 13.43, 0.10, ALWAYS,
+                  "soil surface–air convection coefficient"),
+    )
+
+    def coefficients(self, p, x, t_in, t: Index):
+        s = p["c_cnv_ss"]
+        return s * x["t_soil"][t], s
+
+
+class CoverExchange(FluxTerm):
+    name = "q_cnd_cnv"
+    equation = "III.27"
+    description = "convection and conduction through the cover: -C_cnd_cnv (T_in - T_out)"
+    requires = ("t_out",)
+    parameters = (
+        Parameter("c_cnd_cnv", "W m-2 K-1", 1.0, 300.0, 10.32, 0.10, ALWAYS,
+                  "inside–outside convection-conduction coefficient"),
+    )
+
+    def coefficients(self, p, x, t_in, t: Index):
+        s = p["c_cnd_cnv"]
+        return s * x["t_out"][t], s
+
+
+class Transpiration(FluxTerm):
+    """Latent heat of crop transpiration (III.28–III.29, Baille et al. form).
+
+    The printed III.29 mixes mass and energy units; this is the dimensionally consistent form
+    of MODEL_NOTES §3: ``Q_trp = C_A (1 - exp(-k LAI)) I_in + C_B LAI VPD`` [W m-2] with C_B in
+    W m-2 kPa-1 (C_Bd by day, C_Bn by night). VPD uses the simulated air temperature and the
+    measured vapour pressure, so a free run does not read the measured temperature.
+    """
+
+    name = "q_trp"
+    equation = "III.28–III.29"
+    description = "crop transpiration: -(C_A (1 - e^-k LAI) I_in + C_B LAI VPD)"
+    requires = ("i_glob", "rh_in")
+    uses = ("c_tsw",)
+    parameters = (
+        Parameter("c_a", "-", 0.2, 0.7, 0.26, 0.002, CROP_DAY, "radiative transpiration"),
+        Parameter("c_bd", "W m-2 kPa-1", 4.0, 26.0, 8.27, 0.002, CROP_DAY,
+                  "aerodynamic transpiration, day"),
+        Parameter("c_bn", "W m-2 kPa-1", 4.0, 26.0, 10.28, 0.002, CROP_NIGHT,
+                  "aerodynamic transpiration, night"),
+    )
+
+    def __init__(self, extinction: float = 0.64) -> None:
+        self.extinction = extinction
+
+    def coefficients(self, p, x, t_in, t: Index):
+        lai = x["lai"][t]
+        i_out = x["i_glob"][t]
+        i_in = p["c_tsw"] * i_out
+        vpd = np.maximum(psy.saturation_vapour_pressure(t_in) - x["p_w_in"][t], 0.0)
+        c_b = np.where(i_out > 5.0, p["c_bd"], p["c_bn"])
+        q = p["c_a"] * (1.0 - np.exp(-self.extinction * lai)) * i_in + c_b * lai * vpd
+        return -q, 0.0
+
+
+class NaturalVentilation(FluxTerm):
+    """Heat lost by natural ventilation and leakage (III.31–III.32, Kittas et al. 1997).
+
+    ``G = C_d sqrt((A_r A_s / sqrt(A_r² + A_s²))² 2 g h ΔT/T_out + ((A_r + A_s)/2)² C_w u²)
+    + G_leak`` [m3 s-1] (the standard form; printed III.31 has typos, MODEL_NOTES §3) and
+    ``Q_vent = rho c_p G (T_in - T_out) / A`` [W m-2].
+    """
+
+    name = "q_vent"
+    equation = "III.31–III.32"
+    description = "natural ventilation and leakage: -rho c_p G (T_in - T_out) / A"
+    requires = ("t_out", "wind")
+    parameters = (
+        Parameter("c_ven_d", "-", 0.05, 1.0, 0.65, 0.07, VENTS_OPEN, "vent discharge coefficient"),
+        Parameter("c_ven_w", "-", 0.01, 1.0, 0.09, 0.07, VENTS_OPEN, "wind pressure coefficient"),
+        Parameter("c_loss", "m3 s-1", 0.1, 1.0, 0.2, 0.07, ALWAYS, "leakage air flow"),
+    )
+
+    def __init__(self, gh: Greenhouse) -> None:
+        self.height = gh.vents.height_difference
+        self.rho_cp_a = gh.air_density * psy.CP_AIR / gh.floor_area
+
+    def flow(self, p, x, t_in, t: Index) -> np.ndarray:
+        """Ventilation flow G [m3 s-1] (III.31)."""
+        a_r, a_s = x["a_roof"][t], x["a_side"][t]
+        t_out = x["t_out"][t]
+        norm = np.sqrt(a_r * a_r + a_s * a_s)
+        a_eff = np.where(norm > 0, a_r * a_s / np.where(norm > 0, norm, 1.0), 0.0)
+        buoyancy = a_eff**2 * 2.0 * psy.GRAVITY * self.height * np.abs(t_in - t_out) / (
+            t_out + psy.KELVIN
+        )
+        wind = ((a_r + a_s) / 2.0) ** 2 * p["c_ven_w"] * x["wind"][t] ** 2
+        return p["c_ven_d"] * np.sqrt(buoyancy + wind) + p["c_loss"]
+
+    def coefficients(self, p, x, t_in, t: Index):
+        s = self.rho_cp_a * self.flow(p, x, t_in, t)
+        return s * x["t_out"][t], s
+
+
+def almeria_capacity(gh: Greenhouse) -> float:
+    """C_ter = c_p rho V / A [J m-2 K-1] (III.24)."""
+    return psy.CP_AIR * gh.air_density * gh.volume / gh.floor_area
+
+
+def build_almeria(gh: Greenhouse) -> Model:
+    """The five-flux model of III.23 with the radiation sub-model III.35 (ten parameters)."""
+    return Model(
+        name="almeria",
+        terms=(
+            AirSolarAbsorption(),
+            SoilConvection(),
+            CoverExchange(),
+            Transpiration(gh.crop.extinction),
+            NaturalVentilation(gh),
+        ),
+        capacity=almeria_capacity,
+        radiation=RadiationSubmodel(C_TSW),
+        description="pseudo-physical model of the Almería greenhouse (III.23–III.35)",
+        capacity_equation="III.24",
+    )

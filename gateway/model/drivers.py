@@ -1,0 +1,57 @@
+"""Model inputs ("drivers") prepared once from a resampled series and a greenhouse.
+
+Derived quantities that do not depend on the simulated state are computed here, once per
+series, so the hot loops only index arrays.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gateway.greenhouse import Greenhouse, Vents
+from gateway.model import psychrometrics as psy
+from gateway.series import Series
+
+
+def roof_vent_area(vents: Vents, opening: np.ndarray) -> np.ndarray:
+    """Roof (flap) opening area A_r [m2] from the opening signal [%] (III.34).
+
+    ``A_r = n L 2 W sin(U/100 * angle_max / 2)``, the flap's open area as a function of its
+    opening angle (MODEL_NOTES §3).
+    """
+    angle = np.radians(np.asarray(opening, dtype=float) / 100.0 * vents.roof_max_angle / 2.0)
+    return vents.roof_count * 2.0 * vents.roof_length * vents.roof_width * np.sin(angle)
+
+
+def side_vent_area(vents: Vents, opening: np.ndarray) -> np.ndarray:
+    """Side vent opening area A_s [m2] from the opening signal [%] (III.33, linear)."""
+    return vents.side_count * vents.side_length * vents.side_height * np.asarray(opening) / 100.0
+
+
+def prepare_drivers(series: Series, gh: Greenhouse) -> dict[str, np.ndarray]:
+    """Arrays (length T) that the flux terms read.
+
+    Measured columns pass through (NaN for gaps); optional columns get physically neutral
+    values when absent (closed vents, the crop's LAI of the greenhouse description, no soil
+    flux is not possible: terms that need ``t_soil`` must find it). Derived: ``t_sky`` [°C]
+    (III.13), ``h_o`` [W m-2 K-1] (III.9), ``p_w_in`` inside vapour pressure [kPa] (III.4),
+    ``a_roof``/``a_side`` [m2] (III.33–III.34).
+    """
+    n = len(series)
+    x: dict[str, np.ndarray] = {}
+    for name, values in series.columns.items():
+        x[name] = np.asarray(values, dtype=float)
+    nan = np.full(n, np.nan)
+    for name in ("t_in", "t_out", "rh_in", "i_glob", "wind"):
+        x.setdefault(name, nan)
+    x["i_glob"] = np.maximum(x["i_glob"], 0.0)
+    x["t_sky"] = psy.sky_temperature(x["t_out"])
+    x["h_o"] = 2.8 + 1.2 * x["wind"]
+    x["p_w_in"] = psy.vapour_pressure(x["t_in"], x["rh_in"])
+    if "lai" not in series:
+        x["lai"] = np.full(n, gh.crop.lai)
+    roof = x.get("vent_roof", np.zeros(n))
+    side = x.get("vent_side", np.zeros(n))
+    x["a_roof"] = roof_vent_area(gh.vents, np.nan_to_num(roof))
+    x["a_side"] = side_vent_area(gh.vents, np.nan_to_num(side))
+    return x

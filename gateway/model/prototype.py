@@ -1,0 +1,104 @@
+"""The four-parameter grey-box model of the low-cost kit's prototype (thesis §III.2.2).
+
+    rho_a V/S_f dT_in/dt = Q_solar - Q_cnv_cnd - Q_loss - Q_thermal        (III.14)
+
+The lumped parameters already carry 1/C_a (III.16, III.18, III.22), so the "capacity" here is
+rho_a V/S_f [kg m-2] and each flux is in W m-2 divided by C_a [J kg-1 K-1], i.e. K kg m-2 s-1.
+Inputs: outside temperature, wind, outside global radiation (and inside RH through the data).
+Search box: §III.4.2.1.2.A; defaults: the RIWPSO values of table 6 (Biskra prototype).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gateway.greenhouse import Greenhouse
+from gateway.model.model import Model
+from gateway.model.terms import ALWAYS, SUNLIT, FluxTerm, Index, Parameter
+
+# Variation ratios for online use: the thesis gives none for this model (table 12 is for the
+# Almería model); 10 % follows its "fast" class for convective and loss coefficients.
+_R_FAST = 0.10
+
+
+class SolarGain(FluxTerm):
+    name = "q_solar"
+    equation = "III.15"
+    description = "short-wave radiation absorbed inside: C_solar I"
+    requires = ("i_glob",)
+    parameters = (
+        Parameter("c_solar", "kg K J-1 (alpha_c tau_c / C_a)", 0.0, 2e-4,
+                  6.834498e-5, 0.02, SUNLIT, "solar gain coefficient alpha_c tau_c / C_a"),
+    )
+
+    def coefficients(self, p, x, t_in, t: Index):
+        return p["c_solar"] * x["i_glob"][t], 0.0
+
+
+class CoverConvection(FluxTerm):
+    name = "q_cnv_cnd"
+    equation = "III.17"
+    description = "convection and conduction through the cover: -C_cnv_cnd U (T_in - T_out)"
+    requires = ("t_out", "wind")
+    parameters = (
+        Parameter("c_cnv_cnd", "kg K J-1 (1/C_a)", 0.0, 2e-3, 4.142013e-4, _R_FAST, ALWAYS,
+                  "cover convection-conduction coefficient 1/C_a"),
+    )
+
+    def coefficients(self, p, x, t_in, t: Index):
+        h_o = x["h_o"][t]  # III.9
+        h_i = 5.2 * np.abs(t_in - x["t_out"][t]) ** 0.33  # III.10
+        u = h_o * h_i / (h_o + h_i)  # U = (1/h_o + 1/h_i)^-1, safe when h_i = 0
+        s = p["c_cnv_cnd"] * u
+        return s * x["t_out"][t], s
+
+
+class AirLeakage(FluxTerm):
+    name = "q_loss"
+    equation = "III.19"
+    description = "air exchange losses: -C_loss rho_a (T_in - T_out)"
+    requires = ("t_out",)
+
+    parameters = (
+        Parameter("c_loss", "s-1 (ACH/3600)", 0.0, 2e-3, 2.556947e-4, _R_FAST, ALWAYS,
+                  "air changes per second ACH/3600"),
+    )
+
+    def __init__(self, rho: float = 1.205) -> None:
+        self.rho = rho  # gamma_0 [kg m-3], table 2
+
+    def coefficients(self, p, x, t_in, t: Index):
+        s = p["c_loss"] * self.rho
+        return s * x["t_out"][t], s
+
+
+class SkyRadiation(FluxTerm):
+    name = "q_thermal"
+    equation = "III.21"
+    description = "long-wave loss to the sky: -C_thermal h_o (T_in - T_sky)"
+    requires = ("t_out", "wind")
+    parameters = (
+        Parameter("c_thermal", "kg K J-1 ((1 - tau_c)/C_a)", 0.0, 2e-4, 2.556266e-5, _R_FAST,
+                  ALWAYS, "thermal loss coefficient (1 - tau_c)/C_a"),
+    )
+
+    def coefficients(self, p, x, t_in, t: Index):
+        s = p["c_thermal"] * x["h_o"][t]
+        return s * x["t_sky"][t], s
+
+
+def prototype_capacity(gh: Greenhouse) -> float:
+    """rho_a V / S_f [kg m-2] (III.14)."""
+    return gh.air_density * gh.volume / gh.floor_area
+
+
+def build_prototype(gh: Greenhouse | None = None) -> Model:
+    """The four-term model of III.14–III.22 (table 2 constants from ``gh``)."""
+    rho = 1.205 if gh is None else gh.air_density
+    return Model(
+        name="prototype",
+        terms=(SolarGain(), CoverConvection(), AirLeakage(rho), SkyRadiation()),
+        capacity=prototype_capacity,
+        description="four-parameter grey-box model of the low-cost kit (III.14–III.22)",
+        capacity_equation="III.14",
+    )

@@ -1,0 +1,117 @@
+"""The vocabulary of a climate model: parameters, activity conditions and heat-flux terms.
+
+A model is a list of flux terms (ARCHITECTURE.md). Each term contributes to the air heat
+balance ``C dT_in/dt = sum_k Q_k`` a flux that is affine in the state once the step's
+coefficients are frozen:
+
+    Q_k = g_k - s_k * T_in          g_k [W m-2], s_k [W m-2 K-1]
+
+which is what the exact exponential step (MODEL_NOTES §4) needs. ``coefficients`` evaluates
+(g_k, s_k) for a whole population of parameter sets at once: parameter columns arrive with
+shape (P, 1) and broadcast against the time axis, so the calibrators, the online estimator and
+the diagnosis never loop over candidates.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+Index = int | slice | np.ndarray
+"""A time index into the drivers: one step, a slice, or an array of steps (one per row)."""
+
+
+@dataclass(frozen=True)
+class Condition:
+    """When a physical process is active, so that its parameters may be re-estimated."""
+
+    name: str
+    description: str
+    test: Callable[[Mapping[str, np.ndarray]], np.ndarray]
+
+    def __call__(self, x: Mapping[str, np.ndarray]) -> np.ndarray:
+        return np.asarray(self.test(x), dtype=bool)
+
+
+SUN_THRESHOLD = 5.0
+"""Outside radiation above which solar processes count as active [W m-2] (§IV.2.1.2)."""
+LAI_THRESHOLD = 0.1
+"""Leaf area index above which transpiration counts as active [m2 m-2] (§IV.2.1.2)."""
+
+ALWAYS = Condition("always", "always active", lambda x: np.ones_like(x["t_out"], dtype=bool))
+SUNLIT = Condition(
+    "sunlit", f"outside radiation > {SUN_THRESHOLD:g} W m-2", lambda x: x["i_glob"] > SUN_THRESHOLD
+)
+VENTS_OPEN = Condition(
+    "vents_open", "a roof or side vent is open", lambda x: (x["a_roof"] + x["a_side"]) > 0.0
+)
+CROP_DAY = Condition(
+    "crop_day",
+    f"LAI > {LAI_THRESHOLD:g} and radiation > {SUN_THRESHOLD:g} W m-2",
+    lambda x: (x["lai"] > LAI_THRESHOLD) & (x["i_glob"] > SUN_THRESHOLD),
+)
+CROP_NIGHT = Condition(
+    "crop_night",
+    f"LAI > {LAI_THRESHOLD:g} and radiation <= {SUN_THRESHOLD:g} W m-2",
+    lambda x: (x["lai"] > LAI_THRESHOLD) & ~(x["i_glob"] > SUN_THRESHOLD),
+)
+CROP = Condition("crop", f"LAI > {LAI_THRESHOLD:g}", lambda x: x["lai"] > LAI_THRESHOLD)
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One parameter of a flux term.
+
+    ``lower``/``upper`` are the hard bounds (thesis table 13 or §III.4.2.1.2.A); ``variation``
+    is the online variation ratio R_j of table 12 (the search box is re-centred each step at
+    C_j (1 ± R_j)); None means the whole hard box is searched every time (as the thesis does
+    for c_tsw).
+    """
+
+    name: str
+    unit: str
+    lower: float
+    upper: float
+    default: float
+    variation: float | None
+    active: Condition
+    description: str
+
+    def __post_init__(self) -> None:
+        if not self.lower <= self.default <= self.upper:
+            raise ValueError(f"{self.name}: default {self.default} outside [{self.lower}, {self.upper}]")
+
+
+Params = Mapping[str, np.ndarray]
+Drivers = Mapping[str, np.ndarray]
+
+
+class FluxTerm:
+    """A heat flux into the inside air [W m-2] (negative for losses).
+
+    Subclasses set ``name`` (``q_<name>``), ``equation`` (thesis number), ``parameters``,
+    ``requires`` (driver columns it reads) and implement ``coefficients``.
+    """
+
+    name: str = "q"
+    equation: str = ""
+    description: str = ""
+    parameters: tuple[Parameter, ...] = ()
+    requires: tuple[str, ...] = ()
+    uses: tuple[str, ...] = ()  # parameters owned by another part of the model (e.g. c_tsw)
+
+    def coefficients(
+        self, p: Params, x: Drivers, t_in: np.ndarray, t: Index
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(g [W m-2], s [W m-2 K-1]) with Q = g - s T_in, for state ``t_in`` at time ``t``."""
+        raise NotImplementedError
+
+    def flux(self, p: Params, x: Drivers, t_in: np.ndarray, t: Index) -> np.ndarray:
+        """The flux Q [W m-2] at state ``t_in`` (°C)."""
+        g, s = self.coefficients(p, x, t_in, t)
+        return g - s * t_in
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.name} ({self.equation})>"

@@ -1,0 +1,110 @@
+"""Regular-grid time series: kit samples resampled to the model step, gaps kept as gaps."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gateway.kitcsv import KitData, read_kit_csv
+
+MAX_GAP_S = 300.0
+"""No value is interpolated across a hole longer than this [s] (docs/data-format.md)."""
+
+
+@dataclass
+class Series:
+    """Samples on a regular grid of ``step`` seconds; NaN marks a gap or a missing value."""
+
+    time: np.ndarray  # datetime64[s], UTC
+    step: float  # [s]
+    columns: dict[str, np.ndarray]
+    source: str = "<memory>"
+    notices: list[str] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.time)
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.columns and bool(np.isfinite(self.columns[name]).any())
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self.columns[name]
+
+    def slice(self, start: int, stop: int) -> Series:
+        """Rows ``start:stop`` as a new series sharing no arrays with this one."""
+        return Series(
+            self.time[start:stop].copy(),
+            self.step,
+            {k: v[start:stop].copy() for k, v in self.columns.items()},
+            self.source,
+            list(self.notices),
+        )
+
+    def index_of(self, stamp: np.datetime64) -> int:
+        """Index of the first grid time at or after ``stamp``."""
+        return int(np.searchsorted(self.time, np.datetime64(stamp, "s")))
+
+
+def resample(data: KitData, step: float = 60.0, max_gap: float = MAX_GAP_S) -> Series:
+    """Resample irregular kit samples onto a grid of ``step`` seconds.
+
+    Each grid value is interpolated linearly between the two neighbouring finite samples of its
+    column, only when those are at most ``max_gap`` seconds apart (or the grid time falls on a
+    sample); otherwise it stays NaN. Samples finer than the grid are block-averaged first, so
+    30 s sensor noise is not aliased.
+    """
+    if step <= 0:
+        raise ValueError(f"step must be positive, got {step}")
+    t = data.seconds()
+    start = np.ceil(t[0] / step) * step
+    grid = np.arange(start, t[-1] + 1e-9, step)
+    native = float(np.median(np.diff(t))) if len(t) > 1 else step
+    columns = {}
+    for name, values in data.columns.items():
+        ok = np.isfinite(values)
+        tt, vv = t[ok], values[ok]
+        if native < step and len(tt):
+            tt, vv = _block_average(tt, vv, step)
+        columns[name] = _interp_with_gaps(grid, tt, vv, max_gap)
+    return Series(
+        time=grid.astype(np.int64).astype("datetime64[s]"),
+        step=float(step),
+        columns=columns,
+        source=data.source,
+        notices=list(data.notices),
+    )
+
+
+def _block_average(t: np.ndarray, v: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Mean of the samples in each grid cell [k step - step/2, k step + step/2)."""
+    key = np.floor(t / step + 0.5).astype(np.int64)
+    cells, start = np.unique(key, return_index=True)
+    sums = np.add.reduceat(v, start)
+    counts = np.diff(np.append(start, len(v)))
+    return cells * step, sums / counts
+
+
+def _interp_with_gaps(grid: np.ndarray, t: np.ndarray, v: np.ndarray, max_gap: float) -> np.ndarray:
+    out = np.full(len(grid), np.nan)
+    if len(t) == 0:
+        return out
+    right = np.searchsorted(t, grid, side="left")
+    exact = (right < len(t)) & (t[np.minimum(right, len(t) - 1)] == grid)
+    inside = (right > 0) & (right < len(t))
+    r = np.minimum(right, len(t) - 1)
+    left = np.maximum(right - 1, 0)
+    span = t[r] - t[left]
+    ok = inside & (span <= max_gap)
+    frac = np.where(span > 0, (grid - t[left]) / np.where(span > 0, span, 1.0), 0.0)
+    out[ok] = (v[left] + frac * (v[r] - v[left]))[ok]
+    out[exact] = v[r][exact]
+    return out
+
+
+def load_series(
+    path: str, step: float = 60.0, required: Iterable[str] = ()
+) -> Series:
+    """Read a kit CSV and resample it to ``step`` seconds."""
+    return resample(read_kit_csv(path, required=required), step)

@@ -1,0 +1,61 @@
+"""Command-line dispatcher: thin layers over the library, one module per command.
+
+Each command module defines ``add_parser(subparsers)`` (registering its arguments and
+``func``) so the dispatcher knows no command by its internals.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+
+COMMANDS = {
+    "calibrate": "gateway.cli.calibrate",
+    "replay": "gateway.cli.replay",
+    "diagnose": "gateway.cli.diagnose",
+    "demo": "gateway.cli.demo",
+}
+
+
+class CliError(Exception):
+    """An error to print as one clear line, exit status 2."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m gateway",
+        description="Serra gateway tools: calibrate, replay and diagnose greenhouse climate models "
+        "on kit CSV data (docs/data-format.md).",
+    )
+    parser.add_argument("-v", "--verbose", action="store_true", help="log details to stderr")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for module in COMMANDS.values():
+        try:
+            mod = importlib.import_module(module)
+        except ModuleNotFoundError as exc:
+            if exc.name != module:
+                raise
+            continue  # a command still being written is simply not offered
+        mod.add_parser(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING,
+        format="%(levelname)s %(name)s: %(message)s",
+    )
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except CliError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130

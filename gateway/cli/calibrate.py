@@ -1,0 +1,104 @@
+"""``python -m gateway calibrate``: fit a model's parameters offline (thesis §III.4)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from gateway.cli.common import (
+    add_data_arguments,
+    dump_json,
+    load_inputs,
+    parse_span,
+    progress_bar,
+    write_params_file,
+)
+from gateway.estimate.calibrate import calibrate, evaluate
+from gateway.estimate.objective import MODES
+from gateway.estimate.swarm import ALGORITHMS, make_algorithm
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "calibrate",
+        help="fit model parameters offline with RIWPSO, BA or RSBA",
+        description="Fit the parameters of a climate model to measured data and report the "
+        "error on the calibration span and on the rest of the data (validation).",
+    )
+    add_data_arguments(p)
+    p.add_argument("--algorithm", choices=ALGORITHMS, default="rsba", help="search algorithm (rsba)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (0)")
+    p.add_argument(
+        "--calibrate-on",
+        metavar="START/END",
+        help="calibration span, e.g. 2009-10-21/2009-10-23 (default: all data, no validation)",
+    )
+    p.add_argument(
+        "--cost", choices=MODES, default="one_step",
+        help="error minimised: one-step-ahead (default) or free-run prediction",
+    )
+    p.add_argument("--iterations", type=int, help="iterations (thesis settings by default)")
+    p.add_argument("--population", type=int, help="particles or bats (thesis settings by default)")
+    p.add_argument("--out", metavar="params.toml", help="write the fitted parameters as TOML")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    series, gh, model = load_inputs(args)
+    span = parse_span(args.calibrate_on, series) or (0, len(series))
+    algorithm = make_algorithm(args.algorithm, model.name, args.iterations, args.population)
+    stages = 2 if model.radiation is not None and "i_in" in series else 1
+    with progress_bar(f"{args.algorithm} {model.name}", stages * algorithm.iterations, True) as bar:
+        result = calibrate(
+            model, series, gh, algorithm, span=span, mode=args.cost, seed=args.seed,
+            progress=lambda stage, it, cost: bar(description=f"{stage}", info=f"MSE {cost:.3g}"),
+        )
+    a, b = span
+    validation = None
+    rest = [(0, a), (b, len(series))]
+    rest = [r for r in rest if r[1] - r[0] >= 2]
+    if rest:
+        # The longest held-out part is the validation span (free run starts at its first row).
+        validation = evaluate(model, result.theta, series, gh, max(rest, key=lambda r: r[1] - r[0]))
+    report = {
+        "model": model.name,
+        "algorithm": args.algorithm,
+        "params": result.params,
+        "metrics": {
+            "calibration": evaluate(model, result.theta, series, gh, span),
+            "validation": validation,
+        },
+        "seconds": result.seconds,
+        "evaluations": result.evaluations,
+        "cost": {"kind": args.cost, "mse": result.cost},
+        "span": {"start": str(series.time[a]) + "Z", "end": str(series.time[b - 1]) + "Z"},
+    }
+    if args.out:
+        write_params_file(
+            args.out, model, result.params,
+            f"python -m gateway calibrate --algorithm {args.algorithm} --seed {args.seed} "
+            f"on {args.data}",
+        )
+    if args.json:
+        dump_json(report)
+    else:
+        _print_human(report)
+    return 0
+
+
+def _print_human(report: dict) -> None:
+    out = sys.stdout
+    out.write(f"{report['model']} calibrated with {report['algorithm']} "
+              f"in {report['seconds']:.1f} s ({report['evaluations']} evaluations)\n")
+    for name, value in report["params"].items():
+        out.write(f"  {name:<10} {value:.6g}\n")
+    for part in ("calibration", "validation"):
+        m = report["metrics"][part]
+        if m is None:
+            out.write(f"{part}: no data\n")
+            continue
+        for mode in ("one_step", "free_run"):
+            x = m[mode]
+            if x:
+                out.write(f"{part:>11} {mode:<8} MAE {x['mae']:.3f} °C  RMSE {x['rmse']:.3f}  "
+                          f"MaxAE {x['maxae']:.3f}  R² {x['r2']:.4f}  EF {x['ef']:.4f}\n")

@@ -1,0 +1,155 @@
+"""Arguments and helpers shared by the data commands (calibrate, replay, diagnose)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gateway.cli import CliError
+from gateway.greenhouse import Greenhouse, GreenhouseError, list_presets, load_greenhouse
+from gateway.kitcsv import KitCsvError, parse_time
+from gateway.model import MODEL_NAMES, build_model
+from gateway.model.model import Model, check_columns
+from gateway.series import Series, load_series
+
+
+def add_data_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--data", required=True, metavar="FILE", help="kit CSV (docs/data-format.md)")
+    p.add_argument(
+        "--greenhouse",
+        required=True,
+        metavar="PRESET|FILE.toml",
+        help=f"greenhouse description: a preset ({', '.join(list_presets())}) or a TOML file",
+    )
+    p.add_argument("--model", required=True, choices=MODEL_NAMES, help="climate model")
+    p.add_argument("--step", type=float, default=60.0, metavar="S", help="model step [s] (60)")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+
+
+def load_inputs(args: argparse.Namespace) -> tuple[Series, Greenhouse, Model]:
+    """Greenhouse, model and resampled data, with errors turned into one clear line."""
+    try:
+        gh = load_greenhouse(args.greenhouse)
+    except GreenhouseError as exc:
+        raise CliError(str(exc)) from None
+    model = build_model(args.model, gh)
+    try:
+        series = load_series(args.data, step=args.step, required=model.requires)
+    except KitCsvError as exc:
+        raise CliError(str(exc)) from None
+    try:
+        check_columns(model, [c for c in series.columns if c in series], args.data)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    return series, gh, model
+
+
+def parse_span(text: str | None, series: Series) -> tuple[int, int] | None:
+    """``START/END`` (ISO 8601 times or dates; UTC when no offset) → row indices [a, b)."""
+    if not text:
+        return None
+    try:
+        start, end = text.split("/")
+        a = series.index_of(_stamp(start))
+        b = series.index_of(_stamp(end))
+    except ValueError as exc:
+        raise CliError(f"--calibrate-on {text!r}: expected START/END in ISO 8601 ({exc})") from None
+    if b - a < 2:
+        raise CliError(
+            f"--calibrate-on {text!r} covers {max(b - a, 0)} samples of {series.source} "
+            f"({series.time[0]}Z to {series.time[-1]}Z)"
+        )
+    return a, b
+
+
+def _stamp(text: str) -> np.datetime64:
+    text = text.strip()
+    if "T" not in text and len(text) == 10:
+        text += "T00:00:00"
+    if not (text.endswith("Z") or "+" in text[10:] or "-" in text[10:]):
+        text += "Z"
+    return parse_time(text)
+
+
+def read_params_file(path: str, model: Model) -> np.ndarray:
+    """Parameters written by ``calibrate --out`` (TOML ``[params]``), checked against the model."""
+    import tomllib
+
+    try:
+        raw = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise CliError(f"{path}: cannot read parameters: {exc}") from None
+    params = raw.get("params")
+    if not isinstance(params, dict):
+        raise CliError(f"{path}: no [params] table")
+    if raw.get("model") not in (None, model.name):
+        raise CliError(f"{path}: parameters are for model '{raw.get('model')}', not '{model.name}'")
+    unknown = [k for k in params if k not in model.names]
+    if unknown:
+        raise CliError(f"{path}: unknown parameter(s) {', '.join(unknown)} for model {model.name}")
+    theta = model.defaults()
+    for k, v in params.items():
+        if not isinstance(v, int | float) or not math.isfinite(v):
+            raise CliError(f"{path}: params.{k} must be a finite number")
+        theta[model.index(k)] = float(v)
+    return theta
+
+
+def write_params_file(path: str, model: Model, params: dict[str, float], header: str) -> None:
+    lines = [f"# {header}", f'model = "{model.name}"', "", "[params]"]
+    for p in model.parameters:
+        lines.append(f"{p.name} = {params[p.name]!r}  # [{p.unit}] {p.description}")
+    Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def dump_json(obj: Any) -> None:
+    """One JSON object on stdout; NaN becomes null."""
+    json.dump(_clean(obj), sys.stdout, indent=2)
+    sys.stdout.write("\n")
+
+
+def _clean(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, float | np.floating):
+        return float(obj) if math.isfinite(obj) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj
+
+
+@contextmanager
+def progress_bar(label: str, total: int, enabled: bool) -> Iterator[Any]:
+    """A rich progress bar on stderr when it is a terminal; a no-op callback otherwise."""
+    if not (enabled and sys.stderr.isatty()):
+        yield lambda *a, **k: None
+        return
+    from rich.console import Console
+    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total}"),
+        TextColumn("{task.fields[info]}"),
+        TimeRemainingColumn(),
+        console=Console(stderr=True),
+        transient=True,
+    ) as bar:
+        task = bar.add_task(label, total=total, info="")
+
+        def update(advance: int = 1, info: str = "", description: str | None = None) -> None:
+            kw = {"description": description} if description else {}
+            bar.update(task, advance=advance, info=info, **kw)
+
+        yield update

@@ -16,7 +16,7 @@ import numpy as np
 
 from gateway.greenhouse import Greenhouse
 from gateway.model import psychrometrics as psy
-from gateway.model.model import Model, RadiationSubmodel
+from gateway.model.model import Model, OnlineGroup, RadiationSubmodel
 from gateway.model.terms import (
     ALWAYS,
     CROP_DAY,
@@ -169,4 +169,7 @@ def build_almeria(gh: Greenhouse) -> Model:
         radiation=RadiationSubmodel(C_TSW),
         description="pseudo-physical model of the Almería greenhouse (III.23–III.35)",
         capacity_equation="III.24",
+        # §IV.2.2.2: air temperature every minute on the last 3 samples; the radiation
+        # sub-model every 20 minutes on the last 60.
+        online=(OnlineGroup("t_in", (), 3, 1), OnlineGroup("i_in", ("c_tsw",), 60, 20)),
     )

@@ -37,6 +37,21 @@ class RadiationSubmodel:
 
 
 @dataclass(frozen=True)
+class OnlineGroup:
+    """Parameters re-estimated together by the online estimator (§IV.2.2.2).
+
+    ``output`` is the measured variable the group is fitted on (``t_in`` or ``i_in``),
+    ``parameters`` the names (empty: every parameter not claimed by another group), ``window``
+    the number n of past samples re-simulated, ``every`` the period in model steps.
+    """
+
+    output: str
+    parameters: tuple[str, ...]
+    window: int
+    every: int
+
+
+@dataclass(frozen=True)
 class Model:
     """A named set of flux terms plus the heat capacity and optional radiation sub-model."""
 
@@ -49,6 +64,8 @@ class Model:
     description: str = ""
     capacity_equation: str = ""
     extra: tuple[Parameter, ...] = field(default=())
+    online: tuple[OnlineGroup, ...] = (OnlineGroup("t_in", (), 3, 1),)
+    """Online estimation groups: air temperature every step with n = 3 (thesis default)."""
 
     # -- the parameter vector -------------------------------------------------------------
     @property

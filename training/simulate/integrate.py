@@ -1,0 +1,323 @@
+"""The greenhouse's heat and water balances, integrated in time.
+
+Nodes (all per m2 of floor): air + fast mass ``T_a``, cover ``T_c``, floor/soil surface ``T_f``,
+deep soil ``T_d`` (tied to a ground boundary ``T_g``), and the absolute humidity of the air
+``c_a`` [kg m-3].
+
+Each sub-step freezes the coefficients (convection, radiation conductances, ventilation flow,
+transpiration) at the start state, then takes a backward-Euler (implicit) step of the linear
+4-node heat network, solved exactly by elimination, and an implicit step of the vapour balance
+with condensation on the cover. Backward Euler is unconditionally stable, so the thin cover
+(time constant ~20 s) and the air node (~1 min) need no tiny steps; and because the fluxes are
+re-evaluated at the new temperatures with the frozen coefficients, node storage = sum of fluxes
+holds to rounding on every sub-step (the balance tests rely on that).
+
+Energy paths (W m-2 of floor, sign = direction in the name):
+- short wave: absorbed by the cover, the fast mass, the canopy and the floor;
+- canopy: quasi-steady big leaf, its absorbed short wave splits into transpiration (latent, to
+  the air's vapour) and sensible heat to the air (negative at night: the crop cools the air);
+- convection air→cover (inner), cover→outside (wind), floor→air;
+- long wave: cover→sky, cover→surroundings (at t_out), floor→cover, floor→sky through the film;
+- conduction floor→deep→ground;
+- ventilation and leakage air→outside;
+- condensation on the cover (latent heat to the cover) and fog in saturated air (to the air).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from gateway.model.psychrometrics import CP_AIR, KELVIN
+from training.simulate import crop, heat, ventilation
+from training.simulate.effects import PhysicsDrivers
+from training.simulate.plant import Plant
+
+RHO_AIR = 1.2
+"""Air density used for heat capacity and ventilation [kg m-3] (constant: closes the balance)."""
+R_VAPOUR = 461.5
+"""Specific gas constant of water vapour [J kg-1 K-1]."""
+K_CONDENSATION = 6.4e-9
+"""Mass transfer per unit heat transfer coefficient [kg W-1 s-1 Pa-1 K] (De Zwart 1996)."""
+NIGHT_RADIATION = 10.0
+"""Outside radiation [W m-2] below which a night-only heater may run."""
+
+FLUXES = (
+    # name, unit, meaning
+    ("q_solar_cover", "W m-2", "short wave absorbed by the cover"),
+    ("q_solar_air", "W m-2", "short wave absorbed by the fast mass (air node)"),
+    ("q_solar_crop", "W m-2", "short wave absorbed by the canopy"),
+    ("q_solar_floor", "W m-2", "short wave absorbed by the floor"),
+    ("q_transpiration", "W m-2", "latent heat of transpiration (canopy to vapour)"),
+    ("q_crop_air", "W m-2", "sensible heat canopy -> air"),
+    ("q_heater", "W m-2", "injected heater -> air"),
+    ("q_fog", "W m-2", "latent heat of fog condensing in the air -> air"),
+    ("q_conv_floor_air", "W m-2", "convection floor -> air"),
+    ("q_conv_air_cover", "W m-2", "convection air -> cover"),
+    ("q_vent", "W m-2", "sensible heat by vent flow air -> outside"),
+    ("q_leak", "W m-2", "sensible heat by leakage (incl. injected) air -> outside"),
+    ("q_condensation", "W m-2", "latent heat of condensation on the cover -> cover"),
+    ("q_lw_floor_cover", "W m-2", "long wave floor -> cover"),
+    ("q_conv_cover_out", "W m-2", "convection cover -> outside air"),
+    ("q_lw_cover_sky", "W m-2", "long wave cover -> sky"),
+    ("q_lw_cover_surr", "W m-2", "long wave cover -> surroundings at t_out"),
+    ("q_lw_floor_sky", "W m-2", "long wave floor -> sky through the film"),
+    ("q_cond_floor_deep", "W m-2", "conduction floor -> deep soil"),
+    ("q_cond_deep_ground", "W m-2", "conduction deep soil -> ground boundary"),
+    ("s_air", "W m-2", "heat storage rate of the air + fast mass"),
+    ("s_cover", "W m-2", "heat storage rate of the cover"),
+    ("s_floor", "W m-2", "heat storage rate of the floor"),
+    ("s_deep", "W m-2", "heat storage rate of the deep soil"),
+    ("w_transpiration", "kg m-2 s-1", "transpiration"),
+    ("w_vent", "kg m-2 s-1", "vapour out by vent flow and leakage"),
+    ("w_condensation", "kg m-2 s-1", "condensation on the cover"),
+    ("w_fog", "kg m-2 s-1", "fog condensing in the air"),
+    ("w_storage", "kg m-2 s-1", "vapour storage rate in the air"),
+    ("g_vent", "m3 s-1", "ventilation flow through the vents"),
+    ("g_leak", "m3 s-1", "leakage flow including injected extra leakage"),
+    ("g_extra", "m3 s-1", "injected extra leakage flow"),
+    ("c_air", "J m-2 K-1", "heat capacity of the air + fast-mass node in use"),
+)
+FLUX_INDEX = {name: i for i, (name, _, _) in enumerate(FLUXES)}
+
+
+@dataclass
+class State:
+    """Node temperatures [°C] and absolute humidity of the air ``c_a`` [kg m-3]."""
+
+    t_a: float
+    t_c: float
+    t_f: float
+    t_d: float
+    c_a: float
+
+
+@dataclass
+class SubstepInputs:
+    """Drivers at each sub-step midpoint (arrays), and at each output time (for the controller)."""
+
+    t_out: np.ndarray  # [°C]
+    c_out: np.ndarray  # [kg m-3]
+    i_glob: np.ndarray  # [W m-2]
+    wind: np.ndarray  # [m s-1]
+    t_sky: np.ndarray  # [°C]
+    lai: np.ndarray  # [m2 m-2]
+    t_ground: float  # [°C]
+    wind_out: np.ndarray  # at output times [m s-1]
+    rain_out: np.ndarray  # at output times [0/1]
+
+
+@dataclass
+class Trajectory:
+    """States at output times, vent positions decided at each output time, and sub-step fluxes."""
+
+    t_a: np.ndarray
+    t_c: np.ndarray
+    t_f: np.ndarray
+    t_d: np.ndarray
+    c_a: np.ndarray
+    vent_roof: np.ndarray  # [%]
+    vent_side: np.ndarray  # [%]
+    i_in: np.ndarray  # sub-step inside radiation [W m-2]
+    fluxes: np.ndarray  # (n_sub, len(FLUXES))
+
+
+def saturation_pa(t: float) -> float:
+    """Saturation vapour pressure [Pa] at ``t`` [°C] (Tetens; same as the psychrometrics module)."""
+    return 610.78 * math.exp(17.2694 * t / (t + 237.3))
+
+
+def vapour_concentration(t: np.ndarray, rh: np.ndarray) -> np.ndarray:
+    """Absolute humidity [kg m-3] of air at ``t`` [°C] and relative humidity ``rh`` [%]."""
+    t = np.asarray(t, dtype=float)
+    p = 610.78 * np.exp(17.2694 * t / (t + 237.3)) * np.asarray(rh, dtype=float) / 100.0
+    return p / (R_VAPOUR * (t + KELVIN))
+
+
+def run(plant: Plant, inputs: SubstepInputs, drivers: PhysicsDrivers, state: State,
+        step: float, substeps: int, roof0: float = 0.0, side0: float = 0.0) -> Trajectory:
+    """Integrate from ``state`` over ``len(inputs.wind_out)`` output times ``step`` [s] apart.
+
+    Index 0 of the output is the initial state; sub-steps ``(k-1)*substeps ...`` fill the
+    interval ending at output ``k``.
+    """
+    n_out = len(inputs.wind_out)
+    m = substeps
+    dt = step / m
+    p = plant
+    a_f = p.floor_area
+    cover_ratio = p.cover_area / a_f
+    height = p.volume / a_f
+    c_air0 = RHO_AIR * CP_AIR * height + p.fast_capacity
+    c_cov = p.cover_capacity * cover_ratio
+    c_flr = p.floor_capacity
+    c_dp = p.deep_capacity
+    k_fd = p.k_floor_deep
+    k_dg = p.k_deep_ground
+    t_g = inputs.t_ground
+    rhocp = RHO_AIR * CP_AIR
+    eps_fc = p.eps_floor * p.eps_cover
+    eps_fs = p.eps_floor * p.tau_lw
+    eps_cs = p.eps_cover * p.sky_view
+    eps_cu = p.eps_cover * (1.0 - p.sky_view)
+    cd = p.cd * p.screen_factor
+    ctrl = p.controller
+
+    t_out = inputs.t_out.tolist()
+    c_out = inputs.c_out.tolist()
+    i_glob = inputs.i_glob.tolist()
+    wind = inputs.wind.tolist()
+    t_sky = inputs.t_sky.tolist()
+    lai_s = inputs.lai.tolist()
+    tau = (p.tau_sw * drivers.tau_factor).tolist()
+    extra = drivers.extra_leak.tolist()
+    capf = drivers.cap_factor.tolist()
+    heaters = [(mask.tolist(), power, sp, night) for mask, power, sp, night in drivers.heaters]
+
+    n_sub = (n_out - 1) * m
+    rec = np.empty((n_sub, len(FLUXES)))
+    i_in_rec = np.empty(n_sub)
+    out = np.empty((n_out, 5))
+    vent = np.empty((n_out, 2))
+    ta, tc, tf, td, ca = state.t_a, state.t_c, state.t_f, state.t_d, state.c_a
+    roof, side = roof0, side0
+    out[0] = (ta, tc, tf, td, ca)
+
+    for k in range(1, n_out):
+        if ctrl is not None:
+            roof, side = ctrl.step(ta, inputs.wind_out[k - 1], inputs.rain_out[k - 1],
+                                   roof, side, step)
+        vent[k - 1] = (roof, side)
+        a_r = p.fixed_roof_area
+        a_s = p.fixed_side_area
+        h_r = 0.05
+        if p.roof_n:
+            a_r += ventilation.roof_area(roof, p.roof_n, p.roof_length, p.roof_width,
+                                         p.roof_max_angle)
+            h_r = max(h_r, p.roof_width * math.sin(math.radians(roof / 100 * p.roof_max_angle)))
+        if p.side_n:
+            a_s += ventilation.side_area(side, p.side_n, p.side_length, p.side_height)
+        for j in range(m):
+            i = (k - 1) * m + j
+            t_o = t_out[i]
+            u = wind[i]
+            t_s = t_sky[i]
+            lai = lai_s[i]
+            i_g = i_glob[i]
+            t_ak = ta + KELVIN
+            c_a_cap = c_air0 * capf[i]
+
+            # Short wave.
+            i_in = tau[i] * i_g * p.sun_ratio
+            q_sc = p.alpha_sw * i_g * p.sun_ratio
+            q_sa = p.f_sw_air * i_in
+            icpt = crop.intercepted(lai, p.k_ext)
+            q_scr = p.alpha_crop * icpt * (1.0 - p.f_sw_air) * i_in
+            q_sf = p.floor_alpha_sw * (1.0 - icpt) * (1.0 - p.f_sw_air) * i_in
+
+            # Transpiration, explicit at the start state.
+            psat_a = saturation_pa(ta)
+            vpd = max(psat_a - ca * R_VAPOUR * t_ak, 0.0)
+            lam = 4185.5 * (597.0 - 0.56 * ta)
+            q_tr = crop.transpiration(q_scr, ta, vpd, lai, p.r_b, p.r_s_min, RHO_AIR)
+            e_tr = q_tr / lam
+
+            # Air exchange.
+            g_v = ventilation.kittas_flow(a_r, a_s, ta - t_o, t_o, u, p.vent_height, cd, p.cw,
+                                          h_r)
+            g_l = ventilation.leakage_flow(p.volume, p.leak_ach, p.leak_ach_wind, u) + extra[i]
+            g_tot = (g_v + g_l) / a_f  # [m s-1] per m2 of floor
+
+            # Vapour, implicit, with condensation on the cover when the air is above its dew point.
+            h_ci = heat.natural_convection(ta - tc, p.h_in_a, p.h_in_b)
+            k_cond = K_CONDENSATION * h_ci * cover_ratio
+            psat_c = saturation_pa(tc)
+            num = height / dt * ca + e_tr + g_tot * c_out[i]
+            den = height / dt + g_tot
+            c_new = num / den
+            m_cond = 0.0
+            if c_new * R_VAPOUR * t_ak > psat_c:
+                num += k_cond * psat_c
+                den += k_cond * R_VAPOUR * t_ak
+                c_new = num / den
+                m_cond = k_cond * (c_new * R_VAPOUR * t_ak - psat_c)
+            c_sat = psat_a / (R_VAPOUR * t_ak)
+            m_fog = 0.0
+            if c_new > c_sat:
+                m_fog = (c_new - c_sat) * height / dt
+                c_new = c_sat
+            m_vent = g_tot * (c_new - c_out[i])
+
+            # Heater(s).
+            q_h = 0.0
+            for mask, power, sp, night in heaters:
+                if mask[i] and not (night and i_g > NIGHT_RADIATION):
+                    q_h += power if sp != sp else power * min(max(sp - ta, 0.0), 1.0)
+
+            # Heat network conductances [W m-2 floor K-1], frozen over the sub-step.
+            k_ac = h_ci * cover_ratio
+            k_co = heat.wind_convection(u, p.h_out_a, p.h_out_b) * cover_ratio
+            k_cs = heat.radiative_conductance(tc, t_s, eps_cs) * cover_ratio
+            k_cu = heat.radiative_conductance(tc, t_o, eps_cu) * cover_ratio
+            k_fa = heat.floor_convection(tf, ta, p.h_floor_up, p.h_floor_down)
+            k_fc = heat.radiative_conductance(tf, tc, eps_fc)
+            k_fs = heat.radiative_conductance(tf, t_s, eps_fs)
+            k_v = rhocp * g_tot
+
+            q_crop_air = q_scr - q_tr
+            r_a = c_a_cap / dt * ta + q_sa + q_crop_air + q_h + lam * m_fog + k_v * t_o
+            r_c = c_cov / dt * tc + q_sc + lam * m_cond + (k_co + k_cu) * t_o + k_cs * t_s
+            r_f = c_flr / dt * tf + q_sf + k_fs * t_s
+            r_d = c_dp / dt * td + k_dg * t_g
+            a_aa = c_a_cap / dt + k_fa + k_ac + k_v
+            a_cc = c_cov / dt + k_ac + k_fc + k_co + k_cs + k_cu
+            a_ff = c_flr / dt + k_fa + k_fc + k_fs + k_fd
+            a_dd = c_dp / dt + k_fd + k_dg
+            # Eliminate the deep node, then the air node, then solve the 2x2 (cover, floor).
+            a_ff -= k_fd * k_fd / a_dd
+            r_f += k_fd * r_d / a_dd
+            pc = a_cc - k_ac * k_ac / a_aa
+            qf = a_ff - k_fa * k_fa / a_aa
+            b = -k_fc - k_ac * k_fa / a_aa
+            s1 = r_c + k_ac * r_a / a_aa
+            s2 = r_f + k_fa * r_a / a_aa
+            det = pc * qf - b * b
+            tc_n = (s1 * qf - b * s2) / det
+            tf_n = (pc * s2 - b * s1) / det
+            ta_n = (r_a + k_ac * tc_n + k_fa * tf_n) / a_aa
+            td_n = (r_d + k_fd * tf_n) / a_dd
+
+            q_ac = k_ac * (ta_n - tc_n)
+            q_fa = k_fa * (tf_n - ta_n)
+            q_vl = k_v * (ta_n - t_o)
+            share_v = g_v / (g_v + g_l) if g_v + g_l > 0.0 else 0.0
+            rec[i] = (
+                q_sc, q_sa, q_scr, q_sf, q_tr, q_crop_air, q_h, lam * m_fog, q_fa, q_ac,
+                q_vl * share_v, q_vl * (1.0 - share_v), lam * m_cond,
+                k_fc * (tf_n - tc_n), k_co * (tc_n - t_o), k_cs * (tc_n - t_s),
+                k_cu * (tc_n - t_o), k_fs * (tf_n - t_s), k_fd * (tf_n - td_n),
+                k_dg * (td_n - t_g),
+                c_a_cap * (ta_n - ta) / dt, c_cov * (tc_n - tc) / dt, c_flr * (tf_n - tf) / dt,
+                c_dp * (td_n - td) / dt,
+                e_tr, m_vent, m_cond, m_fog, height * (c_new - ca) / dt,
+                g_v, g_l, extra[i], c_a_cap,
+            )
+            i_in_rec[i] = i_in
+            ta, tc, tf, td, ca = ta_n, tc_n, tf_n, td_n, c_new
+        out[k] = (ta, tc, tf, td, ca)
+    if ctrl is not None:
+        roof, side = ctrl.step(ta, inputs.wind_out[-1], inputs.rain_out[-1], roof, side, step)
+    vent[n_out - 1] = (roof, side)
+    return Trajectory(out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4],
+                      vent[:, 0], vent[:, 1], i_in_rec, rec)
+
+
+def interval_means(values: np.ndarray, substeps: int) -> np.ndarray:
+    """Means of sub-step rows over each output interval; row 0 (no interval ends there) is NaN."""
+    n_sub = values.shape[0]
+    shape = (n_sub // substeps, substeps) + values.shape[1:]
+    means = values.reshape(shape).mean(axis=1)
+    pad = np.full((1,) + values.shape[1:], np.nan)
+    return np.concatenate([pad, means])

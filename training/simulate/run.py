@@ -9,7 +9,7 @@ Files written by :meth:`SimResult.write` (``data.csv`` as example):
 - ``data.truth.npz``: true series on the CSV's time grid (``time`` as int64 s since the epoch):
   true states, flows [m3 s-1] and heat fluxes [W m-2 of floor]. A state at index k is the value
   at ``time[k]``; a flux at index k is the mean over the interval ending at ``time[k]``
-  (index 0 is NaN).
+  (index 0 is NaN). Stored as float32.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from training.simulate import crop, integrate, sensors
 from training.simulate.effects import Effect, PhysicsDrivers, parse_effect
 from training.simulate.integrate import FLUXES, R_VAPOUR, State, SubstepInputs
 from training.simulate.plant import Plant, get_plant
-from training.simulate.weather import DEFAULT_START, Weather, load_weather
+from training.simulate.weather import DEFAULT_START, Weather, load_weather, parse_start
 
 TRUTH_FORMAT = "serra-sim-truth/1"
 SPINUP_DAYS = 1.0
@@ -87,7 +87,8 @@ class SimResult:
         json_path.write_text(json.dumps(meta, indent=1, default=_json_default) + "\n",
                              encoding="utf-8")
         arrays = {"time": self.time.astype("datetime64[s]").astype(np.int64)}
-        arrays.update({k: np.asarray(v) for k, v in self.series.items()})
+        # float32 halves the file; the in-memory truth stays float64 (balances are tested there).
+        arrays.update({k: np.asarray(v, dtype=np.float32) for k, v in self.series.items()})
         np.savez_compressed(npz_path, **arrays)
         return csv_path, json_path, npz_path
 
@@ -184,7 +185,7 @@ def simulate(
     if isinstance(weather, Weather):
         wx = weather
     else:
-        t0 = np.datetime64(start or DEFAULT_START.get(weather, "2009-11-01"), "s")
+        t0 = parse_start(start if start is not None else DEFAULT_START.get(weather, "2009-11-01"))
         wx = load_weather(weather, t0, days, step, seed)
     t0 = wx.time[0]
     step = float(wx.seconds()[1] - wx.seconds()[0])

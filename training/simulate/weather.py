@@ -100,6 +100,16 @@ DEFAULT_START = {
 }
 
 
+def parse_start(text: str | np.datetime64) -> np.datetime64:
+    """A start instant 'YYYY-MM-DD[THH:MM[:SS]][Z]' (UTC) as datetime64[s]."""
+    if isinstance(text, np.datetime64):
+        return text.astype("datetime64[s]")
+    try:
+        return np.datetime64(str(text).strip().rstrip("Z"), "s")
+    except ValueError:
+        raise ValueError(f"bad start time {text!r}; write YYYY-MM-DD[THH:MM] (UTC)") from None
+
+
 def load_weather(
     source: str, start: np.datetime64, days: float, step: float = 60.0, seed: int = 0
 ) -> Weather:

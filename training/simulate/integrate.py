@@ -78,7 +78,7 @@ FLUXES = (
     ("g_vent", "m3 s-1", "ventilation flow through the vents"),
     ("g_leak", "m3 s-1", "leakage flow including injected extra leakage"),
     ("g_extra", "m3 s-1", "injected extra leakage flow"),
-    ("c_air", "J m-2 K-1", "heat capacity of the air + fast-mass node in use"),
+    ("cap_air", "J m-2 K-1", "heat capacity of the air + fast-mass node in use"),
 )
 FLUX_INDEX = {name: i for i, (name, _, _) in enumerate(FLUXES)}
 
@@ -243,12 +243,12 @@ def run(plant: Plant, inputs: SubstepInputs, drivers: PhysicsDrivers, state: Sta
                 den += k_cond * R_VAPOUR * t_ak
                 c_new = num / den
                 m_cond = k_cond * (c_new * R_VAPOUR * t_ak - psat_c)
+            m_vent = g_tot * (c_new - c_out[i])  # the implicit solution carries this flow
             c_sat = psat_a / (R_VAPOUR * t_ak)
             m_fog = 0.0
-            if c_new > c_sat:
+            if c_new > c_sat:  # supersaturated: the excess condenses as fog in the air
                 m_fog = (c_new - c_sat) * height / dt
                 c_new = c_sat
-            m_vent = g_tot * (c_new - c_out[i])
 
             # Heater(s).
             q_h = 0.0

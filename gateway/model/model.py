@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from gateway.greenhouse import Greenhouse
-from gateway.model.terms import FluxTerm, Index, Parameter
+from gateway.model.terms import FluxTerm, Index, Parameter, SensorTerm
 
 
 @dataclass(frozen=True)
@@ -66,6 +66,9 @@ class Model:
     extra: tuple[Parameter, ...] = field(default=())
     online: tuple[OnlineGroup, ...] = (OnlineGroup("t_in", (), 3, 1),)
     """Online estimation groups: air temperature every step with n = 3 (thesis default)."""
+    sensors: tuple[SensorTerm, ...] = ()
+    """Observation terms: measured T_in = true T_in + sum of offsets (default none: the sensor
+    reads the true state). Added by the diagnosis (gateway/diagnose) for sensor errors."""
 
     # -- the parameter vector -------------------------------------------------------------
     @property
@@ -77,6 +80,9 @@ class Model:
                 seen.setdefault(p.name, p)
         for p in self.extra:
             seen.setdefault(p.name, p)
+        for sensor in self.sensors:
+            for p in sensor.parameters:
+                seen.setdefault(p.name, p)
         if self.radiation is not None:
             seen.setdefault(self.radiation.parameter.name, self.radiation.parameter)
         return tuple(seen.values())
@@ -88,7 +94,7 @@ class Model:
     @property
     def requires(self) -> list[str]:
         cols = ["t_in"]
-        for term in self.terms:
+        for term in (*self.terms, *self.sensors):
             cols += [c for c in term.requires if c not in cols]
         return cols
 
@@ -134,6 +140,17 @@ class Model:
     def with_terms(self, *terms: FluxTerm, name: str | None = None) -> Model:
         """This model plus extra terms (what the diagnosis does when it adds an effect)."""
         return replace(self, name=name or self.name, terms=self.terms + tuple(terms))
+
+    def with_sensors(self, *sensors: SensorTerm) -> Model:
+        """This model plus observation terms (sensor errors)."""
+        return replace(self, sensors=self.sensors + tuple(sensors))
+
+    def sensor_offset(self, p: Mapping[str, np.ndarray], x: Mapping[str, np.ndarray], t: Index):
+        """Measured minus true T_in [K] of the observation terms (0.0 when there are none)."""
+        total = 0.0
+        for sensor in self.sensors:
+            total = total + sensor.offset(p, x, t)
+        return total
 
     def columns(self, theta: np.ndarray) -> dict[str, np.ndarray]:
         """Parameter matrix (P, k) → {name: column of shape (P, 1)}."""
@@ -181,7 +198,12 @@ class Model:
         block = max(16, 16384 // out.shape[0])
         for a in range(0, len(measured) - 1, block):
             b = min(a + block, len(measured) - 1)
-            out[:, a + 1 : b + 1] = self.step(p, x, measured[None, a:b], slice(a, b), c, dt)
+            if self.sensors:  # restart from the true state behind the reading, report a reading
+                prev = measured[None, a:b] - self.sensor_offset(p, x, slice(a, b))
+                new = self.step(p, x, prev, slice(a, b), c, dt)
+                out[:, a + 1 : b + 1] = new + self.sensor_offset(p, x, slice(a + 1, b + 1))
+            else:
+                out[:, a + 1 : b + 1] = self.step(p, x, measured[None, a:b], slice(a, b), c, dt)
         return out
 
     def free_run(
@@ -209,9 +231,11 @@ class Model:
         out[:, 0] = state[:, 0]
         for k, t in enumerate(range(start, stop - 1), start=1):
             state = self.step(p, x, state, t, c, dt)
-            if restart_after_gaps and np.isnan(state[0, 0]):
-                state = np.full((n_p, 1), measured[t + 1])
             out[:, k] = state[:, 0]
+            if restart_after_gaps and np.isnan(state[0, 0]):
+                # The output stays NaN: a measurement copied into it would score as a perfect
+                # prediction. The state restarts from the measurement when there is one.
+                state = np.full((n_p, 1), measured[t + 1])
         return out
 
     def forecast(
@@ -233,8 +257,12 @@ class Model:
         c = self.capacity(gh)
         t = np.asarray(starts)[:, None]
         state = x["t_in"][t]
+        if self.sensors:
+            state = state - self.sensor_offset(p, x, t)
         for k in range(horizon):
             state = self.step(p, x, state, t + k, c, dt)
+        if self.sensors:
+            state = state + self.sensor_offset(p, x, t + horizon)
         return state[:, 0]
 
     def fluxes(

@@ -115,3 +115,25 @@ class FluxTerm:
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name} ({self.equation})>"
+
+
+class SensorTerm:
+    """An observation error of the inside temperature sensor (issue 4, diagnosis).
+
+    It changes what is *measured*, not the heat balance: ``T_meas = T_true + offset``. The model
+    integrates the true state and adds the offset to what it reports (and removes it from a
+    measured state it restarts from). Subclasses set ``name``, ``description``, ``parameters``,
+    ``requires`` and implement ``offset`` [K] for parameter columns (P, 1) at time ``t``.
+    """
+
+    name: str = "e"
+    description: str = ""
+    parameters: tuple[Parameter, ...] = ()
+    requires: tuple[str, ...] = ()
+
+    def offset(self, p: Params, x: Drivers, t: Index) -> np.ndarray:
+        """Measured minus true inside temperature [K]."""
+        raise NotImplementedError
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.name}>"

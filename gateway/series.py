@@ -59,7 +59,7 @@ def resample(data: KitData, step: float = 60.0, max_gap: float = MAX_GAP_S) -> S
         raise ValueError(f"step must be positive, got {step}")
     t = data.seconds()
     start = np.ceil(t[0] / step) * step
-    grid = np.arange(start, t[-1] + 1e-9, step)
+    grid = start + step * np.arange(int(np.floor((t[-1] - start) / step + 1e-9)) + 1)
     native = float(np.median(np.diff(t))) if len(t) > 1 else step
     columns = {}
     for name, values in data.columns.items():

@@ -42,7 +42,7 @@ def load_bleiswijk(path: Path = BLEISWIJK) -> dict[str, np.ndarray]:
 def to_minutes(weather: dict[str, np.ndarray], step: float = 60.0) -> dict[str, np.ndarray]:
     """Linear interpolation of the 5-minute weather onto a ``step``-second grid."""
     t = weather["time"].astype(np.int64).astype(float)
-    grid = np.arange(t[0], t[-1] + 1e-9, step)
+    grid = t[0] + step * np.arange(int(np.floor((t[-1] - t[0]) / step + 1e-9)) + 1)
     out = {"time": grid.astype(np.int64).astype("datetime64[s]")}
     for name, values in weather.items():
         if name != "time":

@@ -1,0 +1,41 @@
+"""Shared fixtures: real shipped weather, resampled, driving synthetic inside conditions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gateway.greenhouse import load_greenhouse
+from gateway.series import Series
+from training.weather import load_bleiswijk, to_minutes
+
+
+@pytest.fixture(scope="session")
+def weather_minutes() -> dict[str, np.ndarray]:
+    return to_minutes(load_bleiswijk())
+
+
+def almeria_like_series(weather: dict[str, np.ndarray], days: int, first_day: int = 0) -> Series:
+    """Bleiswijk weather with plausible inside inputs for the almeria model: soil following
+    the daily mean, vents opening with radiation, constant humidity and LAI."""
+    a = 60 + first_day * 1440
+    n = days * 1440
+    cols = {k: weather[k][a : a + n].copy() for k in ("t_out", "rh_out", "i_glob", "wind")}
+    kernel = np.ones(720) / 720
+    cols["t_soil"] = np.convolve(np.pad(cols["t_out"], (360, 359), mode="edge"), kernel, "valid") + 4
+    cols["vent_roof"] = np.clip((cols["i_glob"] - 100) / 3, 0, 100)
+    cols["vent_side"] = np.clip((cols["i_glob"] - 300) / 3, 0, 100)
+    cols["rh_in"] = np.full(n, 75.0)
+    cols["t_in"] = cols["t_out"] + 3.0
+    cols["lai"] = np.full(n, 2.5)
+    return Series(weather["time"][a : a + n], 60.0, cols, source="almeria-like")
+
+
+@pytest.fixture(scope="session")
+def almeria_gh():
+    return load_greenhouse("almeria-palmerillas")
+
+
+@pytest.fixture(scope="session")
+def prototype_gh():
+    return load_greenhouse("biskra-prototype")

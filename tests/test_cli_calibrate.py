@@ -1,0 +1,60 @@
+import json
+
+import numpy as np
+import pytest
+
+from gateway.cli import main
+from gateway.kitcsv import write_kit_csv
+from training.identifiability import DATASET
+
+METRIC_KEYS = {"mae", "rmse", "maxae", "r2", "ef"}
+
+
+def test_calibrate_json_report_and_params_file(capsys, tmp_path):
+    out = tmp_path / "p.toml"
+    code = main([
+        "calibrate", "--data", str(DATASET), "--greenhouse", "biskra-prototype",
+        "--model", "prototype", "--algorithm", "riwpso", "--iterations", "60",
+        "--calibrate-on", "2009-10-20/2009-10-21", "--json", "--out", str(out),
+    ])
+    assert code == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["model"] == "prototype" and report["algorithm"] == "riwpso"
+    assert set(report["params"]) == {"c_solar", "c_cnv_cnd", "c_loss", "c_thermal"}
+    for part in ("calibration", "validation"):
+        for mode in ("one_step", "free_run"):
+            assert METRIC_KEYS <= set(report["metrics"][part][mode])
+    assert report["metrics"]["validation"]["one_step"]["n"] == 1439  # the second day
+    assert report["seconds"] > 0
+    assert "[params]" in out.read_text() and 'model = "prototype"' in out.read_text()
+
+
+def test_calibrate_without_held_out_data_reports_null_validation(capsys):
+    main(["calibrate", "--data", str(DATASET), "--greenhouse", "biskra-prototype", "--model",
+          "prototype", "--algorithm", "rsba", "--iterations", "5", "--json"])
+    assert json.loads(capsys.readouterr().out)["metrics"]["validation"] is None
+
+
+def test_bad_file_gives_one_clear_line_and_exit_2(capsys, tmp_path):
+    path = tmp_path / "k.csv"
+    path.write_text("time,t_in,rh_in,t_out,i_glob,wind\n2020-01-01T00:00:00Z,293.15,50,10,0,1\n")
+    assert main(["calibrate", "--data", str(path), "--greenhouse", "biskra-prototype",
+                 "--model", "prototype"]) == 2
+    err = capsys.readouterr().err
+    assert "k.csv:2: column t_in" in err and "kelvin" in err
+
+
+def test_missing_model_column_is_named(capsys, tmp_path):
+    t = np.datetime64("2020-01-01T00:00:00", "s") + np.arange(5) * np.timedelta64(60, "s")
+    cols = {c: np.full(5, 10.0) for c in ("t_in", "rh_in", "t_out", "i_glob", "wind")}
+    path = write_kit_csv(tmp_path / "noso.csv", t, cols)
+    assert main(["calibrate", "--data", str(path), "--greenhouse", "almeria-palmerillas",
+                 "--model", "almeria"]) == 2
+    assert "t_soil" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("span", ["2030-01-01/2030-01-02", "yesterday"])
+def test_bad_span_is_explained(capsys, span):
+    assert main(["calibrate", "--data", str(DATASET), "--greenhouse", "biskra-prototype",
+                 "--model", "prototype", "--calibrate-on", span]) == 2
+    assert "--calibrate-on" in capsys.readouterr().err

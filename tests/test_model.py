@@ -1,0 +1,142 @@
+"""Flux-term models: vectorisation, exact integration, stability at the box corners."""
+
+import itertools
+
+import numpy as np
+import pytest
+from conftest import almeria_like_series
+
+from gateway.model import build_model
+from gateway.model.drivers import prepare_drivers, roof_vent_area, side_vent_area
+
+
+@pytest.fixture(scope="module")
+def almeria(weather_minutes, almeria_gh):
+    model = build_model("almeria", almeria_gh)
+    series = almeria_like_series(weather_minutes, days=2)
+    return model, prepare_drivers(series, almeria_gh), almeria_gh
+
+
+@pytest.fixture(scope="module")
+def prototype(weather_minutes, prototype_gh):
+    model = build_model("prototype", prototype_gh)
+    series = almeria_like_series(weather_minutes, days=2)
+    return model, prepare_drivers(series, prototype_gh), prototype_gh
+
+
+def random_population(model, gh, n, seed=0):
+    lo, hi = model.bounds(gh)
+    return lo + np.random.default_rng(seed).random((n, len(lo))) * (hi - lo)
+
+
+def test_almeria_has_the_ten_parameters_of_table_13(almeria):
+    model, _, gh = almeria
+    assert model.names == ["c_asw", "c_cnv_ss", "c_cnd_cnv", "c_a", "c_bd", "c_bn",
+                           "c_ven_d", "c_ven_w", "c_loss", "c_tsw"]
+    lo, hi = model.bounds(gh)
+    table13 = {"c_asw": (0.1, 0.9), "c_cnv_ss": (1, 100), "c_cnd_cnv": (1, 300), "c_a": (0.2, 0.7),
+               "c_bd": (4, 26), "c_bn": (4, 26), "c_loss": (0.1, 1), "c_tsw": (0.1, 1)}
+    for name, (a, b) in table13.items():
+        j = model.index(name)
+        assert (lo[j], hi[j]) == (a, b)
+
+
+@pytest.mark.parametrize("which", ["almeria", "prototype"])
+def test_population_evaluation_equals_one_candidate_at_a_time(which, request):
+    model, x, gh = request.getfixturevalue(which)
+    theta = random_population(model, gh, 7)
+    one = model.one_step(theta, x, gh, 60.0)
+    free = model.free_run(theta, x, gh, 60.0)
+    assert one.shape == free.shape == (7, len(x["t_in"]))
+    for i in range(7):
+        np.testing.assert_allclose(one[i], model.one_step(theta[i : i + 1], x, gh, 60.0)[0], rtol=1e-12)
+        np.testing.assert_allclose(free[i], model.free_run(theta[i : i + 1], x, gh, 60.0)[0], rtol=1e-12)
+
+
+def test_exponential_step_matches_a_fine_euler_integration(almeria):
+    model, x, gh = almeria
+    theta = random_population(model, gh, 3, seed=1)
+    p = model.columns(theta)
+    c = model.capacity(gh)
+    t = 700  # midday: sun, vents open
+    state = np.full((3, 1), 20.0)
+    exact = model.step(p, x, state, t, c, 60.0)
+    # Explicit Euler with 60000 sub-steps of 1 ms: converged reference for the frozen step.
+    g = sum(term.coefficients(p, x, state, t)[0] for term in model.terms)
+    s = sum(term.coefficients(p, x, state, t)[1] for term in model.terms)
+    ref = state.copy()
+    for _ in range(60000):
+        ref = ref + (g - s * ref) * 0.001 / c
+    np.testing.assert_allclose(exact, ref, atol=1e-4)
+
+
+def test_one_step_at_the_measured_state_is_what_free_run_does_for_one_step(almeria):
+    model, x, gh = almeria
+    theta = model.defaults(gh)[None, :]
+    one = model.one_step(theta, x, gh, 60.0)
+    free = model.free_run(theta, x, gh, 60.0, start=500, stop=502)
+    assert one[0, 501] == pytest.approx(free[0, 1])
+
+
+def test_forecast_is_a_free_run_vectorised_over_start_times(almeria):
+    model, x, gh = almeria
+    theta = model.defaults(gh)
+    starts = np.array([10, 400, 900])
+    fc = model.forecast(np.repeat(theta[None, :], 3, axis=0), x, gh, 60.0, starts, horizon=30)
+    for k, s0 in enumerate(starts):
+        run = model.free_run(theta[None, :], x, gh, 60.0, start=s0, stop=s0 + 31)
+        assert fc[k] == pytest.approx(run[0, -1])
+
+
+def test_free_run_restarts_from_the_measurement_after_a_gap(prototype):
+    model, x, gh = prototype
+    x = dict(x)
+    x["t_out"] = x["t_out"].copy()
+    x["t_out"][100:110] = np.nan
+    run = model.free_run(model.defaults(gh)[None, :], x, gh, 60.0)[0]
+    assert np.isnan(run[101:111]).all()
+    # First value after the gap: one step from the measured state at 110.
+    one = model.one_step(model.defaults(gh)[None, :], x, gh, 60.0)[0]
+    assert run[111] == pytest.approx(one[111])
+    assert np.isfinite(run[111:]).all()
+
+
+def test_fluxes_balance_the_temperature_change(almeria):
+    model, x, gh = almeria
+    theta = model.defaults(gh)
+    run = model.free_run(theta[None, :], x, gh, 60.0)[0]
+    q = model.fluxes(theta, x, run)
+    assert set(q) == {"q_sol", "q_cnv_ss", "q_cnd_cnv", "q_trp", "q_vent"}
+    total = sum(q.values())
+    # C dT/dt = sum Q: compare over a calm night hour where the coefficients barely change.
+    dTdt = np.gradient(run) / 60.0
+    night = slice(60, 120)
+    np.testing.assert_allclose(model.capacity(gh) * dTdt[night], total[night], rtol=0.05, atol=0.5)
+
+
+def test_vent_areas_follow_iii33_and_iii34(almeria_gh):
+    v = almeria_gh.vents
+    assert side_vent_area(v, np.array(50.0)) == pytest.approx(2 * 32.75 * 1.90 * 0.5)
+    full = roof_vent_area(v, np.array(100.0))
+    assert full == pytest.approx(5 * 2 * 8.36 * 0.73 * np.sin(np.radians(v.roof_max_angle / 2)))
+    assert roof_vent_area(v, np.array(0.0)) == 0.0
+
+
+def test_free_run_is_stable_for_15_days_at_every_corner_of_the_box(weather_minutes, almeria_gh):
+    """All 2^10 corners of the table-13 box at once: 15 days of free run stay finite, inside the
+    equilibrium envelope the exact step guarantees, and inside [-50, 100] °C. (An explicit
+    Euler step at dt = 60 s diverges here: C_ter / C_cnd_cnv,max ≈ 14 s.)"""
+    model = build_model("almeria", almeria_gh)
+    series = almeria_like_series(weather_minutes, days=15)
+    x = prepare_drivers(series, almeria_gh)
+    lo, hi = model.bounds(almeria_gh)
+    corners = np.array(list(itertools.product(*zip(lo, hi, strict=True))))
+    run = model.free_run(corners, x, almeria_gh, 60.0)
+    assert run.shape == (1024, 15 * 1440)
+    assert np.isfinite(run).all()
+    assert run.min() > -50.0 and run.max() < 100.0
+    # Calibrated (table 8) parameters stay near the weather that drives them.
+    typical = model.free_run(model.defaults(almeria_gh)[None, :], x, almeria_gh, 60.0)[0]
+    assert series["t_out"].min() - 5 < typical.min() and typical.max() < series["t_out"].max() + 25
+    # The explicit Euler step is unstable at the stiff corner: the reason for the exact step.
+    assert model.capacity(almeria_gh) / hi[model.index("c_cnd_cnv")] < 60.0

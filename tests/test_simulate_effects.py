@@ -104,7 +104,7 @@ def test_sensor_radiation_bias(base):
         np.testing.assert_array_equal(base.series[name], r.series[name])
     diff = r.columns["t_in"] - base.columns["t_in"]
     sunny = after & (r.series["i_in"] > 100)
-    dark = after & (r.series["i_glob"] <= 0)
+    dark = after & (r.series["i_in"] <= 0)
     expected = 0.01 * r.series["i_in"][sunny]
     np.testing.assert_allclose(diff[sunny], expected, atol=0.011)  # HC2S3 resolution 0.01
     assert np.nanmax(np.abs(diff[dark])) < 1e-9

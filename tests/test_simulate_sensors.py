@@ -94,3 +94,8 @@ def test_controller_motor_speed_rain_and_wind():
     assert roof == 0.0 and side == 100.0  # rain closes the roof only
     roof, side = ctrl.step(35.0, 15.0, 0.0, 100.0, 100.0, 1e6)
     assert roof == ctrl.wind_cap and side == ctrl.wind_cap
+    # Capped vents stay capped while the wind is only a little below the limit...
+    assert ctrl.step(35.0, ctrl.wind_limit - 1.0, 0.0, roof, side, 1e6) == (roof, side)
+    # ...and open again once it has calmed down; an open vent is not capped in that band.
+    assert ctrl.step(35.0, ctrl.wind_limit - 3.0, 0.0, roof, side, 1e6) == (100.0, 100.0)
+    assert ctrl.step(35.0, ctrl.wind_limit - 1.0, 0.0, 100.0, 100.0, 1e6) == (100.0, 100.0)

@@ -33,7 +33,8 @@ class VentController:
 
     ``roof_setpoint``/``side_setpoint`` start of opening [°C]; ``band`` proportional band [K];
     ``hysteresis`` [K]; ``speed`` motor speed [% s-1]; ``wind_limit`` wind speed [m s-1] above
-    which openings are capped at ``wind_cap`` [%]; ``rain_closes_roof`` [bool].
+    which openings are capped at ``wind_cap`` [%] until it is ``wind_hysteresis`` [m s-1] lower;
+    ``rain_closes_roof`` [bool].
     """
 
     roof_setpoint: float = 24.0
@@ -43,6 +44,7 @@ class VentController:
     speed: float = 100.0 / 180.0
     wind_limit: float = 10.0
     wind_cap: float = 20.0
+    wind_hysteresis: float = 2.0
     rain_closes_roof: bool = True
 
     def step(self, t_air: float, wind: float, rain: float, roof: float, side: float,
@@ -53,8 +55,12 @@ class VentController:
         """
         roof_target = backlash(roof, t_air, self.roof_setpoint, self.band, self.hysteresis)
         side_target = backlash(side, t_air, self.side_setpoint, self.band, self.hysteresis)
-        if wind > self.wind_limit:
+        # Wind cap with hysteresis: once capped, a vent stays capped until the wind falls
+        # ``wind_hysteresis`` below the limit (the position remembers the state).
+        calm = self.wind_limit - self.wind_hysteresis
+        if wind > self.wind_limit or (wind > calm and roof <= self.wind_cap + 1e-9):
             roof_target = min(roof_target, self.wind_cap)
+        if wind > self.wind_limit or (wind > calm and side <= self.wind_cap + 1e-9):
             side_target = min(side_target, self.wind_cap)
         if rain > 0.5 and self.rain_closes_roof:
             roof_target = 0.0

@@ -23,10 +23,19 @@ test: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(PY) -m pytest -q
 
+# The peers (mealpy pins numpy < 2) live in their own virtualenv so they never touch .venv.
+BENCH_VENV  := .venv-bench
+BENCH_STAMP := $(BENCH_VENV)/.installed
+
+$(BENCH_STAMP): pyproject.toml
+	$(PYTHON) -m venv $(BENCH_VENV)
+	$(BENCH_VENV)/bin/python -m pip install --quiet --upgrade pip
+	$(BENCH_VENV)/bin/python -m pip install --quiet -e '.[dev,bench]'
+	touch $(BENCH_STAMP)
+
 ## bench: speed and memory, side by side with peers; JSON in bench/results/
-bench: $(STAMP)
-	$(PY) -m pip install --quiet -e '.[bench]'
-	$(PY) tests/bench/run.py
+bench: $(BENCH_STAMP)
+	$(BENCH_VENV)/bin/python tests/bench/run.py
 
 ## images: MCU firmware bundle and gateway bundle in images/build/
 images: $(STAMP)
@@ -36,4 +45,4 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 
 clean:
-	rm -rf $(VENV) images/build bench/results .pytest_cache .ruff_cache
+	rm -rf $(VENV) $(BENCH_VENV) images/build bench/results .pytest_cache .ruff_cache

@@ -102,7 +102,8 @@ def _inputs(plant, wx: Weather, substeps: int = 2) -> SubstepInputs:
 
     return SubstepInputs(full(wx.t_out), full(vapour_concentration(wx.t_out, wx.rh_out)),
                          full(wx.i_glob), full(wx.wind), full(wx.t_sky), np.zeros(n_sub),
-                         float(wx.t_out[0]) + plant.ground_offset, wx.wind, wx.rain)
+                         float(wx.t_out[0]) + plant.ground_offset, np.zeros(len(wx), bool),
+                         wx.rain)
 
 
 def test_unheated_house_relaxes_to_outside():

@@ -75,7 +75,7 @@ def test_controller_roof_first_then_side_and_loop_of_hysteresis():
     roof = side = 0.0
     trace = []
     for t in temps:
-        roof, side = ctrl.step(t, 1.0, 0.0, roof, side, 60.0)
+        roof, side = ctrl.step(t, False, 0.0, roof, side, 60.0)
         trace.append((t, roof, side))
     trace = np.array(trace)
     up, down = trace[:121], trace[121:][::-1]
@@ -88,14 +88,16 @@ def test_controller_roof_first_then_side_and_loop_of_hysteresis():
 
 def test_controller_motor_speed_rain_and_wind():
     ctrl = VentController()
-    roof, side = ctrl.step(35.0, 1.0, 0.0, 0.0, 0.0, 60.0)
+    roof, side = ctrl.step(35.0, False, 0.0, 0.0, 0.0, 60.0)
     assert roof == pytest.approx(ctrl.speed * 60.0) and side == pytest.approx(roof)
-    roof, side = ctrl.step(35.0, 1.0, 1.0, 100.0, 100.0, 1e6)
+    roof, side = ctrl.step(35.0, False, 1.0, 100.0, 100.0, 1e6)
     assert roof == 0.0 and side == 100.0  # rain closes the roof only
-    roof, side = ctrl.step(35.0, 15.0, 0.0, 100.0, 100.0, 1e6)
+    roof, side = ctrl.step(35.0, True, 0.0, 100.0, 100.0, 1e6)
     assert roof == ctrl.wind_cap and side == ctrl.wind_cap
-    # Capped vents stay capped while the wind is only a little below the limit...
-    assert ctrl.step(35.0, ctrl.wind_limit - 1.0, 0.0, roof, side, 1e6) == (roof, side)
-    # ...and open again once it has calmed down; an open vent is not capped in that band.
-    assert ctrl.step(35.0, ctrl.wind_limit - 3.0, 0.0, roof, side, 1e6) == (100.0, 100.0)
-    assert ctrl.step(35.0, ctrl.wind_limit - 1.0, 0.0, 100.0, 100.0, 1e6) == (100.0, 100.0)
+
+
+def test_wind_alarm_hysteresis():
+    ctrl = VentController(wind_limit=10.0, wind_hysteresis=2.0)
+    wind = np.array([5.0, 9.9, 10.5, 9.0, 8.5, 10.2, 7.9, 9.5])
+    expected = [False, False, True, True, True, True, False, False]
+    assert ctrl.storm(wind).tolist() == expected

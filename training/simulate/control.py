@@ -13,6 +13,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 
 def proportional(t_air: float, setpoint: float, band: float) -> float:
     """Proportional demand [%] for air temperature ``t_air`` [°C], ``setpoint`` [°C], ``band`` [K]."""
@@ -47,20 +49,30 @@ class VentController:
     wind_hysteresis: float = 2.0
     rain_closes_roof: bool = True
 
-    def step(self, t_air: float, wind: float, rain: float, roof: float, side: float,
+    def storm(self, wind: np.ndarray) -> np.ndarray:
+        """Wind alarm [bool] per sample from the (filtered) wind speed [m s-1].
+
+        A Schmitt trigger: on above ``wind_limit``, off only below ``wind_limit -
+        wind_hysteresis``, so gusts around the limit do not make the motors hunt.
+        """
+        out = np.zeros(len(wind), dtype=bool)
+        on = False
+        for i, u in enumerate(np.asarray(wind, dtype=float).tolist()):
+            on = u > self.wind_limit or (on and u > self.wind_limit - self.wind_hysteresis)
+            out[i] = on
+        return out
+
+    def step(self, t_air: float, storm: bool, rain: float, roof: float, side: float,
              dt: float) -> tuple[float, float]:
         """New (roof, side) positions [%] after ``dt`` [s] from ``roof``, ``side`` [%].
 
-        ``t_air`` [°C] is the controller's air temperature, ``wind`` [m s-1], ``rain`` [0/1].
+        ``t_air`` [°C] is the controller's air temperature, ``storm`` the wind alarm
+        (:meth:`storm`), ``rain`` [0/1].
         """
         roof_target = backlash(roof, t_air, self.roof_setpoint, self.band, self.hysteresis)
         side_target = backlash(side, t_air, self.side_setpoint, self.band, self.hysteresis)
-        # Wind cap with hysteresis: once capped, a vent stays capped until the wind falls
-        # ``wind_hysteresis`` below the limit (the position remembers the state).
-        calm = self.wind_limit - self.wind_hysteresis
-        if wind > self.wind_limit or (wind > calm and roof <= self.wind_cap + 1e-9):
+        if storm:
             roof_target = min(roof_target, self.wind_cap)
-        if wind > self.wind_limit or (wind > calm and side <= self.wind_cap + 1e-9):
             side_target = min(side_target, self.wind_cap)
         if rain > 0.5 and self.rain_closes_roof:
             roof_target = 0.0

@@ -129,6 +129,7 @@ class Heater(Effect):
     night_only: bool = False
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "night_only", bool(self.night_only))  # 1/0 from a spec string
         if self.power < 0.0:
             raise ValueError(f"heater power must be >= 0, got {self.power}")
 

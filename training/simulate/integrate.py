@@ -105,7 +105,7 @@ class SubstepInputs:
     t_sky: np.ndarray  # [°C]
     lai: np.ndarray  # [m2 m-2]
     t_ground: float  # [°C]
-    wind_out: np.ndarray  # at output times [m s-1]
+    storm_out: np.ndarray  # wind alarm of the vent controller at output times [bool]
     rain_out: np.ndarray  # at output times [0/1]
 
 
@@ -138,12 +138,12 @@ def vapour_concentration(t: np.ndarray, rh: np.ndarray) -> np.ndarray:
 
 def run(plant: Plant, inputs: SubstepInputs, drivers: PhysicsDrivers, state: State,
         step: float, substeps: int, roof0: float = 0.0, side0: float = 0.0) -> Trajectory:
-    """Integrate from ``state`` over ``len(inputs.wind_out)`` output times ``step`` [s] apart.
+    """Integrate from ``state`` over ``len(inputs.storm_out)`` output times ``step`` [s] apart.
 
     Index 0 of the output is the initial state; sub-steps ``(k-1)*substeps ...`` fill the
     interval ending at output ``k``.
     """
-    n_out = len(inputs.wind_out)
+    n_out = len(inputs.storm_out)
     m = substeps
     dt = step / m
     p = plant
@@ -187,7 +187,7 @@ def run(plant: Plant, inputs: SubstepInputs, drivers: PhysicsDrivers, state: Sta
 
     for k in range(1, n_out):
         if ctrl is not None:
-            roof, side = ctrl.step(ta, inputs.wind_out[k - 1], inputs.rain_out[k - 1],
+            roof, side = ctrl.step(ta, inputs.storm_out[k - 1], inputs.rain_out[k - 1],
                                    roof, side, step)
         vent[k - 1] = (roof, side)
         a_r = p.fixed_roof_area
@@ -308,7 +308,7 @@ def run(plant: Plant, inputs: SubstepInputs, drivers: PhysicsDrivers, state: Sta
             ta, tc, tf, td, ca = ta_n, tc_n, tf_n, td_n, c_new
         out[k] = (ta, tc, tf, td, ca)
     if ctrl is not None:
-        roof, side = ctrl.step(ta, inputs.wind_out[-1], inputs.rain_out[-1], roof, side, step)
+        roof, side = ctrl.step(ta, inputs.storm_out[-1], inputs.rain_out[-1], roof, side, step)
     vent[n_out - 1] = (roof, side)
     return Trajectory(out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4],
                       vent[:, 0], vent[:, 1], i_in_rec, rec)

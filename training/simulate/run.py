@@ -131,13 +131,15 @@ def _substep_inputs(plant: Plant, weather: Weather, substeps: int, t_ground: flo
         return np.interp(mid, sec, x)
 
     c_out = integrate.vapour_concentration(weather.t_out, weather.rh_out)
+    storm = np.zeros(len(sec), dtype=bool)
+    if plant.controller is not None:
+        storm = plant.controller.storm(_trailing_mean(weather.wind, CONTROL_WIND_WINDOW / step))
     days = lai_days0 + (mid - sec[0]) / 86400.0
     return SubstepInputs(
         t_out=at(weather.t_out), c_out=at(c_out), i_glob=at(weather.i_glob),
         wind=at(weather.wind), t_sky=at(weather.t_sky),
         lai=crop.logistic_lai(days, plant.lai_start, plant.lai_max, plant.lai_rate),
-        t_ground=t_ground, wind_out=_trailing_mean(weather.wind, CONTROL_WIND_WINDOW / step),
-        rain_out=weather.rain,
+        t_ground=t_ground, storm_out=storm, rain_out=weather.rain,
     )
 
 

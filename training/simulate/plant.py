@@ -108,7 +108,7 @@ PROTOTYPE = Plant(
     floor_area=0.68, volume=0.76,  # thesis table 2
     cover_area=3.9,  # gable box 0.85 × 0.80 m, 0.8 m walls, 0.4 m ridge (assumed)
     tau_sw=0.82, alpha_sw=0.08, tau_lw=0.55, eps_cover=0.40,  # new 0.2 mm PE (assumed)
-    sun_ratio=1.5,  # day mean for winter sun on a 0.8 m high box (assumed)
+    sun_ratio=1.3,  # day mean, between low winter sun and high summer sun (assumed)
     cover_capacity=920.0 * 2300.0 * 0.2e-3,  # rho c d of 0.2 mm PE
     sky_view=0.6,  # walls see half sky, half ground
     h_in_a=1.86, h_in_b=0.5, h_out_a=2.8, h_out_b=3.0,  # Papadakis 1992; Watmuff et al. 1977

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import time
 
 import numpy as np
 import pytest
@@ -103,10 +102,8 @@ def test_synthetic_weather_follows_solar_geometry():
     assert np.all(w.t_sky < w.t_out)
 
 
-@pytest.mark.slow
-def test_fourteen_days_run_fast():
-    began = time.perf_counter()
+def test_fourteen_days_give_complete_minute_data():
+    # Speed is measured in benches, never asserted in tests.
     r = simulate("almeria", "bleiswijk", "2009-11-01", days=14.0, seed=0)
-    elapsed = time.perf_counter() - began
     assert len(r.time) == 14 * 1440
-    assert elapsed < 8.0
+    assert np.isfinite(r.columns["t_out"]).all() and np.isfinite(r.columns["t_soil"]).all()

@@ -54,6 +54,9 @@ class Greenhouse:
     sensors: tuple[str, ...] = ()
     parameters: dict[str, dict[str, Any]] = field(default_factory=dict)
     source: str = "<memory>"
+    online: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """Online estimator overrides per output (``[online.t_in]``, ``[online.i_in]``): window,
+    every, iterations, bats, prior (docs/online-estimator.md)."""
 
     @property
     def mean_height(self) -> float:
@@ -80,8 +83,16 @@ _SCHEMA: dict[str, dict[str, tuple[type, float, float]]] = {
     },
     "crop": {"lai": (float, 0.0, 15.0), "extinction": (float, 0.0, 3.0)},
 }
-_TOP = {"name", "description", "sensors", "parameters", *_SCHEMA}
+_TOP = {"name", "description", "sensors", "parameters", "online", *_SCHEMA}
 _PARAM_KEYS = {"value", "bounds", "variation"}
+ONLINE_OUTPUTS = ("t_in", "i_in")
+_ONLINE_KEYS: dict[str, tuple[type, float, float]] = {
+    "window": (int, 1, 10000),  # n past samples re-simulated
+    "every": (int, 1, 10000),  # period in model steps
+    "iterations": (int, 1, 100000),  # RSBA iterations per estimation
+    "bats": (int, 2, 10000),  # RSBA population
+    "prior": (float, 0.0, 1e6),  # weight of the pull toward the starting values [°C²]
+}
 
 
 def list_presets() -> list[str]:
@@ -156,6 +167,7 @@ def parse_greenhouse(raw: dict[str, Any], source: str = "<memory>") -> Greenhous
                     raise GreenhouseError(f"{source}: '{where}' must be [lower, upper] with lower < upper")
             else:
                 _check_number(source, where, value, float, 0.0, math.inf)
+    online = _parse_online(raw.get("online", {}), source)
     air = sections["air"]
     return Greenhouse(
         name=str(raw.get("name", Path(source).stem)),
@@ -169,7 +181,32 @@ def parse_greenhouse(raw: dict[str, Any], source: str = "<memory>") -> Greenhous
         sensors=tuple(sensors),
         parameters={k: dict(v) for k, v in params.items()},
         source=source,
+        online=online,
     )
+
+
+def _parse_online(table: Any, source: str) -> dict[str, dict[str, Any]]:
+    """``[online.<output>]`` tables of online estimator settings, checked key by key."""
+    if not isinstance(table, dict):
+        raise GreenhouseError(f"{source}: 'online' must be a table of [online.<output>] tables")
+    out: dict[str, dict[str, Any]] = {}
+    for output, settings in table.items():
+        if output not in ONLINE_OUTPUTS:
+            raise GreenhouseError(
+                f"{source}: unknown key 'online.{output}' (allowed: {', '.join(ONLINE_OUTPUTS)})"
+            )
+        if not isinstance(settings, dict):
+            raise GreenhouseError(f"{source}: 'online.{output}' must be a table")
+        out[output] = {}
+        for key, value in settings.items():
+            if key not in _ONLINE_KEYS:
+                raise GreenhouseError(
+                    f"{source}: unknown key 'online.{output}.{key}' "
+                    f"(allowed: {', '.join(_ONLINE_KEYS)})"
+                )
+            kind, lo, hi = _ONLINE_KEYS[key]
+            out[output][key] = _check_number(source, f"online.{output}.{key}", value, kind, lo, hi)
+    return out
 
 
 def _check_number(source: str, where: str, value: Any, kind: type, lo: float, hi: float) -> Any:

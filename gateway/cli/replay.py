@@ -1,0 +1,123 @@
+"""``python -m gateway replay``: run the online estimator over recorded data (thesis §IV.2)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from gateway.cli import CliError
+from gateway.cli.common import add_data_arguments, dump_json, load_inputs, progress_bar, read_params_file
+from gateway.estimate.online import online_settings
+from gateway.estimate.replay import replay, report, write_predictions
+
+_KEYS = ("window", "every", "iterations", "bats", "prior")
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "replay",
+        help="run the adaptive (online) model over recorded data, sample by sample",
+        description="Feed a kit CSV to the online parameter estimator exactly as the live gateway "
+        "would, and score its one-step-ahead prediction of the inside temperature against the "
+        "same model with fixed parameters ('constant') and persistence, plus 15/30/60-minute "
+        "forecasts. Settings come from the model and the greenhouse's [online.<output>] tables "
+        "(docs/online-estimator.md).",
+        epilog="example: python -m gateway replay --data spring.csv --greenhouse almeria-palmerillas "
+        "--model almeria --params calibrated.toml --json --plot replay.png",
+    )
+    add_data_arguments(p)
+    p.add_argument(
+        "--params", metavar="calibrated.toml",
+        help="starting parameters written by 'calibrate --out' (default: the middle of each "
+        "parameter's hard box, i.e. no offline calibration)",
+    )
+    p.add_argument(
+        "--set", action="append", default=[], metavar="OUTPUT.KEY=VALUE",
+        help="override an online setting, e.g. --set t_in.window=30 --set t_in.prior=1 "
+        f"(keys: {', '.join(_KEYS)}); repeatable",
+    )
+    p.add_argument(
+        "--warmup", type=float, default=0.0, metavar="MIN",
+        help="leave the first MIN minutes out of every metric (e.g. 1440 to score days 2..)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="random seed of the bats (0)")
+    p.add_argument("--out", metavar="predictions.csv",
+                   help="write time, measured/predicted values, parameters and heat fluxes")
+    p.add_argument("--plot", metavar="replay.png", help="draw measured vs predicted, residual, parameters")
+    p.set_defaults(func=run)
+
+
+def _overrides(items: list[str]) -> dict[str, dict[str, float]]:
+    out: dict[str, dict[str, float]] = {}
+    for item in items:
+        try:
+            key, value = item.split("=", 1)
+            output, name = key.split(".", 1)
+            number = float(value)
+        except ValueError:
+            raise CliError(f"--set {item!r}: expected OUTPUT.KEY=NUMBER, e.g. t_in.window=30") from None
+        if name not in _KEYS:
+            raise CliError(f"--set {item!r}: unknown key '{name}' (keys: {', '.join(_KEYS)})")
+        out.setdefault(output, {})[name] = number
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    series, gh, model = load_inputs(args)
+    theta0 = read_params_file(args.params, model) if args.params else None
+    try:
+        settings = online_settings(model, gh, _overrides(args.set))
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    if args.warmup < 0:
+        raise CliError("--warmup must be >= 0 minutes")
+    warmup = int(round(args.warmup * 60.0 / series.step))
+    if warmup >= len(series) - 2:
+        raise CliError(f"--warmup {args.warmup:g} min leaves no sample of {args.data} to score")
+    with progress_bar(f"replay {model.name}", len(series), True) as bar:
+        result = replay(model, series, gh, theta0, settings, seed=args.seed,
+                        progress=lambda done: bar(advance=100))
+    rep = report(result, warmup)
+    rep["data"] = args.data
+    rep["start"] = "calibrated" if args.params else "middle of the hard box"
+    if args.out:
+        write_predictions(result, args.out)
+    if args.plot:
+        from gateway.plots import plot_replay
+
+        plot_replay(result, args.plot, title=f"{model.name} on {args.data}")
+    if args.json:
+        dump_json(rep)
+    else:
+        _print_human(rep)
+    return 0
+
+
+def _line(name: str, m: dict | None, unit: str = "°C") -> str:
+    if not m:
+        return f"  {name:<12} no comparable samples\n"
+    return (f"  {name:<12} MAE {m['mae']:.3f} {unit}  RMSE {m['rmse']:.3f}  MaxAE {m['maxae']:.2f}  "
+            f"R² {m['r2']:.4f}  EF {m['ef']:.4f}  (n={m['n']})\n")
+
+
+def _print_human(rep: dict) -> None:
+    out = sys.stdout
+    out.write(f"{rep['model']} replay of {rep['data']}: {rep['samples']} samples, "
+              f"{rep['skipped']} with dropped values, start: {rep['start']}\n")
+    if rep["faults"]:
+        out.write("  dropped: " + ", ".join(f"{k} {v}" for k, v in rep["faults"].items()) + "\n")
+    out.write("one-step-ahead inside temperature:\n")
+    for name, m in rep["metrics"].items():
+        out.write(_line(name, m))
+    for h, block in rep["horizons"].items():
+        out.write(f"{h}-minute forecast:\n")
+        for name, m in block.items():
+            out.write(_line(name, m))
+    if rep["radiation"]:
+        out.write("inside radiation (sunlit samples):\n")
+        for name, m in rep["radiation"].items():
+            out.write(_line(name, m, "W m-2"))
+    ms = rep["step_ms"]
+    if ms["median"] is not None:
+        out.write(f"time per step: median {ms['median']:.1f} ms, p95 {ms['p95']:.1f} ms, "
+                  f"max {ms['max']:.1f} ms\n")

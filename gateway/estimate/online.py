@@ -1,0 +1,405 @@
+"""Online parameter estimator: RSBA on "virtual models" of the last n samples (thesis §IV.2.1.2).
+
+Every sample the estimator
+
+1. checks the sample (non-finite, outside the kit column's possible range, or a stuck inside
+   temperature → that value is dropped and counted);
+2. for each estimation group due at this step (``Model.online``, e.g. air temperature every
+   step with n = 3 and the radiation sub-model every 20 steps with n = 60), re-simulates the
+   window [t - n, t] from the measured state at t - n for the whole bat population at once and
+   lets RSBA minimise the mean square error (RMSE in the thesis: same minimiser);
+3. searches parameter j only while its process is active (``Parameter.active``: radiation
+   > 5 W m-2, vents open, LAI > 0.1), inside the adaptive box ``C_j (1 ± R_j)`` (IV.53–IV.54,
+   table 12) clipped to the hard limits (table 13); otherwise the value is held;
+4. applies the best set at t and predicts T_in[t + 1] with one exact exponential step.
+
+Nothing after t is ever read, so replaying recorded data gives exactly what the live gateway
+would have predicted. Parameters never leave their hard box and no NaN is ever returned: a
+prediction that cannot be made is ``None``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from gateway.estimate.swarm import ALMERIA_OFFLINE, bat
+from gateway.greenhouse import Greenhouse
+from gateway.kitcsv import COLUMNS
+from gateway.model.drivers import prepare_drivers
+from gateway.model.model import Model
+from gateway.series import Series
+
+DEFAULT_ITERATIONS = 100
+"""RSBA iterations per estimation. The thesis does not print its online count; 100 keeps the
+almeria step under 20 ms on one core, and more iterations do not lower the replay error
+(docs/online-estimator.md, "Iterations")."""
+
+STUCK_SAMPLES = 30
+"""An inside temperature repeated bit for bit this many samples in a row (30 min at 1 min) is a
+stuck sensor: real air temperature, read to 0.01 °C, always moves within half an hour."""
+
+MIN_RADIATION_PAIRS = 10
+"""The radiation sub-model is only re-estimated with at least this many sunlit samples."""
+
+
+@dataclass(frozen=True)
+class GroupSettings:
+    """Settings of one estimation group (thesis §IV.2.2.2).
+
+    ``parameters``: the names searched (resolved: never empty); ``window``: n past samples
+    re-simulated; ``every``: period in model steps; ``iterations``/``bats``: RSBA budget;
+    ``prior``: weight λ [°C² or (W m-2)²] of the pull toward the starting values, added to the
+    window MSE as λ mean_j ((θ_j - θ0_j)/(hi_j - lo_j))² (0 = the thesis's estimator).
+    """
+
+    output: str
+    parameters: tuple[str, ...]
+    window: int
+    every: int
+    iterations: int = DEFAULT_ITERATIONS
+    bats: int = ALMERIA_OFFLINE.bats
+    prior: float = 0.0
+
+
+def online_settings(
+    model: Model, gh: Greenhouse | None = None, overrides: Mapping[str, Mapping[str, float]] | None = None
+) -> tuple[GroupSettings, ...]:
+    """The model's estimation groups (``Model.online``) with the greenhouse's ``[online.<output>]``
+    settings and then ``overrides`` applied on top.
+
+    A group whose ``parameters`` is empty takes every parameter no other group claims.
+    """
+    claimed = {n for g in model.online for n in g.parameters}
+    groups = []
+    for g in model.online:
+        names = g.parameters or tuple(n for n in model.names if n not in claimed)
+        unknown = [n for n in names if n not in model.names]
+        if unknown:
+            raise ValueError(f"{model.name}: online group '{g.output}' names unknown {unknown}")
+        s = GroupSettings(g.output, names, g.window, g.every)
+        for source in (gh.online if gh is not None else {}, overrides or {}):
+            table = dict(source.get(g.output, {}))
+            bad = [k for k in table if k not in ("window", "every", "iterations", "bats", "prior")]
+            if bad:
+                raise ValueError(f"online.{g.output}: unknown setting(s) {', '.join(bad)}")
+            for key in ("window", "every", "iterations", "bats"):
+                if key in table:
+                    table[key] = int(table[key])
+                    if table[key] < (2 if key == "bats" else 1):
+                        raise ValueError(f"online.{g.output}.{key} must be positive, got {table[key]}")
+            if "prior" in table:
+                table["prior"] = float(table["prior"])
+                if not table["prior"] >= 0:
+                    raise ValueError(f"online.{g.output}.prior must be >= 0, got {table['prior']}")
+            s = replace(s, **table)
+        groups.append(s)
+    known = {g.output for g in model.online}
+    for source in (gh.online if gh is not None else {}, overrides or {}):
+        extra = [k for k in source if k not in known]
+        if extra:
+            raise ValueError(
+                f"online.{extra[0]}: the '{model.name}' model has no such estimation group "
+                f"(groups: {', '.join(sorted(known))})"
+            )
+    return tuple(groups)
+
+
+@dataclass
+class Prediction:
+    """What ``OnlineEstimator.update`` returns for the sample at t.
+
+    ``t_in``: predicted inside temperature at t + 1 [°C] (None when it cannot be made);
+    ``theta``: parameters in force for that prediction (k,); ``estimated``: outputs whose group
+    ran at this step; ``faults``: columns of this sample that were dropped; ``dead_reckoning``:
+    True when the measured T_in[t] was missing and the previous prediction served as state.
+    """
+
+    t_in: float | None
+    theta: np.ndarray
+    estimated: tuple[str, ...] = ()
+    faults: tuple[str, ...] = ()
+    dead_reckoning: bool = False
+
+
+@dataclass
+class Counters:
+    """Counts for the replay report and the gateway's health page."""
+
+    samples: int = 0
+    faulty_samples: int = 0  # samples with at least one dropped value
+    faults: dict[str, int] = field(default_factory=dict)  # per column and reason
+    estimated: dict[str, int] = field(default_factory=dict)  # per group
+    skipped: dict[str, int] = field(default_factory=dict)  # group due but window incomplete
+    no_prediction: int = 0
+
+
+class OnlineEstimator:
+    """Sample-by-sample adaptation of a model's parameters, usable live or in replay.
+
+    ``theta0``: starting parameters (offline calibration); None starts from the middle of the
+    hard box (the thesis's estimator works without offline calibration). ``dt`` is the model
+    step [s]; samples are expected every ``dt`` (the ingest layer resamples).
+    """
+
+    def __init__(
+        self,
+        model: Model,
+        gh: Greenhouse,
+        theta0: np.ndarray | None = None,
+        settings: Sequence[GroupSettings] | None = None,
+        dt: float = 60.0,
+        seed: int | None = 0,
+    ) -> None:
+        self.model, self.gh, self.dt = model, gh, float(dt)
+        self.lower, self.upper = model.bounds(gh)
+        self.variation = model.variations(gh)
+        if theta0 is None:
+            theta0 = 0.5 * (self.lower + self.upper)
+        theta0 = np.asarray(theta0, dtype=float)
+        if theta0.shape != self.lower.shape or not np.all(np.isfinite(theta0)):
+            raise ValueError(f"{model.name}: theta0 must be {len(self.lower)} finite values {model.names}")
+        self.theta0 = np.clip(theta0, self.lower, self.upper)
+        self.theta = self.theta0.copy()
+        self.settings = tuple(settings) if settings is not None else online_settings(model, gh)
+        self.rng = np.random.default_rng(seed)
+        self.capacity_c = model.capacity(gh)  # C [J m-2 K-1] (III.24) or rho V / S_f (III.14)
+        self._idx = {g.output: np.array([model.index(n) for n in g.parameters]) for g in self.settings}
+        self._conditions = [p.active for p in model.parameters]
+        self._names = list(enumerate(model.names))
+        self._bat = {
+            g.output: replace(ALMERIA_OFFLINE, bats=g.bats, iterations=g.iterations) for g in self.settings
+        }
+        # Columns whose absence stops the temperature step (derived ones follow from these).
+        self._needed = [c for c in model.requires if c != "t_in"]
+        if "rh_in" in model.requires:
+            self._needed.append("p_w_in")  # transpiration's VPD (III.29)
+        self.history = max(g.window for g in self.settings) + 1
+        self._cap = max(4 * self.history, 512)
+        self._buf: dict[str, np.ndarray] = {}
+        self._n = 0  # rows stored in the buffer
+        self._stuck_value = np.nan
+        self._stuck_run = 0
+        self._last_prediction: float | None = None
+        self.counters = Counters()
+        self.last_row: dict[str, float] = {}
+        """The checked and derived drivers of the last sample (what replay records)."""
+
+    # -- public API ----------------------------------------------------------------------
+    def update(self, sample: Mapping[str, float]) -> Prediction:
+        """Take the measured sample at t (kit column name → value), adapt, predict t + 1."""
+        self.counters.samples += 1
+        step = self.counters.samples - 1  # index of this sample since start
+        values, faults = self._check(sample)
+        if faults:
+            self.counters.faulty_samples += 1
+        row = self._derive(values)
+        self._append(row)
+        self.last_row = row
+        estimated = []
+        for g in self.settings:
+            if step % g.every:
+                continue
+            ran = self._estimate_rad(g) if g.output == "i_in" else self._estimate_air(g)
+            if ran is None:
+                continue  # nothing active or nothing measured for this group: hold, no fault
+            if ran:
+                estimated.append(g.output)
+                self.counters.estimated[g.output] = self.counters.estimated.get(g.output, 0) + 1
+            else:
+                self.counters.skipped[g.output] = self.counters.skipped.get(g.output, 0) + 1
+        t_next, dead = self._predict(row)
+        if t_next is None:
+            self.counters.no_prediction += 1
+        self._last_prediction = t_next
+        return Prediction(t_next, self.theta.copy(), tuple(estimated), tuple(faults), dead)
+
+    # -- checks and buffer ----------------------------------------------------------------
+    def _check(self, sample: Mapping[str, float]) -> tuple[dict[str, float], list[str]]:
+        values: dict[str, float] = {}
+        faults = []
+        for name, raw in sample.items():
+            col = COLUMNS.get(name)
+            if col is None:
+                continue  # not a kit measurement (time stamps, ids)
+            try:
+                v = float(raw)
+            except (TypeError, ValueError):
+                v = np.nan
+            reason = None
+            if not np.isfinite(v):
+                reason = "missing"
+            elif not col.lower <= v <= col.upper:
+                reason = "out_of_range"
+            if name == "t_in" and reason is None:
+                self._stuck_run = self._stuck_run + 1 if v == self._stuck_value else 1
+                self._stuck_value = v
+                if self._stuck_run >= STUCK_SAMPLES:
+                    reason = "stuck"
+            if reason is not None:
+                v = np.nan
+                if reason != "missing" or name in self.model.requires:
+                    faults.append(name)
+                    key = f"{name}:{reason}"
+                    self.counters.faults[key] = self.counters.faults.get(key, 0) + 1
+            values[name] = v
+        for name in self.model.requires:
+            if name not in values:
+                values[name] = np.nan
+                faults.append(name)
+                key = f"{name}:missing"
+                self.counters.faults[key] = self.counters.faults.get(key, 0) + 1
+        return values, faults
+
+    def _derive(self, values: dict[str, float]) -> dict[str, float]:
+        """The same derived drivers as a whole-series replay (``prepare_drivers``), for one row."""
+        cols = {k: np.array([v]) for k, v in values.items()}
+        x = prepare_drivers(Series(np.zeros(1, "datetime64[s]"), self.dt, cols), self.gh)
+        return {k: float(v[0]) for k, v in x.items()}
+
+    def _append(self, row: Mapping[str, float]) -> None:
+        if not self._buf:
+            self._buf = {k: np.full(self._cap, np.nan) for k in row}
+        if self._n == self._cap:  # keep the last `history` rows; amortised O(1) per sample
+            keep = self.history
+            for arr in self._buf.values():
+                arr[:keep] = arr[self._cap - keep :]
+                arr[keep:] = np.nan
+            self._n = keep
+        for k, arr in self._buf.items():
+            arr[self._n] = row.get(k, np.nan)
+        self._n += 1
+
+    def _window(self, rows: int) -> dict[str, np.ndarray] | None:
+        """Views of the last ``rows`` rows of every driver, or None before enough samples."""
+        if self._n < rows:
+            return None
+        a = self._n - rows
+        return {k: v[a : self._n] for k, v in self._buf.items()}
+
+    # -- estimation -------------------------------------------------------------------------
+    def _free(self, g: GroupSettings, now: Mapping[str, np.ndarray]) -> np.ndarray:
+        """Indices of the group's parameters whose process is active at t."""
+        idx = self._idx[g.output]
+        active = [bool(self._conditions[j](now)[0]) for j in idx]
+        return idx[np.array(active, dtype=bool)]
+
+    def _box(self, free: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Adaptive search box C_j (1 ± R_j) (IV.53–IV.54) inside the hard box (table 13)."""
+        lo, hi = self.lower[free], self.upper[free]
+        c, r = self.theta[free], self.variation[free]
+        # A value at 0 would give a box of width 0 forever: the half-width never drops below
+        # R_j times 1 % of the hard range.
+        half = r * np.maximum(np.abs(c), 0.01 * (hi - lo))
+        whole = ~np.isfinite(r)
+        b_lo = np.where(whole, lo, np.maximum(lo, c - half))
+        b_hi = np.where(whole, hi, np.minimum(hi, c + half))
+        return b_lo, b_hi
+
+    def _penalty(self, g: GroupSettings, free: np.ndarray, cand: np.ndarray) -> np.ndarray | float:
+        if g.prior <= 0:
+            return 0.0
+        z = (cand - self.theta0[free]) / (self.upper[free] - self.lower[free])
+        return g.prior * np.mean(z * z, axis=1)
+
+    def _estimate_air(self, g: GroupSettings) -> bool | None:
+        """Virtual model of the temperature: free run over [t - n, t] for all bats at once."""
+        n = g.window
+        x = self._window(n + 1)
+        if x is None:
+            return False
+        now = {k: v[-1:] for k, v in x.items()}
+        free = self._free(g, now)
+        if free.size == 0:
+            return None
+        measured = x["t_in"]
+        if not np.all(np.isfinite(measured)) or not all(
+            np.all(np.isfinite(x[c][:-1])) for c in self._needed
+        ):
+            return False
+        model, c, dt = self.model, self.capacity_c, self.dt
+        base = self.theta
+        target = measured[1:]
+        names = self._names
+
+        sensors = bool(model.sensors)
+
+        def cost(cand: np.ndarray) -> np.ndarray:
+            theta = np.repeat(base[None, :], cand.shape[0], axis=0)
+            theta[:, free] = cand
+            p = {name: theta[:, j : j + 1] for j, name in names}  # Model.columns without checks
+            state = np.full((cand.shape[0], 1), measured[0])
+            if sensors:  # observation terms: simulate the true state behind the reading
+                state = state - model.sensor_offset(p, x, 0)
+            sq = np.zeros(cand.shape[0])
+            for s in range(n):  # III.23 integrated step by step from the measured T_in[t - n]
+                state = model.step(p, x, state, s, c, dt)
+                seen = state + model.sensor_offset(p, x, s + 1) if sensors else state
+                sq += (seen[:, 0] - target[s]) ** 2
+            return sq / n + self._penalty(g, free, cand)
+
+        lo, hi = self._box(free)
+        res = bat(cost, lo, hi, self._bat[g.output], "rsba", self.rng, x0=self.theta[free])
+        if np.all(np.isfinite(res.best)) and np.isfinite(res.cost):
+            self.theta[free] = np.clip(res.best, self.lower[free], self.upper[free])
+        return True
+
+    def _estimate_rad(self, g: GroupSettings) -> bool | None:
+        """Radiation sub-model i_in = c_tsw i_glob (III.35) on the sunlit samples of the window."""
+        radiation = self.model.radiation
+        if radiation is None:
+            return None
+        x = self._window(g.window)
+        if x is None:
+            return False
+        if "i_in" not in x or not np.any(np.isfinite(x["i_in"])):
+            return None  # not measured (yet): c_tsw keeps its value
+        now = {k: v[-1:] for k, v in x.items()}
+        free = self._free(g, now)
+        if free.size == 0:
+            return None
+        i_glob, i_in = x["i_glob"], x["i_in"]
+        ok = np.isfinite(i_glob) & np.isfinite(i_in) & (i_glob > 5.0)
+        if ok.sum() < MIN_RADIATION_PAIRS:
+            return False
+        xs = {"i_glob": i_glob[ok]}
+        meas = i_in[ok]
+        j = self.model.index(radiation.parameter.name)
+        others = free[free != j]
+
+        def cost(cand: np.ndarray) -> np.ndarray:
+            pred = radiation.predict(cand[:, :1], xs)  # (P, n_ok)
+            return np.mean((pred - meas[None, :]) ** 2, axis=1) + self._penalty(g, free, cand)
+
+        if others.size:  # the radiation sub-model has a single parameter
+            raise ValueError(f"online.i_in: only {radiation.parameter.name} can be fitted on i_in")
+        lo, hi = self._box(free)
+        res = bat(cost, lo, hi, self._bat[g.output], "rsba", self.rng, x0=self.theta[free])
+        if np.all(np.isfinite(res.best)):
+            self.theta[free] = np.clip(res.best, self.lower[free], self.upper[free])
+        return True
+
+    # -- prediction ---------------------------------------------------------------------------
+    def _predict(self, row: Mapping[str, float]) -> tuple[float | None, bool]:
+        """T_in[t + 1] from T_in[t] (or the previous prediction when T_in[t] is missing)."""
+        state = row.get("t_in", np.nan)
+        dead = False
+        if not np.isfinite(state):
+            if self._last_prediction is None:
+                return None, False
+            state, dead = self._last_prediction, True
+        if not all(np.isfinite(row.get(c, np.nan)) for c in self._needed):
+            return None, dead
+        x = self._window(1)
+        assert x is not None
+        p = self.model.columns(self.theta[None, :])
+        # Observation terms: step the true state behind the reading; the offset at t stands for
+        # the one at t + 1 (its drivers are not known yet; sensor errors move slowly).
+        offset = self.model.sensor_offset(p, x, 0) if self.model.sensors else 0.0
+        t_next = self.model.step(p, x, np.array([[state]]) - offset, 0, self.capacity_c, self.dt) + offset
+        value = float(np.asarray(t_next).reshape(-1)[0])
+        if not np.isfinite(value):
+            return None, dead
+        return value, dead

@@ -1,0 +1,70 @@
+"""``python -m gateway diagnose``: trace a model's residual to an effect it lacks (issue 4)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from gateway.cli import CliError
+from gateway.cli.common import add_data_arguments, dump_json, load_inputs
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "diagnose",
+        help="find effects the model lacks (shading, open door, heater, ...) from its residual",
+        description="Calibrate the model on the first part of the data, analyse the residual on "
+        "the rest, add effects from the library (docs/effects.md) while they cut the held-out "
+        "error significantly, and report each finding with its start time, parameters and "
+        "evidence, and the held-out error before and after (beside persistence).",
+    )
+    add_data_arguments(p)
+    p.add_argument("--split", type=float, default=0.5, metavar="FRACTION",
+                   help="fraction of the data used to calibrate the base model (0.5)")
+    p.add_argument("--report", metavar="DIR", help="write report.md and PNG plots into DIR")
+    p.add_argument("--seed", type=int, default=0, help="random seed of the swarm (0)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from gateway.diagnose import diagnose, to_json
+
+    if not 0.1 <= args.split <= 0.9:
+        raise CliError(f"--split {args.split}: must be between 0.1 and 0.9")
+    series, gh, model = load_inputs(args)
+    tty = sys.stderr.isatty()
+
+    def say(msg: str) -> None:
+        if tty:
+            print(f"  {msg}", file=sys.stderr, flush=True)
+
+    try:
+        d = diagnose(series, gh, model, split=args.split, seed=args.seed, progress=say)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    if args.report:
+        from gateway.diagnose.report import write_report
+
+        path = write_report(d, args.report, args.data)
+        say(f"report written to {path}")
+    if args.json:
+        dump_json(to_json(d))
+    else:
+        _print_human(d)
+    return 0
+
+
+def _print_human(d) -> None:
+    out = sys.stdout
+    out.write(f"diagnosis of {d.model.name} in {d.seconds:.1f} s\n")
+    if not d.findings:
+        out.write("no library effect improved the held-out error significantly\n")
+    for i, f in enumerate(d.findings, 1):
+        out.write(f"{i}. {f.effect.name}: {f.summary}\n   {f.evidence}\n")
+    for name, m in (("persistence", d.persistence), ("before", d.before), ("after", d.after)):
+        for mode in ("free_run", "one_step"):
+            x = m[mode]
+            if x:
+                out.write(f"{name:>11} {mode:<8} MAE {x['mae']:.3f} °C  RMSE {x['rmse']:.3f}  "
+                          f"MaxAE {x['maxae']:.3f}  R² {x['r2']:.4f}  EF {x['ef']:.4f}\n")
+    out.write(("UNEXPLAINED residual: " if d.unexplained else "residual: ") + d.signature + "\n")

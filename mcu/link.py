@@ -1,0 +1,147 @@
+"""Wi-Fi as a state machine with exponential backoff (never a reboot loop when the network is
+gone) and the UDP sender: resends records from the ring until an authenticated ack arrives."""
+
+import socket
+from time import ticks_add, ticks_diff
+
+import wire
+from micropython import const
+
+DOWN = const(0)
+CONNECTING = const(1)
+UP = const(2)
+BACKOFF = const(3)
+STATE_NAMES = ("down", "connecting", "up", "backoff")
+
+
+class WifiLink:
+    def __init__(self, wlan, ssid: str, password: str, connect_timeout_ms: int = 15000,
+                 backoff_min_ms: int = 1000, backoff_max_ms: int = 60000,
+                 fail_status: tuple = ()) -> None:
+        """fail_status: wlan.status() codes that end an attempt early (network.STAT_NO_AP_FOUND,
+        STAT_WRONG_PASSWORD, STAT_CONNECT_FAIL)."""
+        self.wlan = wlan
+        self.fail_status = fail_status
+        self.ssid = ssid
+        self.password = password
+        self.timeout = connect_timeout_ms
+        self.bmin = backoff_min_ms
+        self.bmax = backoff_max_ms
+        self.backoff = backoff_min_ms
+        self.state = DOWN
+        self.t = 0
+        self.attempts = 0
+        self.drops = 0
+
+    def step(self, now: int) -> bool:
+        """Advance the state machine without blocking; True when the link is up."""
+        s = self.state
+        if s == DOWN:
+            self.wlan.active(True)
+            try:
+                self.wlan.connect(self.ssid, self.password)
+            except OSError:
+                pass  # treated like a timeout below
+            self.attempts += 1
+            self.state = CONNECTING
+            self.t = now
+        elif s == CONNECTING:
+            if self.wlan.isconnected():
+                self.state = UP
+                self.backoff = self.bmin
+                return True
+            if ticks_diff(now, self.t) >= self.timeout or self.wlan.status() in self.fail_status:
+                self._fail(now)
+        elif s == UP:
+            if self.wlan.isconnected():
+                return True
+            self.drops += 1
+            self._fail(now)
+        elif ticks_diff(now, self.t) >= 0:  # BACKOFF elapsed
+            self.state = DOWN
+        return False
+
+    def _fail(self, now: int) -> None:
+        try:
+            self.wlan.disconnect()
+        except OSError:
+            pass
+        self.state = BACKOFF
+        self.t = ticks_add(now, self.backoff)
+        self.backoff = min(self.backoff * 2, self.bmax)
+
+
+class Sender:
+    """Sends due records from the ring and removes those the gateway acknowledged."""
+
+    def __init__(self, ring, mac, device_id: int, boot: int, host: str, port: int,
+                 ack_timeout_ms: int, burst: int = 8) -> None:
+        self.ring = ring
+        self.mac = mac
+        self.dev = device_id
+        self.boot = boot
+        self.host = host
+        self.port = port
+        self.rto = ack_timeout_ms
+        self.burst = burst
+        self.sock = None
+        self.addr = None
+        self.sent = 0
+        self.acked = 0
+        self.rejected = 0
+        self.errors = 0
+
+    def open(self) -> None:
+        if self.sock is None:
+            self.addr = socket.getaddrinfo(self.host, self.port)[0][-1]
+            s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            s.setblocking(False)
+            self.sock = s
+
+    def close(self) -> None:
+        if self.sock is not None:
+            self.sock.close()
+            self.sock = None
+
+    def step(self, now: int) -> None:
+        try:
+            self.open()
+        except OSError:
+            self.errors += 1
+            return
+        self._poll_acks()
+        ring = self.ring
+        n = 0
+        for i in range(ring.capacity):
+            if n >= self.burst:
+                break
+            if ring.seq[i] < 0 or ticks_diff(now, ring.due[i]) < 0:
+                continue
+            buf = ring.slot_view(i)
+            wire.seal(buf, ticks_diff(now, ring.tick[i]), self.mac)
+            try:
+                self.sock.sendto(buf, self.addr)
+                self.sent += 1
+            except OSError:
+                self.errors += 1
+            # Backoff per record: 1, 2, 4, 8x the ack timeout, so an outage does not flood.
+            tries = ring.tries[i]
+            ring.tries[i] = tries + 1
+            ring.due[i] = ticks_add(now, self.rto << (tries if tries < 3 else 3))
+            n += 1
+
+    def _poll_acks(self) -> None:
+        for _ in range(32):
+            try:
+                data = self.sock.recv(64)
+            except OSError:
+                return  # EAGAIN: nothing more
+            r = wire.parse_ack(data, self.dev, self.mac)
+            if r is None or r[0] != self.boot:
+                continue  # forged, garbled or from another boot: ignore
+            if self.ring.remove(r[1]):
+                if r[2] == wire.ACK_REJECTED:
+                    self.rejected += 1
+                    print("serra: record", r[1], "rejected by gateway, reason", r[3])
+                else:
+                    self.acked += 1

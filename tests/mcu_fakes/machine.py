@@ -1,0 +1,110 @@
+"""Fake `machine` for host tests: replays a sensor trace from the folder named by $SERRA_TRACE.
+
+One text file per input, one reading per line, cycling at the end: adc_<gpio>.txt (raw counts),
+pin_<gpio>.txt (0/1), dht_<gpio>.txt ("t rh", "timeout", "checksum" or "zero"). Files are read
+line by line so the fake itself takes almost nothing from the emulated ESP32 heap. Only the
+hardware edge is fake: the firmware above it is real.
+"""
+
+import os
+import sys
+from time import ticks_diff, ticks_ms
+
+
+class _Cursor:
+    def __init__(self, kind, pin_id, default):
+        root = os.getenv("SERRA_TRACE")
+        self.path = f"{root}/{kind}_{pin_id}.txt" if root else None
+        self.default = default
+        self.f = None
+
+    def next(self):
+        if self.path is None:
+            return self.default
+        for _ in range(2):
+            if self.f is None:
+                try:
+                    self.f = open(self.path)
+                except OSError:
+                    self.path = None
+                    return self.default
+            line = self.f.readline()
+            if line:
+                return line.strip()
+            self.f.close()
+            self.f = None  # cycle
+        return self.default
+
+
+class Pin:
+    IN = 1
+    OUT = 3
+    PULL_UP = 2
+    PULL_DOWN = 1
+    OPEN_DRAIN = 7
+
+    def __init__(self, id, mode=-1, pull=-1, value=None):
+        self.id = id
+        self._cur = _Cursor("pin", id, "1")
+
+    def value(self, v=None):
+        if v is None:
+            return int(self._cur.next())
+        return None
+
+    def init(self, *a, **k):
+        pass
+
+
+class ADC:
+    ATTN_0DB = 0
+    ATTN_2_5DB = 1
+    ATTN_6DB = 2
+    ATTN_11DB = 3
+
+    def __init__(self, pin, atten=None):
+        self._cur = _Cursor("adc", pin.id, "0")
+        self._last = 0
+
+    def atten(self, a):
+        self._atten = a
+
+    def read_u16(self):
+        self._last = int(self._cur.next())
+        return self._last
+
+    def read_uv(self):
+        # 11 dB attenuation: full scale about 3.1 V.
+        return self.read_u16() * 3_100_000 // 65535
+
+
+class WDT:
+    """Resets the 'board' (exits with status 75) if not fed in time, like the real one."""
+
+    def __init__(self, id=0, timeout=5000):
+        self.timeout = timeout
+        self.t = ticks_ms()
+
+    def feed(self):
+        now = ticks_ms()
+        if ticks_diff(now, self.t) > self.timeout:
+            print("FAKE WDT: not fed for", ticks_diff(now, self.t), "ms: reset")
+            sys.exit(75)
+        self.t = now
+
+
+def unique_id():
+    return b"\x24\x0a\xc4\x00\x00\x07"
+
+
+def reset():
+    print("FAKE machine.reset()")
+    sys.exit(76)
+
+
+def freq(*a):
+    return 240_000_000
+
+
+def idle():
+    pass

@@ -1,0 +1,57 @@
+"""Fake `network`: a station interface whose connection attempts follow $SERRA_WIFI, e.g.
+"fail,fail,ok" (the last outcome repeats). The UDP traffic itself is real, on 127.0.0.1."""
+
+import os
+from time import ticks_diff, ticks_ms
+
+STA_IF = 0
+AP_IF = 1
+STAT_IDLE = 1000
+STAT_CONNECTING = 1001
+STAT_GOT_IP = 1010
+STAT_NO_AP_FOUND = 201
+STAT_WRONG_PASSWORD = 202
+STAT_CONNECT_FAIL = 203
+
+CONNECT_DELAY_MS = 50
+
+
+class WLAN:
+    def __init__(self, interface=STA_IF):
+        plan = os.getenv("SERRA_WIFI") or "ok"
+        self._plan = plan.split(",")
+        self._attempt = 0
+        self._active = False
+        self._ok = False
+        self._t = 0
+        self.connects = 0
+
+    def active(self, a=None):
+        if a is None:
+            return self._active
+        self._active = a
+        return None
+
+    def connect(self, ssid=None, key=None):
+        if not self._active:
+            raise OSError("wifi not active")
+        outcome = self._plan[min(self._attempt, len(self._plan) - 1)]
+        self._attempt += 1
+        self.connects += 1
+        self._ok = outcome == "ok"
+        self._t = ticks_ms()
+        print("FAKE wifi connect attempt", self._attempt, outcome)
+
+    def disconnect(self):
+        self._ok = False
+
+    def isconnected(self):
+        return self._ok and ticks_diff(ticks_ms(), self._t) >= CONNECT_DELAY_MS
+
+    def status(self, *a):
+        if self.isconnected():
+            return STAT_GOT_IP
+        return STAT_CONNECTING if self._ok else STAT_NO_AP_FOUND
+
+    def ifconfig(self, *a):
+        return ("127.0.0.1", "255.0.0.0", "127.0.0.1", "127.0.0.1")

@@ -1,0 +1,160 @@
+"""Calibration bench (issue: thesis task timing and peers side by side in one run).
+
+(a) The thesis identification task: 4 parameters, 2880 one-minute samples, 100 particles,
+    220 iterations (RIWPSO), one-step-ahead cost, on one core. Goal ≤ 5 s.
+(b) The same objective solved by mealpy's BA and PSO (per-solution objective calls) and by
+    pyswarms' global-best PSO (whole-swarm calls) at an equal number of evaluations: time per
+    evaluation and final cost, ours vs theirs. Goal: ≥ 10× faster per evaluation, cost ≤ theirs.
+(c) BA vs RSBA over 10 seeds (thesis table 5): median final cost, and RSBA/RIWPSO parameter
+    errors (table 4).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import one_core, write_result  # noqa: E402
+
+one_core()
+
+import numpy as np  # noqa: E402
+
+from gateway.estimate.calibrate import calibrate  # noqa: E402
+from gateway.estimate.objective import Objective  # noqa: E402
+from gateway.estimate.swarm import make_algorithm  # noqa: E402
+from gateway.greenhouse import load_greenhouse  # noqa: E402
+from gateway.model import build_model  # noqa: E402
+from gateway.model.drivers import prepare_drivers  # noqa: E402
+from gateway.series import load_series  # noqa: E402
+from training.identifiability import ASSUMED, DATASET  # noqa: E402
+
+PARTICLES, ITERATIONS = 100, 220
+
+
+def _problem():
+    gh = load_greenhouse("biskra-prototype")
+    model = build_model("prototype", gh)
+    series = load_series(DATASET)
+    x = prepare_drivers(series, gh)
+    idx = np.arange(len(model.names))
+    obj = Objective(model, x, gh, 60.0, idx, model.defaults(gh), [(0, len(series))])
+    lo, hi = model.bounds(gh)
+    return gh, model, series, obj, lo, hi
+
+
+class Counted:
+    """Wraps a cost to count evaluated candidates."""
+
+    def __init__(self, fn):
+        self.fn, self.n = fn, 0
+
+    def __call__(self, x):
+        x = np.atleast_2d(x)
+        self.n += x.shape[0]
+        return self.fn(x)
+
+
+def ours(obj, lo, hi, name, seed, iterations=ITERATIONS, population=PARTICLES):
+    algo = make_algorithm(name, iterations=iterations, population=population)
+    algo.settings = replace(algo.settings, tol=0.0)  # run every iteration: a fair timing
+    cost = Counted(obj)
+    t0 = time.perf_counter()
+    res = algo(cost, lo, hi, rng=np.random.default_rng(seed))
+    dt = time.perf_counter() - t0
+    return {"seconds": dt, "evaluations": cost.n, "us_per_eval": dt / cost.n * 1e6, "cost": res.cost}
+
+
+def mealpy_run(obj, lo, hi, kind, seed, evaluations):
+    from mealpy import BA, PSO, FloatVar
+
+    cost = Counted(obj)
+    problem = {
+        "obj_func": lambda sol: float(cost(np.asarray(sol)[None, :])[0]),
+        "bounds": FloatVar(lb=lo.tolist(), ub=hi.tolist()),
+        "minmax": "min",
+        "log_to": None,
+    }
+    epochs = max(1, evaluations // PARTICLES - 1)
+    opt = BA.OriginalBA(epoch=epochs, pop_size=PARTICLES) if kind == "ba" else PSO.OriginalPSO(
+        epoch=epochs, pop_size=PARTICLES, c1=2.0, c2=1.5)
+    t0 = time.perf_counter()
+    best = opt.solve(problem, seed=seed)
+    dt = time.perf_counter() - t0
+    return {"seconds": dt, "evaluations": cost.n, "us_per_eval": dt / cost.n * 1e6,
+            "cost": float(best.target.fitness)}
+
+
+def pyswarms_run(obj, lo, hi, seed, evaluations):
+    import logging
+
+    import pyswarms as ps
+
+    logging.getLogger("pyswarms").setLevel(logging.ERROR)
+    np.random.seed(seed)  # noqa: NPY002 -- pyswarms draws from the legacy global generator
+    cost = Counted(obj)
+    opt = ps.single.GlobalBestPSO(
+        n_particles=PARTICLES, dimensions=len(lo), options={"c1": 2.0, "c2": 1.5, "w": 0.5},
+        bounds=(lo, hi),
+    )
+    t0 = time.perf_counter()
+    best_cost, _ = opt.optimize(cost, iters=max(1, evaluations // PARTICLES - 1), verbose=False)
+    dt = time.perf_counter() - t0
+    return {"seconds": dt, "evaluations": cost.n, "us_per_eval": dt / cost.n * 1e6, "cost": float(best_cost)}
+
+
+def run() -> dict:
+    gh, model, series, obj, lo, hi = _problem()
+    result: dict = {"task": {"parameters": 4, "samples": len(series), "particles": PARTICLES,
+                             "iterations": ITERATIONS, "cost": "one-step-ahead MSE [°C²]"}}
+    thesis = {name: ours(obj, lo, hi, name, seed=0) for name in ("riwpso", "rsba", "ba")}
+    result["thesis_task"] = thesis
+    evaluations = thesis["riwpso"]["evaluations"]
+    peers = {}
+    for label, fn in (
+        ("mealpy_ba", lambda: mealpy_run(obj, lo, hi, "ba", 0, evaluations)),
+        ("mealpy_pso", lambda: mealpy_run(obj, lo, hi, "pso", 0, evaluations)),
+        ("pyswarms_gbest", lambda: pyswarms_run(obj, lo, hi, 0, evaluations)),
+    ):
+        try:
+            peers[label] = fn()
+        except Exception as exc:  # a peer that fails to import or run is reported, not fatal
+            peers[label] = {"error": f"{type(exc).__name__}: {exc}"}
+    result["peers"] = peers
+    ratios = {}
+    for label, peer in peers.items():
+        if "error" in peer:
+            continue
+        mine = thesis["rsba"] if label == "mealpy_ba" else thesis["riwpso"]
+        ratios[label] = {
+            "speedup_per_eval": peer["us_per_eval"] / mine["us_per_eval"],
+            "our_cost": mine["cost"],
+            "their_cost": peer["cost"],
+        }
+    result["ratios"] = ratios
+    # (c) thesis table 5: 10 runs of BA and RSBA, 500 iterations, 100 bats.
+    seeds = range(10)
+    ba = [ours(obj, lo, hi, "ba", s, iterations=500)["cost"] for s in seeds]
+    rsba = [ours(obj, lo, hi, "rsba", s, iterations=500)["cost"] for s in seeds]
+    result["ba_vs_rsba_500"] = {"ba": ba, "rsba": rsba, "median_ba": float(np.median(ba)),
+                                "median_rsba": float(np.median(rsba))}
+    errs = []
+    for s in seeds:
+        cal = calibrate(model, series, gh, make_algorithm("rsba", iterations=2500), seed=s)
+        errs.append(max(abs(cal.params[k] - v) / v for k, v in ASSUMED.items()) * 100)
+    result["rsba_2500_max_relative_error_percent"] = errs
+    result["summary"] = {
+        "thesis_task_seconds": {k: round(v["seconds"], 3) for k, v in thesis.items()},
+        "speedup_per_eval_vs_peers": {k: round(v["speedup_per_eval"], 1) for k, v in ratios.items()},
+        "cost_ours_vs_peers": {k: [v["our_cost"], v["their_cost"]] for k, v in ratios.items()},
+        "median_final_cost_500_it": {"ba": float(np.median(ba)), "rsba": float(np.median(rsba))},
+        "rsba_2500_worst_param_error_percent_median": float(np.median(errs)),
+    }
+    return result
+
+
+if __name__ == "__main__":
+    print(write_result("calibration", run()))

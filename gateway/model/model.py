@@ -227,15 +227,20 @@ class Model:
         c = self.capacity(gh)
         n_p = next(iter(p.values())).shape[0]
         out = np.full((n_p, stop - start), np.nan)
+        obs = bool(self.sensors)  # sensor terms: integrate the true state, report a reading
         state = np.full((n_p, 1), measured[start])
         out[:, 0] = state[:, 0]
+        if obs:
+            state = state - self.sensor_offset(p, x, start)
         for k, t in enumerate(range(start, stop - 1), start=1):
             state = self.step(p, x, state, t, c, dt)
-            out[:, k] = state[:, 0]
+            out[:, k] = (state + self.sensor_offset(p, x, t + 1))[:, 0] if obs else state[:, 0]
             if restart_after_gaps and np.isnan(state[0, 0]):
                 # The output stays NaN: a measurement copied into it would score as a perfect
                 # prediction. The state restarts from the measurement when there is one.
                 state = np.full((n_p, 1), measured[t + 1])
+                if obs:
+                    state = state - self.sensor_offset(p, x, t + 1)
         return out
 
     def forecast(

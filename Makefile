@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: run test bench images lint clean venv
+.PHONY: run test bench images lint clean venv stubs
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -14,12 +14,22 @@ $(STAMP): pyproject.toml
 
 venv: $(STAMP)
 
+# --- MicroPython ESP32 stubs: mcu/ is type-checked against them (tests/test_firmware.py). ---
+# Installed apart from the venv (pip --target, gitignored): they shadow CPython's typeshed.
+STUBS := mcu/typings_esp32/.installed
+$(STUBS): $(STAMP)
+	$(PY) -m pip install --quiet --upgrade --target mcu/typings_esp32 \
+		'micropython-esp32-stubs==1.29.0.post1'
+	touch $(STUBS)
+
+stubs: $(STUBS)
+
 ## run: the main end-to-end job on embedded defaults
 run: $(STAMP)
 	$(PY) -m gateway demo
 
 ## test: the whole suite (CI calls this)
-test: $(STAMP)
+test: $(STAMP) $(STUBS)
 	$(VENV)/bin/ruff check .
 	$(PY) -m pytest -q
 

@@ -33,7 +33,7 @@ class WifiLink:
         self.attempts = 0
         self.drops = 0
 
-    def step(self, now: int) -> bool:
+    def step(self, now) -> bool:
         """Advance the state machine without blocking; True when the link is up."""
         s = self.state
         if s == DOWN:
@@ -61,7 +61,7 @@ class WifiLink:
             self.state = DOWN
         return False
 
-    def _fail(self, now: int) -> None:
+    def _fail(self, now) -> None:
         try:
             self.wlan.disconnect()
         except OSError:
@@ -84,8 +84,8 @@ class Sender:
         self.port = port
         self.rto = ack_timeout_ms
         self.burst = burst
-        self.sock = None
-        self.addr = None
+        self.sock: socket.socket | None = None
+        self.addr: tuple[str, int] | tuple[str, int, int, int] | None = None
         self.sent = 0
         self.acked = 0
         self.rejected = 0
@@ -103,13 +103,16 @@ class Sender:
             self.sock.close()
             self.sock = None
 
-    def step(self, now: int) -> None:
+    def step(self, now) -> None:
         try:
             self.open()
         except OSError:
             self.errors += 1
             return
-        self._poll_acks()
+        sock, addr = self.sock, self.addr
+        if sock is None or addr is None:
+            return
+        self._poll_acks(sock)
         ring = self.ring
         n = 0
         for i in range(ring.capacity):
@@ -120,7 +123,7 @@ class Sender:
             buf = ring.slot_view(i)
             wire.seal(buf, ticks_diff(now, ring.tick[i]), self.mac)
             try:
-                self.sock.sendto(buf, self.addr)
+                sock.sendto(buf, addr)
                 self.sent += 1
             except OSError:
                 self.errors += 1
@@ -130,10 +133,10 @@ class Sender:
             ring.due[i] = ticks_add(now, self.rto << (tries if tries < 3 else 3))
             n += 1
 
-    def _poll_acks(self) -> None:
+    def _poll_acks(self, sock) -> None:
         for _ in range(32):
             try:
-                data = self.sock.recv(64)
+                data = sock.recv(64)
             except OSError:
                 return  # EAGAIN: nothing more
             r = wire.parse_ack(data, self.dev, self.mac)

@@ -46,7 +46,7 @@ def build_sensors(cfg):
     )
 
 
-def sample(sensors, avg, now: int) -> None:
+def sample(sensors, avg, now) -> None:
     dht_in, dht_out, pyr, anem, rain = sensors
     for drv, ct, ch in ((dht_in, T_IN, RH_IN), (dht_out, T_OUT, RH_OUT)):
         if drv is None:

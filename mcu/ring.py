@@ -1,8 +1,8 @@
 """RAM ring of records not yet acknowledged: fixed slots, no allocation per record.
 
-When full, the oldest record is dropped (and counted): fresh data is worth more than old, and the
-in-flight sequence numbers stay within `capacity` of each other (the gateway's replay window
-relies on that).
+When full, the oldest record is dropped (and counted): fresh data is worth more than old. A
+record older than `max_span` sequence numbers is dropped too, so in-flight sequence numbers stay
+within the gateway's replay window (1024) even if one record keeps getting lost.
 """
 
 from micropython import const
@@ -12,8 +12,9 @@ FREE = const(-1)
 
 
 class Ring:
-    def __init__(self, capacity: int = 128) -> None:
+    def __init__(self, capacity: int = 128, max_span: int = 512) -> None:
         self.capacity = capacity
+        self.max_span = max_span
         self.buf = bytearray(capacity * RECORD_LEN)
         self.mv = memoryview(self.buf)
         self.seq = [FREE] * capacity  # FREE or the record's sequence number
@@ -23,9 +24,15 @@ class Ring:
         self.count = 0
         self.dropped = 0
 
-    def push(self, seq: int, tick: int):
+    def push(self, seq: int, tick):
         """Reserve a slot for a new record; returns its memoryview (RECORD_LEN bytes)."""
         slot = -1
+        too_old = seq - self.max_span
+        for i in range(self.capacity):
+            if self.seq[i] != FREE and self.seq[i] <= too_old:
+                self.seq[i] = FREE
+                self.count -= 1
+                self.dropped += 1
         if self.count == self.capacity:
             oldest = 0
             for i in range(self.capacity):

@@ -57,7 +57,7 @@ def to_raw(value: float, chan: int) -> int:
     return int(round(value * SCALE_INV[chan]))
 
 
-def pack_record(buf, dev: int, boot: int, seq: int, tick: int, period_ds: int, raw, status) -> None:
+def pack_record(buf, dev: int, boot: int, seq: int, tick, period_ds: int, raw, status) -> None:
     """Write the body of a record into buf (>= RECORD_LEN bytes); age and tag come at send."""
     struct.pack_into(HEAD_FMT, buf, 0, MAGIC, VERSION, TYPE_RECORD, dev, boot, seq,
                      tick & 0xFFFFFFFF, 0, period_ds)

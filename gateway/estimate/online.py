@@ -20,12 +20,12 @@ prediction that cannot be made is ``None``.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from gateway.estimate.swarm import ALMERIA_OFFLINE, bat
+from gateway.estimate.swarm import ALMERIA_OFFLINE, SearchResult, bat
 from gateway.greenhouse import Greenhouse
 from gateway.kitcsv import COLUMNS
 from gateway.model.drivers import prepare_drivers
@@ -152,8 +152,10 @@ class OnlineEstimator:
         settings: Sequence[GroupSettings] | None = None,
         dt: float = 60.0,
         seed: int | None = 0,
+        search: Callable[..., SearchResult] = bat,
     ) -> None:
         self.model, self.gh, self.dt = model, gh, float(dt)
+        self.search = search  # swarm.bat (vectorised RSBA); the bench swaps in a per-bat loop
         self.lower, self.upper = model.bounds(gh)
         self.variation = model.variations(gh)
         if theta0 is None:
@@ -346,7 +348,7 @@ class OnlineEstimator:
             return sq / n + self._penalty(g, free, cand)
 
         lo, hi = self._box(free)
-        res = bat(cost, lo, hi, self._bat[g.output], "rsba", self.rng, x0=self.theta[free])
+        res = self.search(cost, lo, hi, self._bat[g.output], "rsba", self.rng, x0=self.theta[free])
         if np.all(np.isfinite(res.best)) and np.isfinite(res.cost):
             self.theta[free] = np.clip(res.best, self.lower[free], self.upper[free])
         return True
@@ -381,7 +383,7 @@ class OnlineEstimator:
         if others.size:  # the radiation sub-model has a single parameter
             raise ValueError(f"online.i_in: only {radiation.parameter.name} can be fitted on i_in")
         lo, hi = self._box(free)
-        res = bat(cost, lo, hi, self._bat[g.output], "rsba", self.rng, x0=self.theta[free])
+        res = self.search(cost, lo, hi, self._bat[g.output], "rsba", self.rng, x0=self.theta[free])
         if np.all(np.isfinite(res.best)):
             self.theta[free] = np.clip(res.best, self.lower[free], self.upper[free])
         return True

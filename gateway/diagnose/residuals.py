@@ -16,6 +16,8 @@ LAGS_MIN = (30, 60, 120)
 ROLL_S = 6 * 3600.0
 UNEXPLAINED_RATIO = 1.6
 """Held-out free-run MAE above this multiple of the in-sample one: something is unexplained."""
+HOUR_SHIFT_K = 0.6
+"""Departure of an hour-of-day mean residual from the calibration part's that is flagged [K]."""
 CHANGE_T = 4.0
 """Change-point statistic (two-segment t) above which a rolling coefficient has shifted."""
 
@@ -163,14 +165,21 @@ def describe(an: dict, time: np.ndarray, a: int) -> str:
     return "; ".join(parts)
 
 
-def unexplained(an_after: dict, calib_mae: float, time: np.ndarray, a: int) -> tuple[bool, str]:
+def unexplained(an_after: dict, calib_r: np.ndarray, time: np.ndarray, a: int) -> tuple[bool, str]:
     """Does the held-out residual still carry structure the model lacks?
 
     Yes when its free-run MAE exceeds ``UNEXPLAINED_RATIO`` × the in-sample one on the
-    calibration part (the held-out part behaves differently), or when a rolling-fit coefficient
-    shifts inside it (t ≥ ``CHANGE_T``). The signature says what the residual looks like.
+    calibration part (rows [0, a), residual ``calib_r``), when a rolling-fit coefficient shifts
+    inside it (t ≥ ``CHANGE_T``), or when its hour-of-day profile departs from the calibration
+    part's by more than ``HOUR_SHIFT_K`` at some hour. The signature says what it looks like.
     """
+    calib_mae = float(np.nanmean(np.abs(calib_r)))
     ratio = an_after["mae"] / calib_mae if calib_mae > 0 else float("inf")
     shifted = any(v["t"] >= CHANGE_T for v in an_after["change_points"].values())
-    sig = describe(an_after, time, a) + f"; held-out/in-sample MAE ratio {ratio:.2f}"
-    return bool(ratio > UNEXPLAINED_RATIO or shifted), sig
+    diff = an_after["hour_profile"] - hour_profile(time[:a], calib_r)
+    h = int(np.nanargmax(np.abs(diff))) if np.isfinite(diff).any() else 0
+    hour_shift = bool(np.isfinite(diff[h]) and abs(diff[h]) > HOUR_SHIFT_K)
+    sig = describe(an_after, time[a:], a) + f"; held-out/in-sample MAE ratio {ratio:.2f}"
+    if hour_shift:
+        sig += f"; hour-of-day profile differs from the calibration part by {diff[h]:+.2f} K at {h:02d} h"
+    return bool(ratio > UNEXPLAINED_RATIO or shifted or hour_shift), sig

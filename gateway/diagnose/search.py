@@ -240,8 +240,8 @@ def diagnose(
     pers = _metrics(meas, _persistence(meas, blocks, s, n), s)
     an_before = res.analyse(series.time[s:], meas[s:] - before_pred["free_run"], x, s, dt)
     an_after = res.analyse(series.time[s:], meas[s:] - current_pred["free_run"], x, s, dt)
-    calib_free = _calibration_free_run(model, theta_all, x, gh, dt, s)
-    unexplained, signature = res.unexplained(an_after, calib_free, series.time[s:], s)
+    calib_r = _calibration_free_run(model, theta_all, x, gh, dt, s)
+    unexplained, signature = res.unexplained(an_after, calib_r, series.time, s)
     return Diagnosis(
         model=model, theta=theta_all, base_model=base, base_theta=base_theta, findings=findings,
         rejected=rejected, before=before, after=after, persistence=pers, unexplained=unexplained,
@@ -382,8 +382,8 @@ def _judge(before, after, meas, blocks, s) -> dict:
     return {"ok": bool(good), "why": why, "gain": gain, "t": t, "mae_before": mae_b, "mae_after": mae_a}
 
 
-def _calibration_free_run(model, theta, x, gh, dt, s) -> float:
-    """In-sample free-run MAE on the calibration part (blocks of one day), for comparison."""
+def _calibration_free_run(model, theta, x, gh, dt, s) -> np.ndarray:
+    """In-sample free-run residual on the calibration part (blocks of one day), for comparison."""
     day = int(round(86400.0 / dt))
     block = min(day, max(s // 2, 2))
     errs = []
@@ -392,9 +392,8 @@ def _calibration_free_run(model, theta, x, gh, dt, s) -> float:
         if b - a < 2:
             continue
         pred = model.free_run(theta[None, :], x, gh, dt, start=a, stop=b)[0]
-        errs.append(np.abs(pred - x["t_in"][a:b]))
-    e = np.concatenate(errs)
-    return float(np.nanmean(e))
+        errs.append(x["t_in"][a:b] - pred)
+    return np.concatenate(errs)
 
 
 def _finding(e, model, theta, series, pred_before, pred_after, verdict, dbic, x, blocks, s):

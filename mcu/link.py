@@ -129,7 +129,7 @@ class Sender:
                 self.errors += 1
             # Backoff per record: 1, 2, 4, 8x the ack timeout, so an outage does not flood.
             tries = ring.tries[i]
-            ring.tries[i] = tries + 1
+            ring.tries[i] = tries + 1 if tries < 255 else 255
             ring.due[i] = ticks_add(now, self.rto << (tries if tries < 3 else 3))
             n += 1
 

@@ -89,6 +89,8 @@ def run(cfg, boot: int, wdt, wlan, sensors, fail_status: tuple = (),
     period_end = ticks_add(now, cfg.period_ms)
     last_state = -1
     loops = 0
+    gc.collect()
+    print("MEM boot", gc.mem_alloc())
     while loops != max_loops:
         loops += 1
         now = ticks_ms()

@@ -5,6 +5,8 @@ record older than `max_span` sequence numbers is dropped too, so in-flight seque
 within the gateway's replay window (1024) even if one record keeps getting lost.
 """
 
+from array import array
+
 from micropython import const
 from wire import RECORD_LEN
 
@@ -17,10 +19,11 @@ class Ring:
         self.max_span = max_span
         self.buf = bytearray(capacity * RECORD_LEN)
         self.mv = memoryview(self.buf)
-        self.seq = [FREE] * capacity  # FREE or the record's sequence number
-        self.tick = [0] * capacity  # device tick at the end of the record's period
-        self.due = [0] * capacity  # tick of the next (re)transmission
-        self.tries = [0] * capacity
+        # Typed arrays, not lists: 4 bytes a slot and no boxed ints on the heap.
+        self.seq = array("q", [FREE] * capacity)  # FREE or the record's sequence number
+        self.tick = array("l", [0] * capacity)  # device tick at the end of the record's period
+        self.due = array("l", [0] * capacity)  # tick of the next (re)transmission
+        self.tries = array("B", [0] * capacity)
         self.count = 0
         self.dropped = 0
 

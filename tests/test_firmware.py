@@ -134,15 +134,15 @@ def check_ring():
     assert r.remove(3) and not r.remove(3) and r.count == 7
     r.push(8, 0)
     r.push(9, 0)  # full: drops the oldest (seq 0)
-    assert r.dropped == 1 and 0 not in r.seq and 9 in r.seq and r.count == 8
+    assert r.dropped == 1 and 0 not in list(r.seq) and 9 in list(r.seq) and r.count == 8
     r2 = Ring(4, max_span=10)
     r2.push(0, 0)  # never acknowledged
     for s in range(1, 10):
         r2.push(s, 0)
         r2.remove(s)
-    assert 0 in r2.seq and r2.dropped == 0
+    assert 0 in list(r2.seq) and r2.dropped == 0
     r2.push(10, 0)  # seq 0 is now 10 behind: at the span, dropped
-    assert 0 not in r2.seq and r2.dropped == 1 and r2.count == 1
+    assert 0 not in list(r2.seq) and r2.dropped == 1 and r2.count == 1
 
 def check_wifi_backoff():
     import network

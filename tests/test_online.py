@@ -227,3 +227,16 @@ def test_prototype_model_runs_from_the_middle_of_its_box():
     assert est.counters.estimated["t_in"] > 300
     lo, hi = proto.bounds(gh)
     assert np.all((theta >= lo) & (theta <= hi))
+
+
+def test_prior_keeps_estimates_near_the_starting_values():
+    """With a strong prior (λ = 100 °C²) the noise-only window cannot drag the parameters away."""
+    series = model_data(ALMERIA, GH, hours=3, start_hour=9, noise=0.05)
+    base = ALMERIA.defaults(GH)
+    lo, hi = ALMERIA.bounds(GH)
+    spread = {}
+    for prior in (0.0, 100.0):
+        settings = online_settings(ALMERIA, GH, {"t_in": {"iterations": 10, "bats": 10, "prior": prior}})
+        _, theta = run(OnlineEstimator(ALMERIA, GH, base, settings), series)
+        spread[prior] = np.mean(np.abs(theta - base) / (hi - lo))
+    assert spread[100.0] < 0.5 * spread[0.0]

@@ -28,7 +28,7 @@ WINDOW = 1024
 
 @dataclass(slots=True)
 class _Dev:
-    key: bytes
+    key: p.Mac
     boot: int = -1
     max_seq: int = -1
     seen: set[int] = field(default_factory=set)  # committed seqs of `boot` inside the window
@@ -50,7 +50,7 @@ class IngestCore:
         self.max_pending = max_pending
         self.alarm_at = int(max_pending * alarm_fraction)
         self.batch_delay = batch_delay
-        self.devs: dict[int, _Dev] = {d: _Dev(k) for d, k in keys.items()}
+        self.devs: dict[int, _Dev] = {d: _Dev(p.Mac(k)) for d, k in keys.items()}
         for dev, st in store.device_states().items():
             d = self.devs.get(dev)
             if d is not None:

@@ -75,26 +75,27 @@ class Store:
         if not items:
             return 0
         rows = []
-        dev: dict[int, list] = {}
+        dev: dict[int, list] = {}  # device -> [boot, max_seq, first_seen, last_seen, n]
         for rec, t_recv in items:
-            row = [rec.device_id, rec.boot, rec.seq, t_recv - rec.age_ms / 1000.0, t_recv,
-                   rec.tick_ms, rec.period_s]
-            for v, st in zip(rec.values, rec.status, strict=True):
-                row += (v, st)
-            rows.append(row)
+            v, st = rec.values, rec.status
+            rows.append((rec.device_id, rec.boot, rec.seq, t_recv - rec.age_ms / 1000.0, t_recv,
+                         rec.tick_ms, rec.period_s, v[0], st[0], v[1], st[1], v[2], st[2],
+                         v[3], st[3], v[4], st[4], v[5], st[5], v[6], st[6]))
             d = dev.get(rec.device_id)
-            if d is None or rec.boot > d[1] or (rec.boot == d[1] and rec.seq > d[2]):
-                n = d[5] if d else 0
-                first = d[3] if d else t_recv
-                dev[rec.device_id] = d = [rec.device_id, rec.boot, rec.seq, first, t_recv, n]
-            d[4] = max(d[4], t_recv)
-            d[5] += 1
+            if d is None:
+                dev[rec.device_id] = [rec.boot, rec.seq, t_recv, t_recv, 1]
+                continue
+            if rec.boot > d[0] or (rec.boot == d[0] and rec.seq > d[1]):
+                d[0], d[1] = rec.boot, rec.seq
+            if t_recv > d[3]:
+                d[3] = t_recv
+            d[4] += 1
         c = self.conn
         with transaction(c):
             before = c.total_changes
             c.executemany(_INSERT, rows)
             stored = c.total_changes - before
-            c.executemany(_UPSERT_DEVICE, dev.values())
+            c.executemany(_UPSERT_DEVICE, [(k, *d) for k, d in dev.items()])
         return stored
 
     def device_states(self) -> dict[int, DeviceState]:

@@ -28,7 +28,7 @@ from gateway import protocol as p  # noqa: E402
 from gateway.store.keys import write_keys  # noqa: E402
 
 N_DEV = 64
-WINDOW = 256
+WINDOW = 1024  # 16 records in flight per board: a fleet catching up after an outage
 DURATION = 5.0
 WARMUP = 1.0
 FUZZ_N = int(os.environ.get("SERRA_FUZZ_N", "1000000"))

@@ -32,6 +32,7 @@ C_TSW = Parameter("c_tsw", "-", 0.1, 1.0, 0.56, None, SUNLIT, "cover solar trans
 
 
 class AirSolarAbsorption(FluxTerm):
+    linear_in_parameters = True
     name = "q_sol"
     equation = "III.25, III.35"
     description = "short-wave radiation absorbed by the air: C_asw C_tsw I_out"
@@ -46,6 +47,7 @@ class AirSolarAbsorption(FluxTerm):
 
 
 class SoilConvection(FluxTerm):
+    linear_in_parameters = True
     name = "q_cnv_ss"
     equation = "III.26"
     description = "convection from the soil surface: C_cnv_ss (T_ss - T_in)"
@@ -61,6 +63,7 @@ class SoilConvection(FluxTerm):
 
 
 class CoverExchange(FluxTerm):
+    linear_in_parameters = True
     name = "q_cnd_cnv"
     equation = "III.27"
     description = "convection and conduction through the cover: -C_cnd_cnv (T_in - T_out)"
@@ -84,6 +87,7 @@ class Transpiration(FluxTerm):
     measured vapour pressure, so a free run does not read the measured temperature.
     """
 
+    linear_in_parameters = True
     name = "q_trp"
     equation = "III.28–III.29"
     description = "crop transpiration: -(C_A (1 - e^-k LAI) I_in + C_B LAI VPD)"

@@ -22,6 +22,7 @@ _R_FAST = 0.10
 
 
 class SolarGain(FluxTerm):
+    linear_in_parameters = True
     name = "q_solar"
     equation = "III.15"
     description = "short-wave radiation absorbed inside: C_solar I"
@@ -36,6 +37,7 @@ class SolarGain(FluxTerm):
 
 
 class CoverConvection(FluxTerm):
+    linear_in_parameters = True
     name = "q_cnv_cnd"
     equation = "III.17"
     description = "convection and conduction through the cover: -C_cnv_cnd U (T_in - T_out)"
@@ -54,6 +56,7 @@ class CoverConvection(FluxTerm):
 
 
 class AirLeakage(FluxTerm):
+    linear_in_parameters = True
     name = "q_loss"
     equation = "III.19"
     description = "air exchange losses: -C_loss rho_a (T_in - T_out)"
@@ -73,6 +76,7 @@ class AirLeakage(FluxTerm):
 
 
 class SkyRadiation(FluxTerm):
+    linear_in_parameters = True
     name = "q_thermal"
     equation = "III.21"
     description = "long-wave loss to the sky: -C_thermal h_o (T_in - T_sky)"

@@ -101,6 +101,10 @@ class FluxTerm:
     parameters: tuple[Parameter, ...] = ()
     requires: tuple[str, ...] = ()
     uses: tuple[str, ...] = ()  # parameters owned by another part of the model (e.g. c_tsw)
+    linear_in_parameters: bool = False
+    """True when (g, s) = sum_j theta_j (g_j, s_j) over the term's own parameters for a given
+    state (the ``uses`` parameters held fixed): a one-step cost can then precompute the
+    (g_j, s_j) once and evaluate a whole population with one matrix product."""
 
     def coefficients(
         self, p: Params, x: Drivers, t_in: np.ndarray, t: Index

@@ -67,8 +67,14 @@ def plot_replay(result: ReplayResult, path: str | Path, title: str = "") -> None
         a.tick_params(labelsize=7)
         span = hi[j] - lo[j]
         a.set_ylim(lo[j] - 0.05 * span, hi[j] + 0.05 * span)
+    import matplotlib.dates as mdates
+
     for a in fig.axes:
+        locator = mdates.AutoDateLocator(maxticks=8)
+        a.xaxis.set_major_locator(locator)
+        a.xaxis.set_major_formatter(mdates.ConciseDateFormatter(locator))
         a.tick_params(axis="x", labelsize=7)
+        a.xaxis.get_offset_text().set_visible(a is ax)  # the date once, under the top panel
     fig.savefig(path, dpi=90)
     plt.close(fig)
 

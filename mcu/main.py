@@ -72,11 +72,12 @@ def log_record(seq: int, avg) -> None:
     print("REC", seq, " ".join(f"{avg.raw[i]}:{avg.status[i]}" for i in range(7)))
 
 
-def run(cfg, boot: int, wdt, wlan, sensors, fail_status: tuple = (),
+def run(cfg, boot: int, wdt, wlan, sensors, fail_status: tuple = (), ring=None,
         max_loops: int = -1) -> None:
     print("serra: device", cfg.device_id, "boot", boot)
     mac = wire.Hmac(cfg.key)
-    ring = Ring(cfg.ring_size)
+    if ring is None:
+        ring = Ring(cfg.ring_size)
     avg = Averager()
     wifi = WifiLink(wlan, cfg.ssid, cfg.password, cfg.connect_timeout_ms,
                     fail_status=fail_status)
@@ -139,13 +140,17 @@ def main() -> None:
     except BootCountError as e:
         print("serra: BOOT COUNTER ERROR:", e)
         return
+    # The ring is the one large buffer (8 KB for 128 records): allocate it while the heap is
+    # still unfragmented.
+    gc.collect()
+    ring = Ring(cfg.ring_size)
     import machine
     import network
 
     # Started only once config and counter are good: a bad file must not become a reset loop.
     wdt = machine.WDT(timeout=cfg.wdt_ms)
     fail = (network.STAT_NO_AP_FOUND, network.STAT_WRONG_PASSWORD, network.STAT_CONNECT_FAIL)
-    run(cfg, boot, wdt, network.WLAN(network.STA_IF), build_sensors(cfg), fail)
+    run(cfg, boot, wdt, network.WLAN(network.STA_IF), build_sensors(cfg), fail, ring)
 
 
 if __name__ == "__main__":

@@ -131,41 +131,57 @@ def _load(addr: tuple, n: int, boot: int) -> dict[str, Any]:
     return out
 
 
-def bench_throughput() -> dict[str, Any]:
+def _pin_server(proc: subprocess.Popen) -> None:
+    # Server on one core, load generator on the other: the same for ours and the bare loop.
+    if hasattr(os, "sched_setaffinity") and len(os.sched_getaffinity(0)) > 1:
+        os.sched_setaffinity(proc.pid, {min(os.sched_getaffinity(0))})
+
+
+def bench_throughput(rounds: int = 2) -> dict[str, Any]:
     n = 600_000
+    ours: list[float] = []
+    bare_r: list[float] = []
     with tempfile.TemporaryDirectory() as tmp:
         keys, db = Path(tmp) / "keys", Path(tmp) / "g.db"
         write_keys(keys, {d: _key(d) for d in range(N_DEV)})
-        bare, baddr = _start([sys.executable, "-c", BARE_LOOP])
-        try:
-            b = _load(baddr, n, 1)
-        finally:
-            bare.kill()
-            bare.wait()
-        gw, gaddr = _start([sys.executable, "-m", "gateway.ingest.service", "--db", str(db),
-                            "--keys", str(keys), "--listen", "127.0.0.1:0",
-                            "--maintenance-every", "3600"])
-        try:
-            o = _load(gaddr, n, 2)
-        finally:
-            gw.terminate()
-            gw.wait(timeout=60)
+        for r in range(rounds):  # alternate, so a load change on the machine hits both
+            bare, baddr = _start([sys.executable, "-c", BARE_LOOP])
+            _pin_server(bare)
+            try:
+                bare_r.append(_load(baddr, n, 1)["replies_per_s"])
+            finally:
+                bare.kill()
+                bare.wait()
+            gw, gaddr = _start([sys.executable, "-m", "gateway.ingest.service", "--db", str(db),
+                                "--keys", str(keys), "--listen", "127.0.0.1:0",
+                                "--maintenance-every", "3600"])
+            _pin_server(gw)
+            try:
+                o = _load(gaddr, n, 2 + r)
+                ours.append(o["stored_per_s"])
+            finally:
+                gw.terminate()
+                gw.wait(timeout=60)
         import sqlite3
 
         with sqlite3.connect(db) as c:
             rows = c.execute("SELECT count(*) FROM samples").fetchone()[0]
             sync = c.execute("PRAGMA synchronous").fetchone()[0]
             mode = c.execute("PRAGMA journal_mode").fetchone()[0]
+    best_o, best_b = max(ours), max(bare_r)
     return {
-        "ours_acked_stored_per_s": round(o["stored_per_s"]),
-        "bare_recvfrom_loop_per_s": round(b["replies_per_s"]),
-        "ratio_ours_to_bare": round(o["stored_per_s"] / b["replies_per_s"], 3),
+        "ours_acked_stored_per_s": round(best_o),
+        "bare_recvfrom_loop_per_s": round(best_b),
+        "ratio_ours_to_bare": round(best_o / best_b, 3),
+        "rounds_ours": [round(x) for x in ours],
+        "rounds_bare": [round(x) for x in bare_r],
         "stored_rows_after_run": rows,
-        "acked_total": o["replies"],
         "sqlite": f"journal_mode={mode}, synchronous={sync} (2 = FULL)",
         "method": (f"{N_DEV} devices, {WINDOW} packets in flight, closed loop, {DURATION:.0f} s "
-                   f"after {WARMUP:.0f} s warm-up; every packet unique, HMAC-verified, "
-                   "committed (WAL, synchronous=FULL) before its authenticated ack"),
+                   f"after {WARMUP:.0f} s warm-up, best of {rounds} alternating rounds; server "
+                   "pinned to one core, load generator to the other; every packet unique, "
+                   "HMAC-verified, committed (WAL, synchronous=FULL) before its authenticated "
+                   "ack; the bare loop answers each datagram with its first 34 bytes"),
     }
 
 

@@ -28,6 +28,11 @@ class Config:
     ring_size = 128
     wdt_ms = 30000
     boot_file = "boot.cnt"
+    transport = "udp"  # or "uart": a board wired to the gateway's USB port
+    uart_id = 1
+    uart_baud = 115200
+    uart_tx = -1  # -1: the board's default pins
+    uart_rx = -1
     pins: dict = {}
     cal: dict = {}
 
@@ -71,12 +76,22 @@ def parse(d, where: str = "config") -> Config:
         raise ConfigError(f"{where}: field 'key' is not hexadecimal") from None
     if not 16 <= len(c.key) <= 64:
         raise ConfigError(f"{where}: field 'key' has {len(c.key)} bytes, expected 16..64")
-    c.ssid = _get(d, "wifi.ssid", str, where=where)
-    c.password = _get(d, "wifi.password", str, where=where)
-    c.connect_timeout_ms = _get(d, "wifi.connect_timeout_ms", int, 15000, lo=1000, hi=120000,
-                                where=where)
-    c.gateway_host = _get(d, "gateway.host", str, where=where)
-    c.gateway_port = _get(d, "gateway.port", int, lo=1, hi=65535, where=where)
+    c.transport = _get(d, "transport", str, "udp", where=where)
+    if c.transport == "udp":
+        c.ssid = _get(d, "wifi.ssid", str, where=where)
+        c.password = _get(d, "wifi.password", str, where=where)
+        c.connect_timeout_ms = _get(d, "wifi.connect_timeout_ms", int, 15000, lo=1000,
+                                    hi=120000, where=where)
+        c.gateway_host = _get(d, "gateway.host", str, where=where)
+        c.gateway_port = _get(d, "gateway.port", int, lo=1, hi=65535, where=where)
+    elif c.transport == "uart":
+        c.uart_id = _get(d, "uart.id", int, 1, lo=0, hi=9, where=where)
+        c.uart_baud = _get(d, "uart.baudrate", int, 115200, lo=1200, hi=4000000, where=where)
+        c.uart_tx = _get(d, "uart.tx", int, -1, lo=-1, hi=64, where=where)
+        c.uart_rx = _get(d, "uart.rx", int, -1, lo=-1, hi=64, where=where)
+    else:
+        raise ConfigError(f"{where}: field 'transport' must be \"udp\" or \"uart\", "
+                          f"got {c.transport!r}")
     c.sample_ms = _get(d, "sample_ms", int, 2000, lo=20, hi=600000, where=where)
     period_s = _get(d, "period_s", float, 60.0, lo=0.1, hi=MAX_PERIOD_S, where=where)
     c.period_ms = int(period_s * 1000)

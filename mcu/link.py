@@ -71,25 +71,14 @@ class WifiLink:
         self.backoff = min(self.backoff * 2, self.bmax)
 
 
-class Sender:
-    """Sends due records from the ring and removes those the gateway acknowledged."""
+class UdpPort:
+    """Datagrams to the gateway over Wi-Fi (non-blocking socket)."""
 
-    def __init__(self, ring, mac, device_id: int, boot: int, host: str, port: int,
-                 ack_timeout_ms: int, burst: int = 8) -> None:
-        self.ring = ring
-        self.mac = mac
-        self.dev = device_id
-        self.boot = boot
+    def __init__(self, host: str, port: int) -> None:
         self.host = host
         self.port = port
-        self.rto = ack_timeout_ms
-        self.burst = burst
         self.sock: socket.socket | None = None
         self.addr: tuple[str, int] | tuple[str, int, int, int] | None = None
-        self.sent = 0
-        self.acked = 0
-        self.rejected = 0
-        self.errors = 0
 
     def open(self) -> None:
         if self.sock is None:
@@ -103,16 +92,47 @@ class Sender:
             self.sock.close()
             self.sock = None
 
+    def send(self, buf) -> None:
+        if self.sock is not None and self.addr is not None:
+            self.sock.sendto(buf, self.addr)
+
+    def recv(self):
+        if self.sock is None:
+            return None
+        try:
+            return self.sock.recv(64)
+        except OSError:
+            return None  # EAGAIN: nothing waiting
+
+
+class Sender:
+    """Sends due records from the ring through a port (UdpPort or UartPort) and removes those
+    the gateway acknowledged."""
+
+    def __init__(self, ring, mac, device_id: int, boot: int, port, ack_timeout_ms: int,
+                 burst: int = 8) -> None:
+        self.ring = ring
+        self.mac = mac
+        self.dev = device_id
+        self.boot = boot
+        self.port = port
+        self.rto = ack_timeout_ms
+        self.burst = burst
+        self.sent = 0
+        self.acked = 0
+        self.rejected = 0
+        self.errors = 0
+
+    def close(self) -> None:
+        self.port.close()
+
     def step(self, now) -> None:
         try:
-            self.open()
+            self.port.open()
         except OSError:
             self.errors += 1
             return
-        sock, addr = self.sock, self.addr
-        if sock is None or addr is None:
-            return
-        self._poll_acks(sock)
+        self._poll_acks()
         ring = self.ring
         n = 0
         for i in range(ring.capacity):
@@ -123,7 +143,7 @@ class Sender:
             buf = ring.slot_view(i)
             wire.seal(buf, ticks_diff(now, ring.tick[i]), self.mac)
             try:
-                sock.sendto(buf, addr)
+                self.port.send(buf)
                 self.sent += 1
             except OSError:
                 self.errors += 1
@@ -133,12 +153,11 @@ class Sender:
             ring.due[i] = ticks_add(now, self.rto << (tries if tries < 3 else 3))
             n += 1
 
-    def _poll_acks(self, sock) -> None:
+    def _poll_acks(self) -> None:
         for _ in range(32):
-            try:
-                data = sock.recv(64)
-            except OSError:
-                return  # EAGAIN: nothing more
+            data = self.port.recv()
+            if data is None:
+                return
             r = wire.parse_ack(data, self.dev, self.mac)
             if r is None or r[0] != self.boot:
                 continue  # forged, garbled or from another boot: ignore

@@ -11,7 +11,7 @@ import config
 import status
 import wire
 from bootcount import BootCountError, next_boot
-from link import UP, Sender, WifiLink
+from link import UP, Sender, UdpPort, WifiLink
 from record import Averager
 from ring import Ring
 
@@ -72,17 +72,21 @@ def log_record(seq: int, avg) -> None:
     print("REC", seq, " ".join(f"{avg.raw[i]}:{avg.status[i]}" for i in range(7)))
 
 
-def run(cfg, boot: int, wdt, wlan, sensors, fail_status: tuple = (), ring=None,
+def run(cfg, boot: int, wdt, wlan, sensors, fail_status: tuple = (), ring=None, port=None,
         max_loops: int = -1) -> None:
+    """wlan None: no Wi-Fi (UART transport), the port is always up."""
     print("serra: device", cfg.device_id, "boot", boot)
     mac = wire.Hmac(cfg.key)
     if ring is None:
         ring = Ring(cfg.ring_size)
     avg = Averager()
-    wifi = WifiLink(wlan, cfg.ssid, cfg.password, cfg.connect_timeout_ms,
-                    fail_status=fail_status)
-    sender = Sender(ring, mac, cfg.device_id, boot, cfg.gateway_host, cfg.gateway_port,
-                    cfg.ack_timeout_ms)
+    wifi = None
+    if wlan is not None:
+        wifi = WifiLink(wlan, cfg.ssid, cfg.password, cfg.connect_timeout_ms,
+                        fail_status=fail_status)
+    if port is None:
+        port = UdpPort(cfg.gateway_host, cfg.gateway_port)
+    sender = Sender(ring, mac, cfg.device_id, boot, port, cfg.ack_timeout_ms)
     period_ds = cfg.period_ms // 100
     seq = 0
     now = ticks_ms()
@@ -112,11 +116,13 @@ def run(cfg, boot: int, wdt, wlan, sensors, fail_status: tuple = (), ring=None,
                 gc.collect()
                 print("MEM", gc.mem_alloc(), "ring", ring.count, "dropped", ring.dropped,
                       "sent", sender.sent, "acked", sender.acked)
-        if wifi.step(now):
+        if wifi is None:
+            sender.step(now)
+        elif wifi.step(now):
             sender.step(now)
         elif wifi.state != UP:
             sender.close()
-        if wifi.state != last_state:
+        if wifi is not None and wifi.state != last_state:
             last_state = wifi.state
             print("serra: wifi", ("down", "connecting", "up", "backoff")[last_state])
         wdt.feed()
@@ -145,10 +151,21 @@ def main() -> None:
     gc.collect()
     ring = Ring(cfg.ring_size)
     import machine
-    import network
 
     # Started only once config and counter are good: a bad file must not become a reset loop.
     wdt = machine.WDT(timeout=cfg.wdt_ms)
+    if cfg.transport == "uart":
+        from uartport import UartPort
+
+        if cfg.uart_tx >= 0 and cfg.uart_rx >= 0:
+            uart = machine.UART(cfg.uart_id, baudrate=cfg.uart_baud, tx=cfg.uart_tx,
+                                rx=cfg.uart_rx)
+        else:
+            uart = machine.UART(cfg.uart_id, baudrate=cfg.uart_baud)
+        run(cfg, boot, wdt, None, build_sensors(cfg), (), ring, UartPort(uart))
+        return
+    import network
+
     fail = (network.STAT_NO_AP_FOUND, network.STAT_WRONG_PASSWORD, network.STAT_CONNECT_FAIL)
     run(cfg, boot, wdt, network.WLAN(network.STA_IF), build_sensors(cfg), fail, ring)
 

@@ -223,3 +223,37 @@ def test_firmware_type_checks_against_esp32_stubs() -> None:
                        cwd=MCU, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
     assert "Success" in r.stdout
+
+
+COBS_MPY = r"""
+import sys, binascii
+from cobs import encode_into, decode
+out = bytearray(600)
+back = bytearray(600)
+for h in open(sys.argv[1]).read().split():
+    src = binascii.unhexlify(h) if h != "-" else b""
+    n = encode_into(src, len(src), out)
+    m = decode(out, n - 1, back)
+    print(binascii.hexlify(out[:n]).decode(), m == len(src) and bytes(back[:m]) == src)
+print("bad", decode(b"\x05\x01", 2, back), decode(b"\x02\x00", 2, back))
+"""
+
+
+@pytest.mark.skipif(micropython() is None, reason="micropython not installed")
+def test_firmware_cobs_matches_gateway_framing(tmp_path: Path) -> None:
+    from gateway.ingest.framing import cobs_encode
+
+    cases = [b"", b"\x00", b"\x00\x00", b"\x11\x22\x00\x33", bytes(range(1, 255)),
+             bytes(range(256)) * 2, bytes.fromhex(json.loads(
+                 (ROOT / "tests" / "vectors" / "wire_v1.json").read_text())["acks"][0]["packet"])]
+    script = tmp_path / "cobs_check.py"
+    script.write_text(COBS_MPY)
+    (tmp_path / "cases.txt").write_text("\n".join(c.hex() or "-" for c in cases))
+    r = run_mpy(script, str(tmp_path / "cases.txt"), timeout=60)
+    assert r.returncode == 0, r.stderr
+    lines = r.stdout.splitlines()
+    for case, line in zip(cases, lines, strict=False):
+        enc, ok = line.split()
+        assert bytes.fromhex(enc) == cobs_encode(case) + b"\0"
+        assert ok == "True"
+    assert lines[-1] == "bad -1 -1"

@@ -118,3 +118,32 @@ def freq(*a):
 
 def idle():
     pass
+
+
+class UART:
+    """A UART wired to a host pty: $SERRA_UART_<id> names the device file. any()/read()/write()
+    never block, like the ESP32's with timeout=0."""
+
+    def __init__(self, id, baudrate=115200, **kw):
+        import select
+
+        path = os.getenv("SERRA_UART_" + str(id))
+        if not path:
+            raise OSError(f"fake UART {id}: set SERRA_UART_{id} to a pty path")
+        self._f = open(path, "r+b")
+        self._poll = select.poll()
+        self._poll.register(self._f, select.POLLIN)
+
+    def any(self):
+        return 1 if self._poll.poll(0) else 0
+
+    def read(self, n=1):
+        out = bytearray()
+        while len(out) < n and self._poll.poll(0):
+            out += self._f.read(1)
+        return bytes(out) if out else None
+
+    def write(self, buf):
+        n = self._f.write(buf)
+        self._f.flush()
+        return n

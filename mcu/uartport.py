@@ -1,0 +1,50 @@
+"""Packets over a UART (a board on the gateway's USB port): COBS frames, 0x00 delimited."""
+
+from cobs import decode, encode_into
+from wire import ACK_LEN, RECORD_LEN
+
+
+class UartPort:
+    def __init__(self, uart) -> None:
+        """uart: machine.UART already configured (baud rate, pins)."""
+        self.uart = uart
+        self._tx = bytearray(RECORD_LEN + 4)
+        self._rx = bytearray(2 * ACK_LEN)  # a frame in progress
+        self._n = 0
+        self._ack = bytearray(ACK_LEN)
+        self.bad_frames = 0
+
+    def open(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+    def send(self, buf) -> None:
+        n = encode_into(buf, len(buf), self._tx)
+        self.uart.write(memoryview(self._tx)[:n])
+
+    def recv(self):
+        """One decoded frame if complete, else None (never blocks)."""
+        u = self.uart
+        while u.any():
+            c = u.read(1)
+            if not c:
+                return None
+            b = c[0]
+            if b != 0:
+                if self._n < len(self._rx):
+                    self._rx[self._n] = b
+                self._n += 1  # an overlong frame is counted and dropped at its delimiter
+                continue
+            n, self._n = self._n, 0
+            if n == 0:
+                continue
+            if n > len(self._rx):
+                self.bad_frames += 1
+                continue
+            m = decode(self._rx, n, self._ack)
+            if m == ACK_LEN:
+                return self._ack
+            self.bad_frames += 1
+        return None

@@ -1,0 +1,113 @@
+"""A board on the gateway's USB port: the real firmware under MicroPython with a fake UART wired
+to a host pty, COBS frames through a 'cable' that corrupts bytes both ways, the real gateway
+reading the other pty through pyserial. Every record arrives exactly once."""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import select
+import signal
+import subprocess
+import sys
+import threading
+import tty
+from pathlib import Path
+
+import pytest
+
+from gateway.store.keys import write_keys
+from tests.mcu_fakes.hostenv import micropython
+from tests.test_firmware_e2e import (
+    KEY,
+    ROOT,
+    Firmware,
+    check_exactly_once,
+    make_trace,
+    run_until_delivered,
+    stored,
+)
+
+pytestmark = pytest.mark.skipif(micropython() is None, reason="micropython not installed")
+
+
+class NoisyCable:
+    """Relays bytes between two pty masters, flipping a fraction of bytes (seeded)."""
+
+    def __init__(self, a: int, b: int, flip: float, seed: int) -> None:
+        self.a, self.b, self.flip = a, b, flip
+        self.rng = random.Random(seed)
+        self.flipped = 0
+        self._stop = False
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        while not self._stop:
+            ready, _, _ = select.select([self.a, self.b], [], [], 0.1)
+            for src in ready:
+                try:
+                    data = bytearray(os.read(src, 4096))
+                except OSError:
+                    continue
+                for i in range(len(data)):
+                    if self.rng.random() < self.flip:
+                        data[i] ^= 1 << self.rng.randrange(8)
+                        self.flipped += 1
+                os.write(self.b if src == self.a else self.a, data)
+
+    def close(self) -> None:
+        self._stop = True
+        self.thread.join(timeout=5)
+
+
+def _pty() -> tuple[int, int, str]:
+    m, s = os.openpty()
+    tty.setraw(m)
+    tty.setraw(s)
+    return m, s, os.ttyname(s)
+
+
+def test_firmware_over_uart_with_a_noisy_cable(tmp_path: Path) -> None:
+    db, keys, trace = tmp_path / "g.db", tmp_path / "keys", tmp_path / "trace"
+    write_keys(keys, {7: KEY})
+    make_trace(trace)
+    ma, sa, board_tty = _pty()
+    mb, sb, gw_tty = _pty()
+    cable = NoisyCable(ma, mb, flip=0.003, seed=11)
+    log = tmp_path / "gateway.log"
+    with open(log, "w") as err:
+        gw = subprocess.Popen(
+            [sys.executable, "-m", "gateway.ingest.service", "--db", str(db), "--keys",
+             str(keys), "--serial", gw_tty, "--maintenance-every", "0.5"],
+            cwd=ROOT, stdout=subprocess.PIPE, stderr=err, text=True)
+    board = tmp_path / "board"
+    board.mkdir()
+    (board / "config.json").write_text(json.dumps({
+        "device_id": 7, "key": KEY.hex(), "transport": "uart", "uart": {"id": 1},
+        "sample_ms": 50, "period_s": 0.2, "ack_timeout_ms": 300, "wdt_ms": 5000,
+        "pins": {"dht_in": 4, "dht_out": 16, "pyranometer": 34, "anemometer": 35, "rain": 27}}))
+    os.environ["SERRA_UART_1"] = board_tty
+    n = 40
+    try:
+        assert gw.stdout is not None
+        assert select.select([gw.stdout], [], [], 60)[0], "gateway did not start"
+        assert "listening serial" in gw.stdout.readline()
+        fw = Firmware(board, trace)
+        try:
+            recs = run_until_delivered(fw, db, 0, n, timeout=120)
+        finally:
+            fw.stop()
+        check_exactly_once(recs, stored(db, 0), n)
+    finally:
+        os.environ.pop("SERRA_UART_1", None)
+        gw.send_signal(signal.SIGTERM)
+        gw.wait(timeout=30)
+        cable.close()
+        for fd in (ma, sa, mb, sb):
+            os.close(fd)
+    assert cable.flipped > 0
+    # The corrupted frames were caught by COBS or by the tag, counted, never stored.
+    counters = log.read_text().rsplit("counters", 1)[-1]
+    assert "framing" in counters or "bad_tag" in counters or "short" in counters, counters

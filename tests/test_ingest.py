@@ -220,3 +220,28 @@ def test_service_refuses_world_readable_keys(tmp_path: Path, capsys) -> None:
                        "--listen", "127.0.0.1:0"])
     assert rc == 2
     assert "chmod 600" in capsys.readouterr().err
+
+
+_FUZZ: dict = {}
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.one_of(st.binary(max_size=120),
+                          st.builds(lambda i, x: bytes(b ^ x if j == i else b
+                                                       for j, b in enumerate(pkt(3))),
+                                    st.integers(0, p.RECORD_LEN - 1), st.integers(1, 255))),
+                max_size=20))
+def test_core_never_crashes_nor_acks_forgeries(tmp_path_factory, datagrams: list[bytes]) -> None:
+    from gateway.ingest.core import IngestCore
+    from gateway.store import Store
+
+    if "core" not in _FUZZ:  # one store for all examples: nothing forged may ever reach it
+        _FUZZ["core"] = IngestCore(Store(tmp_path_factory.mktemp("fz") / "g.db"), {7: KEY})
+    core = _FUZZ["core"]
+    replies: list[bytes] = []
+    for d in datagrams:
+        core.handle(d, ("127.0.0.1", 9), lambda pkt, peer: replies.append(pkt))
+    assert core.counters["internal_error"] == 0
+    assert not core._pending  # nothing forged was queued for storage
+    for r in replies:  # only authenticated content problems are answered
+        assert p.decode_ack(r, KEY).status == p.ACK_REJECTED

@@ -121,6 +121,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="keep raw samples this many days (minute aggregates are kept longer)")
     ap.add_argument("--max-db-mb", type=float, default=retention.Policy.max_db_bytes / 2**20,
                     help="alarm when the database reaches 80 %% of this size")
+    ap.add_argument("--batch-delay", type=float, default=0.0,
+                    help="seconds to wait for more records before a commit (fewer SD-card "
+                         "writes; acks are delayed as much)")
     ap.add_argument("--maintenance-every", type=float, default=10.0, help=argparse.SUPPRESS)
     ap.add_argument("-v", "--verbose", action="store_true")
     return ap
@@ -135,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
         listen = ("0.0.0.0", DEFAULT_PORT)
     cfg = IngestConfig(
         db=args.db, keys=args.keys, listen=listen, serial=args.serial, baudrate=args.baudrate,
-        maintenance_every=args.maintenance_every,
+        maintenance_every=args.maintenance_every, batch_delay=args.batch_delay,
         policy=retention.Policy(samples_days=args.retention_days,
                                 max_db_bytes=int(args.max_db_mb * 2**20)))
     try:

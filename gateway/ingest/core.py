@@ -13,6 +13,7 @@ from collections.abc import Callable, Hashable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from hmac import compare_digest
+from typing import TypeVar
 
 from gateway import protocol as p
 from gateway.ingest.counters import Counters, RateLimitedLog
@@ -21,6 +22,7 @@ from gateway.store import Store
 log = logging.getLogger("serra.ingest")
 
 Send = Callable[[bytes, Hashable], None]
+T = TypeVar("T")
 
 # Sequence numbers older than max_seq - WINDOW are replays. The firmware ring holds far fewer
 # unacknowledged records (128), so a genuine resend is always inside the window.
@@ -181,7 +183,8 @@ class IngestCore:
         """Commit whatever is queued (graceful shutdown)."""
         await self._commit(asyncio.get_running_loop())
 
-    def run_in_store_thread(self, fn, *args):  # noqa: ANN001, ANN201 - thin helper
+    def run_in_store_thread(self, fn: Callable[..., T], *args: object) -> asyncio.Future[T]:
+        """Run store work (aggregation, retention) on the thread that owns the connection."""
         return asyncio.get_running_loop().run_in_executor(self._exec, fn, *args)
 
     def close(self) -> None:

@@ -35,7 +35,7 @@ class UdpServer:
 
     def _send(self, pkt: bytes, addr: Hashable) -> None:
         try:
-            self.sock.sendto(pkt, addr)  # type: ignore[arg-type]
+            self.sock.sendto(pkt, addr)  # type: ignore[call-overload]  # addr from recvfrom
         except BlockingIOError:
             # Socket buffer full: dropping the ack only causes a resend.
             self.core.counters["ack_dropped"] += 1

@@ -5,12 +5,11 @@ host tests replace only machine/dht/network with fakes.
 """
 
 import gc
+import sys
 from time import sleep_ms, ticks_add, ticks_diff, ticks_ms
 
-import config
 import status
 import wire
-from bootcount import BootCountError, next_boot
 from link import UP, Sender, UdpPort, WifiLink
 from record import Averager
 from ring import Ring
@@ -134,18 +133,31 @@ def run(cfg, boot: int, wdt, wlan, sensors, fail_status: tuple = (), ring=None, 
             sleep_ms(wait)
 
 
+def _unload(name: str) -> None:
+    # Config parsing and the boot counter run once: drop their bytecode from the heap.
+    if name in sys.modules:
+        del sys.modules[name]
+
+
 def main() -> None:
+    import config
+
     try:
         cfg = config.load("config.json")
     except config.ConfigError as e:
         # No reboot loop on a bad config: say what is wrong on the serial console and stop.
         print("serra: CONFIG ERROR:", e)
         return
+    from bootcount import BootCountError, next_boot
+
     try:
         boot = next_boot(cfg.boot_file)
     except BootCountError as e:
         print("serra: BOOT COUNTER ERROR:", e)
         return
+    del config, BootCountError, next_boot
+    _unload("config")
+    _unload("bootcount")
     # The ring is the one large buffer (8 KB for 128 records): allocate it while the heap is
     # still unfragmented.
     gc.collect()

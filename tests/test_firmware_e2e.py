@@ -228,7 +228,8 @@ def test_firmware_delivers_every_record_exactly_once_over_lossy_udp(tmp_path: Pa
         gw.wait(timeout=30)
     # The link was lossy both ways, and nothing was stored twice.
     st = proxy.stats
-    assert 0.2 < st["up_dropped"] / st["up"] < 0.4 and 0.2 < st["down_dropped"] / st["down"] < 0.4
+    assert 0.15 < st["up_dropped"] / st["up"] < 0.45
+    assert 0.15 < st["down_dropped"] / st["down"] < 0.45
     with sqlite3.connect(db) as c:
         dup = c.execute("SELECT count(*) - count(DISTINCT device_id || '/' || boot || '/' || seq)"
                         " FROM samples").fetchone()[0]

@@ -245,3 +245,15 @@ def test_core_never_crashes_nor_acks_forgeries(tmp_path_factory, datagrams: list
     assert not core._pending  # nothing forged was queued for storage
     for r in replies:  # only authenticated content problems are answered
         assert p.decode_ack(r, KEY).status == p.ACK_REJECTED
+
+
+def test_service_reports_bad_arguments_clearly(tmp_path: Path, capsys) -> None:
+    k = tmp_path / "keys"
+    write_keys(k, {7: KEY})
+    assert service.main(["--db", str(tmp_path / "no" / "g.db"), "--keys", str(k)]) == 2
+    assert "cannot open the store" in capsys.readouterr().err
+    assert service.main(["--db", str(tmp_path / "g.db"), "--keys", str(tmp_path / "none")]) == 2
+    assert "No such file" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        service.main(["--db", "x", "--keys", str(k), "--listen", "nope"])
+    assert "expected HOST:PORT, got 'nope'" in capsys.readouterr().err

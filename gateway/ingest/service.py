@@ -10,6 +10,7 @@ import asyncio
 import contextlib
 import logging
 import signal
+import sqlite3
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -145,6 +146,11 @@ def main(argv: list[str] | None = None) -> int:
         load_keys(cfg.keys)  # fail early with a clear message
     except (KeyFileError, OSError) as e:
         print(f"error: {e}", file=sys.stderr)
+        return 2
+    try:
+        Store(cfg.db).close()
+    except (sqlite3.Error, RuntimeError) as e:
+        print(f"error: cannot open the store {cfg.db}: {e}", file=sys.stderr)
         return 2
 
     async def _run() -> None:

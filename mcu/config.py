@@ -98,7 +98,7 @@ def parse(d, where: str = "config") -> Config:
     if c.sample_ms > c.period_ms:
         raise ConfigError(f"{where}: sample_ms {c.sample_ms} longer than period_s {period_s}")
     c.ack_timeout_ms = _get(d, "ack_timeout_ms", int, 3000, lo=50, hi=600000, where=where)
-    c.ring_size = _get(d, "ring_size", int, 128, lo=8, hi=1024, where=where)
+    c.ring_size = _get(d, "ring_size", int, 128, lo=120, hi=1024, where=where)
     c.wdt_ms = _get(d, "wdt_ms", int, 30000, lo=2000, hi=3600000, where=where)
     c.boot_file = _get(d, "boot_file", str, "boot.cnt", where=where)
     pins = d.get("pins", {})

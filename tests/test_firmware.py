@@ -32,6 +32,8 @@ def check_config():
         ({"gateway": {"host": "h", "port": 70000}}, "field 'gateway.port' = 70000 outside"),
         ({"period_s": 0}, "field 'period_s' = 0.0 outside"),
         ({"sample_ms": 120000}, "sample_ms 120000 longer than period_s"),
+        ({"ring_size": 64}, "field 'ring_size' = 64 outside [120, 1024]"),
+        ({"transport": "lora"}, "field 'transport' must be"),
         ({"pins": {"dht_in": "4"}}, "field 'pins.dht_in' must be a GPIO number"),
         ({"pins": {"dht_inside": 4}}, "unknown field 'pins.dht_inside'"),
         ({"calibration": {"pyr_w_per_count": "x"}}, "field 'pyr_w_per_count' must be float"),

@@ -70,7 +70,7 @@ def plot_replay(result: ReplayResult, path: str | Path, title: str = "") -> None
     import matplotlib.dates as mdates
 
     for a in fig.axes:
-        locator = mdates.AutoDateLocator(maxticks=8)
+        locator = mdates.AutoDateLocator()
         a.xaxis.set_major_locator(locator)
         a.xaxis.set_major_formatter(mdates.ConciseDateFormatter(locator))
         a.tick_params(axis="x", labelsize=7)

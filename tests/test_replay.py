@@ -152,3 +152,16 @@ def test_unseen_season_adaptive_beats_constant_and_persistence(tmp_path):
     for h in ("15", "30", "60"):
         block = rep["horizons"][h]
         assert block["adaptive"]["mae"] <= 0.7 * block["persistence"]["mae"], h
+
+
+def test_horizons_are_minutes_whatever_the_model_step(drifting):
+    series, base = drifting
+    coarse = series.slice(0, 360)
+    coarse.time, coarse.step = coarse.time[::5], 300.0
+    coarse.columns = {k: v[::5] for k, v in coarse.columns.items()}
+    res = replay(ALMERIA, coarse, GH, base, online_settings(ALMERIA, GH, FAST), horizons=(15, 60, 7))
+    assert set(res.horizons) == {15, 60}  # 7 min is not a whole number of 5-minute steps
+    f = res.horizons[15]
+    assert np.all(f["measured"] == res.measured[f["target"]])
+    assert np.all(f["persistence"] == res.measured[f["target"] - 3])
+    assert set(report(res)["horizons"]) == {"15", "60"}

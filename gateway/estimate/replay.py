@@ -30,7 +30,7 @@ from gateway.model.terms import SUN_THRESHOLD
 from gateway.series import Series
 
 HORIZONS = (15, 30, 60)
-"""Forecast horizons [min] of the report."""
+"""Forecast horizons [min] of the report (reached in whole model steps)."""
 
 
 @dataclass
@@ -105,8 +105,10 @@ def replay(
         constant=constant, theta=theta, theta0=theta0_used, step_ms=step_ms,
         counters=est.counters, settings=est.settings,
     )
-    for h in horizons:
-        result.horizons[int(h)] = forecasts(result, int(h))
+    for minutes in horizons:
+        steps = minutes * 60.0 / series.step
+        if steps >= 1 and float(steps).is_integer():  # a horizon the model step cannot reach is left out
+            result.horizons[int(minutes)] = forecasts(result, int(steps))
     if model.radiation is not None and "i_in" in x and np.isfinite(x["i_in"]).any():
         j = model.index(model.radiation.parameter.name)
         # i_in at t simulated from i_glob at t with c_tsw as estimated up to t - 1 (III.35)
@@ -117,7 +119,8 @@ def replay(
 
 
 def forecasts(result: ReplayResult, horizon: int) -> dict[str, np.ndarray]:
-    """Forecasts of T_in[t + h] from every start t (vectorised over the starts).
+    """Forecasts of T_in[t + h] from every start t, h = ``horizon`` model steps (vectorised over
+    the starts).
 
     Returns ``target`` (index t + h), ``measured``, ``adaptive`` (parameters in force at t),
     ``constant`` (theta0) and ``persistence`` (T_in[t]) arrays over the starts.
@@ -157,7 +160,8 @@ def report(result: ReplayResult, warmup: int = 0) -> dict:
     )
     horizons = {}
     for h, f in result.horizons.items():
-        keep_h = f["target"] >= warmup + h  # the start, not only the target, is after warm-up
+        steps = int(round(h * 60.0 / result.dt))
+        keep_h = f["target"] >= warmup + steps  # the start, not only the target, is after warm-up
         horizons[str(h)] = _common(
             f["measured"],
             {"adaptive": f["adaptive"], "persistence": f["persistence"], "constant": f["constant"]},

@@ -33,6 +33,7 @@ from gateway.series import load_series  # noqa: E402
 from training.identifiability import ASSUMED, DATASET  # noqa: E402
 
 PARTICLES, ITERATIONS = 100, 220
+ROUNDS = 3
 
 
 def _problem():
@@ -110,19 +111,30 @@ def run() -> dict:
     gh, model, series, obj, lo, hi = _problem()
     result: dict = {"task": {"parameters": 4, "samples": len(series), "particles": PARTICLES,
                              "iterations": ITERATIONS, "cost": "one-step-ahead MSE [°C²]"}}
-    thesis = {name: ours(obj, lo, hi, name, seed=0) for name in ("riwpso", "rsba", "ba")}
+    # Alternating rounds, best of 3 for each contender: the machine's load changes over a run,
+    # so contenders are interleaved and each keeps its fastest round (same seed, same result).
+    evaluations = PARTICLES * (ITERATIONS + 1)
+    contenders = {
+        "riwpso": lambda: ours(obj, lo, hi, "riwpso", seed=0),
+        "rsba": lambda: ours(obj, lo, hi, "rsba", seed=0),
+        "ba": lambda: ours(obj, lo, hi, "ba", seed=0),
+        "mealpy_ba": lambda: mealpy_run(obj, lo, hi, "ba", 0, evaluations),
+        "mealpy_pso": lambda: mealpy_run(obj, lo, hi, "pso", 0, evaluations),
+        "pyswarms_gbest": lambda: pyswarms_run(obj, lo, hi, 0, evaluations),
+    }
+    best: dict[str, dict] = {}
+    for _ in range(ROUNDS):
+        for label, fn in contenders.items():
+            try:
+                r = fn()
+            except Exception as exc:  # a peer that fails to import or run is reported, not fatal
+                best[label] = {"error": f"{type(exc).__name__}: {exc}"}
+                continue
+            if label not in best or r["seconds"] < best[label].get("seconds", float("inf")):
+                best[label] = r
+    thesis = {k: best[k] for k in ("riwpso", "rsba", "ba")}
     result["thesis_task"] = thesis
-    evaluations = thesis["riwpso"]["evaluations"]
-    peers = {}
-    for label, fn in (
-        ("mealpy_ba", lambda: mealpy_run(obj, lo, hi, "ba", 0, evaluations)),
-        ("mealpy_pso", lambda: mealpy_run(obj, lo, hi, "pso", 0, evaluations)),
-        ("pyswarms_gbest", lambda: pyswarms_run(obj, lo, hi, 0, evaluations)),
-    ):
-        try:
-            peers[label] = fn()
-        except Exception as exc:  # a peer that fails to import or run is reported, not fatal
-            peers[label] = {"error": f"{type(exc).__name__}: {exc}"}
+    peers = {k: best[k] for k in ("mealpy_ba", "mealpy_pso", "pyswarms_gbest")}
     result["peers"] = peers
     ratios = {}
     for label, peer in peers.items():

@@ -240,3 +240,19 @@ def test_prior_keeps_estimates_near_the_starting_values():
         _, theta = run(OnlineEstimator(ALMERIA, GH, base, settings), series)
         spread[prior] = np.mean(np.abs(theta - base) / (hi - lo))
     assert spread[100.0] < 0.5 * spread[0.0]
+
+
+def test_almeria_without_optional_columns_holds_what_it_cannot_see():
+    """No i_in, no vent signals, no lai column: c_tsw and the vent coefficients are held, the LAI
+    comes from the greenhouse description, and every prediction is still made."""
+    series = model_data(ALMERIA, GH, hours=4, start_hour=9)
+    for name in ("i_in", "vent_roof", "vent_side", "lai"):
+        series.columns.pop(name)
+    base = ALMERIA.defaults(GH)
+    est = OnlineEstimator(ALMERIA, GH, base, online_settings(ALMERIA, GH, FAST))
+    preds, theta = run(est, series)
+    assert all(p is not None for p in preds)
+    assert "i_in" not in est.counters.estimated and est.counters.faulty_samples == 0
+    for name in ("c_tsw", "c_ven_d", "c_ven_w"):
+        assert np.all(theta[:, ALMERIA.index(name)] == base[ALMERIA.index(name)])
+    assert np.any(theta[:, ALMERIA.index("c_bd")] != base[ALMERIA.index("c_bd")])  # LAI 2 from the preset

@@ -256,3 +256,13 @@ def test_almeria_without_optional_columns_holds_what_it_cannot_see():
     for name in ("c_tsw", "c_ven_d", "c_ven_w"):
         assert np.all(theta[:, ALMERIA.index(name)] == base[ALMERIA.index(name)])
     assert np.any(theta[:, ALMERIA.index("c_bd")] != base[ALMERIA.index("c_bd")])  # LAI 2 from the preset
+
+
+def test_a_sensor_that_appears_later_is_used_from_then_on():
+    series = model_data(ALMERIA, GH, hours=3, start_hour=9)
+    est = OnlineEstimator(ALMERIA, GH, ALMERIA.defaults(GH), online_settings(ALMERIA, GH, FAST))
+    for t, sample in enumerate(samples(series)):
+        if t < 60:
+            sample.pop("i_in")  # the inside pyranometer is plugged in after an hour
+        est.update(sample)
+    assert est.counters.estimated.get("i_in", 0) >= 3

@@ -267,8 +267,9 @@ class OnlineEstimator:
         return {k: float(v[0]) for k, v in x.items()}
 
     def _append(self, row: Mapping[str, float]) -> None:
-        if not self._buf:
-            self._buf = {k: np.full(self._cap, np.nan) for k in row}
+        for k in row:
+            if k not in self._buf:  # a column first seen now (a sensor added live): NaN before
+                self._buf[k] = np.full(self._cap, np.nan)
         if self._n == self._cap:  # keep the last `history` rows; amortised O(1) per sample
             keep = self.history
             for arr in self._buf.values():

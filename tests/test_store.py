@@ -155,3 +155,13 @@ def test_retention_and_capacity(tmp_path: Path) -> None:
     assert retention.capacity_alarms(tmp_path / "g.db", pol) == []
     tiny = retention.Policy(max_db_bytes=1000)
     assert "limit" in retention.capacity_alarms(tmp_path / "g.db", tiny)[0]
+
+
+def test_aggregation_works_through_a_backlog_in_bounded_steps(tmp_path: Path) -> None:
+    s = Store(tmp_path / "g.db")
+    s.write_batch([(rec(i), T0 + 60 * i + 1) for i in range(50)])
+    steps = []
+    while (n := agg.aggregate(s.conn, max_rows=7)) > 0:
+        steps.append(n)
+    assert steps == [7] * 7 + [1]
+    assert s.conn.execute("SELECT count(*), sum(n) FROM minute").fetchone() == (50, 50)

@@ -55,11 +55,15 @@ def _minute_row(conn: sqlite3.Connection, dev: int, minute: int) -> list:
     return out
 
 
-def aggregate(conn: sqlite3.Connection) -> int:
-    """Recompute the minutes touched by samples stored since the last call; returns how many."""
+def aggregate(conn: sqlite3.Connection, max_rows: int = 20_000) -> int:
+    """Recompute the minutes touched by samples stored since the last call; returns how many.
+
+    At most `max_rows` new samples per call, so a backlog never holds the write lock for long
+    (the ingest writer, and so the acknowledgements, wait meanwhile)."""
     last = int((conn.execute("SELECT value FROM meta WHERE name='agg_rowid'").fetchone()
                 or ("0",))[0])
     top = conn.execute("SELECT max(rowid) FROM samples").fetchone()[0] or 0
+    top = min(top, last + max_rows)
     if top <= last:
         return 0
     touched = sorted(conn.execute(

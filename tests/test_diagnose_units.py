@@ -1,77 +1,215 @@
-"""Unit checks of the diagnosis building blocks: effect terms, sensor terms, residual tools."""
+"""Unit checks of the diagnosis building blocks: structured base, effect terms, sensor terms,
+fits and residual tools."""
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
 from gateway.diagnose import residuals as res
-from gateway.diagnose.effects import EFFECTS
-from gateway.diagnose.fit import Shooting, drivers, scan_tau, window_starts
-from gateway.diagnose.search import compose
+from gateway.diagnose.effects import EFFECTS, compose
+from gateway.diagnose.fit import (
+    Shooting,
+    coarsen,
+    drivers,
+    fit_lm,
+    radiation_change,
+    scan_tau,
+    window_starts,
+)
+from gateway.diagnose.structure import STORE, structure
 from gateway.greenhouse import load_greenhouse
 from gateway.model import build_model
+from gateway.model import psychrometrics as psy
 from gateway.series import Series
 
 
-def _series(n=2880):
-    t = np.arange(n) * 60
+def _series(n=2880, step=60):
+    t = np.arange(n) * step
     day = (t % 86400) / 86400
     cols = {"t_out": 10 + 5 * np.sin(2 * np.pi * (day - 0.3)), "rh_out": np.full(n, 70.0),
             "i_glob": np.maximum(0, 600 * np.sin(2 * np.pi * (day - 0.25))), "wind": np.full(n, 2.0),
             "rh_in": np.full(n, 60.0), "t_in": np.full(n, 12.0)}
-    return Series((np.datetime64("2020-01-01T00:00:00") + t.astype("timedelta64[s]")), 60.0, cols)
+    return Series((np.datetime64("2020-01-01T00:00:00") + t.astype("timedelta64[s]")), float(step), cols)
 
 
-def test_capacity_change_equals_scaled_capacity():
-    """thermal_mass with factor m from τ = 0 gives the same run as a capacity × m model."""
+def _proto(store=False):
     gh = load_greenhouse("biskra-prototype")
     base = build_model("prototype", gh)
+    return gh, base, structure(base, gh, store)
+
+
+def test_structured_base_at_neutral_values_is_the_thesis_model():
+    """m_cap = 1, no store: the diagnosis's base runs exactly like gateway.model's."""
+    gh, base, m = _proto()
     s = _series()
     x = drivers(s, gh)
-    m = compose(base, [EFFECTS["thermal_mass"]], gh, len(s), 60.0)
+    th = m.defaults(gh)
+    np.testing.assert_allclose(m.free_run(th[None], x, gh, 60.0)[0],
+                               base.free_run(base.defaults(gh)[None], x, gh, 60.0)[0], atol=1e-9)
+    np.testing.assert_allclose(m.one_step(th[None], x, gh, 60.0)[0, 1:],
+                               base.one_step(base.defaults(gh)[None], x, gh, 60.0)[0, 1:], atol=1e-9)
+
+
+def test_thermal_mass_effect_scales_capacity_from_its_start():
+    """thermal_mass with factor 3 from τ: identical to a model of 3 × capacity after τ."""
+    gh, base, m0 = _proto()
+    s = _series()
+    x = drivers(s, gh)
+    m = compose(m0, [EFFECTS["thermal_mass"]], gh, x["_index"][-1])
     th = m.defaults(gh)
     th[m.index("m_capacity")] = 3.0
-    with_term = m.free_run(th[None], x, gh, 60.0)[0]
-    from dataclasses import replace
-
+    th[m.index("tau_thermal_mass")] = 600 * 60.0
+    run = m.free_run(th[None], x, gh, 60.0)[0]
+    plain = base.free_run(base.defaults(gh)[None], x, gh, 60.0)[0]
+    np.testing.assert_allclose(run[:601], plain[:601], atol=1e-9)
     scaled = replace(base, capacity=lambda g: 3.0 * base.capacity(g))
-    direct = scaled.free_run(base.defaults(gh)[None], x, gh, 60.0)[0]
-    np.testing.assert_allclose(with_term, direct, atol=1e-9)
+    tail = scaled.free_run(base.defaults(gh)[None], {**x, "t_in": np.r_[np.zeros(600), run[600:]]},
+                           gh, 60.0, start=600)[0]
+    np.testing.assert_allclose(run[600:], tail, atol=1e-9)
+
+
+def test_store_observer_matches_the_sequential_recursion():
+    gh, base, m = _proto(store=True)
+    s = _series(n=1500)
+    x = drivers(s, gh)
+    rng = np.random.default_rng(1)
+    x["t_in"] = 15 + 5 * np.sin(np.arange(1500) / 200.0) + rng.normal(0, 0.1, 1500)
+    th = m.defaults(gh)
+    rows = np.repeat(th[None], 2, axis=0)
+    rows[:, m.index("c_store")] = [1e4, 2e5]
+    rows[:, m.index("h_store")] = [20.0, 2.0]
+    rows[:, m.index("a_store")] = [0.3, 0.1]
+    got = m.observer(m.columns(rows), x, 60.0)
+    for i, row in enumerate(rows):
+        p = dict(zip(m.names, row, strict=True))
+        k, h, c = p["k_store"], p["h_store"], p["c_store"]
+        lam = np.exp(-(h + k) * 60.0 / c)
+        ta_next = np.r_[x["t_in"][1:], x["t_in"][-1]]
+        u = (p["a_store"] * x["i_glob"] + h * ta_next + k * x["t_out"]) / (h + k)
+        y = np.empty(1500)
+        y[0] = u[0]
+        for t in range(1499):
+            y[t + 1] = lam * y[t] + (1 - lam) * u[t]
+        np.testing.assert_allclose(got[i], y, rtol=1e-9, atol=1e-9)
+
+
+def test_store_shifts_heat_into_the_night():
+    """A store that absorbs sun by day keeps the night warmer than the same model without it."""
+    gh, base, m = _proto(store=True)
+    s = _series()
+    x = drivers(s, gh)
+    th = m.defaults(gh)
+    th[m.index("h_store")], th[m.index("a_store")], th[m.index("k_store")] = 5.0, 0.3, 0.0
+    off = th.copy()
+    off[m.index("a_store")] = 0.0
+    night = (np.arange(2880) % 1440) > 1200  # 20:00-24:00
+    warm = m.free_run(th[None], x, gh, 60.0)[0]
+    cold = m.free_run(off[None], x, gh, 60.0)[0]
+    assert np.all(warm[night] - cold[night] > 0.1)
 
 
 def test_sensor_drift_changes_reading_not_state():
-    gh = load_greenhouse("biskra-prototype")
-    base = build_model("prototype", gh)
+    gh, base, m0 = _proto()
     s = _series()
     x = drivers(s, gh)
-    m = compose(base, [EFFECTS["sensor_drift"]], gh, len(s), 60.0)
+    m = compose(m0, [EFFECTS["sensor_drift"]], gh, x["_index"][-1])
     th = m.defaults(gh)
     th[m.index("a_drift")] = 1.0
-    th[m.index("tau_sensor_drift")] = 1440
+    th[m.index("tau_sensor_drift")] = 1440 * 60.0
     run = m.free_run(th[None], x, gh, 60.0)[0]
     plain = base.free_run(base.defaults(gh)[None], x, gh, 60.0)[0]
     np.testing.assert_allclose(run[:1441], plain[:1441], atol=1e-9)
     np.testing.assert_allclose(run[-1] - plain[-1], 1.0 * 1439 / 1440, atol=1e-9)
 
 
+def test_electronic_offset_recomputes_the_vapour_pressure():
+    """A drifting temperature reading (RH referring to the true air) must not distort the
+    vapour pressure the transpiration term sees (Almería model, III.29)."""
+    gh = load_greenhouse("almeria-palmerillas")
+    base = build_model("almeria", gh)
+    m0 = structure(base, gh, store=False)
+    s = _series()
+    s.columns["t_soil"] = np.full(len(s), 15.0)
+    x = drivers(s, gh)
+    m = compose(m0, [EFFECTS["sensor_drift"]], gh, x["_index"][-1])
+    th = m.defaults(gh)
+    th[m.index("a_drift")] = 2.0
+    t = np.array([[2000]])
+    view = m._inputs(m.columns(th[None]), x, t)
+    offset = 2.0 * 2000 * 60 / 86400
+    want = psy.vapour_pressure(x["t_in"][2000] - offset, x["rh_in"][2000])
+    np.testing.assert_allclose(view["p_w_in"][t], want)
+    assert abs(view["p_w_in"][t] - x["p_w_in"][2000]).max() > 0.01
+
+
 def test_scan_recovers_step_time_and_amplitude():
-    """Data made by the model itself with a 40 % solar drop at sample 2000 (09:20, in sunlight,
-    where it is identifiable): the τ scan finds it."""
-    gh = load_greenhouse("biskra-prototype")
-    base = build_model("prototype", gh)
+    """Data made by the model itself with a 40 % solar drop at 09:20 (in sunlight, where it is
+    identifiable): the τ scan finds it."""
+    gh, base, m0 = _proto()
     s = _series()
     x = drivers(s, gh)
     e = EFFECTS["solar_gain_change"]
-    m = compose(base, [e], gh, len(s), 60.0)
+    m = compose(m0, [e], gh, x["_index"][-1])
     th = m.defaults(gh)
     truth = th.copy()
-    truth[m.index("d_solar")], truth[m.index("tau_solar_gain_change")] = -0.4, 2000
+    truth[m.index("d_solar")], truth[m.index("tau_solar_gain_change")] = -0.4, 2000 * 60.0
     x["t_in"] = m.free_run(truth[None], x, gh, 60.0)[0]
     shoot = Shooting(m, x, gh, 60.0, window_starts([(0, len(s))], 180), 180)
     sse0, _ = shoot.sse(th[None])
-    sc = scan_tau(shoot, th, e, np.arange(0, len(s), 30, dtype=float), float(sse0[0]))
-    assert abs(sc.taus[sc.best] - 2000) <= 30
+    sc = scan_tau(shoot, th, e, np.arange(0, len(s), 30, dtype=float) * 60.0, float(sse0[0]))
+    assert abs(sc.taus[sc.best] - 2000 * 60.0) <= 30 * 60.0
     assert abs(sc.amps[sc.best] + 0.4) < 0.05
+
+
+def test_levenberg_marquardt_recovers_base_parameters():
+    """From the defaults, LM on multiple shooting recovers the parameters that made the data."""
+    gh, base, m = _proto(store=True)
+    s = _series(n=864, step=300)
+    x = drivers(s, gh)
+    truth = m.defaults(gh)
+    for name, v in (("c_cnv_cnd", 8e-4), ("c_solar", 1.2e-4), ("m_cap", 2.5), ("h_store", 4.0),
+                    ("a_store", 0.2)):
+        truth[m.index(name)] = v
+    x["t_in"] = m.free_run(truth[None], x, gh, 300.0)[0]
+    shoot = Shooting(m, x, gh, 300.0, window_starts([(0, 864)], 72, skip=288), 72)
+    free = [m.index(n) for n in ("c_cnv_cnd", "c_solar", "m_cap")]
+    start = truth.copy()
+    start[free] = m.defaults(gh)[free]
+    lo, hi = m.bounds(gh)
+    got = fit_lm(shoot, start, free, lo, hi, 40)
+    np.testing.assert_allclose(got[free], truth[free], rtol=0.02)
+    assert shoot.mse(got[None])[0] < 1e-6
+
+
+def test_radiation_change_from_inside_radiation():
+    gh = load_greenhouse("almeria-palmerillas")
+    m = structure(build_model("almeria", gh), gh, store=False)
+    s = _series()
+    x = drivers(s, gh)
+    th = m.defaults(gh)
+    c = th[m.index("c_tsw")]
+    x["i_in"] = c * x["i_glob"] * np.where(np.arange(2880) >= 1900, 0.6, 1.0)
+    tau, d = radiation_change(m, x, th, [(0, 2880)], 0.0)
+    # 1900 falls in the night: any start between the last sunlit sample before it and the first
+    # after is equally good, the latest is chosen
+    first_sun = 1900 + int(np.argmax(x["i_glob"][1900:] > 5.0))
+    assert tau == first_sun * 60.0
+    assert abs(d + 0.4) < 1e-9
+
+
+def test_coarsen_keeps_state_samples_and_averages_inputs():
+    s = _series(n=600)
+    c = coarsen(s, 5)
+    assert len(c) == 120 and c.step == 300.0
+    np.testing.assert_array_equal(c.columns["t_in"], s.columns["t_in"][::5])
+    np.testing.assert_allclose(c.columns["i_glob"], s.columns["i_glob"].reshape(-1, 5).mean(axis=1))
+
+
+def test_store_parameters_are_bounded_and_physical():
+    for p in STORE:
+        assert p.lower <= p.default <= p.upper and p.lower >= 0.0
 
 
 def test_change_point_and_hour_profile():

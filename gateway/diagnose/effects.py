@@ -1,18 +1,20 @@
 """The effect library: physical effects a calibrated model may lack (issue 4, docs/effects.md).
 
 Each effect is one term with a name, a physical meaning, one amplitude parameter (unit, hard
-bounds, neutral value = "no effect") and a start time τ [sample index] from which it acts
-(τ = 0: it was there before the data began). Three kinds:
+bounds, neutral value = "no effect") and a start time τ [s since the first sample] from which
+it acts (τ = 0: it was there before the data began). Four kinds:
 
 - ``flux``: a heat flux added to the air balance (a :class:`FluxTerm`);
-- ``capacity``: a change of the air node's heat capacity, written as a flux term that rescales
-  the others (exact for the exponential step, see :class:`CapacityChange`);
+- ``modulation``: a relative change of base parameters (cover transmission, heat capacity), see
+  :class:`gateway.diagnose.structure.Modulation`;
 - ``sensor``: an observation error (a :class:`SensorTerm`): the heat balance is unchanged, the
   reading is not.
 
-Fluxes are converted to each model's own units through the capacity ratio
-``u = C_model / C_phys`` with ``C_phys = c_p ρ V / A`` [J m-2 K-1] (III.24): the Almería model is
-in W m-2 (u = 1), the prototype's lumped coefficients carry 1/c_p (III.14, u = 1/c_p).
+Effects are *changes* on top of the structurally calibrated base (structure.py): the base
+already has an effective heat capacity, so ``thermal_mass`` can only start inside the data.
+
+Fluxes are converted to each model's own units through ``u = C_model / (c_p ρ V / A)`` (III.24):
+the Almería model is in W m-2 (u = 1), the prototype's lumped coefficients carry 1/c_p (III.14).
 """
 
 from __future__ import annotations
@@ -22,48 +24,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gateway.diagnose.structure import (
+    INDEX,
+    SOLAR_PARAMETERS,
+    Modulation,
+    Structured,
+    model_unit,
+    on,
+)
 from gateway.greenhouse import Greenhouse
-from gateway.model import psychrometrics as psy
-from gateway.model.model import Model
 from gateway.model.terms import ALWAYS, SUN_THRESHOLD, FluxTerm, Index, Parameter, SensorTerm
-
-INDEX = "_index"
-"""Driver holding the absolute sample index (float), so τ survives slicing of the drivers."""
-
-
-def _on(p, x, t: Index, tau: str) -> np.ndarray:
-    """1.0 from the start sample τ on, else 0.0; shape broadcasts (P, 1) against time."""
-    return (x[INDEX][t] >= p[tau]).astype(float)
-
-
-def physical_capacity(gh: Greenhouse) -> float:
-    """C_phys = c_p ρ V / A [J m-2 K-1] (III.24)."""
-    return psy.CP_AIR * gh.air_density * gh.volume / gh.floor_area
 
 
 # -- flux terms ------------------------------------------------------------------------------
-class SolarGainChange(FluxTerm):
-    """Step change of the solar gain: ``Q = δ · Q_solar(base)`` from τ (cover transmission
-    change: whitening, shading screen, second cover, dust). δ = -0.31 means "fell 31 %"."""
-
-    equation = "δ Q_solar (III.15 / III.25)"
-    description = "relative change of the solar gain from τ"
-    requires = ("i_glob",)
-
-    def __init__(self, base: FluxTerm, amp: Parameter, tau: Parameter) -> None:
-        self.base, self.amp, self.tau = base, amp.name, tau.name
-        self.name = "q_solar_gain_change"
-        self.parameters = (amp, tau)
-        self.uses = tuple(q.name for q in base.parameters) + base.uses
-
-    def coefficients(self, p, x, t_in, t: Index):
-        g, _ = self.base.coefficients(p, x, t_in, t)
-        return p[self.amp] * _on(p, x, t, self.tau) * g, 0.0
-
-
 class ExtraVentilation(FluxTerm):
     """Added air exchange from τ (door left open, torn cover, extra leakage):
-    ``Q = -C (N/3600) (T_in - T_out)`` with N air changes per hour."""
+    ``Q = ρ c_p (V/A) (N/3600) (T_out - T_in)`` with N air changes per hour (III.32 form)."""
 
     equation = "ρ c_p V N (T_out - T_in) / A (III.32 form)"
     description = "added air exchange from τ"
@@ -75,7 +51,7 @@ class ExtraVentilation(FluxTerm):
         self.parameters = (amp, tau)
 
     def coefficients(self, p, x, t_in, t: Index):
-        s = self.capacity * p[self.amp] / 3600.0 * _on(p, x, t, self.tau)
+        s = self.capacity * p[self.amp] / 3600.0 * on(p, x, t, self.tau)
         return s * x["t_out"][t], s
 
 
@@ -93,34 +69,10 @@ class HeatSource(FluxTerm):
         self.parameters = (amp, tau)
 
     def coefficients(self, p, x, t_in, t: Index):
-        g = self.unit * p[self.amp] * _on(p, x, t, self.tau)
+        g = self.unit * p[self.amp] * on(p, x, t, self.tau)
         if self.night_only:
             g = g * (x["i_glob"][t] <= SUN_THRESHOLD)
         return g, 0.0
-
-
-class CapacityChange(FluxTerm):
-    """Heat capacity of the air node × m from τ (water barrels, a concrete floor, a denser
-    crop: mass tightly coupled to the air). ``m C dT/dt = G - S T`` is the same as adding
-    ``-(1 - 1/m)(G - S T)`` to the unscaled balance, so this term rescales the sum (G, S) of
-    the ``wrapped`` terms and the exponential step stays exact."""
-
-    equation = "m C_ter dT/dt (III.24)"
-    description = "change of the air node's heat capacity from τ"
-
-    def __init__(self, wrapped: tuple[FluxTerm, ...], amp: Parameter, tau: Parameter) -> None:
-        self.wrapped, self.amp, self.tau = wrapped, amp.name, tau.name
-        self.name = "q_thermal_mass"
-        self.parameters = (amp, tau)
-        self.requires = tuple(dict.fromkeys(c for w in wrapped for c in w.requires))
-
-    def coefficients(self, p, x, t_in, t: Index):
-        g_sum, s_sum = 0.0, 0.0
-        for w in self.wrapped:
-            g, s = w.coefficients(p, x, t_in, t)
-            g_sum, s_sum = g_sum + g, s_sum + s
-        f = (1.0 - 1.0 / p[self.amp]) * _on(p, x, t, self.tau)
-        return -f * g_sum, -f * s_sum
 
 
 # -- sensor terms ----------------------------------------------------------------------------
@@ -136,22 +88,28 @@ class RadiationBias(SensorTerm):
         self.parameters = (amp, tau)
 
     def offset(self, p, x, t: Index) -> np.ndarray:
-        return p[self.amp] * x["i_glob"][t] * _on(p, x, t, self.tau)
+        return p[self.amp] * x["i_glob"][t] * on(p, x, t, self.tau)
 
 
 class Drift(SensorTerm):
-    """Drifting sensor: ``T_meas = T + a (t - τ)`` for t ≥ τ, a in K per day."""
+    """Drifting sensor: ``T_meas = T + a (t - τ)`` for t ≥ τ, a in K per day.
+
+    Electronic: the temperature reading drifts, the RH channel still refers to the true air
+    temperature, so the inside vapour pressure is recomputed from the corrected reading
+    (structure.Structured._inputs). A sun-heated sensor is not electronic: its RH refers to its
+    own warm body, so reading and RH give the true vapour pressure together.
+    """
 
     description = "sensor reading drifts linearly"
+    electronic = True
 
-    def __init__(self, dt: float, amp: Parameter, tau: Parameter) -> None:
-        self.dt, self.amp, self.tau = dt, amp.name, tau.name
+    def __init__(self, amp: Parameter, tau: Parameter) -> None:
+        self.amp, self.tau = amp.name, tau.name
         self.name = "e_sensor_drift"
         self.parameters = (amp, tau)
 
     def offset(self, p, x, t: Index) -> np.ndarray:
-        days = np.maximum(x[INDEX][t] - p[self.tau], 0.0) * (self.dt / 86400.0)
-        return p[self.amp] * days
+        return p[self.amp] * np.maximum(x[INDEX][t] - p[self.tau], 0.0) / 86400.0
 
 
 # -- the library -----------------------------------------------------------------------------
@@ -160,7 +118,7 @@ class Effect:
     """A library entry: name, kind, meaning, amplitude parameter, and how to build its term."""
 
     name: str
-    kind: str  # "flux" | "capacity" | "sensor"
+    kind: str  # "flux" | "modulation" | "sensor"
     meaning: str
     signature: str
     amp_name: str
@@ -170,43 +128,41 @@ class Effect:
     neutral: float
     describe: Callable[[float], str]
     """Amplitude → a short phrase, e.g. ``"solar gain fell 31 %"``."""
+    from_start: bool = True
+    """May the effect act from the first sample (τ = 0)? False when the base structure already
+    holds its constant version (a capacity change must start inside the data)."""
 
-    def parameters(self, n: int) -> tuple[Parameter, Parameter]:
+    def parameters(self, duration: float) -> tuple[Parameter, Parameter]:
         amp = Parameter(self.amp_name, self.unit, self.lower, self.upper, self.neutral, None,
                         ALWAYS, self.meaning)
-        tau = Parameter(self.tau_name, "sample", 0.0, float(max(n - 1, 1)), 0.0, None, ALWAYS,
-                        f"start of {self.name} [sample index]")
+        tau = Parameter(self.tau_name, "s", 0.0, max(duration, 1.0), 0.0, None, ALWAYS,
+                        f"start of {self.name} [s since the first sample]")
         return amp, tau
 
     @property
     def tau_name(self) -> str:
         return f"tau_{self.name}"
 
-    def build(self, model: Model, gh: Greenhouse, n: int, dt: float) -> FluxTerm | SensorTerm:
-        """The term for ``model`` (base terms only are wrapped or scaled)."""
-        amp, tau = self.parameters(n)
-        unit = model.capacity(gh) / physical_capacity(gh)
+    def build(self, model: Structured, gh: Greenhouse, duration: float):
+        """The term, modulation or sensor term of this effect for ``model``."""
+        amp, tau = self.parameters(duration)
+        unit = model_unit(model, gh)
         if self.name == "solar_gain_change":
-            return SolarGainChange(solar_term(model), amp, tau)
+            targets = tuple(n for n in SOLAR_PARAMETERS if n in model.names)
+            if model.radiation is not None:  # c_tsw carries every solar path (III.35)
+                targets = tuple(n for n in targets if n != "c_solar")
+            return Modulation(self.name, targets, amp, tau, self.neutral)
+        if self.name == "thermal_mass":
+            return Modulation(self.name, ("m_cap",), amp, tau, self.neutral)
         if self.name == "extra_ventilation":
             return ExtraVentilation(model.capacity(gh), amp, tau)
         if self.name in ("heat_source", "night_heat_source"):
             return HeatSource(unit, amp, tau, night_only=self.name == "night_heat_source")
-        if self.name == "thermal_mass":
-            return CapacityChange(model.terms, amp, tau)
         if self.name == "sensor_radiation_bias":
             return RadiationBias(amp, tau)
         if self.name == "sensor_drift":
-            return Drift(dt, amp, tau)
+            return Drift(amp, tau)
         raise ValueError(f"no term for effect {self.name!r}")
-
-
-def solar_term(model: Model) -> FluxTerm:
-    """The model's solar-gain term: the first term reading i_glob with no state coefficient."""
-    for term in model.terms:
-        if term.name in ("q_solar", "q_sol"):
-            return term
-    raise ValueError(f"model {model.name} has no solar gain term (q_solar or q_sol)")
 
 
 def _pct(word_up: str, word_down: str) -> Callable[[float], str]:
@@ -214,36 +170,52 @@ def _pct(word_up: str, word_down: str) -> Callable[[float], str]:
 
 
 LIBRARY: tuple[Effect, ...] = (
-    Effect("solar_gain_change", "flux",
-           "step change of the solar gain coefficient (cover transmission change: whitening, "
-           "shading, second cover, dust)",
-           "daytime residual proportional to radiation, from a date on",
+    Effect("solar_gain_change", "modulation",
+           "step change of the cover's solar transmission (whitening, shading, second cover, "
+           "dust): every solar gain of the model scaled by 1 + d",
+           "daytime residual proportional to radiation, lagging it when mass stores the sun",
            "d_solar", "-", -0.9, 1.5, 0.0, _pct("solar gain rose", "solar gain fell")),
     Effect("extra_ventilation", "flux",
            "added air exchange (door left open, torn cover, extra leakage)",
-           "residual proportional to T_in - T_out (pulls towards outside), from a date on",
+           "residual proportional to T_in - T_out (pulls towards outside), day and night",
            "n_extra", "h-1", 0.0, 60.0, 0.0, lambda a: f"{a:.2g} extra air changes per hour"),
     Effect("heat_source", "flux",
            "undeclared constant heat input (heater, warm pipe, machine)",
-           "warm offset at all hours, largest relative effect at night, from a date on",
+           "warm offset at all hours, largest at night when the house is closed",
            "p_heat", "W m-2", 0.0, 400.0, 0.0, lambda a: f"{a:.3g} W m-2 of heat added"),
     Effect("night_heat_source", "flux",
            "undeclared heat input at night only (night heater, night screen heating)",
-           "warm offset at night only, from a date on",
+           "warm offset at night only",
            "p_night_heat", "W m-2", 0.0, 400.0, 0.0,
            lambda a: f"{a:.3g} W m-2 of heat added at night"),
-    Effect("thermal_mass", "capacity",
+    Effect("thermal_mass", "modulation",
            "change of the heat capacity coupled to the air (water barrels, concrete, more crop)",
-           "damped, lagging daily swing: residual opposite to dT/dt, from a date on",
-           "m_capacity", "-", 0.25, 8.0, 1.0, lambda a: f"heat capacity x {a:.2f}"),
+           "damped, lagging daily swing: residual opposite to dT/dt",
+           "m_capacity", "-", 0.25, 8.0, 1.0, lambda a: f"heat capacity x {a:.2f}",
+           from_start=False),
     Effect("sensor_radiation_bias", "sensor",
            "inside sensor heated by the sun (missing or poor radiation shield)",
-           "reading too warm in proportion to radiation, no lag, from a date on",
+           "reading too warm in proportion to radiation, no lag, zero at night",
            "k_rad", "K W-1 m2", 0.0, 0.03, 0.0,
            lambda a: f"sensor reads {a * 1000:.2f} mK per W m-2 too warm"),
     Effect("sensor_drift", "sensor",
            "drifting inside temperature sensor (ageing, contamination)",
-           "residual growing linearly with time from a date on",
-           "a_drift", "K d-1", -3.0, 3.0, 0.0, lambda a: f"sensor drifts {a:+.3g} K per day"),
+           "residual growing linearly with time",
+           "a_drift", "K d-1", -3.0, 3.0, 0.0, lambda a: f"sensor drifts {a:+.3g} K per day",
+           from_start=False),
 )
 EFFECTS = {e.name: e for e in LIBRARY}
+
+
+def compose(base: Structured, effects: list[Effect], gh: Greenhouse, duration: float) -> Structured:
+    """Base model plus effect terms: flux terms, modulations, sensor terms."""
+    model = base
+    for e in effects:
+        part = e.build(base, gh, duration)
+        if e.kind == "flux":
+            model = model.with_terms(part)
+        elif e.kind == "modulation":
+            model = model.with_modulation(part)
+        else:
+            model = model.with_sensors(part)
+    return model

@@ -12,35 +12,69 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gateway.diagnose.effects import INDEX, Effect
+from gateway.diagnose.effects import Effect
+from gateway.diagnose.structure import INDEX, Structured
 from gateway.estimate.swarm import ALMERIA_OFFLINE, bat
 from gateway.greenhouse import Greenhouse
 from gateway.model.drivers import prepare_drivers
 from gateway.model.model import Model
 from gateway.series import Series
 
-HORIZON_S = 3 * 3600.0
+HORIZON_S = 6 * 3600.0
 """Length of one shooting window [s]: long enough for the slow heat balance to show."""
 
 
 def drivers(series: Series, gh: Greenhouse) -> dict[str, np.ndarray]:
-    """Model drivers plus the absolute sample index the effect terms' τ refers to."""
+    """Model drivers plus the clock the effect terms' τ refers to [s since the first sample]."""
     x = prepare_drivers(series, gh)
-    x[INDEX] = np.arange(len(series), dtype=float)
+    x[INDEX] = (series.time - series.time[0]).astype("timedelta64[s]").astype(float)
     return x
 
 
-def window_starts(segments: list[tuple[int, int]], horizon: int) -> np.ndarray:
-    """Start indices of back-to-back windows of ``horizon`` steps inside each [a, b)."""
-    out = [np.arange(a, b - horizon, horizon) for a, b in segments if b - a > horizon]
-    return np.concatenate(out) if out else np.zeros(0, dtype=int)
+def coarsen(series: Series, k: int) -> Series:
+    """Every k-th reading of T_in (the state), block means of the inputs over the k samples
+    that follow it (the zero-order hold the exponential step assumes). Fits run on this grid:
+    the heat balance's time scales (tens of minutes to days) are resolved at 5 minutes, and a
+    free run of 5-minute steps costs a fifth of one of 1-minute steps."""
+    if k <= 1:
+        return series
+    n = len(series) // k * k
+    cols = {}
+    with np.errstate(all="ignore"):
+        for name, v in series.columns.items():
+            v = np.asarray(v, dtype=float)
+            if name == "t_in":
+                cols[name] = v[:n:k].copy()
+                continue
+            blocks = v[:n].reshape(-1, k)
+            ok = np.isfinite(blocks)
+            cnt = ok.sum(axis=1)
+            tot = np.where(ok, blocks, 0.0).sum(axis=1)
+            cols[name] = np.where(cnt > 0, tot / np.maximum(cnt, 1), np.nan)
+    return Series(time=series.time[:n:k], step=series.step * k, columns=cols,
+                  source=series.source, notices=list(series.notices))
+
+
+def window_starts(segments: list[tuple[int, int]], horizon: int, skip: int = 0) -> np.ndarray:
+    """Start indices of back-to-back windows of ``horizon`` steps inside each [a, b), none
+    before sample ``skip`` (the store observer's start-up)."""
+    out = []
+    for a, b in segments:
+        a = max(a, skip)
+        if b - a - 1 < horizon:  # a window needs its start plus ``horizon`` later samples
+            continue
+        starts = np.arange(a, b - horizon, horizon)
+        if starts[-1] + horizon < b - 1:  # one more window, overlapping, ends at the segment's end
+            starts = np.append(starts, b - 1 - horizon)
+        out.append(starts)
+    return np.concatenate(out).astype(int) if out else np.zeros(0, dtype=int)
 
 
 @dataclass
 class Shooting:
     """Free runs of ``horizon`` steps from ``starts`` for a population of parameter sets."""
 
-    model: Model
+    model: Structured
     x: dict[str, np.ndarray]
     gh: Greenhouse
     dt: float
@@ -54,21 +88,7 @@ class Shooting:
 
     def predict(self, theta: np.ndarray) -> np.ndarray:
         """Readings predicted at steps 1..H of every window: (P, N, H)."""
-        theta = np.atleast_2d(theta)
-        n_p, n = theta.shape[0], len(self.starts)
-        m = self.model
-        p = m.columns(np.repeat(theta, n, axis=0))  # row r = candidate r // N, window r % N
-        t0 = np.tile(self.starts, n_p)[:, None]
-        c = m.capacity(self.gh)
-        state = self.x["t_in"][t0]
-        if m.sensors:
-            state = state - m.sensor_offset(p, self.x, t0)
-        out = np.empty((n_p * n, self.horizon))
-        for k in range(self.horizon):
-            state = m.step(p, self.x, state, t0 + k, c, self.dt)
-            obs = state + m.sensor_offset(p, self.x, t0 + k + 1) if m.sensors else state
-            out[:, k] = obs[:, 0]
-        return out.reshape(n_p, n, self.horizon)
+        return self.model.shoot(theta, self.x, self.gh, self.dt, self.starts, self.horizon)
 
     def residual(self, theta: np.ndarray) -> np.ndarray:
         """Prediction minus measurement (P, N, H), NaN where not comparable."""
@@ -116,6 +136,56 @@ def fit_swarm(
     return theta
 
 
+def fit_lm(shoot: Shooting, theta0: np.ndarray, free: list[int], lower: np.ndarray,
+           upper: np.ndarray, iterations: int = 15) -> np.ndarray:
+    """Box-bounded Levenberg–Marquardt on the multiple-shooting residuals.
+
+    Works in box-normalised coordinates like the swarm. Each iteration is two population
+    calls: the forward-difference Jacobian (the k+1 parameter sets as one population) and the
+    trial steps for a ladder of damping values (again one population). Polishes a swarm result:
+    the swarm explores, this converges.
+    """
+    free_idx = np.asarray(free, dtype=int)
+    lo, hi = lower[free_idx], upper[free_idx]
+    width = np.where(hi > lo, hi - lo, 1.0)
+    theta = theta0.copy()
+    r0 = shoot.residual(theta[None])[0]
+    ok = np.isfinite(r0).reshape(-1)
+
+    def flat(r: np.ndarray) -> np.ndarray:
+        f = r.reshape(len(r), -1)[:, ok]
+        return np.where(np.isfinite(f), f, 1e3)  # a diverged run costs a lot, not NaN
+
+    f0 = flat(r0[None])[0]
+    cost0 = float(f0 @ f0)
+    mus = np.array([1e-5, 1e-4, 1e-3, 1e-2, 1e-1, 1.0, 10.0])
+    k = len(free_idx)
+    for _ in range(iterations):
+        u = (theta[free_idx] - lo) / width
+        h = np.where(u > 0.5, -1e-4, 1e-4)
+        rows = np.repeat(theta[None, :], k + 1, axis=0)
+        rows[np.arange(1, k + 1), free_idx] += h * width
+        f = flat(shoot.residual(rows))
+        jac = (f[1:] - f[0][None, :]) / h[:, None]  # (k, M)
+        a = jac @ jac.T
+        g = jac @ f[0]
+        d = np.diag(a) + 1e-12
+        trials = np.repeat(theta[None, :], len(mus), axis=0)
+        for i, mu in enumerate(mus):
+            try:
+                step = -np.linalg.solve(a + mu * np.diag(d), g)
+            except np.linalg.LinAlgError:
+                step = np.zeros(k)
+            trials[i, free_idx] = lo + np.clip(u + step, 0.0, 1.0) * width
+        ft = flat(shoot.residual(trials))
+        costs = np.sum(ft * ft, axis=1)
+        j = int(np.argmin(costs))
+        if not costs[j] < cost0 * (1.0 - 1e-6):
+            break
+        theta, cost0 = trials[j], float(costs[j])
+    return theta
+
+
 def radiation_fit(model: Model, x: dict[str, np.ndarray], theta: np.ndarray,
                   span: tuple[int, int]) -> np.ndarray:
     """c_tsw by least squares of measured i_in on i_glob (III.35) over ``span``, when measured."""
@@ -142,10 +212,25 @@ class Scan:
     amps: np.ndarray
     sse: np.ndarray
     n: int
+    pick: int | None = None
+    """Chosen index when it is not simply the lowest SSE (see ``latest_of_best``)."""
 
     @property
     def best(self) -> int:
-        return int(np.argmin(self.sse))
+        return int(np.argmin(self.sse)) if self.pick is None else self.pick
+
+    def latest_of_best(self, rel: float) -> Scan:
+        """The latest τ of the contiguous run of τ (in time order) around the best whose SSE
+        is within ``rel`` × the best SSE of it. Start times between two pieces of fit data (a held-out
+        block, a night for a solar effect) fit equally well; the latest one says "no change
+        until the data shows it", and keeps a judged block free of a guessed effect."""
+        order = np.argsort(self.taus)
+        sse = self.sse[order]
+        i = int(np.argmin(sse))
+        limit = sse[i] * (1.0 + rel)
+        while i + 1 < len(sse) and sse[i + 1] <= limit:
+            i += 1
+        return Scan(self.effect, self.taus, self.amps, self.sse, self.n, int(order[i]))
 
 
 def scan_tau(
@@ -185,3 +270,35 @@ def scan_tau(
         # next secant from the new point (fall back to a small step where nothing moved)
         a_prev = np.where(np.abs(a_new - a0) > 1e-9 * (effect.upper - effect.lower), a_new, a0 + delta)
     return Scan(effect, taus, best_a, best_sse, int(ok.sum()))
+
+
+def measures_radiation(model: Model, x: dict[str, np.ndarray]) -> bool:
+    """Does the model have a radiation sub-model (III.35) and the data the inside radiation?"""
+    return model.radiation is not None and "i_in" in x and int(np.isfinite(x["i_in"]).sum()) > 10
+
+
+def radiation_change(model: Model, x: dict[str, np.ndarray], theta: np.ndarray,
+                     segments: list[tuple[int, int]], first: float) -> tuple[float, float]:
+    """Start τ [s] and relative size d of a step change of the cover transmission seen on the
+    measured inside radiation: ``i_in = c_tsw (1 + d [t ≥ τ]) i_glob`` (III.35), least squares
+    over sunlit samples of ``segments``, every τ ≥ ``first`` at once through reverse cumulative
+    sums. The thesis fits c_tsw on i_in before the temperature (two stages); a transmission
+    change is fitted the same way, so the temperature cannot trade it against another effect.
+    """
+    j = model.index(model.radiation.parameter.name)
+    z = theta[j] * x["i_glob"]  # predicted i_in
+    r = x["i_in"] - z
+    use = np.zeros(len(z), dtype=bool)
+    for a, b in segments:
+        use[a:b] = True
+    ok = use & np.isfinite(r) & np.isfinite(z) & (x["i_glob"] > 5.0)
+    r, z = np.where(ok, r, 0.0), np.where(ok, z, 0.0)
+    s_rz = np.cumsum((r * z)[::-1])[::-1]  # Σ_{t ≥ τ}
+    s_zz = np.cumsum((z * z)[::-1])[::-1]
+    gain = np.where(s_zz > 0, s_rz**2 / np.where(s_zz > 0, s_zz, 1.0), 0.0)
+    gain[x["_index"] < first] = -1.0
+    k = int(np.argmax(gain))
+    while k + 1 < len(gain) and gain[k + 1] >= gain[k] * (1.0 - 1e-9):  # latest of equals
+        k += 1
+    d = float(s_rz[k] / s_zz[k]) if s_zz[k] > 0 else 0.0
+    return float(x["_index"][k]), d

@@ -2,56 +2,77 @@
 
 Protocol (docs/effects.md, "How the diagnosis decides"):
 
-1. The base model is calibrated on the first ``split`` of the data (C) only.
-2. The rest (H) is cut into blocks (one day, or a quarter of H when shorter) dealt into two
+1. Fits run on a grid of at least ``FIT_STEP_S`` (T_in readings, block-mean inputs); the
+   reported metrics are on the data's own grid.
+2. Structural calibration of the base on the first ``split`` of the data (C) only
+   (structure.py): the thesis model + an effective heat capacity (+ a long-wave sky loss where it
+   has none), then a heat store and a constant sensor offset, each kept only if BIC on C falls.
+   RSBA explores, Levenberg–Marquardt converges, both on multiple-shooting free runs.
+3. The rest (H) is cut into blocks (one day, or a quarter of H when shorter) dealt into two
    folds. An effect that starts inside H can only be fitted on data that contains it, so each
    fold's judge blocks are predicted by a model whose effect (τ, amplitude) and refitted base
    parameters saw C plus the *other* fold only (two-fold blocked cross-fitting): every held-out
    figure comes from data its fit never saw, wherever the effect starts.
-3. Candidates are ranked by the drop of the multiple-shooting SSE over all data (BIC with one
-   effective sample per ``HORIZON_S`` window); the best is added, its τ re-scanned and the base
-   refitted jointly per fold. It is kept only if BIC falls on its fit sets AND the held-out
-   free-run error falls significantly (relative MAE ≥ ``MIN_GAIN`` and a block-paired t ≥
-   ``MIN_T`` or an MSE cut ≥ ``STRONG_GAIN``). Repeat until nothing passes.
-4. Held-out free-run error is measured by free runs restarted at each block start, for the
+4. Candidates are ranked on all data by ΔBIC of their τ scan; the best ones are tried in turn:
+   τ re-scanned and the base refitted jointly per fold. One is kept only if BIC falls on its fit
+   sets AND the held-out free-run error falls significantly (relative MAE ≥ ``MIN_GAIN`` and a
+   block-paired t ≥ ``MIN_T`` or an MSE cut ≥ ``STRONG_GAIN``). Among the candidates that pass
+   in a round, the one with the lowest held-out free-run MSE wins. Repeat until nothing passes.
+5. Held-out free-run error is measured by free runs restarted at each block start, for the
    model before and after alike (headline: free-run MAE), beside persistence.
 """
 
 from __future__ import annotations
 
+import time as _time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from gateway.diagnose import residuals as res
-from gateway.diagnose.effects import LIBRARY, Effect
+from gateway.diagnose.effects import LIBRARY, Effect, compose
 from gateway.diagnose.fit import (
     HORIZON_S,
     Scan,
     Shooting,
+    coarsen,
     drivers,
+    fit_lm,
     fit_swarm,
+    measures_radiation,
+    radiation_change,
     radiation_fit,
     scan_tau,
     window_starts,
 )
+from gateway.diagnose.structure import STORE, SensorBias, Structured, structure
 from gateway.greenhouse import Greenhouse
 from gateway.metrics import metrics
 from gateway.model.model import Model
 from gateway.series import Series
 
+FIT_STEP_S = 300.0
+"""Coarsest grid the fits run on [s] (finer data is coarsened, see fit.coarsen)."""
+EFFECTIVE_S = 3600.0
+"""One effective sample per hour of residual in BIC: free-run residuals are autocorrelated."""
 MIN_GAIN = 0.05
 """Smallest relative cut of held-out free-run MAE that can count as an improvement."""
 MIN_T = 1.0
 """Block-paired t statistic of the MSE cut required (unless the cut is ≥ STRONG_GAIN)."""
 STRONG_GAIN = 0.25
+JUDGE_PIECE_S = 6 * 3600.0
+"""Length of the held-out pieces whose paired MSE differences the t statistic is taken over."""
 MAX_EFFECTS = 3
-TRIES_PER_ROUND = 2
-BASE_ITERATIONS = 120
-REFIT_ITERATIONS = 40
+TRIES_PER_ROUND = 3
+BASE_ITERATIONS = 80
+OPTION_ITERATIONS = 40
+LM_ITERATIONS = 25
+REFIT_LM_ITERATIONS = 12
 COARSE_TAU_S = 3 * 3600.0
-"""Spacing of the coarse grid of candidate start times [s]; refined to COARSE/18 around the best."""
+"""Spacing of the coarse grid of candidate start times [s]; refined to COARSE/36 around the best."""
+STORE_START = {"c_store": 5e4, "h_store": 3.0, "k_store": 3.0, "a_store": 0.1}
+"""Where the heat store's fit starts (a floor-like store: 5 cm of wet sand, h ≈ 3 W m-2 K-1)."""
 
 Progress = Callable[[str], None]
 
@@ -61,7 +82,7 @@ class Finding:
     """One accepted effect with its fitted parameters and the evidence for it."""
 
     effect: Effect
-    tau: int
+    tau: float  # [s since the first sample]
     start: str | None  # ISO UTC, None = before the data
     amplitude: float
     summary: str
@@ -70,7 +91,7 @@ class Finding:
     mae_after: float
     delta_bic: float
     trace: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    """The fitted effect over the record: flux [W m-2 of floor] or sensor offset [K]."""
+    """The fitted effect over the record: flux [W m-2 of floor], factor [-] or offset [K]."""
     trace_unit: str = ""
 
     def to_json(self) -> dict:
@@ -108,30 +129,20 @@ class Diagnosis:
     analysis_before: dict = field(default_factory=dict)
     analysis_after: dict = field(default_factory=dict)
     seconds: float = 0.0
+    structure: list[dict] = field(default_factory=list)
+    """The base structure choices on the calibration part (step 2), in order tried."""
 
 
-def compose(base: Model, effects: list[Effect], gh: Greenhouse, n: int, dt: float) -> Model:
-    """Base model plus effect terms: flux effects, then capacity (wrapping all fluxes), then
-    sensor terms."""
-    model = base
-    for e in effects:
-        if e.kind == "flux":
-            model = model.with_terms(e.build(base, gh, n, dt))
-    for e in effects:
-        if e.kind == "capacity":
-            model = model.with_terms(e.build(model, gh, n, dt))
-    for e in effects:
-        if e.kind == "sensor":
-            model = model.with_sensors(e.build(base, gh, n, dt))
-    return model
-
-
-def carry(theta: np.ndarray, old: Model, new: Model) -> np.ndarray:
-    """Parameter vector for ``new``: values of ``old`` by name, the rest at their defaults."""
-    out = new.defaults()
+def carry(theta: np.ndarray, old: Model, new: Model, gh: Greenhouse | None = None,
+          start: dict[str, float] | None = None) -> np.ndarray:
+    """Parameter vector for ``new``: values of ``old`` by name, the rest from ``start`` or at
+    their defaults."""
+    out = new.defaults(gh)
     for j, name in enumerate(new.names):
         if name in old.names:
             out[j] = theta[old.index(name)]
+        elif start and name in start:
+            out[j] = start[name]
     return out
 
 
@@ -148,6 +159,72 @@ def heldout_blocks(split: int, n: int, dt: float) -> list[tuple[int, int]]:
     return blocks
 
 
+def _free(model: Model) -> list[int]:
+    """Indices fitted on T_in: everything but c_tsw (fitted on i_in) and start times."""
+    rad = model.radiation.parameter.name if model.radiation is not None else None
+    return [j for j, nm in enumerate(model.names) if nm != rad and not nm.startswith("tau_")]
+
+
+def _bic_delta(sse_new: float, sse_old: float, n_pairs: int, dt: float, k_new: int) -> float:
+    """ΔBIC = n_e ln(SSE_new/SSE_old) + k ln(n_e) with n_e = one effective sample per
+    ``EFFECTIVE_S`` of compared residuals."""
+    n_e = max(n_pairs * dt / EFFECTIVE_S, 2.0)
+    return float(n_e * np.log(max(sse_new, 1e-300) / max(sse_old, 1e-300)) + k_new * np.log(n_e))
+
+
+def _fit(model: Model, theta: np.ndarray, shoot: Shooting, gh: Greenhouse, iterations: int,
+         seed: int) -> np.ndarray:
+    lo, hi = model.bounds(gh)
+    free = _free(model)
+    if iterations:
+        theta = fit_swarm(shoot, theta, free, lo, hi, iterations, seed)
+    return fit_lm(shoot, theta, free, lo, hi, LM_ITERATIONS)
+
+
+def calibrate_base(base: Model, gh: Greenhouse, x: dict, dt: float, s: int, horizon: int,
+                   seed: int, say: Progress) -> tuple[Structured, np.ndarray, list[dict]]:
+    """Structural calibration on rows [0, s) (module docstring, step 2)."""
+    starts = window_starts([(0, s)], horizon, skip=horizon)
+    model = structure(base, gh, store=False)
+    theta = radiation_fit(model, x, model.defaults(gh), (0, s))
+    say("calibrating the base model (thesis terms + effective heat capacity)")
+    shoot = Shooting(model, x, gh, dt, starts, horizon)
+    theta = _fit(model, theta, shoot, gh, BASE_ITERATIONS, seed)
+    sse, npair = shoot.sse(theta[None])
+    log = [{"structure": "base", "detail": _structure_detail(model), "kept": True,
+            "mse": float(sse[0] / npair), "delta_bic": 0.0}]
+    options = [
+        ("heat store", lambda m: replace(m, store=True, extra=m.extra + STORE)),
+        ("sensor offset", lambda m: m.with_sensors(SensorBias())),
+    ]
+    for label, build in options:
+        new = build(model)
+        say(f"calibrating the base model: trying a {label}")
+        th = carry(theta, model, new, gh, STORE_START)
+        sh = Shooting(new, x, gh, dt, starts, horizon)
+        th = _fit(new, th, sh, gh, OPTION_ITERATIONS, seed + 1)
+        sse_new, _ = sh.sse(th[None])
+        k_new = len(new.names) - len(model.names)
+        dbic = _bic_delta(float(sse_new[0]), float(sse[0]), npair, dt, k_new)
+        kept = dbic < 0
+        log.append({"structure": label, "detail": _structure_detail(new), "kept": bool(kept),
+                    "mse": float(sse_new[0] / npair), "delta_bic": dbic})
+        if kept:
+            model, theta, sse = new, th, sse_new
+    return model, theta, log
+
+
+def _structure_detail(model: Structured) -> str:
+    parts = ["effective heat capacity m_cap"]
+    if any(t.name == "q_lw_sky" for t in model.terms):
+        parts.append("long-wave sky loss c_lw_sky")
+    if model.store:
+        parts.append("heat store (c_store, h_store, k_store, a_store)")
+    if any(sn.name == "e_sensor_bias" for sn in model.sensors):
+        parts.append("constant sensor offset b_sensor")
+    return ", ".join(parts)
+
+
 def diagnose(
     series: Series,
     gh: Greenhouse,
@@ -158,36 +235,32 @@ def diagnose(
     progress: Progress | None = None,
 ) -> Diagnosis:
     """Run the whole diagnosis on ``series`` (see the module docstring)."""
-    import time as _time
-
     t_start = _time.perf_counter()
     say = progress or (lambda msg: None)
     if not 0.1 <= split <= 0.9:
         raise ValueError(f"split must be within [0.1, 0.9], got {split}")
-    x = drivers(series, gh)
-    n, dt = len(series), series.step
+    k = max(int(FIT_STEP_S // series.step), 1)
+    coarse = coarsen(series, k)
+    x = drivers(coarse, gh)
+    n, dt = len(coarse), coarse.step
     s = int(round(split * n))
     horizon = max(int(round(HORIZON_S / dt)), 2)
-    if s < 2 * horizon or n - s < 2 * horizon:
+    if s < 3 * horizon or n - s < 2 * horizon:
         raise ValueError(
-            f"{series.source}: {n} samples of {dt:g} s are too few to diagnose: both the "
-            f"calibration and the held-out part need at least {2 * HORIZON_S / 3600:g} h"
+            f"{series.source}: {len(series)} samples of {series.step:g} s are too few to "
+            f"diagnose: the calibration part needs at least {3 * HORIZON_S / 3600:g} h and "
+            f"the held-out part {2 * HORIZON_S / 3600:g} h"
         )
+    duration = float(x["_index"][-1])
     blocks = heldout_blocks(s, n, dt)
-    folds = [[b for i, b in enumerate(blocks) if i % 2 == k] for k in (0, 1)]
-    fit_sets = [[(0, s)] + folds[1 - k] for k in (0, 1)]  # fold k is judged on folds[k]
+    folds = [[b for i, b in enumerate(blocks) if i % 2 == j] for j in (0, 1)]
+    fit_sets = [[(0, s)] + folds[1 - j] for j in (0, 1)]  # fold j is judged on folds[j]
 
-    # 1. base calibration on C
-    say("calibrating the base model on the calibration part")
-    theta = radiation_fit(base, x, base.defaults(gh), (0, s))
-    lo, hi = base.bounds(gh)
-    rad = base.radiation.parameter.name if base.radiation is not None else None
-    free = [j for j, nm in enumerate(base.names) if nm != rad]
-    shoot_c = Shooting(base, x, gh, dt, window_starts([(0, s)], horizon), horizon)
-    theta = fit_swarm(shoot_c, theta, free, lo, hi, BASE_ITERATIONS, seed)
+    # 1. structural calibration on C
+    model0, theta, structure_log = calibrate_base(base, gh, x, dt, s, horizon, seed, say)
     base_theta = theta.copy()
 
-    model = base
+    model = model0
     thetas = [theta.copy(), theta.copy()]  # per fold
     theta_all = theta.copy()
     before_pred = _heldout(model, thetas, x, gh, dt, folds, s, n)
@@ -197,148 +270,170 @@ def diagnose(
     current_pred = before_pred
     all_set = [(0, n)]
 
-    for _round in range(MAX_EFFECTS):
+    for rnd in range(1, MAX_EFFECTS + 1):
         candidates = [e for e in library if e not in effects]
         if not candidates:
             break
-        say(f"round {_round + 1}: ranking {len(candidates)} candidate effects")
-        ranked = _rank(base, model, theta_all, effects, candidates, x, gh, dt, n, horizon, all_set)
-        accepted = False
+        say(f"round {rnd}: ranking {len(candidates)} candidate effects")
+        ranked = _rank(model0, model, theta_all, effects, candidates, x, gh, dt, duration,
+                       horizon, all_set)
+        passed = []
         for scan_all, dbic_all in ranked[:TRIES_PER_ROUND]:
             if dbic_all >= 0:
                 break
             e = scan_all.effect
-            say(f"round {_round + 1}: trying {e.name}")
-            new_model = compose(base, effects + [e], gh, n, dt)
+            say(f"round {rnd}: trying {e.name}")
+            new_model = compose(model0, effects + [e], gh, duration)
             new_thetas, dbics = [], []
-            for k in (0, 1):
-                th, dbic = _fit_effect(new_model, model, thetas[k], e, x, gh, dt, n, horizon,
-                                       fit_sets[k], seed + 17 * k)
+            for j in (0, 1):
+                th, dbic = _fit_effect(new_model, model, thetas[j], e, x, gh, dt, duration,
+                                       horizon, fit_sets[j], seed + 17 * j)
                 new_thetas.append(th)
                 dbics.append(dbic)
             pred = _heldout(new_model, new_thetas, x, gh, dt, folds, s, n)
-            verdict = _judge(current_pred, pred, x["t_in"], blocks, s)
+            verdict = _judge(current_pred, pred, x["t_in"], blocks, s, dt)
             verdict["delta_bic"] = [float(v) for v in dbics]
             if max(dbics) < 0 and verdict["ok"]:
-                th_all, dbic_full = _fit_effect(new_model, model, theta_all, e, x, gh, dt, n,
-                                                horizon, all_set, seed + 101)
-                findings.append(_finding(e, new_model, th_all, series, current_pred, pred,
-                                         verdict, dbic_full, x, blocks, s))
-                effects.append(e)
-                model, thetas, theta_all, current_pred = new_model, new_thetas, th_all, pred
-                accepted = True
-                say(f"kept {e.name}: {findings[-1].summary}")
-                break
-            rejected.append({"effect": e.name, "reason": verdict["why"], "delta_bic": dbics})
-        if not accepted:
+                passed.append((verdict["mae_after"], e, new_model, new_thetas, pred, verdict))
+            else:
+                rejected.append({"effect": e.name, "reason": verdict["why"], "delta_bic": dbics})
+        if not passed:
             break
+        passed.sort(key=lambda item: item[0])
+        _, e, new_model, new_thetas, pred, verdict = passed[0]
+        for other in passed[1:]:
+            rejected.append({"effect": other[1].name, "reason": "passed, but a rival cut the "
+                             "held-out error more: " + other[5]["why"],
+                             "delta_bic": other[5]["delta_bic"]})
+        th_all, dbic_full = _fit_effect(new_model, model, theta_all, e, x, gh, dt, duration,
+                                        horizon, all_set, seed + 101)
+        findings.append(_finding(e, new_model, th_all, series, current_pred, pred, verdict,
+                                 dbic_full, x, s))
+        effects.append(e)
+        model, thetas, theta_all, current_pred = new_model, new_thetas, th_all, pred
+        say(f"kept {e.name}: {findings[-1].summary}")
 
-    meas = x["t_in"]
-    _traces(findings, model, theta_all, x, gh)
-    before = _metrics(meas, before_pred, s)
-    after = _metrics(meas, current_pred, s)
-    pers = _metrics(meas, _persistence(meas, blocks, s, n), s)
-    an_before = res.analyse(series.time[s:], meas[s:] - before_pred["free_run"], x, s, dt)
-    an_after = res.analyse(series.time[s:], meas[s:] - current_pred["free_run"], x, s, dt)
-    calib_r = _calibration_free_run(model, theta_all, x, gh, dt, s)
-    unexplained, signature = res.unexplained(an_after, calib_r, series.time, s)
+    # 2. figures on the data's own grid
+    xf = drivers(series, gh)
+    nf, dtf = len(series), series.step
+    sf = s * k
+    fblocks = [(a * k, b * k if b < n else nf) for a, b in blocks]
+    ffolds = [[(a * k, b * k if b < n else nf) for a, b in f] for f in folds]
+    before_f = _heldout(model0, [base_theta, base_theta], xf, gh, dtf, ffolds, sf, nf)
+    after_f = _heldout(model, thetas, xf, gh, dtf, ffolds, sf, nf)
+    meas = xf["t_in"]
+    _traces(findings, model, theta_all, xf, gh)
+    before = _metrics(meas, before_f, sf)
+    after = _metrics(meas, after_f, sf)
+    pers = _metrics(meas, _persistence(meas, fblocks, sf, nf), sf)
+    an_before = res.analyse(series.time[sf:], meas[sf:] - before_f["free_run"], xf, sf, dtf)
+    an_after = res.analyse(series.time[sf:], meas[sf:] - after_f["free_run"], xf, sf, dtf)
+    calib_r = _calibration_free_run(model, theta_all, xf, gh, dtf, sf)
+    unexplained, signature = res.unexplained(an_after, calib_r, series.time, sf)
     return Diagnosis(
-        model=model, theta=theta_all, base_model=base, base_theta=base_theta, findings=findings,
-        rejected=rejected, before=before, after=after, persistence=pers, unexplained=unexplained,
-        signature=signature, split_index=s, blocks=blocks, time=series.time, measured=meas,
-        pred_before=before_pred, pred_after=current_pred, analysis_before=an_before,
-        analysis_after=an_after, seconds=_time.perf_counter() - t_start,
+        model=model, theta=theta_all, base_model=model0, base_theta=base_theta,
+        findings=findings, rejected=rejected, before=before, after=after, persistence=pers,
+        unexplained=unexplained, signature=signature, split_index=sf, blocks=fblocks,
+        time=series.time, measured=meas, pred_before=before_f, pred_after=after_f,
+        analysis_before=an_before, analysis_after=an_after,
+        seconds=_time.perf_counter() - t_start, structure=structure_log,
     )
 
 
-def _traces(findings: list[Finding], model: Model, theta: np.ndarray, x, gh: Greenhouse) -> None:
-    """Each finding's flux (physical W m-2) or sensor offset (K) along the measured state."""
-    from gateway.diagnose.effects import physical_capacity
+def _traces(findings: list[Finding], model: Structured, theta: np.ndarray, x, gh: Greenhouse) -> None:
+    """Each finding over the record: flux (physical W m-2), factor (-) or sensor offset (K)."""
+    from gateway.diagnose.structure import model_unit
 
-    unit = model.capacity(gh) / physical_capacity(gh)
+    unit = model_unit(model, gh)
+    n = len(x["t_in"])
     fluxes = model.fluxes(theta, x, x["t_in"])
     p = {k: v[:, 0] for k, v in model.columns(theta[None, :]).items()}
     for f in findings:
         if f.effect.kind == "sensor":
             term = next(t for t in model.sensors if t.name == "e_" + f.effect.name)
-            f.trace = np.broadcast_to(term.offset(p, x, slice(0, len(x["t_in"]))), x["t_in"].shape)
+            f.trace = np.broadcast_to(term.offset(p, x, slice(0, n)), (n,)).copy()
             f.trace_unit = "K"
+        elif f.effect.kind == "modulation":
+            m = next(m for m in model.modulations if m.name == f.effect.name)
+            f.trace = np.broadcast_to(m.factor(p, x, slice(0, n)), (n,)).copy()
+            f.trace_unit = "factor"
         else:
             f.trace = fluxes["q_" + f.effect.name] / unit
             f.trace_unit = "W m-2"
 
 
 # -- steps -------------------------------------------------------------------------------------
-def _tau_grid(n: int, dt: float, segments: list[tuple[int, int]]) -> np.ndarray:
-    step = max(int(round(COARSE_TAU_S / dt)), 1)
-    grid = np.arange(0, n, step)
-    return grid.astype(float)
+def _tau_grid(effect: Effect, duration: float) -> np.ndarray:
+    first = 0.0 if effect.from_start else COARSE_TAU_S
+    return np.arange(first, duration, COARSE_TAU_S)
 
 
-def _scan(shoot: Shooting, theta: np.ndarray, e: Effect, n: int, dt: float,
+def _scan(shoot: Shooting, theta: np.ndarray, e: Effect, duration: float,
           segments: list[tuple[int, int]]) -> Scan:
-    """Coarse τ grid, then a fine grid around the best coarse τ."""
-    sse0, _ = shoot.sse(theta[None, :])
-    coarse = scan_tau(shoot, theta, e, _tau_grid(n, dt, segments), float(sse0[0]))
-    step = max(int(round(COARSE_TAU_S / dt)), 1)
+    """Coarse τ grid, then a fine grid around the best coarse τ. A cover transmission change
+    is taken from the measured inside radiation when there is one (fit.radiation_change)."""
+    m = shoot.model
+    if e.name == "solar_gain_change" and measures_radiation(m, shoot.x):
+        first = 0.0 if e.from_start else COARSE_TAU_S
+        tau, d = radiation_change(m, shoot.x, theta, segments, first)
+        th = theta.copy()
+        th[m.index(e.tau_name)], th[m.index(e.amp_name)] = tau, np.clip(d, e.lower, e.upper)
+        sse, npair = shoot.sse(th[None, :])
+        return Scan(e, np.array([tau]), np.array([th[m.index(e.amp_name)]]), sse, npair)
+    sse0, npair = shoot.sse(theta[None, :])
+    # SSE differences below one effective sample's share do not tell start times apart
+    rel = 1.0 / max(npair * shoot.dt / EFFECTIVE_S, 1.0)
+    coarse = scan_tau(shoot, theta, e, _tau_grid(e, duration), float(sse0[0])).latest_of_best(rel)
     t_best = coarse.taus[coarse.best]
-    fine_taus = np.unique(np.clip(t_best + np.linspace(-step, step, 37).round(), 0, n - 1))
-    fine = scan_tau(shoot, theta, e, fine_taus, float(sse0[0]))
-    return fine if fine.sse[fine.best] < coarse.sse[coarse.best] else coarse
+    lo = 0.0 if e.from_start else shoot.dt
+    fine_taus = np.unique(np.clip(t_best + np.linspace(-1, 1, 37) * COARSE_TAU_S, lo, duration))
+    fine = scan_tau(shoot, theta, e, fine_taus, float(sse0[0])).latest_of_best(rel)
+    return fine if fine.sse[fine.best] <= coarse.sse[coarse.best] * (1.0 + rel) else coarse
 
 
-def _bic_delta(sse_new: float, sse_old: float, n_pairs: int, horizon: int, k_new: int) -> float:
-    """ΔBIC = n_e ln(SSE_new/SSE_old) + k ln(n_e) with n_e = pairs / horizon effective samples
-    (residuals of one shooting window are strongly autocorrelated)."""
-    n_e = max(n_pairs / horizon, 2.0)
-    return float(n_e * np.log(max(sse_new, 1e-300) / max(sse_old, 1e-300)) + k_new * np.log(n_e))
-
-
-def _rank(base, model, theta, effects, candidates, x, gh, dt, n, horizon, segments):
+def _rank(base, model, theta, effects, candidates, x, gh, dt, duration, horizon, segments):
     """Each candidate's τ scan (other parameters held) on ``segments``, sorted by ΔBIC."""
     out = []
-    starts = window_starts(segments, horizon)
+    starts = window_starts(segments, horizon, skip=horizon)
     for e in candidates:
-        new = compose(base, effects + [e], gh, n, dt)
-        th = carry(theta, model, new)
+        new = compose(base, effects + [e], gh, duration)
+        th = carry(theta, model, new, gh)
         shoot = Shooting(new, x, gh, dt, starts, horizon)
         sse0, npair = shoot.sse(th[None, :])
-        sc = _scan(shoot, th, e, n, dt, segments)
-        out.append((sc, _bic_delta(sc.sse[sc.best], float(sse0[0]), npair, horizon, 2)))
+        sc = _scan(shoot, th, e, duration, segments)
+        out.append((sc, _bic_delta(sc.sse[sc.best], float(sse0[0]), npair, dt, 2)))
     out.sort(key=lambda item: item[1])
     return out
 
 
-def _fit_effect(new_model, old_model, theta_old, e, x, gh, dt, n, horizon, segments, seed):
+def _fit_effect(new_model, old_model, theta_old, e, x, gh, dt, duration, horizon, segments, seed):
     """τ scan then a joint refit (base parameters + amplitude, τ held) on ``segments``."""
-    th = carry(theta_old, old_model, new_model)
-    starts = window_starts(segments, horizon)
+    th = carry(theta_old, old_model, new_model, gh)
+    starts = window_starts(segments, horizon, skip=horizon)
     shoot = Shooting(new_model, x, gh, dt, starts, horizon)
     sse_old, npair = shoot.sse(th[None, :])
-    sc = _scan(shoot, th, e, n, dt, segments)
+    sc = _scan(shoot, th, e, duration, segments)
     th[new_model.index(e.tau_name)] = sc.taus[sc.best]
     th[new_model.index(e.amp_name)] = sc.amps[sc.best]
     lo, hi = new_model.bounds(gh)
-    rad = new_model.radiation.parameter.name if new_model.radiation is not None else None
-    free = [j for j, nm in enumerate(new_model.names) if nm != rad and not nm.startswith("tau_")]
-    # a box around the current values: a refit, not a new search
-    width = 0.3 * (hi - lo)
-    lo2, hi2 = np.maximum(lo, th - width), np.minimum(hi, th + width)
-    th = fit_swarm(shoot, th, free, lo2, hi2, REFIT_ITERATIONS, seed)
+    free = _free(new_model)
+    if e.name == "solar_gain_change" and measures_radiation(new_model, x):
+        free = [j for j in free if new_model.names[j] != e.amp_name]  # fixed by i_in
+    th = fit_lm(shoot, th, free, lo, hi, REFIT_LM_ITERATIONS)
     sse_new, _ = shoot.sse(th[None, :])
-    return th, _bic_delta(float(sse_new[0]), float(sse_old[0]), npair, horizon, 2)
+    return th, _bic_delta(float(sse_new[0]), float(sse_old[0]), npair, dt, 2)
 
 
 def _heldout(model, thetas, x, gh, dt, folds, s, n) -> dict[str, np.ndarray]:
     """Cross-fitted held-out predictions: free runs restarted at each block start, one-step."""
     free = np.full(n - s, np.nan)
     one = np.full(n - s, np.nan)
-    for k in (0, 1):
-        th = thetas[k][None, :]
-        if not folds[k]:
+    for j in (0, 1):
+        th = thetas[j][None, :]
+        if not folds[j]:
             continue
         o = model.one_step(th, x, gh, dt)[0]
-        for a, b in folds[k]:
+        for a, b in folds[j]:
             free[a - s : b - s] = model.free_run(th, x, gh, dt, start=a, stop=b)[0]
             one[a - s : b - s] = o[a:b]
     return {"free_run": free, "one_step": one}
@@ -358,16 +453,21 @@ def _metrics(meas, pred, s) -> dict:
     return {k: metrics(m, v) for k, v in pred.items()}
 
 
-def _judge(before, after, meas, blocks, s) -> dict:
-    """Is the held-out free-run error significantly lower after?"""
+def _judge(before, after, meas, blocks, s, dt) -> dict:
+    """Is the held-out free-run error significantly lower after? The paired t statistic is
+    over pieces of ``JUDGE_PIECE_S`` of the blocks (free-run residuals decorrelate within
+    hours; whole blocks would leave only a handful of pairs)."""
     eb = (before["free_run"] - meas[s:]) ** 2
     ea = (after["free_run"] - meas[s:]) ** 2
     ok = np.isfinite(eb) & np.isfinite(ea)
+    piece = max(int(round(JUDGE_PIECE_S / dt)), 1)
     d = []
-    for a, b in blocks:
-        k = ok[a - s : b - s]
-        if k.any():
-            d.append(np.mean(eb[a - s : b - s][k]) - np.mean(ea[a - s : b - s][k]))
+    for a0, b0 in blocks:
+        for a in range(a0, b0, piece):
+            b = min(a + piece, b0)
+            k = ok[a - s : b - s]
+            if k.any():
+                d.append(np.mean(eb[a - s : b - s][k]) - np.mean(ea[a - s : b - s][k]))
     d = np.array(d)
     mae_b = float(np.mean(np.sqrt(eb[ok])))
     mae_a = float(np.mean(np.sqrt(ea[ok])))
@@ -378,8 +478,9 @@ def _judge(before, after, meas, blocks, s) -> dict:
     t = float(np.mean(d) / (sd / np.sqrt(len(d)))) if sd > 0 else (np.inf if np.mean(d) > 0 else 0.0)
     good = gain >= MIN_GAIN and (t >= MIN_T or mse_gain >= STRONG_GAIN)
     why = (f"held-out free-run MAE {mae_b:.3f} → {mae_a:.3f} °C ({-100 * gain:+.0f} %), "
-           f"block-paired t = {t:.2f} over {len(d)} blocks")
-    return {"ok": bool(good), "why": why, "gain": gain, "t": t, "mae_before": mae_b, "mae_after": mae_a}
+           f"paired t = {t:.2f} over {len(d)} pieces of {JUDGE_PIECE_S / 3600:g} h")
+    return {"ok": bool(good), "why": why, "gain": gain, "t": t, "mae_before": mae_b,
+            "mae_after": mae_a, "mse_after": mse_a}
 
 
 def _calibration_free_run(model, theta, x, gh, dt, s) -> np.ndarray:
@@ -396,17 +497,20 @@ def _calibration_free_run(model, theta, x, gh, dt, s) -> np.ndarray:
     return np.concatenate(errs)
 
 
-def _finding(e, model, theta, series, pred_before, pred_after, verdict, dbic, x, blocks, s):
-    tau = int(round(theta[model.index(e.tau_name)]))
+def _finding(e, model, theta, series, pred_before, pred_after, verdict, dbic, x, s):
+    tau = float(theta[model.index(e.tau_name)])
     amp = float(theta[model.index(e.amp_name)])
-    start = None if tau <= 0 else str(series.time[tau]) + "Z"
-    when = f"from {str(series.time[tau])[:16].replace('T', ' ')} UTC" if start else "throughout the data"
+    stamp = series.time[0] + np.timedelta64(int(round(tau)), "s")
+    start = None if tau <= 0 else str(stamp) + "Z"
+    when = f"from {str(stamp)[:16].replace('T', ' ')} UTC" if start else "throughout the data"
     summary = f"{e.describe(amp)} {when}"
     r = x["t_in"][s:] - pred_before["free_run"]
-    sig = res.short_signature(series.time[s:], r, x, s, series.step)
+    t_c = series.time[0] + x["_index"].astype("timedelta64[s]")
+    sig = res.short_signature(t_c[s:], r, x, s, float(x["_index"][1] - x["_index"][0]))
     evidence = (f"{verdict['why']}; ΔBIC {dbic:.0f} on all data; residual before it: {sig}; "
                 f"expected signature: {e.signature}")
-    return Finding(e, tau, start, amp, summary, evidence, verdict["mae_before"], verdict["mae_after"], dbic)
+    return Finding(e, tau, start, amp, summary, evidence, verdict["mae_before"],
+                   verdict["mae_after"], dbic)
 
 
 def to_json(d: Diagnosis) -> dict:
@@ -422,6 +526,7 @@ def to_json(d: Diagnosis) -> dict:
         "persistence": strip(d.persistence),
         "unexplained": d.unexplained,
         "signature": d.signature,
+        "base_structure": d.structure,
         "rejected": d.rejected,
         "heldout": {"start": str(d.time[d.split_index]) + "Z", "end": str(d.time[-1]) + "Z",
                     "blocks": len(d.blocks)},

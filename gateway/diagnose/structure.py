@@ -1,0 +1,371 @@
+"""Structural calibration of the base model before any effect is searched (issue 4, diagnosis).
+
+The thesis models lump the greenhouse into one air node whose heat capacity is the air's alone
+(C_ter = c_p ρ V / A, III.24). Real houses store heat in fast mass (crop, frame, pots, the floor's
+skin) and release it with a lag (the floor and soil after sunset). On data richer than the model
+that structural error is as large as the effects the diagnosis looks for, and an effect library
+will happily "explain" it with a constant thermal-mass change or a heater. So the diagnosis fits
+a slightly richer *base* on the calibration part first (docs/effects.md, "Base structure"):
+
+- ``m_cap`` [-]: effective heat capacity of the air node = m_cap × C_model (air + fast mass);
+- a lumped heat store (floor surface, soil, structure) coupled to the air, for models that do
+  not read a measured soil temperature:
+
+      C_s dT_s/dt = a_s I_glob + h_s (T_in - T_s) + k_s (T_out - T_s)
+      Q_store = h_s (T_s - T_in)                        (into the air, W m-2 of floor)
+
+  It is a second state. T_s is never measured, so wherever a run starts from a measured air
+  temperature the store starts from an observer: the same store equation driven by the
+  *measured* air temperature before that time (causal: it uses no later reading);
+- ``c_lw_sky`` [W m-2 K-1]: long-wave loss to the sky (as III.21) for models without one.
+
+Effects are then *changes* from a time τ on top of this base: a thermal-mass effect is the
+capacity factor changing, not the capacity being wrong from the start. Relative parameter
+changes (cover transmission, capacity) are :class:`Modulation` s of base parameters.
+
+All methods are vectorised over candidate parameter sets (rows) as in :mod:`gateway.model`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from gateway.greenhouse import Greenhouse
+from gateway.model import psychrometrics as psy
+from gateway.model.model import Model
+from gateway.model.terms import ALWAYS, FluxTerm, Index, Parameter, SensorTerm
+
+INDEX = "_index"
+"""Driver holding the absolute sample index (float), so τ survives slicing of the drivers."""
+
+CAPACITY = Parameter("m_cap", "-", 1.0, 12.0, 1.0, None, ALWAYS,
+                     "effective heat capacity of the air node / air alone (fast mass: crop, frame)")
+STORE = (
+    Parameter("c_store", "J m-2 K-1", 5e3, 4e5, 5e4, None, ALWAYS,
+              "heat capacity of the lumped store (floor surface, soil, structure)"),
+    Parameter("h_store", "W m-2 K-1", 0.0, 25.0, 0.0, None, ALWAYS, "store–air coupling"),
+    Parameter("k_store", "W m-2 K-1", 0.0, 25.0, 2.0, None, ALWAYS,
+              "store loss to the outside (ground, long wave through the cover)"),
+    Parameter("a_store", "-", 0.0, 1.0, 0.0, None, ALWAYS,
+              "share of the outside radiation absorbed by the store"),
+)
+SKY = Parameter("c_lw_sky", "W m-2 K-1", 0.0, 15.0, 0.0, None, ALWAYS,
+                "long-wave loss of the air node to the sky (III.21 form)")
+SKY_TERMS = ("q_thermal",)
+"""Base terms that already carry a long-wave loss to the sky (the prototype's III.21)."""
+SOLAR_PARAMETERS = ("c_tsw", "c_solar", "a_store")
+"""Parameters scaled by a change of cover transmission (whichever the model has)."""
+
+
+def physical_capacity(gh: Greenhouse) -> float:
+    """C_phys = c_p ρ V / A [J m-2 K-1] (III.24)."""
+    return psy.CP_AIR * gh.air_density * gh.volume / gh.floor_area
+
+
+def model_unit(model: Model, gh: Greenhouse) -> float:
+    """u = C_model / C_phys: a physical flux [W m-2] times u is in the model's own units (1 for
+    Almería, 1/c_p for the prototype whose lumped coefficients carry 1/C_a, III.14)."""
+    return model.capacity(gh) / physical_capacity(gh)
+
+
+def on(p: Mapping[str, np.ndarray], x: Mapping[str, np.ndarray], t: Index, tau: str) -> np.ndarray:
+    """1.0 from the start sample τ on, else 0.0; shape broadcasts (P, 1) against time."""
+    return (x[INDEX][t] >= p[tau]).astype(float)
+
+
+class SkyLoss(FluxTerm):
+    """Long-wave loss to the sky ``Q = c_lw_sky (T_sky - T_in)`` (III.21 form, T_sky III.13)."""
+
+    name = "q_lw_sky"
+    equation = "III.21 form"
+    description = "long-wave loss to the sky: -c_lw_sky (T_in - T_sky)"
+    requires = ("t_out",)
+    parameters = (SKY,)
+
+    def __init__(self, unit: float) -> None:
+        self.unit = unit
+
+    def coefficients(self, p, x, t_in, t: Index):
+        s = self.unit * p["c_lw_sky"]
+        return s * x["t_sky"][t], s
+
+
+@dataclass(frozen=True)
+class Modulation:
+    """A relative change of base parameters from τ: ``p_j → p_j (1 + (A - A0) [t ≥ τ])``.
+
+    ``A`` is the amplitude parameter, ``A0`` its neutral value (0 for a relative change, 1 for a
+    factor). Used for a cover transmission change (solar parameters) and a change of thermal
+    mass (``m_cap``).
+    """
+
+    name: str
+    targets: tuple[str, ...]
+    amp: Parameter
+    tau: Parameter
+    neutral: float
+
+    @property
+    def parameters(self) -> tuple[Parameter, Parameter]:
+        return (self.amp, self.tau)
+
+    def factor(self, p, x, t: Index) -> np.ndarray:
+        return 1.0 + (p[self.amp.name] - self.neutral) * on(p, x, t, self.tau.name)
+
+
+def _phi(z: np.ndarray) -> np.ndarray:
+    """(1 - e^-z)/z, finite at z → 0 (MODEL_NOTES §4)."""
+    z = np.maximum(z, 1e-12)
+    return -np.expm1(-z) / z
+
+
+def _filled(v: np.ndarray) -> np.ndarray:
+    """Gaps bridged linearly (only to drive the store observer, never scored)."""
+    ok = np.isfinite(v)
+    if ok.all() or not ok.any():
+        return np.nan_to_num(v)
+    idx = np.arange(len(v))
+    return np.interp(idx, idx[ok], v[ok])
+
+
+class _Same:
+    """Indexes to the same value whatever the index (one step's recomputed driver)."""
+
+    def __init__(self, value: np.ndarray) -> None:
+        self.value = value
+
+    def __getitem__(self, t: Index) -> np.ndarray:
+        return self.value
+
+
+class _Override(Mapping):
+    """The drivers with some entries replaced."""
+
+    def __init__(self, base: Mapping, overrides: dict) -> None:
+        self.base, self.overrides = base, overrides
+
+    def __getitem__(self, key: str):
+        return self.overrides[key] if key in self.overrides else self.base[key]
+
+    def __iter__(self):
+        return iter(self.base)
+
+    def __len__(self) -> int:
+        return len(self.base)
+
+    def __contains__(self, key: object) -> bool:
+        return key in self.base
+
+
+@dataclass(frozen=True)
+class Structured(Model):
+    """A base model with an effective capacity, optionally a heat store, and modulations.
+
+    Same API as :class:`Model` (``one_step``, ``free_run``, ``forecast``) plus :meth:`shoot`,
+    free runs from many start times for many parameter sets at once.
+    """
+
+    store: bool = False
+    modulations: tuple[Modulation, ...] = ()
+
+    # -- building ----------------------------------------------------------------------------
+    def with_modulation(self, m: Modulation) -> Structured:
+        return replace(self, modulations=self.modulations + (m,), extra=self.extra + m.parameters)
+
+    # -- parameters at a time ------------------------------------------------------------------
+    def _at(self, p: Mapping[str, np.ndarray], x, t: Index) -> dict[str, np.ndarray]:
+        if not self.modulations:
+            return dict(p)
+        q = dict(p)
+        for m in self.modulations:
+            f = m.factor(p, x, t)
+            for name in m.targets:
+                if name in q:
+                    q[name] = q[name] * f
+        return q
+
+    # -- one step of the two nodes ------------------------------------------------------------
+    def _inputs(self, p, x, t: Index):
+        """The drivers as the terms should see them at ``t``: when a sensor term is an
+        electronic offset of the temperature reading only (``electronic``), the inside vapour
+        pressure computed from that reading and the RH (drivers.py, III.4) is recomputed
+        from the corrected temperature."""
+        elec = [sn for sn in self.sensors if getattr(sn, "electronic", False)]
+        if not elec or "rh_in" not in x:
+            return x
+        off = 0.0
+        for sn in elec:
+            off = off + sn.offset(p, x, t)
+        return _Override(x, {"p_w_in": _Same(psy.vapour_pressure(x["t_in"][t] - off,
+                                                                  x["rh_in"][t]))})
+
+    def advance(self, q, x, ta, ts, t: Index, c0: float, unit: float, dt: float):
+        """Air (exact exponential step, store frozen), then store (exact step, new air)."""
+        x = self._inputs(q, x, t)
+        g_sum, s_sum = 0.0, 0.0
+        for term in self.terms:
+            g, s = term.coefficients(q, x, ta, t)
+            g_sum, s_sum = g_sum + g, s_sum + s
+        if self.store:
+            h = unit * q["h_store"]
+            g_sum, s_sum = g_sum + h * ts, s_sum + h
+        c = c0 * q["m_cap"]
+        ta_new = ta + (g_sum - s_sum * ta) * (dt / c) * _phi(s_sum * dt / c)
+        if not self.store:
+            return ta_new, ts
+        s_st = q["h_store"] + q["k_store"]
+        g_st = q["a_store"] * x["i_glob"][t] + q["h_store"] * ta_new + q["k_store"] * x["t_out"][t]
+        cs = q["c_store"]
+        ts_new = ts + (g_st - s_st * ts) * (dt / cs) * _phi(s_st * dt / cs)
+        return ta_new, ts_new
+
+    # -- the store observer -------------------------------------------------------------------
+    def observer(self, p: Mapping[str, np.ndarray], x, dt: float) -> np.ndarray:
+        """Store temperature (P, T) driven by the measured air temperature: T_s[t] uses
+        readings up to t only (the same exact step as ``advance``, with the reading in place
+        of the simulated air). Exact for the zero-order-hold inputs, vectorised over
+        candidates; a Python loop over blocks of samples, not over samples."""
+        n = len(x["t_in"])
+        n_p = next(iter(p.values())).shape[0]
+        idx = slice(0, n)
+        q = self._at(p, x, idx)
+        ta = _filled(x["t_in"])[None, :] - self.sensor_offset(p, x, idx)
+        ta = np.broadcast_to(ta, (n_p, n))
+        # the store's step from t to t+1 sees the air at t+1 (as in ``advance``)
+        ta = np.concatenate([ta[:, 1:], ta[:, -1:]], axis=1)
+        h, k, cs = q["h_store"], q["k_store"], q["c_store"]
+        s = np.maximum(h + k, 1e-9)
+        u = (q["a_store"] * _filled(x["i_glob"])[None, :] + h * ta
+             + k * _filled(x["t_out"])[None, :]) / s
+        u = np.broadcast_to(u, (n_p, n))
+        rate = s * dt / cs  # -ln λ per sample (P, 1)
+        lam = np.exp(-rate)
+        # blocks of L samples with λ^-L ≤ e^30, so the scaled cumulative sums stay exact
+        L = int(max(1, min(n, np.floor(30.0 / float(np.max(rate))))))
+        nb = -(-n // L)
+        pad = nb * L - n
+        up = np.concatenate([u, np.repeat(u[:, -1:], pad, axis=1)], axis=1).reshape(n_p, nb, L)
+        j = np.arange(L)[None, :]
+        scale = np.exp(rate * j)  # λ^-j (P, L)
+        # y[b+i] = λ^i y[b] + (1-λ) λ^(i-1) Σ_{j<i} λ^-j u[b+j]
+        cs_ = np.cumsum(up * scale[:, None, :], axis=2)  # Σ_{j<=i}
+        part = np.concatenate([np.zeros((n_p, nb, 1)), cs_[:, :, :-1]], axis=2)  # Σ_{j<i}
+        lam_i = np.exp(-rate * j)  # λ^i
+        forced = (1.0 - lam)[:, :, None] * (lam_i / lam)[:, None, :] * part
+        y_end = (1.0 - lam) * np.exp(-rate * (L - 1)) * cs_[:, :, -1]  # forced part at b+L
+        out = np.empty((n_p, nb, L))
+        y = u[:, 0].copy()  # start at equilibrium with the first inputs
+        lam_l = np.exp(-rate * L)[:, 0]
+        for b in range(nb):
+            out[:, b, :] = lam_i * y[:, None] + forced[:, b, :]
+            y = lam_l * y + y_end[:, b]
+        return out.reshape(n_p, nb * L)[:, :n]
+
+    # -- evaluation modes ---------------------------------------------------------------------
+    def shoot(self, theta: np.ndarray, x, gh: Greenhouse, dt: float, starts: np.ndarray,
+              horizon: int) -> np.ndarray:
+        """Readings predicted at steps 1..H of free runs from every start, for every candidate:
+        (P, N, H). One Python iteration per step serves candidates × starts."""
+        theta = np.atleast_2d(theta)
+        n_p, n = theta.shape[0], len(starts)
+        p = self.columns(theta)
+        c0, unit = self.capacity(gh), model_unit(self, gh)
+        starts = np.asarray(starts, dtype=int)
+        rows = {k: np.repeat(v, n, axis=0) for k, v in p.items()}
+        t0 = np.tile(starts, n_p)[:, None]
+        ta = x["t_in"][t0] - (self.sensor_offset(rows, x, t0) if self.sensors else 0.0)
+        ts = None
+        if self.store:
+            ts = self.observer(p, x, dt)[:, starts].reshape(-1, 1)
+        out = np.empty((n_p * n, horizon))
+        for k in range(horizon):
+            q = self._at(rows, x, t0 + k)
+            ta, ts = self.advance(q, x, ta, ts, t0 + k, c0, unit, dt)
+            obs = ta + self.sensor_offset(rows, x, t0 + k + 1) if self.sensors else ta
+            out[:, k] = obs[:, 0]
+        return out.reshape(n_p, n, horizon)
+
+    def one_step(self, theta, x, gh, dt):
+        """(P, T): element t predicts the reading at t from the reading at t-1 (store from the
+        observer); column 0 is NaN."""
+        theta = np.atleast_2d(theta)
+        p = self.columns(theta)
+        n = len(x["t_in"])
+        c0, unit = self.capacity(gh), model_unit(self, gh)
+        obs_ts = self.observer(p, x, dt) if self.store else None
+        out = np.full((theta.shape[0], n), np.nan)
+        block = max(16, 16384 // theta.shape[0])
+        for a in range(0, n - 1, block):
+            b = min(a + block, n - 1)
+            t = slice(a, b)
+            ta = x["t_in"][None, a:b] - (self.sensor_offset(p, x, t) if self.sensors else 0.0)
+            ts = obs_ts[:, a:b] if self.store else None
+            new, _ = self.advance(self._at(p, x, t), x, ta, ts, t, c0, unit, dt)
+            if self.sensors:
+                new = new + self.sensor_offset(p, x, slice(a + 1, b + 1))
+            out[:, a + 1 : b + 1] = new
+        return out
+
+    def free_run(self, theta, x, gh, dt, start=0, stop=None, restart_after_gaps=True):
+        """Simulation (P, stop-start) from the measured state at ``start`` (store from the
+        observer); restarts from the next reading after an input gap (the gap stays NaN)."""
+        theta = np.atleast_2d(theta)
+        p = self.columns(theta)
+        meas = x["t_in"]
+        stop = len(meas) if stop is None else stop
+        c0, unit = self.capacity(gh), model_unit(self, gh)
+        obs_ts = self.observer(p, x, dt) if self.store else None
+        n_p = theta.shape[0]
+        out = np.full((n_p, stop - start), np.nan)
+
+        def restart(t: int):
+            ta = np.full((n_p, 1), meas[t])
+            if self.sensors:
+                ta = ta - self.sensor_offset(p, x, t)
+            return ta, (obs_ts[:, t : t + 1] if self.store else None)
+
+        ta, ts = restart(start)
+        out[:, 0] = meas[start]
+        for k, t in enumerate(range(start, stop - 1), start=1):
+            ta, ts = self.advance(self._at(p, x, t), x, ta, ts, t, c0, unit, dt)
+            out[:, k] = (ta + self.sensor_offset(p, x, t + 1))[:, 0] if self.sensors else ta[:, 0]
+            if restart_after_gaps and np.isnan(ta[0, 0]):
+                ta, ts = restart(t + 1)
+        return out
+
+    def forecast(self, theta_rows, x, gh, dt, starts, horizon):
+        """Free runs of ``horizon`` steps from many starts (one parameter row per start): (N,)."""
+        starts = np.asarray(starts, dtype=int)
+        out = np.empty(len(starts))
+        for i, (row, s0) in enumerate(zip(np.atleast_2d(theta_rows), starts, strict=True)):
+            out[i] = self.shoot(row[None, :], x, gh, dt, np.array([s0]), horizon)[0, 0, -1]
+        return out
+
+
+def structure(base: Model, gh: Greenhouse, store: bool) -> Structured:
+    """The diagnosis's base: ``base`` + effective capacity, + sky loss when it has none, + a
+    heat store when ``store`` (used when no soil temperature is measured)."""
+    terms = tuple(base.terms)
+    if not any(t.name in SKY_TERMS for t in terms):
+        terms = terms + (SkyLoss(model_unit(base, gh)),)
+    extra = tuple(base.extra) + (CAPACITY,) + (STORE if store else ())
+    fields = {f: getattr(base, f) for f in ("name", "capacity", "radiation", "description",
+                                             "capacity_equation", "online", "sensors")}
+    return Structured(terms=terms, extra=extra, store=store, **fields)
+
+
+class SensorBias(SensorTerm):
+    """A constant calibration offset of the inside sensor: ``T_meas = T + b`` (electronic: the
+    RH channel refers to the true temperature, so the vapour pressure is recomputed)."""
+
+    name = "e_sensor_bias"
+    electronic = True
+    description = "constant inside-sensor offset"
+    parameters = (Parameter("b_sensor", "K", -2.0, 2.0, 0.0, None, ALWAYS,
+                            "constant offset of the inside temperature reading"),)
+
+    def offset(self, p, x, t: Index) -> np.ndarray:
+        return p["b_sensor"] * np.ones_like(x[INDEX][t])

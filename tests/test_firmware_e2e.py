@@ -124,13 +124,14 @@ def start_gateway(db: Path, keys: Path) -> tuple[subprocess.Popen, tuple[str, in
 
 
 class Firmware:
-    def __init__(self, workdir: Path, trace: Path, wifi: str = "ok") -> None:
+    def __init__(self, workdir: Path, trace: Path, wifi: str = "ok", outage: str = "") -> None:
         exe = micropython()
         assert exe
         self.lines: list[str] = []
         self.proc = subprocess.Popen(
             [exe, "-X", "heapsize=96K", str(MCU / "main.py")], cwd=workdir,
-            env=mpy_env({"SERRA_TRACE": str(trace), "SERRA_WIFI": wifi}),
+            env=mpy_env({"SERRA_TRACE": str(trace), "SERRA_WIFI": wifi,
+                         "SERRA_WIFI_OUTAGE": outage}),
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         self.thread = threading.Thread(target=self._read, daemon=True)
         self.thread.start()
@@ -215,13 +216,17 @@ def test_firmware_delivers_every_record_exactly_once_over_lossy_udp(tmp_path: Pa
         rows = stored(db, 0)
         check_exactly_once(recs, rows, n)
         # Second boot: the flash counter moves on, sequence numbers restart at 0, still unique.
-        fw2 = Firmware(dev, trace)
+        # The access point vanishes for 4 s mid-stream: records wait in the ring, no reset.
+        fw2 = Firmware(dev, trace, outage="2000:4000")
         try:
-            recs2 = run_until_delivered(fw2, db, 1, 20, timeout=60)
+            recs2 = run_until_delivered(fw2, db, 1, 40, timeout=90)
         finally:
             fw2.stop()
         assert "serra: device 7 boot 1" in fw2.lines
-        check_exactly_once(recs2, stored(db, 1), 20)
+        check_exactly_once(recs2, stored(db, 1), 40)
+        states = [x for x in fw2.lines if x.startswith("serra: wifi")]
+        assert states.count("serra: wifi up") >= 2 and "serra: wifi backoff" in states, states
+        assert not any("FAKE WDT" in x or "machine.reset" in x for x in fw.lines + fw2.lines)
     finally:
         proxy.close()
         gw.send_signal(signal.SIGTERM)

@@ -1,5 +1,7 @@
 """Fake `network`: a station interface whose connection attempts follow $SERRA_WIFI, e.g.
-"fail,fail,ok" (the last outcome repeats). The UDP traffic itself is real, on 127.0.0.1."""
+"fail,fail,ok" (the last outcome repeats), and $SERRA_WIFI_OUTAGE="START_MS:LENGTH_MS" takes the
+access point away for a while (from the interpreter's start). The UDP traffic itself is real,
+on 127.0.0.1."""
 
 import os
 from time import ticks_diff, ticks_ms
@@ -14,6 +16,16 @@ STAT_WRONG_PASSWORD = 202
 STAT_CONNECT_FAIL = 203
 
 CONNECT_DELAY_MS = 50
+_T0 = ticks_ms()
+
+
+def _outage():
+    spec = os.getenv("SERRA_WIFI_OUTAGE")
+    if not spec:
+        return False
+    start, length = spec.split(":")
+    dt = ticks_diff(ticks_ms(), _T0)
+    return int(start) <= dt < int(start) + int(length)
 
 
 class WLAN:
@@ -38,7 +50,7 @@ class WLAN:
         outcome = self._plan[min(self._attempt, len(self._plan) - 1)]
         self._attempt += 1
         self.connects += 1
-        self._ok = outcome == "ok"
+        self._ok = outcome == "ok" and not _outage()
         self._t = ticks_ms()
         print("FAKE wifi connect attempt", self._attempt, outcome)
 
@@ -46,6 +58,8 @@ class WLAN:
         self._ok = False
 
     def isconnected(self):
+        if self._ok and _outage():
+            self._ok = False  # the access point went away
         return self._ok and ticks_diff(ticks_ms(), self._t) >= CONNECT_DELAY_MS
 
     def status(self, *a):

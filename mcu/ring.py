@@ -19,10 +19,10 @@ class Ring:
         self.max_span = max_span
         self.buf = bytearray(capacity * RECORD_LEN)
         self.mv = memoryview(self.buf)
-        # Typed arrays, not lists: 4 bytes a slot and no boxed ints on the heap.
+        # Typed arrays, not lists: no boxed ints on the heap. Ticks wrap below 2**30: int32.
         self.seq = array("q", [FREE] * capacity)  # FREE or the record's sequence number
-        self.tick = array("l", [0] * capacity)  # device tick at the end of the record's period
-        self.due = array("l", [0] * capacity)  # tick of the next (re)transmission
+        self.tick = array("i", [0] * capacity)  # device tick at the end of the record's period
+        self.due = array("i", [0] * capacity)  # tick of the next (re)transmission
         self.tries = array("B", [0] * capacity)
         self.count = 0
         self.dropped = 0

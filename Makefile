@@ -55,4 +55,4 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 
 clean:
-	rm -rf $(VENV) $(BENCH_VENV) images/build bench/results .pytest_cache .ruff_cache
+	rm -rf $(VENV) $(BENCH_VENV) mcu/typings_esp32 images/build bench/results .pytest_cache .ruff_cache

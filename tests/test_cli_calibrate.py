@@ -58,3 +58,12 @@ def test_bad_span_is_explained(capsys, span):
     assert main(["calibrate", "--data", str(DATASET), "--greenhouse", "biskra-prototype",
                  "--model", "prototype", "--calibrate-on", span]) == 2
     assert "--calibrate-on" in capsys.readouterr().err
+
+
+def test_ingest_subcommand_hands_its_arguments_to_the_service(capsys, tmp_path):
+    keys = tmp_path / "keys.txt"
+    keys.write_text("7 " + "00" * 32 + "\n")
+    keys.chmod(0o644)  # world-readable: the service must refuse it
+    code = main(["ingest", "--db", str(tmp_path / "s.db"), "--keys", str(keys)])
+    assert code == 2
+    assert "keys.txt" in capsys.readouterr().err

@@ -16,6 +16,7 @@ COMMANDS = {
     "replay": "gateway.cli.replay",
     "diagnose": "gateway.cli.diagnose",
     "demo": "gateway.cli.demo",
+    "ingest": "gateway.cli.ingest",
 }
 
 
@@ -43,6 +44,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["ingest"]:  # the service has its own parser: hand it every argument
+        from gateway.ingest.service import main as ingest_main
+
+        return ingest_main(argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(

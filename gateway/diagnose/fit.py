@@ -302,3 +302,22 @@ def radiation_change(model: Model, x: dict[str, np.ndarray], theta: np.ndarray,
         k += 1
     d = float(s_rz[k] / s_zz[k]) if s_zz[k] > 0 else 0.0
     return float(x["_index"][k]), d
+
+
+def radiation_bic_delta(model: Model, x: dict[str, np.ndarray], theta: np.ndarray,
+                        segments: list[tuple[int, int]], tau: float, d: float,
+                        effective_s: float) -> float:
+    """ΔBIC of a transmission change (τ, d) on the measured inside radiation (III.35) over the
+    sunlit samples of ``segments``: the second output a change of c_tsw has to explain."""
+    j = model.index(model.radiation.parameter.name)
+    z = theta[j] * x["i_glob"]
+    use = np.zeros(len(z), dtype=bool)
+    for a, b in segments:
+        use[a:b] = True
+    ok = use & np.isfinite(x["i_in"]) & np.isfinite(z) & (x["i_glob"] > 5.0)
+    if ok.sum() < 10:
+        return 0.0
+    r0 = (x["i_in"] - z)[ok]
+    r1 = (x["i_in"] - z * (1.0 + d * (x["_index"] >= tau)))[ok]
+    n_e = max(ok.sum() * (x["_index"][1] - x["_index"][0]) / effective_s, 2.0)
+    return float(n_e * np.log(max(r1 @ r1, 1e-300) / max(r0 @ r0, 1e-300)) + 2 * np.log(n_e))

@@ -41,6 +41,7 @@ from gateway.diagnose.fit import (
     fit_lm,
     fit_swarm,
     measures_radiation,
+    radiation_bic_delta,
     radiation_change,
     radiation_fit,
     scan_tau,
@@ -61,6 +62,8 @@ MIN_GAIN = 0.05
 MIN_T = 1.0
 """Block-paired t statistic of the MSE cut required (unless the cut is ≥ STRONG_GAIN)."""
 STRONG_GAIN = 0.25
+BLOCK_S = 12 * 3600.0
+"""Length of the held-out blocks dealt into the two folds [s] (``heldout_blocks``)."""
 JUDGE_PIECE_S = 6 * 3600.0
 """Length of the held-out pieces whose paired MSE differences the t statistic is taken over."""
 MAX_EFFECTS = 3
@@ -147,10 +150,15 @@ def carry(theta: np.ndarray, old: Model, new: Model, gh: Greenhouse | None = Non
 
 
 def heldout_blocks(split: int, n: int, dt: float) -> list[tuple[int, int]]:
-    """The held-out part cut into blocks of one day, or a quarter of it when shorter."""
+    """The held-out part cut into blocks of ``BLOCK_S`` (a quarter of it when shorter).
+
+    Half a day: long enough for a free run to forget its measured start (the air and fast
+    mass relax within an hour or two), short enough that each fold's fit set samples the whole
+    held-out part densely, so an effect growing in time (a drift) is pinned down on both sides
+    of every judged block."""
     length = n - split
-    day = int(round(86400.0 / dt))
-    block = day if length >= 4 * day else max(length // 4, 2)
+    want = int(round(BLOCK_S / dt))
+    block = want if length >= 4 * want else max(length // 4, 2)
     edges = list(range(split, n, block))
     blocks = [(a, min(a + block, n)) for a in edges]
     if len(blocks) > 1 and blocks[-1][1] - blocks[-1][0] < block // 2:
@@ -299,11 +307,22 @@ def diagnose(
                 rejected.append({"effect": e.name, "reason": verdict["why"], "delta_bic": dbics})
         if not passed:
             break
-        passed.sort(key=lambda item: item[0])
+        # One score per passing candidate, both halves log-likelihood ratios with one
+        # effective sample per EFFECTIVE_S: the evidence of its fits (ΔBIC summed over both
+        # folds' fit sets) plus its held-out free-run MSE against the best one's. A rival the
+        # held-out part barely separates is decided by the fits, and the other way round.
+        best_mse = min(c[5]["mse_after"] for c in passed)
+        n_h = np.isfinite(x["t_in"][s:]).sum() * dt / EFFECTIVE_S
+
+        def score(c, n_h=n_h, best_mse=best_mse) -> float:
+            return sum(c[5]["delta_bic"]) + n_h * np.log(c[5]["mse_after"] / best_mse)
+
+        passed.sort(key=score)
         _, e, new_model, new_thetas, pred, verdict = passed[0]
         for other in passed[1:]:
-            rejected.append({"effect": other[1].name, "reason": "passed, but a rival cut the "
-                             "held-out error more: " + other[5]["why"],
+            rejected.append({"effect": other[1].name, "reason": "passed, but a rival has "
+                             f"more evidence (score {score(other):.0f} vs {score(passed[0]):.0f},"
+                             " fit ΔBIC + held-out): " + other[5]["why"],
                              "delta_bic": other[5]["delta_bic"]})
         th_all, dbic_full = _fit_effect(new_model, model, theta_all, e, x, gh, dt, duration,
                                         horizon, all_set, seed + 101)
@@ -401,7 +420,8 @@ def _rank(base, model, theta, effects, candidates, x, gh, dt, duration, horizon,
         shoot = Shooting(new, x, gh, dt, starts, horizon)
         sse0, npair = shoot.sse(th[None, :])
         sc = _scan(shoot, th, e, duration, segments)
-        out.append((sc, _bic_delta(sc.sse[sc.best], float(sse0[0]), npair, dt, 2)))
+        dbic = _bic_delta(sc.sse[sc.best], float(sse0[0]), npair, dt, 2)
+        out.append((sc, dbic + _radiation_evidence(new, e, x, th, segments, sc)))
     out.sort(key=lambda item: item[1])
     return out
 
@@ -421,7 +441,17 @@ def _fit_effect(new_model, old_model, theta_old, e, x, gh, dt, duration, horizon
         free = [j for j in free if new_model.names[j] != e.amp_name]  # fixed by i_in
     th = fit_lm(shoot, th, free, lo, hi, REFIT_LM_ITERATIONS)
     sse_new, _ = shoot.sse(th[None, :])
-    return th, _bic_delta(float(sse_new[0]), float(sse_old[0]), npair, dt, 2)
+    dbic = _bic_delta(float(sse_new[0]), float(sse_old[0]), npair, dt, 2)
+    return th, dbic + _radiation_evidence(new_model, e, x, th, segments, sc)
+
+
+def _radiation_evidence(model, e: Effect, x, theta, segments, sc: Scan) -> float:
+    """The inside-radiation part of ΔBIC for a transmission change when i_in is measured
+    (the change is fitted on it, fit.radiation_change); 0 for every other effect."""
+    if e.name != "solar_gain_change" or not measures_radiation(model, x):
+        return 0.0
+    return radiation_bic_delta(model, x, theta, segments, float(sc.taus[sc.best]),
+                               float(sc.amps[sc.best]), EFFECTIVE_S)
 
 
 def _heldout(model, thetas, x, gh, dt, folds, s, n) -> dict[str, np.ndarray]:

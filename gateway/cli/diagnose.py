@@ -57,6 +57,8 @@ def run(args: argparse.Namespace) -> int:
 def _print_human(d) -> None:
     out = sys.stdout
     out.write(f"diagnosis of {d.model.name} in {d.seconds:.1f} s\n")
+    kept = [st["structure"] for st in d.structure if st["kept"]]
+    out.write(f"base structure (calibration part): {', '.join(kept)}\n")
     if not d.findings:
         out.write("no library effect improved the held-out error significantly\n")
     for i, f in enumerate(d.findings, 1):

@@ -21,7 +21,17 @@ def write_report(d: Diagnosis, out: str | Path, source: str) -> Path:
     lines = [f"# Diagnosis of {source}", "",
              f"Model `{d.model.name}`; calibration part up to {str(d.time[d.split_index])[:16]} UTC, "
              f"held-out part after it ({len(d.blocks)} blocks, free runs restarted at each block). "
-             f"{d.seconds:.1f} s.", "", "## Findings", ""]
+             f"{d.seconds:.1f} s.", "", "## Base structure (calibration part only)", "",
+             "Before any effect is searched, the thesis model gets an effective heat capacity and "
+             "optional parts, each kept only if BIC on the calibration part falls "
+             "(docs/effects.md):", ""]
+    for st in d.structure:
+        verdict = "kept" if st["kept"] else "not kept"
+        lines.append(f"- {st['structure']}: {verdict} (ΔBIC {st['delta_bic']:+.1f}, shooting MSE "
+                     f"{st['mse']:.3f} K²); {st['detail']}")
+    lines += ["", "Base parameters: " + ", ".join(
+        f"`{n}` = {v:.4g}" for n, v in zip(d.base_model.names, d.base_theta, strict=True)), "",
+        "## Findings", ""]
     if not d.findings:
         lines.append("No library effect improved the held-out error significantly.")
     for i, f in enumerate(d.findings, 1):

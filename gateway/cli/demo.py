@@ -2,7 +2,7 @@
 
 1. The reference simulator (training/simulate) grows 6 days of an Almería-type greenhouse on
    the shipped Bleiswijk weather, with an effect nobody declares: the cover is whitened
-   (transmission × 0.6) on day 4.
+   (transmission × 0.5) on day 4.
 2. ``calibrate`` fits the almeria model on the first 2 days (RSBA, thesis settings).
 3. ``replay`` runs the online estimator over the 6 days as the live gateway would, beside the
    constant-parameter model and persistence, and plots it.
@@ -21,7 +21,7 @@ from pathlib import Path
 
 from gateway.cli import CliError
 
-EFFECT = "cover_transmission@2009-10-29T10:00:factor=0.6"
+EFFECT = "cover_transmission@2009-10-29T10:00:factor=0.5"
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from gateway.diagnose import residuals as res
 from gateway.diagnose.effects import EFFECTS, compose
@@ -223,3 +224,39 @@ def test_change_point_and_hour_profile():
     assert prof[13] == 1.0 and np.nansum(prof) == 1.0
     acf = res.autocorrelation(np.sin(np.arange(2880) * 2 * np.pi / 1440), np.array([0, 720, 1440]))
     assert acf[0] == 1.0 and acf[1] < -0.4 and acf[2] > 0.4
+
+
+def _humid(f_after: float, rh_in: bool = True, seed: int = 0) -> dict:
+    """Four days at 5 min obeying the night vapour balance e_in − e_out = f D (+ noise), the
+    exchange fraction f stepping from 0.4 to ``f_after`` at day 2; sun from 06 to 18 h."""
+    from gateway.diagnose.structure import INDEX
+
+    rng = np.random.default_rng(seed)
+    t = np.arange(4 * 288) * 300.0
+    hour = (t % 86400) / 3600
+    t_out = 12 + 6 * np.sin(2 * np.pi * (hour - 9) / 24) + rng.normal(0, 1.0, len(t)).cumsum() * 0.05
+    t_in = t_out + 1.0
+    e_out = psy.vapour_pressure(t_out, 55 + 10 * np.sin(t / 86400.0))
+    f = np.where(t >= 2 * 86400, f_after, 0.4)
+    e_in = e_out + f * (psy.saturation_vapour_pressure(t_in) - e_out) + rng.normal(0, 0.01, len(t))
+    x = {INDEX: t, "t_in": t_in, "t_out": t_out, "rh_out": psy.relative_humidity(t_out, e_out),
+         "i_glob": np.where((hour > 6) & (hour < 18), 300.0, 0.0), "wind": rng.uniform(0, 3, len(t))}
+    if rh_in:
+        x["rh_in"] = psy.relative_humidity(t_in, e_in)
+    return x
+
+
+def test_humidity_evidence_sees_more_air_exchange_only():
+    from gateway.diagnose.humidity import exchange_step_bic
+
+    seg = [(0, 4 * 288)]
+    dbic, c = exchange_step_bic(_humid(0.25), seg, 2 * 86400.0)
+    assert dbic < -20 and c == pytest.approx(-0.15, abs=0.03)
+    # no change of the exchange: only the extra parameter's penalty, ln(night hours)
+    dbic0, _ = exchange_step_bic(_humid(0.4), seg, 2 * 86400.0)
+    assert 0 < dbic0 < 6
+    # less exchange (a rise of f) is no evidence for more exchange
+    assert exchange_step_bic(_humid(0.55), seg, 2 * 86400.0)[0] > 0
+    # graceful fallback: no inside RH, or τ with too few night hours after it → no evidence
+    assert exchange_step_bic(_humid(0.25, rh_in=False), seg, 2 * 86400.0)[0] == 0.0
+    assert exchange_step_bic(_humid(0.25), seg, 3.9 * 86400.0)[0] == 0.0

@@ -47,6 +47,7 @@ from gateway.diagnose.fit import (
     scan_tau,
     window_starts,
 )
+from gateway.diagnose.humidity import exchange_step_bic
 from gateway.diagnose.structure import STORE, SensorBias, Structured, structure
 from gateway.greenhouse import Greenhouse
 from gateway.metrics import metrics
@@ -421,7 +422,9 @@ def _rank(base, model, theta, effects, candidates, x, gh, dt, duration, horizon,
         sse0, npair = shoot.sse(th[None, :])
         sc = _scan(shoot, th, e, duration, segments)
         dbic = _bic_delta(sc.sse[sc.best], float(sse0[0]), npair, dt, 2)
-        out.append((sc, dbic + _radiation_evidence(new, e, x, th, segments, sc)))
+        out.append((sc, dbic + _radiation_evidence(new, e, x, th, segments, sc)
+                    + _humidity_evidence(e, x, segments, float(sc.taus[sc.best]),
+                                         float(sc.amps[sc.best]))))
     out.sort(key=lambda item: item[1])
     return out
 
@@ -442,7 +445,9 @@ def _fit_effect(new_model, old_model, theta_old, e, x, gh, dt, duration, horizon
     th = fit_lm(shoot, th, free, lo, hi, REFIT_LM_ITERATIONS)
     sse_new, _ = shoot.sse(th[None, :])
     dbic = _bic_delta(float(sse_new[0]), float(sse_old[0]), npair, dt, 2)
-    return th, dbic + _radiation_evidence(new_model, e, x, th, segments, sc)
+    hum = _humidity_evidence(e, x, segments, float(th[new_model.index(e.tau_name)]),
+                             float(th[new_model.index(e.amp_name)]))
+    return th, dbic + _radiation_evidence(new_model, e, x, th, segments, sc) + hum
 
 
 def _radiation_evidence(model, e: Effect, x, theta, segments, sc: Scan) -> float:
@@ -452,6 +457,16 @@ def _radiation_evidence(model, e: Effect, x, theta, segments, sc: Scan) -> float
         return 0.0
     return radiation_bic_delta(model, x, theta, segments, float(sc.taus[sc.best]),
                                float(sc.amps[sc.best]), EFFECTIVE_S)
+
+
+def _humidity_evidence(e: Effect, x, segments, tau: float, amp: float) -> float:
+    """The vapour-balance part of ΔBIC for added air exchange (humidity.exchange_step_bic):
+    more exchange from τ dilutes the night-time vapour excess, a solar change does not. Only
+    for ``extra_ventilation`` with a positive fitted rate (n = 0 predicts no change) and only
+    when τ is inside the data; 0 without humidity readings."""
+    if e.name != "extra_ventilation" or amp <= 0.0 or tau <= 0.0:
+        return 0.0
+    return exchange_step_bic(x, segments, tau)[0]
 
 
 def _heldout(model, thetas, x, gh, dt, folds, s, n) -> dict[str, np.ndarray]:

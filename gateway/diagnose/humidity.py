@@ -1,0 +1,118 @@
+"""Humidity evidence for a change of air exchange (docs/effects.md, "Humidity evidence").
+
+The heat balance alone cannot always tell more air exchange from less sun: in a small box
+without vents the daytime excess temperature is ∝ I / UA, and a door left open (UA up) looks
+like a whitewashed cover (I down). The vapour balance can: air exchange also dilutes the
+moisture the crop and the wet floor give off, while a cover transmission change does not touch
+the night-time exchange at all.
+
+At night (I_glob below ``SUN_THRESHOLD``) the inside vapour pressure is near a quasi-steady
+balance between evaporation from wet surfaces at about the air temperature and exchange with
+the outside air (ventilation + leakage at rate N):
+
+    g (e_s(T_in) − e_in) = N (e_in − e_out)
+    ⇒ e_in − e_out = f D,   D = e_s(T_in) − e_out,   f = g / (g + N)            (1)
+
+[kPa; e_s Tetens, III.5; e = e_s RH / 100, III.4]. Leakage grows with wind, so f is taken as
+f0 + f_w u_wind (first order in the wind), and a constant b absorbs the offsets of two low-cost
+RH sensors (a few % RH each). Extra air exchange n from τ makes f fall to g / (g + N + n): a
+downward step of the coefficient of D at τ. So the evidence for ``extra_ventilation`` with its
+fitted τ is the BIC change of the hourly night-time regression
+
+    e_in − e_out = b + D (f0 + f_w u_wind + c · 1[t ≥ τ]) ,     c ≤ 0,
+
+against c = 0, with one sample per night hour. A rise (c > 0) or no change leaves the
+constrained c = 0 and costs the extra parameter's penalty, ln n. The magnitude is not
+predicted (the base exchange N and the source g are unknown), only the direction.
+
+Graceful fallback: without both RH readings, or with fewer than ``MIN_HOURS`` night hours on
+either side of τ, the evidence is 0 (the temperature decides alone, as before).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gateway.diagnose.structure import INDEX
+from gateway.model import psychrometrics as psy
+from gateway.model.terms import SUN_THRESHOLD
+
+MIN_HOURS = 6
+"""Night hours needed on each side of τ for the humidity evidence to count."""
+MIN_PER_HOUR = 0.5
+"""Share of an hour's samples that must be valid for its mean to be used."""
+NEEDS = ("t_in", "rh_in", "t_out", "rh_out", "i_glob")
+
+
+def night_hours(x: dict[str, np.ndarray], segments: list[tuple[int, int]],
+                hour_s: float = 3600.0) -> dict[str, np.ndarray] | None:
+    """Hourly means over the night samples of ``segments``: ``t`` [s, hour centre], ``excess``
+    e_in − e_out and ``drive`` D = e_s(T_in) − e_out [kPa], ``wind`` [m s-1] (0 when not
+    measured). None when the humidity readings are missing."""
+    if any(name not in x for name in NEEDS):
+        return None
+    use = np.zeros(len(x["t_in"]), dtype=bool)
+    for a, b in segments:
+        use[a:b] = True
+    with np.errstate(invalid="ignore"):
+        e_in = psy.vapour_pressure(x["t_in"], x["rh_in"])
+        e_out = psy.vapour_pressure(x["t_out"], x["rh_out"])
+        drive = psy.saturation_vapour_pressure(x["t_in"]) - e_out
+        wind = x["wind"] if "wind" in x else np.zeros(len(e_in))
+        wind = np.where(np.isfinite(wind), wind, np.nan)
+        ok = use & (x["i_glob"] < SUN_THRESHOLD) & np.isfinite(e_in) & np.isfinite(e_out)
+    if "wind" in x and np.isfinite(wind[ok]).mean() > 0.5:
+        ok &= np.isfinite(wind)
+    else:
+        wind = np.zeros(len(e_in))
+    if ok.sum() < 2:
+        return None
+    hour = np.floor(x[INDEX] / hour_s).astype(np.int64)
+    h = hour[ok]
+    first = h.min()
+    h = h - first
+    cnt = np.bincount(h)
+    dt = float(x[INDEX][1] - x[INDEX][0])
+    full = cnt >= MIN_PER_HOUR * hour_s / dt
+
+    def mean(v: np.ndarray) -> np.ndarray:
+        return (np.bincount(h, v[ok], minlength=len(cnt)) / np.maximum(cnt, 1))[full]
+
+    idx = np.flatnonzero(full)
+    return {"t": (idx + first + 0.5) * hour_s, "excess": mean(e_in - e_out),
+            "drive": mean(drive), "wind": mean(wind)}
+
+
+def exchange_step_bic(x: dict[str, np.ndarray], segments: list[tuple[int, int]],
+                      tau: float) -> tuple[float, float]:
+    """(ΔBIC, c) of a downward step at τ [s] of the night-time vapour exchange fraction f in
+    (1) (module docstring): negative ΔBIC = the humidity shows more air exchange from τ.
+    (0, nan) when the humidity readings or the night hours on either side of τ are too few."""
+    nh = night_hours(x, segments)
+    if nh is None:
+        return 0.0, float("nan")
+    after = nh["t"] >= tau
+    if after.sum() < MIN_HOURS or (~after).sum() < MIN_HOURS:
+        return 0.0, float("nan")
+    y, d = nh["excess"], nh["drive"]
+    cols = [np.ones_like(y), d]
+    if np.ptp(nh["wind"]) > 0:
+        cols.append(d * nh["wind"])
+    x0 = np.column_stack(cols)
+    x1 = np.column_stack(cols + [d * after])
+    sse0 = _sse(x0, y)
+    coef, sse1 = _lstsq(x1, y)
+    n = len(y)
+    if coef[-1] >= 0.0:  # exchange did not rise: the constrained step is c = 0
+        return float(np.log(n)), float(coef[-1])
+    return float(n * np.log(max(sse1, 1e-300) / max(sse0, 1e-300)) + np.log(n)), float(coef[-1])
+
+
+def _lstsq(a: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
+    coef = np.linalg.lstsq(a, y, rcond=None)[0]
+    r = y - a @ coef
+    return coef, float(r @ r)
+
+
+def _sse(a: np.ndarray, y: np.ndarray) -> float:
+    return _lstsq(a, y)[1]

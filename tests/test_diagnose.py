@@ -46,7 +46,10 @@ Almería house, 17 W for the box); water barrels tripling the Almería air+fast-
 sensor (+3 to +5 K at noon); a sensor drifting 0.5 K per day."""
 # Cases the diagnosis does not yet get right on this data: kept as expected failures so that
 # the suite shows them, not hides them (docs/effects.md, "Known limits").
-KNOWN_MISSES: set[tuple[str, str]] = set()
+KNOWN_MISSES = {("prototype", "extra_leakage")}
+"""extra_leakage/prototype: the night-time humidity evidence (gateway/diagnose/humidity.py) points
+the right way (ΔBIC −7.5 for the door, +1.9 for whitewash on this data) but with one effective
+sample per night and three nights after the change it only ties the scores (−302 vs −302)."""
 START_TOLERANCE_H = {"sensor_drift": 18.0}
 """How far the estimated start may be from the truth [h]: 3 h for a step; a ramp starts from
 zero and only rises above the 0.1 K resolution hours later (0.5 K/d: 5 h), so its start is

@@ -21,8 +21,10 @@ fitted τ is the BIC change of the hourly night-time regression
 
     e_in − e_out = b + D (f0 + f_w u_wind + c · 1[t ≥ τ]) ,     c ≤ 0,
 
-against c = 0, with one sample per night hour. A rise (c > 0) or no change leaves the
-constrained c = 0 and costs the extra parameter's penalty, ln n. The magnitude is not
+against c = 0, fitted on hourly means of the night samples, with one effective sample per
+night (the weather persists through a night; nights are the independent units). A rise
+(c > 0) or no change leaves the
+constrained c = 0 and costs the extra parameter's penalty, ln n_e. The magnitude is not
 predicted (the base exchange N and the source g are unknown), only the direction.
 
 Graceful fallback: without both RH readings, or with fewer than ``MIN_HOURS`` night hours on
@@ -100,9 +102,9 @@ def exchange_step_bic(x: dict[str, np.ndarray], segments: list[tuple[int, int]],
         cols.append(d * nh["wind"])
     x0 = np.column_stack(cols)
     x1 = np.column_stack(cols + [d * after])
-    sse0 = _sse(x0, y)
+    sse0 = _lstsq(x0, y)[1]
     coef, sse1 = _lstsq(x1, y)
-    n = len(y)
+    n = _effective(nh["t"])
     if coef[-1] >= 0.0:  # exchange did not rise: the constrained step is c = 0
         return float(np.log(n)), float(coef[-1])
     return float(n * np.log(max(sse1, 1e-300) / max(sse0, 1e-300)) + np.log(n)), float(coef[-1])
@@ -114,5 +116,9 @@ def _lstsq(a: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
     return coef, float(r @ r)
 
 
-def _sse(a: np.ndarray, y: np.ndarray) -> float:
-    return _lstsq(a, y)[1]
+def _effective(t: np.ndarray, hour_s: float = 3600.0) -> float:
+    """Effective number of independent samples: the number of nights (runs of consecutive night
+    hours), at least 2. The weather that sets a night's humidity (a humid air mass, fog,
+    dew on the cover) persists through the night: the hourly residuals of (1) are nearly as
+    correlated within a night as a random walk, while nights are nearly independent."""
+    return max(float(1 + np.count_nonzero(np.diff(t) > 1.5 * hour_s)), 2.0)

@@ -302,28 +302,33 @@ def diagnose(
             pred = _heldout(new_model, new_thetas, x, gh, dt, folds, s, n)
             verdict = _judge(current_pred, pred, x["t_in"], blocks, s, dt)
             verdict["delta_bic"] = [float(v) for v in dbics]
+            # second output, independent of the T_in folds: counted once, on all data
+            verdict["humidity"] = _humidity_evidence(e, x, all_set, float(scan_all.taus[scan_all.best]),
+                                                     float(scan_all.amps[scan_all.best]))
             if max(dbics) < 0 and verdict["ok"]:
                 passed.append((verdict["mae_after"], e, new_model, new_thetas, pred, verdict))
             else:
                 rejected.append({"effect": e.name, "reason": verdict["why"], "delta_bic": dbics})
         if not passed:
             break
-        # One score per passing candidate, both halves log-likelihood ratios with one
+        # One score per passing candidate, all parts log-likelihood ratios with one
         # effective sample per EFFECTIVE_S: the evidence of its fits (ΔBIC summed over both
-        # folds' fit sets) plus its held-out free-run MSE against the best one's. A rival the
+        # folds' fit sets), the night-time humidity evidence on all data (extra_ventilation
+        # only, humidity.py), plus its held-out free-run MSE against the best one's. A rival the
         # held-out part barely separates is decided by the fits, and the other way round.
         best_mse = min(c[5]["mse_after"] for c in passed)
         n_h = np.isfinite(x["t_in"][s:]).sum() * dt / EFFECTIVE_S
 
         def score(c, n_h=n_h, best_mse=best_mse) -> float:
-            return sum(c[5]["delta_bic"]) + n_h * np.log(c[5]["mse_after"] / best_mse)
+            return (sum(c[5]["delta_bic"]) + c[5]["humidity"]
+                    + n_h * np.log(c[5]["mse_after"] / best_mse))
 
         passed.sort(key=score)
         _, e, new_model, new_thetas, pred, verdict = passed[0]
         for other in passed[1:]:
             rejected.append({"effect": other[1].name, "reason": "passed, but a rival has "
                              f"more evidence (score {score(other):.0f} vs {score(passed[0]):.0f},"
-                             " fit ΔBIC + held-out): " + other[5]["why"],
+                             " fit ΔBIC + humidity + held-out): " + other[5]["why"],
                              "delta_bic": other[5]["delta_bic"]})
         th_all, dbic_full = _fit_effect(new_model, model, theta_all, e, x, gh, dt, duration,
                                         horizon, all_set, seed + 101)
@@ -445,9 +450,7 @@ def _fit_effect(new_model, old_model, theta_old, e, x, gh, dt, duration, horizon
     th = fit_lm(shoot, th, free, lo, hi, REFIT_LM_ITERATIONS)
     sse_new, _ = shoot.sse(th[None, :])
     dbic = _bic_delta(float(sse_new[0]), float(sse_old[0]), npair, dt, 2)
-    hum = _humidity_evidence(e, x, segments, float(th[new_model.index(e.tau_name)]),
-                             float(th[new_model.index(e.amp_name)]))
-    return th, dbic + _radiation_evidence(new_model, e, x, th, segments, sc) + hum
+    return th, dbic + _radiation_evidence(new_model, e, x, th, segments, sc)
 
 
 def _radiation_evidence(model, e: Effect, x, theta, segments, sc: Scan) -> float:

@@ -5,7 +5,7 @@ import json
 
 from micropython import const
 
-MAX_PERIOD_S = const(6553)  # the wire format carries the period in 0.1 s units (uint16)
+_MAX_PERIOD_S = const(6553)  # the wire format carries the period in 0.1 s units (uint16)
 
 
 class ConfigError(Exception):
@@ -13,28 +13,28 @@ class ConfigError(Exception):
 
 
 class Config:
-    """Plain attributes; see config.example.json for every field."""
+    """Plain attributes, all set by parse(); see config.example.json for every field."""
 
-    device_id = 0
-    key = b""
-    ssid = ""
-    password = ""
-    gateway_host = ""
-    gateway_port = 0
-    sample_ms = 2000
-    period_ms = 60000
-    ack_timeout_ms = 3000
-    connect_timeout_ms = 15000
-    ring_size = 128
-    wdt_ms = 30000
-    boot_file = "boot.cnt"
-    transport = "udp"  # or "uart": a board wired to the gateway's USB port
-    uart_id = 1
-    uart_baud = 115200
-    uart_tx = -1  # -1: the board's default pins
-    uart_rx = -1
-    pins: dict = {}
-    cal: dict = {}
+    device_id: int
+    key: bytes
+    transport: str  # "udp" (Wi-Fi) or "uart": a board wired to the gateway's USB port
+    ssid: str
+    password: str
+    connect_timeout_ms: int
+    gateway_host: str
+    gateway_port: int
+    uart_id: int
+    uart_baud: int
+    uart_tx: int  # -1: the board's default pins
+    uart_rx: int
+    sample_ms: int
+    period_ms: int
+    ack_timeout_ms: int
+    ring_size: int
+    wdt_ms: int
+    boot_file: str
+    pins: dict | None  # set to None once the drivers are built
+    cal: dict | None
 
 
 def _get(d: dict, path: str, kind, default=None, lo=None, hi=None, where: str = ""):
@@ -54,14 +54,14 @@ def _get(d: dict, path: str, kind, default=None, lo=None, hi=None, where: str = 
     return cur
 
 
-PIN_NAMES = ("dht_in", "dht_out", "pyranometer", "anemometer", "rain")
-CAL_DEFAULTS = {
-    "pyr_dark_counts": 0,
-    "pyr_w_per_count": 0.0305,
-    "wind_mps_per_volt": 20.0,
-    "wind_dead_band_v": 0.03,
-    "rain_active_low": True,
-}
+_PIN_NAMES = const(("dht_in", "dht_out", "pyranometer", "anemometer", "rain"))
+_CAL_DEFAULTS = const((
+    ("pyr_dark_counts", 0),
+    ("pyr_w_per_count", 0.0305),
+    ("wind_mps_per_volt", 20.0),
+    ("wind_dead_band_v", 0.03),
+    ("rain_active_low", True),
+))
 
 
 def parse(d, where: str = "config") -> Config:
@@ -77,6 +77,10 @@ def parse(d, where: str = "config") -> Config:
     if not 16 <= len(c.key) <= 64:
         raise ConfigError(f"{where}: field 'key' has {len(c.key)} bytes, expected 16..64")
     c.transport = _get(d, "transport", str, "udp", where=where)
+    c.ssid = c.password = c.gateway_host = ""
+    c.connect_timeout_ms = 15000
+    c.gateway_port = 0
+    c.uart_id, c.uart_baud, c.uart_tx, c.uart_rx = 1, 115200, -1, -1
     if c.transport == "udp":
         c.ssid = _get(d, "wifi.ssid", str, where=where)
         c.password = _get(d, "wifi.password", str, where=where)
@@ -93,7 +97,7 @@ def parse(d, where: str = "config") -> Config:
         raise ConfigError(f"{where}: field 'transport' must be \"udp\" or \"uart\", "
                           f"got {c.transport!r}")
     c.sample_ms = _get(d, "sample_ms", int, 2000, lo=20, hi=600000, where=where)
-    period_s = _get(d, "period_s", float, 60.0, lo=0.1, hi=MAX_PERIOD_S, where=where)
+    period_s = _get(d, "period_s", float, 60.0, lo=0.1, hi=_MAX_PERIOD_S, where=where)
     c.period_ms = int(period_s * 1000)
     if c.sample_ms > c.period_ms:
         raise ConfigError(f"{where}: sample_ms {c.sample_ms} longer than period_s {period_s}")
@@ -105,23 +109,22 @@ def parse(d, where: str = "config") -> Config:
     if not isinstance(pins, dict):
         raise ConfigError(f"{where}: field 'pins' must be an object")
     c.pins = {}
-    for name in PIN_NAMES:
+    for name in _PIN_NAMES:
         v = pins.get(name)
         if v is not None and (not isinstance(v, int) or isinstance(v, bool) or v < 0):
             raise ConfigError(f"{where}: field 'pins.{name}' must be a GPIO number or null")
         c.pins[name] = v
     for name in pins:
-        if name not in PIN_NAMES:
+        if name not in _PIN_NAMES:
             raise ConfigError(f"{where}: unknown field 'pins.{name}'")
     cal = d.get("calibration", {})
     if not isinstance(cal, dict):
         raise ConfigError(f"{where}: field 'calibration' must be an object")
     c.cal = {}
-    for name in CAL_DEFAULTS:
-        dflt = CAL_DEFAULTS[name]
+    for name, dflt in _CAL_DEFAULTS:
         c.cal[name] = _get(cal, name, type(dflt), dflt, where=where + " calibration")
     for name in cal:
-        if name not in CAL_DEFAULTS:
+        if name not in c.cal:
             raise ConfigError(f"{where}: unknown field 'calibration.{name}'")
     return c
 

@@ -1,5 +1,5 @@
 """Wi-Fi as a state machine with exponential backoff (never a reboot loop when the network is
-gone) and the UDP sender: resends records from the ring until an authenticated ack arrives."""
+gone) and the sender: resends records from the ring until an authenticated ack arrives."""
 
 import socket
 from time import ticks_add, ticks_diff
@@ -7,68 +7,61 @@ from time import ticks_add, ticks_diff
 import wire
 from micropython import const
 
-DOWN = const(0)
-CONNECTING = const(1)
+_DOWN = const(0)
+_CONNECTING = const(1)
 UP = const(2)
 BACKOFF = const(3)
-STATE_NAMES = ("down", "connecting", "up", "backoff")
 
 
 class WifiLink:
-    def __init__(self, wlan, ssid: str, password: str, connect_timeout_ms: int = 15000,
-                 backoff_min_ms: int = 1000, backoff_max_ms: int = 60000,
-                 fail_status: tuple = ()) -> None:
-        """fail_status: wlan.status() codes that end an attempt early (network.STAT_NO_AP_FOUND,
+    def __init__(self, wlan, ssid: str, password: str, timeout: int = 15000, bmin: int = 1000,
+                 bmax: int = 60000, fail: tuple = ()) -> None:
+        """timeout: ms per connection attempt; bmin/bmax: backoff bounds (ms); fail:
+        wlan.status() codes that end an attempt early (network.STAT_NO_AP_FOUND,
         STAT_WRONG_PASSWORD, STAT_CONNECT_FAIL)."""
         self.wlan = wlan
-        self.fail_status = fail_status
+        self.fail = fail
         self.ssid = ssid
         self.password = password
-        self.timeout = connect_timeout_ms
-        self.bmin = backoff_min_ms
-        self.bmax = backoff_max_ms
-        self.backoff = backoff_min_ms
-        self.state = DOWN
+        self.timeout = timeout
+        self.bmin = bmin
+        self.bmax = bmax
+        self.backoff = bmin
+        self.state = _DOWN
         self.t = 0
-        self.attempts = 0
-        self.drops = 0
 
     def step(self, now) -> bool:
         """Advance the state machine without blocking; True when the link is up."""
         s = self.state
-        if s == DOWN:
-            self.wlan.active(True)
+        w = self.wlan
+        if s == _DOWN:
+            w.active(True)
             try:
-                self.wlan.connect(self.ssid, self.password)
+                w.connect(self.ssid, self.password)
             except OSError:
                 pass  # treated like a timeout below
-            self.attempts += 1
-            self.state = CONNECTING
+            self.state = _CONNECTING
             self.t = now
-        elif s == CONNECTING:
-            if self.wlan.isconnected():
+            return False
+        if s == BACKOFF:
+            if ticks_diff(now, self.t) >= 0:
+                self.state = _DOWN
+            return False
+        if w.isconnected():
+            if s == _CONNECTING:
                 self.state = UP
                 self.backoff = self.bmin
-                return True
-            if ticks_diff(now, self.t) >= self.timeout or self.wlan.status() in self.fail_status:
-                self._fail(now)
-        elif s == UP:
-            if self.wlan.isconnected():
-                return True
-            self.drops += 1
-            self._fail(now)
-        elif ticks_diff(now, self.t) >= 0:  # BACKOFF elapsed
-            self.state = DOWN
+            return True
+        # UP and the link dropped, or CONNECTING and it failed or timed out: back off.
+        if s == UP or ticks_diff(now, self.t) >= self.timeout or w.status() in self.fail:
+            try:
+                w.disconnect()
+            except OSError:
+                pass
+            self.state = BACKOFF
+            self.t = ticks_add(now, self.backoff)
+            self.backoff = min(self.backoff * 2, self.bmax)
         return False
-
-    def _fail(self, now) -> None:
-        try:
-            self.wlan.disconnect()
-        except OSError:
-            pass
-        self.state = BACKOFF
-        self.t = ticks_add(now, self.backoff)
-        self.backoff = min(self.backoff * 2, self.bmax)
 
 
 class UdpPort:
@@ -107,17 +100,20 @@ class UdpPort:
 
 class Sender:
     """Sends due records from the ring through a port (UdpPort or UartPort) and removes those
-    the gateway acknowledged."""
+    the gateway acknowledged. The packet is rebuilt in one buffer for each transmission."""
 
-    def __init__(self, ring, mac, device_id: int, boot: int, port, ack_timeout_ms: int,
+    def __init__(self, ring, mac, dev: int, boot: int, period_ds: int, port, rto: int,
                  burst: int = 8) -> None:
+        """rto: ack timeout (ms) before the first resend."""
         self.ring = ring
         self.mac = mac
-        self.dev = device_id
+        self.dev = dev
         self.boot = boot
+        self.period_ds = period_ds
         self.port = port
-        self.rto = ack_timeout_ms
+        self.rto = rto
         self.burst = burst
+        self.tx = bytearray(wire.RECORD_LEN)
         self.sent = 0
         self.acked = 0
         self.rejected = 0
@@ -134,16 +130,18 @@ class Sender:
             return
         self._poll_acks()
         ring = self.ring
+        tx = self.tx
         n = 0
         for i in range(ring.capacity):
             if n >= self.burst:
                 break
             if ring.seq[i] < 0 or ticks_diff(now, ring.due[i]) < 0:
                 continue
-            buf = ring.slot_view(i)
-            wire.seal(buf, ticks_diff(now, ring.tick[i]), self.mac)
+            wire.pack_head(tx, self.dev, self.boot, ring.seq[i], ring.tick[i], self.period_ds)
+            tx[26:47] = ring.slot(i)  # the channels, after the 26-byte header
+            wire.seal(tx, ticks_diff(now, ring.tick[i]), self.mac)
             try:
-                self.port.send(buf)
+                self.port.send(tx)
                 self.sent += 1
             except OSError:
                 self.errors += 1

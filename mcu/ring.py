@@ -1,5 +1,10 @@
 """RAM ring of records not yet acknowledged: fixed slots, no allocation per record.
 
+A slot keeps only what changes from record to record: the seven channels (CHAN_LEN = 21 bytes)
+plus the sequence number and tick in typed arrays. The rest of the packet (device, boot,
+period) is the same for the whole boot; the sender rebuilds the 63 bytes just before each
+(re)transmission, when the age and the tag have to be written anyway. 128 records: 4.4 KB.
+
 When full, the oldest record is dropped (and counted): fresh data is worth more than old. A
 record older than `max_span` sequence numbers is dropped too, so in-flight sequence numbers stay
 within the gateway's replay window (1024) even if one record keeps getting lost.
@@ -8,32 +13,34 @@ within the gateway's replay window (1024) even if one record keeps getting lost.
 from array import array
 
 from micropython import const
-from wire import RECORD_LEN
+from wire import CHAN_LEN
 
-FREE = const(-1)
+_FREE = const(-1)
 
 
 class Ring:
     def __init__(self, capacity: int = 128, max_span: int = 512) -> None:
         self.capacity = capacity
         self.max_span = max_span
-        self.buf = bytearray(capacity * RECORD_LEN)
-        self.mv = memoryview(self.buf)
-        # Typed arrays, not lists: no boxed ints on the heap. Ticks wrap below 2**30: int32.
-        self.seq = array("q", [FREE] * capacity)  # FREE or the record's sequence number
-        self.tick = array("i", [0] * capacity)  # device tick at the end of the record's period
-        self.due = array("i", [0] * capacity)  # tick of the next (re)transmission
-        self.tries = array("B", [0] * capacity)
+        self.mv = memoryview(bytearray(capacity * CHAN_LEN))
+        # Typed arrays, not lists: no boxed ints on the heap. Sequence numbers restart every
+        # boot and ticks wrap below 2**30: int32 for both.
+        self.seq = array("i", bytearray(4 * capacity))  # -1 (free) or the record's seq
+        for i in range(capacity):
+            self.seq[i] = _FREE
+        self.tick = array("i", bytearray(4 * capacity))  # tick at the end of the record's period
+        self.due = array("i", bytearray(4 * capacity))  # tick of the next (re)transmission
+        self.tries = bytearray(capacity)
         self.count = 0
         self.dropped = 0
 
     def push(self, seq: int, tick):
-        """Reserve a slot for a new record; returns its memoryview (RECORD_LEN bytes)."""
+        """Reserve a slot for a new record; returns its channel bytes (a CHAN_LEN memoryview)."""
         slot = -1
         too_old = seq - self.max_span
         for i in range(self.capacity):
-            if self.seq[i] != FREE and self.seq[i] <= too_old:
-                self.seq[i] = FREE
+            if self.seq[i] != _FREE and self.seq[i] <= too_old:
+                self.seq[i] = _FREE
                 self.count -= 1
                 self.dropped += 1
         if self.count == self.capacity:
@@ -46,7 +53,7 @@ class Ring:
             self.count -= 1
         else:
             for i in range(self.capacity):
-                if self.seq[i] == FREE:
+                if self.seq[i] == _FREE:
                     slot = i
                     break
         self.seq[slot] = seq
@@ -54,15 +61,15 @@ class Ring:
         self.due[slot] = tick
         self.tries[slot] = 0
         self.count += 1
-        return self.mv[slot * RECORD_LEN:(slot + 1) * RECORD_LEN]
+        return self.slot(slot)
 
-    def slot_view(self, i: int):
-        return self.mv[i * RECORD_LEN:(i + 1) * RECORD_LEN]
+    def slot(self, i: int):
+        return self.mv[i * CHAN_LEN:(i + 1) * CHAN_LEN]
 
     def remove(self, seq: int) -> bool:
         for i in range(self.capacity):
             if self.seq[i] == seq:
-                self.seq[i] = FREE
+                self.seq[i] = _FREE
                 self.count -= 1
                 return True
         return False

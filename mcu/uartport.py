@@ -48,3 +48,13 @@ class UartPort:
                 return self._ack
             self.bad_frames += 1
         return None
+
+
+def from_config(cfg) -> UartPort:
+    """The UartPort on the configured UART (the board's default pins when tx/rx are -1)."""
+    import machine
+
+    if cfg.uart_tx >= 0 and cfg.uart_rx >= 0:
+        return UartPort(machine.UART(cfg.uart_id, baudrate=cfg.uart_baud, tx=cfg.uart_tx,
+                                     rx=cfg.uart_rx))
+    return UartPort(machine.UART(cfg.uart_id, baudrate=cfg.uart_baud))

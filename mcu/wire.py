@@ -2,6 +2,9 @@
 
 Record packet: 63 bytes, big-endian, HMAC-SHA256 tag truncated to 16 bytes. MicroPython has
 hashlib.sha256 but no hmac module, so HMAC (RFC 2104) is built here from two hash passes.
+
+Names starting with "_" are compile-time constants: they take no RAM on the board (no global,
+no interned name). Only what other modules use is public.
 """
 
 import hashlib
@@ -9,28 +12,19 @@ import struct
 
 from micropython import const
 
-MAGIC = b"SR"
-VERSION = const(1)
-TYPE_RECORD = const(1)
-TYPE_ACK = const(2)
-TAG_LEN = const(16)
-N_CHAN = const(7)  # t_in, rh_in, t_out, rh_out, i_glob, wind, rain
-HEAD_FMT = ">2sBBIIIIIH"
-HEAD_LEN = const(26)
-BODY_LEN = const(47)  # HEAD_LEN + 7 * (int16 value + uint8 status)
+_MAGIC = b"SR"
+_VERSION = const(1)
+_TYPE_RECORD = const(1)
+_TYPE_ACK = const(2)
+_TAG_LEN = const(16)
+_HEAD_LEN = const(26)  # magic .. period_ds; then 7 * (int16 value + uint8 status)
+CHAN_LEN = const(21)
+_BODY_LEN = const(47)  # _HEAD_LEN + CHAN_LEN
 RECORD_LEN = const(63)
-AGE_OFF = const(20)
-ACK_FMT = ">2sBBIIIBB"
-ACK_BODY_LEN = const(18)
+_AGE_OFF = const(20)
+_ACK_BODY_LEN = const(18)
 ACK_LEN = const(34)
-MISSING = const(-32768)
-
-ACK_STORED = const(0)
-ACK_DUPLICATE = const(1)
-ACK_REJECTED = const(2)
-
-# Raw int16 units per channel (value = raw * scale): 0.01 degC, 0.01 %, 0.1 W m-2, 0.01 m s-1.
-SCALE_INV = (100, 100, 100, 100, 10, 100, 1)
+ACK_REJECTED = const(2)  # ack status: 0 stored, 1 duplicate, 2 rejected (final)
 
 
 class Hmac:
@@ -53,44 +47,43 @@ class Hmac:
         return h.digest()
 
 
-def to_raw(value: float, chan: int) -> int:
-    return int(round(value * SCALE_INV[chan]))
+def pack_channels(buf, off: int, raw, status) -> None:
+    """Write the seven (int16 value, uint8 status) pairs (CHAN_LEN bytes) at buf[off:]."""
+    for i in range(7):
+        struct.pack_into(">hB", buf, off + 3 * i, raw[i], status[i])
+
+
+def pack_head(buf, dev: int, boot: int, seq: int, tick, period_ds: int) -> None:
+    """Write bytes 0..25 (header, age 0) of a record into buf (>= RECORD_LEN bytes)."""
+    struct.pack_into(">2sBBIIIIIH", buf, 0, _MAGIC, _VERSION, _TYPE_RECORD, dev, boot, seq,
+                     tick & 0xFFFFFFFF, 0, period_ds)
 
 
 def pack_record(buf, dev: int, boot: int, seq: int, tick, period_ds: int, raw, status) -> None:
     """Write the body of a record into buf (>= RECORD_LEN bytes); age and tag come at send."""
-    struct.pack_into(HEAD_FMT, buf, 0, MAGIC, VERSION, TYPE_RECORD, dev, boot, seq,
-                     tick & 0xFFFFFFFF, 0, period_ds)
-    off = HEAD_LEN
-    for i in range(N_CHAN):
-        struct.pack_into(">hB", buf, off, raw[i], status[i])
-        off += 3
+    pack_head(buf, dev, boot, seq, tick, period_ds)
+    pack_channels(buf, _HEAD_LEN, raw, status)
 
 
 def seal(buf, age_ms: int, mac: Hmac) -> None:
     """Set the age field and the tag; called before each (re)transmission."""
-    struct.pack_into(">I", buf, AGE_OFF, age_ms & 0xFFFFFFFF)
+    struct.pack_into(">I", buf, _AGE_OFF, age_ms & 0xFFFFFFFF)
     mv = memoryview(buf)
-    mv[BODY_LEN:RECORD_LEN] = mac.digest(mv[:BODY_LEN])[:TAG_LEN]
-
-
-def record_seq(buf) -> int:
-    return struct.unpack_from(">I", buf, 12)[0]
+    mv[_BODY_LEN:RECORD_LEN] = mac.digest(mv[:_BODY_LEN])[:_TAG_LEN]
 
 
 def parse_ack(data, dev: int, mac: Hmac):
     """Return (boot, seq, status, reason) of a genuine ack for this device, else None."""
     if len(data) != ACK_LEN:
         return None
-    magic, ver, typ, adev, boot, seq, st, reason = struct.unpack_from(ACK_FMT, data, 0)
-    if magic != MAGIC or ver != VERSION or typ != TYPE_ACK or adev != dev:
+    magic, ver, typ, adev, boot, seq, st, reason = struct.unpack_from(">2sBBIIIBB", data, 0)
+    if magic != _MAGIC or ver != _VERSION or typ != _TYPE_ACK or adev != dev:
         return None
-    mv = memoryview(data)
-    good = mac.digest(mv[:ACK_BODY_LEN])
+    good = mac.digest(memoryview(data)[:_ACK_BODY_LEN])
     # Constant-time compare: a forged ack would silently drop a record from the ring.
     diff = 0
-    for i in range(TAG_LEN):
-        diff |= good[i] ^ data[ACK_BODY_LEN + i]
+    for i in range(_TAG_LEN):
+        diff |= good[i] ^ data[_ACK_BODY_LEN + i]
     if diff:
         return None
     return boot, seq, st, reason

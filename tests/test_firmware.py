@@ -17,7 +17,10 @@ STUBS = MCU / "typings_esp32"
 
 CHECKS = r'''
 import sys, os
-import status
+# Channel status codes (sensors.py keeps them as compile-time constants, docs/wire-format.md)
+OK, PARTIAL, NO_SENSOR, TIMEOUT, CHECKSUM, RANGE, SATURATED, NOT_READY = (
+    0x00, 0x01, 0x10, 0x11, 0x12, 0x13, 0x14, 0x15)
+MISSING = -32768
 
 def check_config():
     import config, json
@@ -79,31 +82,29 @@ def check_bootcount():
 
 def check_dht22():
     import dht, machine
-    from drivers.dht22 import DHT22
+    from sensors import DHT22
     d = DHT22(machine.Pin(4), dht.DHT22)
     got = []
     t = 0
     for _ in range(6):
         got.append(d.read(t))
-        if got[-1] == status.OK:
+        if got[-1] == OK:
             got.append((d.temperature, d.humidity))
         st = d.status
         assert d.read(t + 1999) == st  # within 2 s: held, the sensor is not touched
         t += 2000
     # ok, timeout, checksum, the all-zero frame, 85 degC (out of range), ok
-    assert got == [0, (21.5, 60.0), status.TIMEOUT, status.CHECKSUM, status.CHECKSUM,
-                   status.RANGE, 0, (22.0, 61.0)], got
+    assert got == [0, (21.5, 60.0), TIMEOUT, CHECKSUM, CHECKSUM,
+                   RANGE, 0, (22.0, 61.0)], got
 
 def check_adc_drivers():
     import machine
-    from drivers.pyranometer import Pyranometer
-    from drivers.anemometer import Anemometer
-    from drivers.rain import RainDetector
+    from sensors import Pyranometer, Anemometer, RainDetector
     p = Pyranometer(machine.ADC(machine.Pin(34)), 100, 0.5)
     out = []
     for _ in range(3):
         out.append((p.read(), p.value))
-    assert out[0] == (0, 450.0) and out[1] == (0, 0.0) and out[2][0] == status.SATURATED, out
+    assert out[0] == (0, 450.0) and out[1] == (0, 0.0) and out[2][0] == SATURATED, out
     a = Anemometer(machine.ADC(machine.Pin(35)), 20.0, 0.03)
     assert a.read() == 0 and a.value == 0.0  # 10 counts = 0.47 mV: inside the dead band
     assert a.read() == 0 and abs(a.value - 20.0 * 21140 * 3.1 / 65535) < 0.01, a.value
@@ -111,21 +112,21 @@ def check_adc_drivers():
     assert [r.read() or r.value for _ in range(3)] == [1, 0, 1]
 
 def check_averager():
-    from record import Averager, MISSING
+    from sensors import Averager
     a = Averager()
-    a.add(0, 20.0); a.add(0, 21.0); a.fail(0, status.TIMEOUT)
-    a.fail(1, status.TIMEOUT); a.fail(1, status.CHECKSUM)
+    a.add(0, 20.0); a.add(0, 21.0); a.fail(0, TIMEOUT)
+    a.fail(1, TIMEOUT); a.fail(1, CHECKSUM)
     a.add(4, 100.04); a.add(6, 0); a.add(6, 1); a.add(6, 0)
-    a.fail(2, status.NO_SENSOR)
+    a.fail(2, NO_SENSOR)
     a.finish()
-    assert a.raw[0] == 2050 and a.status[0] == status.PARTIAL, (a.raw, a.status)
-    assert a.raw[1] == MISSING and a.status[1] == status.CHECKSUM
-    assert a.raw[2] == MISSING and a.status[2] == status.NO_SENSOR
-    assert a.raw[4] == 1000 and a.status[4] == status.OK
+    assert a.raw[0] == 2050 and a.status[0] == PARTIAL, (a.raw, a.status)
+    assert a.raw[1] == MISSING and a.status[1] == CHECKSUM
+    assert a.raw[2] == MISSING and a.status[2] == NO_SENSOR
+    assert a.raw[4] == 1000 and a.status[4] == OK
     assert a.raw[6] == 1
-    assert a.raw[5] == MISSING and a.status[5] == status.NOT_READY  # nothing read at all
+    assert a.raw[5] == MISSING and a.status[5] == NOT_READY  # nothing read at all
     a.finish()
-    assert a.status[0] == status.NOT_READY  # a new period starts empty
+    assert a.status[0] == NOT_READY  # a new period starts empty
 
 def check_ring():
     from ring import Ring

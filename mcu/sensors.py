@@ -1,0 +1,242 @@
+"""The measuring side: channel status codes, the sensor drivers, per-period averaging.
+
+One module rather than one per driver: on the board every module costs RAM of its own (module
+object, globals, interned file names), and the status codes below are compile-time constants
+only inside the module that defines them.
+
+Channel status codes (same as gateway/protocol.py ST_*, table in docs/wire-format.md); below
+0x10 a value is present:
+  0x00 ok, 0x01 partial (averaged over the good reads; some reads of the period failed),
+  0x10 no_sensor (pin null in the config), 0x11 timeout (sensor did not answer),
+  0x12 checksum (corrupted frame, including the all-zero DHT22 frame), 0x13 range (answered
+  outside its physical range), 0x14 saturated (ADC at full scale), 0x15 not_ready (no read
+  completed in the period).
+"""
+
+from time import ticks_diff
+
+from micropython import const
+
+_OK = const(0x00)
+_PARTIAL = const(0x01)
+_NO_SENSOR = const(0x10)
+_TIMEOUT = const(0x11)
+_CHECKSUM = const(0x12)
+_RANGE = const(0x13)
+_SATURATED = const(0x14)
+_NOT_READY = const(0x15)
+
+_MISSING = const(-32768)  # raw value of a channel without a value
+_RAIN = const(6)  # channels: t_in, rh_in, t_out, rh_out, i_glob, wind, rain
+_SCALE_INV = (100, 100, 100, 100, 10, 100, 1)  # raw int16 per unit, as in wire-format.md
+_DHT_MIN_INTERVAL_MS = const(2000)  # datasheet: at most one conversion every 2 s
+
+
+class DHT22:
+    """DHT22 (AM2302) temperature/humidity through MicroPython's `dht` module.
+
+    Never reports a made-up value: a timeout, a bad checksum, the all-zero frame (0.0 degC,
+    0.0 %, valid checksum, sent by a sensor whose bus glitched) and out-of-range answers are
+    failures.
+    """
+
+    def __init__(self, pin, dht_cls, reinit_after: int = 3) -> None:
+        """pin: machine.Pin; dht_cls: dht.DHT22 (re-created after `reinit_after` failures in a
+        row, which clears a hung bus)."""
+        self._pin = pin
+        self._cls = dht_cls
+        self._dev = dht_cls(pin)
+        self._reinit_after = reinit_after
+        self._fails = 0
+        self._last = 0
+        self._fresh = True
+        self.temperature = 0.0  # degC, valid only when status < 0x10
+        self.humidity = 0.0  # %
+        self.status = _NOT_READY
+
+    def read(self, now) -> int:
+        """Convert if the 2 s minimum interval allows, else keep the last result (held value)."""
+        if not self._fresh and ticks_diff(now, self._last) < _DHT_MIN_INTERVAL_MS:
+            return self.status
+        self._fresh = False
+        self._last = now
+        st = _OK
+        try:
+            self._dev.measure()
+            t = self._dev.temperature()
+            rh = self._dev.humidity()
+            if t == 0 and rh == 0:
+                st = _CHECKSUM
+            elif not (-40.0 <= t <= 80.0 and 0.0 <= rh <= 100.0):
+                st = _RANGE
+            else:
+                self.temperature = t
+                self.humidity = rh
+        except OSError:
+            st = _TIMEOUT
+        except Exception:  # the dht module raises a plain Exception on a checksum error
+            st = _CHECKSUM
+        if st == _OK:
+            self._fails = 0
+        else:
+            self._fails += 1
+            if self._fails % self._reinit_after == 0:
+                self._dev = self._cls(self._pin)
+        self.status = st
+        return st
+
+
+class Pyranometer:
+    """BPW34 photodiode pyranometer on an ADC input: W m-2 = (counts - dark) * w_per_count."""
+
+    def __init__(self, adc, dark_counts: int, w_per_count: float, sat: int = 65500) -> None:
+        """adc: machine.ADC with its attenuation already set; calibration from the config;
+        sat: counts at which the ADC is saturated."""
+        self._adc = adc
+        self._zero = dark_counts
+        self._k = w_per_count
+        self._sat = sat
+        self.value = 0.0
+        self.status = _NOT_READY
+
+    def read(self) -> int:
+        c = self._adc.read_u16()
+        if c >= self._sat:
+            self.status = _SATURATED  # above the calibrated range: value unknown
+        else:
+            # Below the dark offset is noise at night, not negative light.
+            self.value = (c - self._zero) * self._k if c > self._zero else 0.0
+            self.status = _OK
+        return self.status
+
+
+class Anemometer:
+    """DC-motor cup anemometer on an ADC input: m s-1 = volts * mps_per_volt above a dead band."""
+
+    def __init__(self, adc, mps_per_volt: float, dead_band_v: float,
+                 sat: int = 3_100_000) -> None:
+        """adc: machine.ADC (read_uv is the ESP32's calibrated reading); sat: saturation (uV)."""
+        self._adc = adc
+        self._k = mps_per_volt
+        self._zero = int(dead_band_v * 1_000_000)  # uV
+        self._sat = sat
+        self.value = 0.0
+        self.status = _NOT_READY
+
+    def read(self) -> int:
+        uv = self._adc.read_uv()
+        if uv >= self._sat:
+            self.status = _SATURATED
+        else:
+            # The motor needs a starting torque: below the dead band the voltage is noise.
+            self.value = uv * self._k / 1_000_000 if uv > self._zero else 0.0
+            self.status = _OK
+        return self.status
+
+
+class RainDetector:
+    """Rain detector board (comparator output on a digital pin): 1 = wet."""
+
+    def __init__(self, pin, active_low: bool = True) -> None:
+        """pin: machine.Pin configured as input (most boards pull the output low when wet)."""
+        self._pin = pin
+        self._zero = 0 if active_low else 1  # the level that means wet
+        self.value = 0
+        self.status = _NOT_READY
+
+    def read(self) -> int:
+        self.value = 1 if self._pin.value() == self._zero else 0
+        self.status = _OK
+        return self.status
+
+
+def build(pins, cal):
+    """(dht_in, dht_out, pyranometer, anemometer, rain) from the config's pins and calibration;
+    None where not fitted."""
+    import dht
+    import machine
+
+    def adc(n):
+        a = machine.ADC(machine.Pin(n))
+        a.atten(machine.ADC.ATTN_11DB)  # 0..3.1 V input range
+        return a
+
+    p = pins
+    return (
+        DHT22(machine.Pin(p["dht_in"]), dht.DHT22) if p["dht_in"] is not None else None,
+        DHT22(machine.Pin(p["dht_out"]), dht.DHT22) if p["dht_out"] is not None else None,
+        Pyranometer(adc(p["pyranometer"]), cal["pyr_dark_counts"], cal["pyr_w_per_count"])
+        if p["pyranometer"] is not None else None,
+        Anemometer(adc(p["anemometer"]), cal["wind_mps_per_volt"], cal["wind_dead_band_v"])
+        if p["anemometer"] is not None else None,
+        RainDetector(machine.Pin(p["rain"], machine.Pin.IN), cal["rain_active_low"])
+        if p["rain"] is not None else None,
+    )
+
+
+class Averager:
+    """Sums good reads, counts failures; finish() yields raw int16 values and statuses.
+
+    A channel with no good read in the period is missing (raw -32768) with its last error code;
+    a channel with some failed reads is averaged over the good ones and flagged partial. Rain is
+    the maximum (wet at any time in the period).
+    """
+
+    def __init__(self) -> None:
+        self._sum = [0.0] * 7
+        self._n = [0] * 7
+        self._fail = [0] * 7
+        self._err = [_NOT_READY] * 7
+        self.raw = [_MISSING] * 7
+        self.status = [_NOT_READY] * 7
+
+    def add(self, chan: int, value: float) -> None:
+        if chan == _RAIN:
+            if value > self._sum[chan]:
+                self._sum[chan] = value
+        else:
+            self._sum[chan] += value
+        self._n[chan] += 1
+
+    def fail(self, chan: int, code: int) -> None:
+        self._fail[chan] += 1
+        self._err[chan] = code
+
+    def sample(self, sensors, now) -> None:
+        """Read every sensor once (a DHT22 holds its last result for 2 s) into the period."""
+        for i in range(5):
+            drv = sensors[i]
+            # Channels: DHT22 inside -> 0 and 1, outside -> 2 and 3; then 4, 5, 6.
+            c = 2 * i if i < 2 else i + 2
+            if drv is None:
+                self.fail(c, _NO_SENSOR)
+                if i < 2:
+                    self.fail(c + 1, _NO_SENSOR)
+            elif i < 2:
+                if drv.read(now) == _OK:
+                    self.add(c, drv.temperature)
+                    self.add(c + 1, drv.humidity)
+                else:
+                    self.fail(c, drv.status)
+                    self.fail(c + 1, drv.status)
+            elif drv.read() == _OK:
+                self.add(c, drv.value)
+            else:
+                self.fail(c, drv.status)
+
+    def finish(self) -> None:
+        """Fill self.raw/self.status for the period just ended and start a new one."""
+        for i in range(7):
+            n = self._n[i]
+            if n == 0:
+                self.raw[i] = _MISSING
+                self.status[i] = self._err[i]
+            else:
+                v = self._sum[i] if i == _RAIN else self._sum[i] / n
+                r = int(round(v * _SCALE_INV[i]))
+                self.raw[i] = 32767 if r > 32767 else (-32767 if r < -32767 else r)
+                self.status[i] = _PARTIAL if self._fail[i] else _OK
+            self._sum[i] = 0.0
+            self._n[i] = 0
+            self._fail[i] = 0
+            self._err[i] = _NOT_READY

@@ -92,6 +92,10 @@ def main() -> None:
         # No reboot loop on a bad config: say what is wrong on the serial console and stop.
         print("serra: CONFIG ERROR:", e)
         return
+    # The ring's channel buffer (2.7 KB for 128 records) is the one large block: allocate it
+    # now, while the top of the heap is one free area; the code dropped below leaves holes.
+    gc.collect()
+    ring = Ring(cfg.ring_size)
     import bootcount
 
     try:
@@ -108,10 +112,6 @@ def main() -> None:
 
     sens = sensors.build(cfg.pins, cfg.cal)
     cfg.pins = cfg.cal = None  # needed at boot only
-    # The ring is the one large buffer (4.4 KB for 128 records): allocate it while the heap is
-    # still unfragmented.
-    gc.collect()
-    ring = Ring(cfg.ring_size)
     # Started only once config and counter are good: a bad file must not become a reset loop.
     wdt = machine.WDT(timeout=cfg.wdt_ms)
     if cfg.transport == "uart":

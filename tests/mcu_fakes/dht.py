@@ -4,7 +4,7 @@
 from machine import _cursor
 
 
-class DHTBase:
+class DHT22:
     def __init__(self, pin):
         self._cur = _cursor("dht", pin.id, "20.0 50.0")
         self._t = 0.0
@@ -27,11 +27,3 @@ class DHTBase:
 
     def humidity(self):
         return self._rh
-
-
-class DHT22(DHTBase):
-    pass
-
-
-class DHT11(DHTBase):
-    pass

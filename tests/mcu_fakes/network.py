@@ -7,8 +7,6 @@ import os
 from time import ticks_diff, ticks_ms
 
 STA_IF = 0
-AP_IF = 1
-STAT_IDLE = 1000
 STAT_CONNECTING = 1001
 STAT_GOT_IP = 1010
 STAT_NO_AP_FOUND = 201
@@ -66,6 +64,3 @@ class WLAN:
         if self.isconnected():
             return STAT_GOT_IP
         return STAT_CONNECTING if self._ok else STAT_NO_AP_FOUND
-
-    def ifconfig(self, *a):
-        return ("127.0.0.1", "255.0.0.0", "127.0.0.1", "127.0.0.1")

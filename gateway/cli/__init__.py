@@ -48,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
     if argv[:1] == ["ingest"]:  # the service has its own parser: hand it every argument
         from gateway.ingest.service import main as ingest_main
 
-        return ingest_main(argv[1:])
+        return ingest_main(argv[1:], prog="python -m gateway ingest")
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(

@@ -107,9 +107,12 @@ async def serve(config: IngestConfig,
         log.info("ingest stopped; counters %s", core.counters.snapshot())
 
 
-def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="python -m gateway.ingest.service",
-                                 description="Serra ingest: kit packets in, durable store out.")
+def build_parser(prog: str = "python -m gateway.ingest.service") -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog=prog,
+        description="Serra ingest: kit packets in over UDP and/or a serial port, validated, "
+        "stored durably in SQLite (WAL), then acknowledged. See docs/wire-format.md.",
+        epilog="example: %(prog)s --db serra.db --keys keys.txt --listen 0.0.0.0:5683")
     ap.add_argument("--db", type=Path, required=True, help="SQLite store (created if absent)")
     ap.add_argument("--keys", type=Path, required=True,
                     help="device keys file, mode 600: '<device_id> <hex key>' per line")
@@ -117,7 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help=f"UDP HOST:PORT (default 0.0.0.0:{DEFAULT_PORT} unless --serial only)")
     ap.add_argument("--serial", default=None,
                     help="pyserial URL of a board on USB, e.g. /dev/ttyUSB0 or loop://")
-    ap.add_argument("--baudrate", type=int, default=115200)
+    ap.add_argument("--baudrate", type=int, default=115200, help="serial speed (default 115200)")
     ap.add_argument("--retention-days", type=float, default=retention.Policy.samples_days,
                     help="keep raw samples this many days (minute aggregates are kept longer)")
     ap.add_argument("--max-db-mb", type=float, default=retention.Policy.max_db_bytes / 2**20,
@@ -126,12 +129,12 @@ def build_parser() -> argparse.ArgumentParser:
                     help="seconds to wait for more records before a commit (fewer SD-card "
                          "writes; acks are delayed as much)")
     ap.add_argument("--maintenance-every", type=float, default=10.0, help=argparse.SUPPRESS)
-    ap.add_argument("-v", "--verbose", action="store_true")
+    ap.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     return ap
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+def main(argv: list[str] | None = None, prog: str = "python -m gateway.ingest.service") -> int:
+    args = build_parser(prog).parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     listen = args.listen

@@ -257,3 +257,14 @@ def test_service_reports_bad_arguments_clearly(tmp_path: Path, capsys) -> None:
     with pytest.raises(SystemExit):
         service.main(["--db", "x", "--keys", str(k), "--listen", "nope"])
     assert "expected HOST:PORT, got 'nope'" in capsys.readouterr().err
+
+
+def test_ingest_help_through_the_gateway_cli(capsys) -> None:
+    from gateway.cli import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["ingest", "--help"])
+    assert e.value.code == 0
+    out = capsys.readouterr().out
+    assert out.startswith("usage: python -m gateway ingest")
+    assert "--retention-days" in out and "example:" in out

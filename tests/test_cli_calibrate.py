@@ -67,3 +67,47 @@ def test_ingest_subcommand_hands_its_arguments_to_the_service(capsys, tmp_path):
     code = main(["ingest", "--db", str(tmp_path / "s.db"), "--keys", str(keys)])
     assert code == 2
     assert "keys.txt" in capsys.readouterr().err
+
+
+def _run_with_stderr(stderr_is_terminal: bool) -> tuple[int, str, str]:
+    """Run calibrate in a child process, stderr on a pseudo-terminal or on a pipe."""
+    import os
+    import pty
+    import select
+    import subprocess
+    import sys
+
+    cmd = [sys.executable, "-m", "gateway", "calibrate", "--data", str(DATASET), "--greenhouse",
+           "biskra-prototype", "--model", "prototype", "--algorithm", "rsba",
+           "--iterations", "600", "--json"]
+    env = {**os.environ, "COLUMNS": "120", "TERM": "xterm"}
+    if not stderr_is_terminal:
+        p = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=300)
+        return p.returncode, p.stdout, p.stderr
+    master, slave = pty.openpty()
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=slave, env=env)
+    os.close(slave)
+    screen = b""
+    while True:  # drain the terminal until the child closes it
+        ready, _, _ = select.select([master], [], [], 300)
+        if not ready:
+            break
+        try:
+            chunk = os.read(master, 65536)
+        except OSError:  # EIO: the child exited and closed its end
+            break
+        if not chunk:
+            break
+        screen += chunk
+    out = proc.stdout.read().decode() if proc.stdout else ""
+    os.close(master)
+    return proc.wait(timeout=60), out, screen.decode(errors="replace")
+
+
+def test_progress_bar_on_a_terminal_and_none_when_piped():
+    code, out, screen = _run_with_stderr(True)
+    assert code == 0 and json.loads(out)["algorithm"] == "rsba"
+    assert "/600" in screen and "MSE" in screen, screen[-500:]  # the bar was drawn
+    code, out, err = _run_with_stderr(False)
+    assert code == 0 and json.loads(out)["algorithm"] == "rsba"
+    assert "/600" not in err and "\x1b[" not in err  # no bar, no escape codes in a pipe

@@ -99,3 +99,23 @@ def test_data_coarser_than_the_gap_limit_is_an_error_not_an_empty_series(tmp_pat
     body = "".join(f"2020-03-27T{h:02d}:{m + 5:02d}:07Z,{20 + h},50,10,0,1\n" for h, m in rows)
     s = load_series(write(tmp_path, body, name="u.csv"), step=600)
     assert len(s) == 17 and np.isfinite(s["t_in"]).all()
+
+
+def test_byte_order_mark_is_accepted(tmp_path):
+    path = tmp_path / "excel.csv"
+    path.write_text("\ufeff" + HEADER + "2020-03-27T00:00:00Z,20,50,10,0,1\n", encoding="utf-8")
+    assert read_kit_csv(path).columns["t_in"][0] == 20.0
+
+
+def test_semicolon_separator_is_named(tmp_path):
+    path = write(tmp_path, "2020-03-27T00:00:00Z;20;50;10;0;1\n", header=HEADER.replace(",", ";"))
+    with pytest.raises(KitCsvError, match=r"d\.csv:1: .*separator must be a comma, not ';'"):
+        read_kit_csv(path)
+
+
+def test_relative_humidity_as_a_fraction_is_an_error(tmp_path):
+    body = "".join(f"2020-03-27T00:{m:02d}:00Z,20,0.{50 + m},10,0,1\n" for m in range(12))
+    with pytest.raises(KitCsvError, match=r"d\.csv: column rh_in: .*fraction"):
+        read_kit_csv(write(tmp_path, body))
+    dry = "".join(f"2020-03-27T00:{m:02d}:00Z,20,{0.5 + m},10,0,1\n" for m in range(12))
+    assert read_kit_csv(write(tmp_path, dry, name="dry.csv")).columns["rh_in"][0] == 0.5

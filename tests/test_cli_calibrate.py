@@ -67,3 +67,16 @@ def test_ingest_subcommand_hands_its_arguments_to_the_service(capsys, tmp_path):
     code = main(["ingest", "--db", str(tmp_path / "s.db"), "--keys", str(keys)])
     assert code == 2
     assert "keys.txt" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("rows", [1, 3])
+@pytest.mark.parametrize("command", ["calibrate", "replay", "diagnose"])
+def test_too_short_data_is_one_clear_line_not_a_traceback(capsys, tmp_path, command, rows):
+    t = np.datetime64("2020-01-01T00:00:00", "s") + np.arange(rows) * np.timedelta64(60, "s")
+    cols = {c: np.full(rows, 10.0) for c in ("t_in", "rh_in", "t_out", "i_glob", "wind")}
+    path = write_kit_csv(tmp_path / "short.csv", t, cols)
+    code = main([command, "--data", str(path), "--greenhouse", "biskra-prototype",
+                 "--model", "prototype", "--iterations" if command == "calibrate" else "--seed", "1"])
+    err = capsys.readouterr().err
+    assert (code, err.count("\n")) == ((0, 0) if rows == 3 and command != "diagnose" else (2, 1)), err
+    assert code == 0 or "short.csv" in err

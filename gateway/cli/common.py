@@ -45,6 +45,11 @@ def load_inputs(args: argparse.Namespace) -> tuple[Series, Greenhouse, Model]:
         series = load_series(args.data, step=args.step, required=model.requires)
     except KitCsvError as exc:
         raise CliError(str(exc)) from None
+    if len(series) < 2:
+        raise CliError(
+            f"{args.data}: {len(series)} sample(s) on the {args.step:g} s grid; every tool needs "
+            f"at least two (one step to predict)"
+        )
     try:
         check_columns(model, [c for c in series.columns if c in series], args.data)
     except ValueError as exc:

@@ -80,3 +80,12 @@ def test_too_short_data_is_one_clear_line_not_a_traceback(capsys, tmp_path, comm
     err = capsys.readouterr().err
     assert (code, err.count("\n")) == ((0, 0) if rows == 3 and command != "diagnose" else (2, 1)), err
     assert code == 0 or "short.csv" in err
+
+
+def test_required_column_present_but_empty_is_named_as_empty(capsys, tmp_path):
+    t = np.datetime64("2020-01-01T00:00:00", "s") + np.arange(5) * np.timedelta64(60, "s")
+    cols = {c: np.full(5, 10.0) for c in ("t_in", "rh_in", "t_out", "i_glob")} | {"wind": np.full(5, np.nan)}
+    path = write_kit_csv(tmp_path / "nowind.csv", t, cols)
+    assert main(["calibrate", "--data", str(path), "--greenhouse", "biskra-prototype",
+                 "--model", "prototype"]) == 2
+    assert "nowind.csv: column(s) wind hold no value" in capsys.readouterr().err

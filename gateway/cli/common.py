@@ -50,6 +50,12 @@ def load_inputs(args: argparse.Namespace) -> tuple[Series, Greenhouse, Model]:
             f"{args.data}: {len(series)} sample(s) on the {args.step:g} s grid; every tool needs "
             f"at least two (one step to predict)"
         )
+    empty = [c for c in model.requires if c in series.columns and c not in series]
+    if empty:
+        raise CliError(
+            f"{args.data}: column(s) {', '.join(empty)} hold no value on the {args.step:g} s grid "
+            f"(every cell empty or in gaps), and the '{model.name}' model needs them"
+        )
     try:
         check_columns(model, [c for c in series.columns if c in series], args.data)
     except ValueError as exc:

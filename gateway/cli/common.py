@@ -16,7 +16,7 @@ import numpy as np
 from gateway.cli import CliError
 from gateway.greenhouse import Greenhouse, GreenhouseError, list_presets, load_greenhouse
 from gateway.kitcsv import KitCsvError, parse_time
-from gateway.model import MODEL_NAMES, build_model
+from gateway.model import MODEL_NAMES, build_model, check_parameters
 from gateway.model.model import Model, check_columns
 from gateway.series import Series, load_series
 
@@ -38,9 +38,10 @@ def load_inputs(args: argparse.Namespace) -> tuple[Series, Greenhouse, Model]:
     """Greenhouse, model and resampled data, with errors turned into one clear line."""
     try:
         gh = load_greenhouse(args.greenhouse)
+        model = build_model(args.model, gh)
+        check_parameters(model, gh)
     except GreenhouseError as exc:
         raise CliError(str(exc)) from None
-    model = build_model(args.model, gh)
     try:
         series = load_series(args.data, step=args.step, required=model.requires)
     except KitCsvError as exc:

@@ -89,3 +89,12 @@ def test_required_column_present_but_empty_is_named_as_empty(capsys, tmp_path):
     assert main(["calibrate", "--data", str(path), "--greenhouse", "biskra-prototype",
                  "--model", "prototype"]) == 2
     assert "nowind.csv: column(s) wind hold no value" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("step", ["0", "-60", "nan"])
+def test_step_must_be_positive(capsys, step):
+    with pytest.raises(SystemExit) as exc:
+        main(["calibrate", "--data", str(DATASET), "--greenhouse", "biskra-prototype",
+              "--model", "prototype", f"--step={step}"])
+    assert exc.value.code == 2
+    assert "--step: must be a positive number" in capsys.readouterr().err

@@ -30,8 +30,19 @@ def add_data_arguments(p: argparse.ArgumentParser) -> None:
         help=f"greenhouse description: a preset ({', '.join(list_presets())}) or a TOML file",
     )
     p.add_argument("--model", required=True, choices=MODEL_NAMES, help="climate model")
-    p.add_argument("--step", type=float, default=60.0, metavar="S", help="model step [s] (60)")
+    p.add_argument("--step", type=_positive, default=60.0, metavar="S", help="model step [s] (60)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+
+
+def _positive(text: str) -> float:
+    """argparse type: a finite number > 0 (a zero or negative step would be a traceback later)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return value
 
 
 def load_inputs(args: argparse.Namespace) -> tuple[Series, Greenhouse, Model]:

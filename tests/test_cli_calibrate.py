@@ -98,3 +98,12 @@ def test_step_must_be_positive(capsys, step):
               "--model", "prototype", f"--step={step}"])
     assert exc.value.code == 2
     assert "--step: must be a positive number" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("arg", ["--iterations=0", "--population=0", "--iterations=-3"])
+def test_iterations_and_population_must_be_at_least_one(capsys, arg):
+    with pytest.raises(SystemExit) as exc:
+        main(["calibrate", "--data", str(DATASET), "--greenhouse", "biskra-prototype",
+              "--model", "prototype", arg])
+    assert exc.value.code == 2
+    assert "must be at least 1" in capsys.readouterr().err

@@ -11,6 +11,7 @@ from gateway.cli.common import (
     dump_json,
     load_inputs,
     parse_span,
+    positive_int,
     progress_bar,
     write_params_file,
 )
@@ -38,8 +39,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--cost", choices=MODES, default="one_step",
         help="error minimised: one-step-ahead (default) or free-run prediction",
     )
-    p.add_argument("--iterations", type=int, help="iterations (thesis settings by default)")
-    p.add_argument("--population", type=int, help="particles or bats (thesis settings by default)")
+    p.add_argument("--iterations", type=positive_int, help="iterations (thesis settings by default)")
+    p.add_argument("--population", type=positive_int, help="particles or bats (thesis settings by default)")
     p.add_argument("--out", metavar="params.toml", help="write the fitted parameters as TOML")
     p.set_defaults(func=run)
 

@@ -45,6 +45,17 @@ def _positive(text: str) -> float:
     return value
 
 
+def positive_int(text: str) -> int:
+    """argparse type: a whole number >= 1 (0 iterations would "calibrate" to the start point)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {text!r}")
+    return value
+
+
 def load_inputs(args: argparse.Namespace) -> tuple[Series, Greenhouse, Model]:
     """Greenhouse, model and resampled data, with errors turned into one clear line."""
     try:

@@ -97,7 +97,8 @@ def read_kit_csv(path: str | Path, required: Iterable[str] = ()) -> KitData:
     """
     path = Path(path)
     try:
-        handle = path.open(newline="", encoding="utf-8")
+        # utf-8-sig: spreadsheets write UTF-8 with a byte-order mark, which is still UTF-8.
+        handle = path.open(newline="", encoding="utf-8-sig")
     except OSError as exc:
         raise KitCsvError(f"{path}: cannot open: {exc.strerror}") from exc
     with handle:
@@ -109,7 +110,11 @@ def read_kit_csv(path: str | Path, required: Iterable[str] = ()) -> KitData:
         except UnicodeDecodeError as exc:
             raise KitCsvError(f"{path}: not UTF-8 text ({exc.reason})") from None
         if not header or header[0] != "time":
-            raise KitCsvError(f"{path}:1: the first column must be 'time', found {header[:1]}")
+            sep = next((c for c in ";\t|" if header and c in header[0]), None)
+            hint = f" (the separator must be a comma, not {sep!r})" if sep else ""
+            raise KitCsvError(
+                f"{path}:1: the first column must be 'time', found {header[:1]}{hint}"
+            )
         if len(set(header)) != len(header):
             dup = sorted({h for h in header if header.count(h) > 1})
             raise KitCsvError(f"{path}:1: duplicate column(s) {', '.join(dup)}")
@@ -148,6 +153,15 @@ def read_kit_csv(path: str | Path, required: Iterable[str] = ()) -> KitData:
                 values[name].append(_parse_cell(path, line, name, row[i]))
     if not times:
         raise KitCsvError(f"{path}: no data rows")
+    for name in ("rh_in", "rh_out"):
+        rh = np.array(values.get(name, []), dtype=float)
+        rh = rh[np.isfinite(rh)]
+        # Each value is possible alone; ten or more, all within 0-1 %, are a fraction, not %.
+        if len(rh) >= 10 and rh.max() <= 1.0 and rh.max() > 0.0:
+            raise KitCsvError(
+                f"{path}: column {name}: every value is between 0 and 1 (max {rh.max():g}): "
+                f"looks like a fraction, the kit CSV wants % (0-100)"
+            )
     return KitData(
         time=np.array(times, dtype="datetime64[s]"),
         columns={k: np.array(v, dtype=float) for k, v in values.items()},

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gateway.kitcsv import KitData, read_kit_csv
+from gateway.kitcsv import KitCsvError, KitData, read_kit_csv
 
 MAX_GAP_S = 300.0
 """No value is interpolated across a hole longer than this [s] (docs/data-format.md)."""
@@ -52,8 +52,10 @@ def resample(data: KitData, step: float = 60.0, max_gap: float = MAX_GAP_S) -> S
 
     Each grid value is interpolated linearly between the two neighbouring finite samples of its
     column, only when those are at most ``max_gap`` seconds apart (or the grid time falls on a
-    sample); otherwise it stays NaN. Samples finer than the grid are block-averaged first, so
-    30 s sensor noise is not aliased.
+    sample); otherwise it stays NaN. A hole of one grid step is no hole at that grid, so the
+    limit is at least ``step``. Samples finer than the grid are block-averaged first, so 30 s
+    sensor noise is not aliased. Data sampled more coarsely than both limits is an error
+    (every grid value between two samples would be a gap).
     """
     if step <= 0:
         raise ValueError(f"step must be positive, got {step}")
@@ -61,6 +63,13 @@ def resample(data: KitData, step: float = 60.0, max_gap: float = MAX_GAP_S) -> S
     start = np.ceil(t[0] / step) * step
     grid = start + step * np.arange(int(np.floor((t[-1] - start) / step + 1e-9)) + 1)
     native = float(np.median(np.diff(t))) if len(t) > 1 else step
+    max_gap = max(max_gap, step)
+    if native > max_gap:
+        raise KitCsvError(
+            f"{data.source}: samples are {native:g} s apart (median), more than the {max_gap:g} s "
+            f"the tools interpolate across: on a {step:g} s grid almost every value would be a "
+            f"gap; use a model step of at least {native:g} s (--step {native:g})"
+        )
     columns = {}
     for name, values in data.columns.items():
         ok = np.isfinite(values)

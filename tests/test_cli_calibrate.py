@@ -111,3 +111,43 @@ def test_progress_bar_on_a_terminal_and_none_when_piped():
     code, out, err = _run_with_stderr(False)
     assert code == 0 and json.loads(out)["algorithm"] == "rsba"
     assert "/600" not in err and "\x1b[" not in err  # no bar, no escape codes in a pipe
+
+
+@pytest.mark.parametrize("rows", [1, 3])
+@pytest.mark.parametrize("command", ["calibrate", "replay", "diagnose"])
+def test_too_short_data_is_one_clear_line_not_a_traceback(capsys, tmp_path, command, rows):
+    t = np.datetime64("2020-01-01T00:00:00", "s") + np.arange(rows) * np.timedelta64(60, "s")
+    cols = {c: np.full(rows, 10.0) for c in ("t_in", "rh_in", "t_out", "i_glob", "wind")}
+    path = write_kit_csv(tmp_path / "short.csv", t, cols)
+    code = main([command, "--data", str(path), "--greenhouse", "biskra-prototype",
+                 "--model", "prototype", "--iterations" if command == "calibrate" else "--seed", "1"])
+    err = capsys.readouterr().err
+    assert (code, err.count("\n")) == ((0, 0) if rows == 3 and command != "diagnose" else (2, 1)), err
+    assert code == 0 or "short.csv" in err
+
+
+def test_required_column_present_but_empty_is_named_as_empty(capsys, tmp_path):
+    t = np.datetime64("2020-01-01T00:00:00", "s") + np.arange(5) * np.timedelta64(60, "s")
+    cols = {c: np.full(5, 10.0) for c in ("t_in", "rh_in", "t_out", "i_glob")} | {"wind": np.full(5, np.nan)}
+    path = write_kit_csv(tmp_path / "nowind.csv", t, cols)
+    assert main(["calibrate", "--data", str(path), "--greenhouse", "biskra-prototype",
+                 "--model", "prototype"]) == 2
+    assert "nowind.csv: column(s) wind hold no value" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("step", ["0", "-60", "nan"])
+def test_step_must_be_positive(capsys, step):
+    with pytest.raises(SystemExit) as exc:
+        main(["calibrate", "--data", str(DATASET), "--greenhouse", "biskra-prototype",
+              "--model", "prototype", f"--step={step}"])
+    assert exc.value.code == 2
+    assert "--step: must be a positive number" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("arg", ["--iterations=0", "--population=0", "--iterations=-3"])
+def test_iterations_and_population_must_be_at_least_one(capsys, arg):
+    with pytest.raises(SystemExit) as exc:
+        main(["calibrate", "--data", str(DATASET), "--greenhouse", "biskra-prototype",
+              "--model", "prototype", arg])
+    assert exc.value.code == 2
+    assert "must be at least 1" in capsys.readouterr().err

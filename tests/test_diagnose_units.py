@@ -260,3 +260,10 @@ def test_humidity_evidence_sees_more_air_exchange_only():
     # graceful fallback: no inside RH, or τ with too few night hours after it → no evidence
     assert exchange_step_bic(_humid(0.25, rh_in=False), seg, 2 * 86400.0)[0] == 0.0
     assert exchange_step_bic(_humid(0.25), seg, 3.9 * 86400.0)[0] == 0.0
+
+
+def test_signature_of_a_short_held_out_part_says_no_nan():
+    an = {"mean": 0.1, "mae": 0.3, "correlations": {"radiation": 0.5}, "hour_profile": np.full(24, np.nan),
+          "acf_1h": 0.7, "acf_1d": np.nan, "change_points": {}}
+    text = res.describe(an, np.array(["2020-01-01T00:00"], dtype="datetime64[s]"), 0)
+    assert "nan" not in text and "autocorrelation 0.70 at 1 h" in text

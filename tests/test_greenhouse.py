@@ -53,3 +53,25 @@ def test_bad_descriptions_name_the_key(tmp_path, text, match):
 def test_unknown_preset_lists_the_presets():
     with pytest.raises(GreenhouseError, match="biskra-prototype"):
         load_greenhouse("atlantis")
+
+
+@pytest.mark.parametrize(
+    ("table", "match"),
+    [
+        ("[parameters.c_sollar]\nvalue = 1e-4\n", "unknown parameter 'parameters.c_sollar'"),
+        ("[parameters.c_solar]\nvalue = 5e-4\nbounds = [0.0, 2e-4]\n",
+         r"'parameters.c_solar.value' = 0.0005 is outside its bounds \[0, 0.0002\]"),
+    ],
+)
+def test_parameter_typo_or_value_outside_bounds_is_an_error(tmp_path, table, match):
+    from gateway.model import check_parameters
+
+    path = tmp_path / "mine.toml"
+    path.write_text("[geometry]\nfloor_area = 1.0\nvolume = 1.0\n" + table, encoding="utf-8")
+    gh = load_greenhouse(path)
+    with pytest.raises(GreenhouseError, match=match):
+        check_parameters(build_model("prototype", gh), gh)
+    # A parameter of the other model is no typo: one file may serve both models.
+    path.write_text("[geometry]\nfloor_area = 1.0\nvolume = 1.0\n[parameters.c_asw]\nvalue = 0.5\n")
+    gh = load_greenhouse(path)
+    check_parameters(build_model("prototype", gh), gh)

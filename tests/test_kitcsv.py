@@ -87,3 +87,35 @@ def test_resample_interpolates_short_gaps_and_averages_fast_samples(tmp_path):
     data = read_kit_csv(write(tmp_path, rows, name="fast.csv"))
     s = resample(data, 60)
     assert np.allclose(s["t_in"][1:-1], 20.5)
+
+
+def test_data_coarser_than_the_gap_limit_is_an_error_not_an_empty_series(tmp_path):
+    # 10-minute data on the default 1-minute grid would be all gaps: say so and name the step.
+    rows = [(h, m) for h in range(3) for m in range(0, 60, 10)]
+    body = "".join(f"2020-03-27T{h:02d}:{m:02d}:00Z,20,50,10,0,1\n" for h, m in rows)
+    with pytest.raises(KitCsvError, match=r"d\.csv: samples are 600 s apart.*--step 600"):
+        load_series(write(tmp_path, body), step=60)
+    # At its own step it reads, also when the clock is not aligned to the grid.
+    body = "".join(f"2020-03-27T{h:02d}:{m + 5:02d}:07Z,{20 + h},50,10,0,1\n" for h, m in rows)
+    s = load_series(write(tmp_path, body, name="u.csv"), step=600)
+    assert len(s) == 17 and np.isfinite(s["t_in"]).all()
+
+
+def test_byte_order_mark_is_accepted(tmp_path):
+    path = tmp_path / "excel.csv"
+    path.write_text("\ufeff" + HEADER + "2020-03-27T00:00:00Z,20,50,10,0,1\n", encoding="utf-8")
+    assert read_kit_csv(path).columns["t_in"][0] == 20.0
+
+
+def test_semicolon_separator_is_named(tmp_path):
+    path = write(tmp_path, "2020-03-27T00:00:00Z;20;50;10;0;1\n", header=HEADER.replace(",", ";"))
+    with pytest.raises(KitCsvError, match=r"d\.csv:1: .*separator must be a comma, not ';'"):
+        read_kit_csv(path)
+
+
+def test_relative_humidity_as_a_fraction_is_an_error(tmp_path):
+    body = "".join(f"2020-03-27T00:{m:02d}:00Z,20,0.{50 + m},10,0,1\n" for m in range(12))
+    with pytest.raises(KitCsvError, match=r"d\.csv: column rh_in: .*fraction"):
+        read_kit_csv(write(tmp_path, body))
+    dry = "".join(f"2020-03-27T00:{m:02d}:00Z,20,{0.5 + m},10,0,1\n" for m in range(12))
+    assert read_kit_csv(write(tmp_path, dry, name="dry.csv")).columns["rh_in"][0] == 0.5

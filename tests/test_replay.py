@@ -118,7 +118,8 @@ def test_cli_human_output_without_calibration(files, capsys):
     "extra, message",
     [(["--set", "t_in.windw=3"], "unknown key 'windw'"), (["--set", "t_in.window"], "OUTPUT.KEY=NUMBER"),
      (["--set", "rh_in.window=3"], "no such estimation group"), (["--warmup", "1e6"], "leaves no sample"),
-     (["--params", "/nonexistent.toml"], "cannot read parameters")],
+     (["--params", "/nonexistent.toml"], "cannot read parameters"),
+     (["--warmup", "nan"], "--warmup must be")],
 )
 def test_cli_errors_are_one_clear_line(files, capsys, extra, message):
     _, data, _ = files

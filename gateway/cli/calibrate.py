@@ -5,11 +5,13 @@ from __future__ import annotations
 import argparse
 import sys
 
+from gateway.cli import CliError
 from gateway.cli.common import (
     add_data_arguments,
     dump_json,
     load_inputs,
     parse_span,
+    positive_int,
     progress_bar,
     write_params_file,
 )
@@ -37,8 +39,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--cost", choices=MODES, default="one_step",
         help="error minimised: one-step-ahead (default) or free-run prediction",
     )
-    p.add_argument("--iterations", type=int, help="iterations (thesis settings by default)")
-    p.add_argument("--population", type=int, help="particles or bats (thesis settings by default)")
+    p.add_argument("--iterations", type=positive_int, help="iterations (thesis settings by default)")
+    p.add_argument("--population", type=positive_int, help="particles or bats (thesis settings by default)")
     p.add_argument("--out", metavar="params.toml", help="write the fitted parameters as TOML")
     p.set_defaults(func=run)
 
@@ -49,10 +51,13 @@ def run(args: argparse.Namespace) -> int:
     algorithm = make_algorithm(args.algorithm, model.name, args.iterations, args.population)
     stages = 2 if model.radiation is not None and "i_in" in series else 1
     with progress_bar(f"{args.algorithm} {model.name}", stages * algorithm.iterations, True) as bar:
-        result = calibrate(
-            model, series, gh, algorithm, span=span, mode=args.cost, seed=args.seed,
-            progress=lambda stage, it, cost: bar(description=f"{stage}", info=f"MSE {cost:.3g}"),
-        )
+        try:
+            result = calibrate(
+                model, series, gh, algorithm, span=span, mode=args.cost, seed=args.seed,
+                progress=lambda stage, it, cost: bar(description=f"{stage}", info=f"MSE {cost:.3g}"),
+            )
+        except ValueError as exc:  # e.g. no calibration window without gaps
+            raise CliError(f"{args.data}: {exc}") from None
     a, b = span
     validation = None
     rest = [(0, a), (b, len(series))]

@@ -16,7 +16,7 @@ import numpy as np
 from gateway.cli import CliError
 from gateway.greenhouse import Greenhouse, GreenhouseError, list_presets, load_greenhouse
 from gateway.kitcsv import KitCsvError, parse_time
-from gateway.model import MODEL_NAMES, build_model
+from gateway.model import MODEL_NAMES, build_model, check_parameters
 from gateway.model.model import Model, check_columns
 from gateway.series import Series, load_series
 
@@ -30,21 +30,55 @@ def add_data_arguments(p: argparse.ArgumentParser) -> None:
         help=f"greenhouse description: a preset ({', '.join(list_presets())}) or a TOML file",
     )
     p.add_argument("--model", required=True, choices=MODEL_NAMES, help="climate model")
-    p.add_argument("--step", type=float, default=60.0, metavar="S", help="model step [s] (60)")
+    p.add_argument("--step", type=_positive, default=60.0, metavar="S", help="model step [s] (60)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+
+
+def _positive(text: str) -> float:
+    """argparse type: a finite number > 0 (a zero or negative step would be a traceback later)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return value
+
+
+def positive_int(text: str) -> int:
+    """argparse type: a whole number >= 1 (0 iterations would "calibrate" to the start point)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {text!r}")
+    return value
 
 
 def load_inputs(args: argparse.Namespace) -> tuple[Series, Greenhouse, Model]:
     """Greenhouse, model and resampled data, with errors turned into one clear line."""
     try:
         gh = load_greenhouse(args.greenhouse)
+        model = build_model(args.model, gh)
+        check_parameters(model, gh)
     except GreenhouseError as exc:
         raise CliError(str(exc)) from None
-    model = build_model(args.model, gh)
     try:
         series = load_series(args.data, step=args.step, required=model.requires)
     except KitCsvError as exc:
         raise CliError(str(exc)) from None
+    if len(series) < 2:
+        raise CliError(
+            f"{args.data}: {len(series)} sample(s) on the {args.step:g} s grid; every tool needs "
+            f"at least two (one step to predict)"
+        )
+    empty = [c for c in model.requires if c in series.columns and c not in series]
+    if empty:
+        raise CliError(
+            f"{args.data}: column(s) {', '.join(empty)} hold no value on the {args.step:g} s grid "
+            f"(every cell empty or in gaps), and the '{model.name}' model needs them"
+        )
     try:
         check_columns(model, [c for c in series.columns if c in series], args.data)
     except ValueError as exc:

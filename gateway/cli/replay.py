@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
         settings = online_settings(model, gh, _overrides(args.set))
     except ValueError as exc:
         raise CliError(str(exc)) from None
-    if args.warmup < 0:
+    if not args.warmup >= 0:  # also NaN
         raise CliError("--warmup must be >= 0 minutes")
     warmup = int(round(args.warmup * 60.0 / series.step))
     if warmup >= len(series) - 2:

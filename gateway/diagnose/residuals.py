@@ -157,7 +157,10 @@ def describe(an: dict, time: np.ndarray, a: int) -> str:
     if np.isfinite(prof).any():
         h = int(np.nanargmax(np.abs(prof)))
         parts.append(f"largest hour-of-day mean {prof[h]:+.2f} K at {h:02d} h UTC")
-    parts.append(f"autocorrelation {an['acf_1h']:.2f} at 1 h, {an['acf_1d']:.2f} at 1 d")
+    # a lag longer than the held-out part has no autocorrelation: say nothing, not "nan"
+    acf = [f"{an[k]:.2f} at {lag}" for k, lag in (("acf_1h", "1 h"), ("acf_1d", "1 d")) if np.isfinite(an[k])]
+    if acf:
+        parts.append("autocorrelation " + ", ".join(acf))
     shifts = [(k, v) for k, v in an["change_points"].items() if v["t"] >= CHANGE_T]
     for k, v in shifts:
         when = str(time[min(max(v["row"] - a, 0), len(time) - 1)])[:16].replace("T", " ")

@@ -250,16 +250,16 @@ def diagnose(
         raise ValueError(f"split must be within [0.1, 0.9], got {split}")
     k = max(int(FIT_STEP_S // series.step), 1)
     coarse = coarsen(series, k)
-    x = drivers(coarse, gh)
     n, dt = len(coarse), coarse.step
     s = int(round(split * n))
     horizon = max(int(round(HORIZON_S / dt)), 2)
-    if s < 3 * horizon or n - s < 2 * horizon:
+    if s < 3 * horizon or n - s < 2 * horizon:  # before drivers(): it needs a first row
         raise ValueError(
             f"{series.source}: {len(series)} samples of {series.step:g} s are too few to "
             f"diagnose: the calibration part needs at least {3 * HORIZON_S / 3600:g} h and "
             f"the held-out part {2 * HORIZON_S / 3600:g} h"
         )
+    x = drivers(coarse, gh)
     duration = float(x["_index"][-1])
     blocks = heldout_blocks(s, n, dt)
     folds = [[b for i, b in enumerate(blocks) if i % 2 == j] for j in (0, 1)]

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from gateway.greenhouse import Greenhouse
+from gateway.greenhouse import Greenhouse, GreenhouseError
 from gateway.model.model import Model
 
 MODEL_NAMES = ("prototype", "almeria")
@@ -19,3 +19,26 @@ def build_model(name: str, gh: Greenhouse) -> Model:
 
         return build_almeria(gh)
     raise ValueError(f"unknown model '{name}' (choose from {', '.join(MODEL_NAMES)})")
+
+
+def check_parameters(model: Model, gh: Greenhouse) -> None:
+    """Raise GreenhouseError for a ``[parameters.<name>]`` that no model knows (a typo would be
+    silently ignored) or a ``value`` outside its bounds (it would be silently clipped).
+
+    A parameter of the other model is allowed: one greenhouse file may serve both models.
+    """
+    known = {n for m in MODEL_NAMES for n in build_model(m, gh).names}
+    for name in gh.parameters:
+        if name not in known:
+            raise GreenhouseError(
+                f"{gh.source}: unknown parameter 'parameters.{name}' (the {model.name} model has "
+                f"{', '.join(model.names)})"
+            )
+    lo, hi = model.bounds(gh)
+    for j, name in enumerate(model.names):
+        value = gh.parameters.get(name, {}).get("value")
+        if value is not None and not lo[j] <= value <= hi[j]:
+            raise GreenhouseError(
+                f"{gh.source}: 'parameters.{name}.value' = {value:g} is outside its bounds "
+                f"[{lo[j]:g}, {hi[j]:g}]"
+            )

@@ -144,9 +144,27 @@ def test_faulty_samples_are_dropped_counted_and_never_leak_nan():
     assert f["t_in:missing"] == 3 and f["t_in:out_of_range"] == 1 and f["rh_in:out_of_range"] == 1
     assert f["t_out:missing"] == 2 and f["wind:out_of_range"] == 1
     assert f["t_in:stuck"] == 11  # from the STUCK_SAMPLES-th repeat on
+    assert f["t_in:stuck_struck_out"] == STUCK_SAMPLES - 2  # the repeats accepted before
     assert est.counters.faulty_samples == 3 + 1 + 1 + 2 + 11 + 1
     assert est.counters.skipped["t_in"] > 0  # windows touching a dropped value are not fitted
     assert est.counters.samples == len(series)
+
+
+def test_a_stuck_run_is_struck_out_and_what_it_taught_is_rolled_back():
+    """The repeats accepted before the run is recognised must not steer the dead reckoning
+    through the fault: the parameters return to those held before the first repeat."""
+    series = model_data(ALMERIA, GH, hours=3, start_hour=9)
+    first = 60
+    series.columns["t_in"][first : first + STUCK_SAMPLES + 20] = series.columns["t_in"][first]
+    est = OnlineEstimator(ALMERIA, GH, ALMERIA.defaults(GH), online_settings(ALMERIA, GH, FAST))
+    _, theta = run(est, series)
+    air = [ALMERIA.index(n) for n in ALMERIA.names if n != "c_tsw"]  # i_in is not stuck
+    assert not np.array_equal(theta[first, air], theta[first + STUCK_SAMPLES - 2, air])  # it learnt
+    recognised = first + STUCK_SAMPLES - 1
+    np.testing.assert_array_equal(theta[recognised, air], theta[first, air])  # and unlearnt
+    np.testing.assert_array_equal(theta[recognised + 10, air], theta[first, air])  # held after
+    # no later window re-uses a struck-out repeat
+    assert est.counters.faults["t_in:stuck_struck_out"] == STUCK_SAMPLES - 2
 
 
 def test_missing_inside_temperature_is_bridged_by_the_previous_prediction():

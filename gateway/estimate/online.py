@@ -20,6 +20,7 @@ prediction that cannot be made is ``None``.
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
@@ -39,7 +40,9 @@ give the error of 100 (docs/online-estimator.md, "Iterations") at half the time 
 
 STUCK_SAMPLES = 30
 """An inside temperature repeated bit for bit this many samples in a row (30 min at 1 min) is a
-stuck sensor: real air temperature, read to 0.01 °C, always moves within half an hour."""
+stuck sensor: real air temperature, read to 0.01 °C, always moves within half an hour. When the
+run is recognised, the repeats already accepted are struck out and the parameters fitted to them
+are rolled back (``OnlineEstimator._strike_stuck_run``)."""
 
 MIN_RADIATION_PAIRS = 10
 """The radiation sub-model is only re-estimated with at least this many sunlit samples."""
@@ -184,6 +187,9 @@ class OnlineEstimator:
         self._n = 0  # rows stored in the buffer
         self._stuck_value = np.nan
         self._stuck_run = 0
+        # Parameters at the start of each of the last STUCK_SAMPLES updates, to undo what a
+        # stuck run taught the estimator before it was recognised.
+        self._theta_before: deque[np.ndarray] = deque(maxlen=STUCK_SAMPLES)
         self._last_prediction: float | None = None
         self.counters = Counters()
         self.last_row: dict[str, float] = {}
@@ -194,7 +200,10 @@ class OnlineEstimator:
         """Take the measured sample at t (kit column name → value), adapt, predict t + 1."""
         self.counters.samples += 1
         step = self.counters.samples - 1  # index of this sample since start
+        self._theta_before.append(self.theta.copy())
         values, faults = self._check(sample)
+        if self._stuck_run == STUCK_SAMPLES:
+            self._strike_stuck_run()
         if faults:
             self.counters.faulty_samples += 1
         if not np.isfinite(values.get("t_in", np.nan)) and self._last_prediction is not None:
@@ -259,6 +268,19 @@ class OnlineEstimator:
                 key = f"{name}:missing"
                 self.counters.faults[key] = self.counters.faults.get(key, 0) + 1
         return values, faults
+
+    def _strike_stuck_run(self) -> None:
+        """A stuck run was just recognised: its repeats 2 … STUCK_SAMPLES − 1 were accepted as
+        measurements. Strike them from the buffer (no later window uses them) and restore the
+        parameters held before the first repeat, so the flat readings do not steer the model
+        while it dead-reckons through the fault (the first reading of the run was a real one)."""
+        repeats = STUCK_SAMPLES - 2
+        if len(self._theta_before) >= repeats + 1:
+            self.theta[:] = self._theta_before[-(repeats + 1)]
+        if "t_in" in self._buf:
+            self._buf["t_in"][max(self._n - repeats, 0) : self._n] = np.nan
+        key = "t_in:stuck_struck_out"  # counted apart: these samples were accepted on arrival
+        self.counters.faults[key] = self.counters.faults.get(key, 0) + repeats
 
     def _derive(self, values: dict[str, float]) -> dict[str, float]:
         """The same derived drivers as a whole-series replay (``prepare_drivers``), for one row."""

@@ -362,12 +362,14 @@ def structure(base: Model, gh: Greenhouse, store: bool) -> Structured:
 
 class SensorBias(SensorTerm):
     """A constant calibration offset of the inside sensor: ``T_meas = T + b`` (electronic: the
-    RH channel refers to the true temperature, so the vapour pressure is recomputed)."""
+    RH channel refers to the true temperature, so the vapour pressure is recomputed). Bounded by
+    what two low-cost sensors can disagree by (±0.5 K each): a wider offset trades against the
+    sky loss and lets an effect move the night-time level it should not."""
 
     name = "e_sensor_bias"
     electronic = True
     description = "constant inside-sensor offset"
-    parameters = (Parameter("b_sensor", "K", -2.0, 2.0, 0.0, None, ALWAYS,
+    parameters = (Parameter("b_sensor", "K", -1.0, 1.0, 0.0, None, ALWAYS,
                             "constant offset of the inside temperature reading"),)
 
     def offset(self, p, x, t: Index) -> np.ndarray:

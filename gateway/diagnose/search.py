@@ -6,7 +6,8 @@ Protocol (docs/effects.md, "How the diagnosis decides"):
    reported metrics are on the data's own grid.
 2. Structural calibration of the base on the first ``split`` of the data (C) only
    (structure.py): the thesis model + an effective heat capacity (+ a long-wave sky loss where it
-   has none), then a heat store and a constant sensor offset, each kept only if BIC on C falls.
+   has none), then a radiative sky loss (where the model has only its own, wind-scaled one), a
+   heat store and a constant sensor offset, each kept only if BIC on C falls.
    RSBA explores, Levenberg–Marquardt converges, both on multiple-shooting free runs.
 3. The rest (H) is cut into blocks (one day, or a quarter of H when shorter) dealt into two
    folds. An effect that starts inside H can only be fitted on data that contains it, so each
@@ -48,7 +49,14 @@ from gateway.diagnose.fit import (
     window_starts,
 )
 from gateway.diagnose.humidity import exchange_step_bic
-from gateway.diagnose.structure import STORE, SensorBias, Structured, structure
+from gateway.diagnose.structure import (
+    STORE,
+    SensorBias,
+    SkyLoss,
+    Structured,
+    model_unit,
+    structure,
+)
 from gateway.greenhouse import Greenhouse
 from gateway.metrics import metrics
 from gateway.model.model import Model
@@ -206,6 +214,12 @@ def calibrate_base(base: Model, gh: Greenhouse, x: dict, dt: float, s: int, hori
         ("heat store", lambda m: replace(m, store=True, extra=m.extra + STORE)),
         ("sensor offset", lambda m: m.with_sensors(SensorBias())),
     ]
+    if not any(t.name == SkyLoss.name for t in model.terms):
+        # The model has its own sky term (the prototype's III.21 scales it by the outside
+        # convection coefficient h_o, i.e. by the wind): try the plain radiative form too,
+        # before the offset, which would otherwise take up the night-time deficit as a
+        # constant reading error (docs/effects.md, "Base structure").
+        options.insert(0, ("long-wave sky loss", lambda m: m.with_terms(SkyLoss(model_unit(m, gh)))))
     for label, build in options:
         new = build(model)
         say(f"calibrating the base model: trying a {label}")

@@ -17,7 +17,10 @@ a slightly richer *base* on the calibration part first (docs/effects.md, "Base s
   It is a second state. T_s is never measured, so wherever a run starts from a measured air
   temperature the store starts from an observer: the same store equation driven by the
   *measured* air temperature before that time (causal: it uses no later reading);
-- ``c_lw_sky`` [W m-2 K-1]: long-wave loss to the sky (as III.21) for models without one.
+- ``c_lw_sky`` [W m-2 K-1]: long-wave loss to the sky (as III.21) for models without one;
+  for models with their own (the prototype's III.21 scales it by the wind-driven h_o) the search
+  tries it as an optional part (search.calibrate_base): a night-time deficit carried by a flux
+  shrinks when the air exchange grows, one carried by a sensor offset does not.
 
 Effects are then *changes* from a time τ on top of this base: a thermal-mass effect is the
 capacity factor changing, not the capacity being wrong from the start. Relative parameter
@@ -359,12 +362,14 @@ def structure(base: Model, gh: Greenhouse, store: bool) -> Structured:
 
 class SensorBias(SensorTerm):
     """A constant calibration offset of the inside sensor: ``T_meas = T + b`` (electronic: the
-    RH channel refers to the true temperature, so the vapour pressure is recomputed)."""
+    RH channel refers to the true temperature, so the vapour pressure is recomputed). Bounded by
+    what two low-cost sensors can disagree by (±0.5 K each): a wider offset trades against the
+    sky loss and lets an effect move the night-time level it should not."""
 
     name = "e_sensor_bias"
     electronic = True
     description = "constant inside-sensor offset"
-    parameters = (Parameter("b_sensor", "K", -2.0, 2.0, 0.0, None, ALWAYS,
+    parameters = (Parameter("b_sensor", "K", -1.0, 1.0, 0.0, None, ALWAYS,
                             "constant offset of the inside temperature reading"),)
 
     def offset(self, p, x, t: Index) -> np.ndarray:

@@ -130,6 +130,8 @@ def read_kit_csv(path: str | Path, required: Iterable[str] = ()) -> KitData:
         times: list[np.datetime64] = []
         values: dict[str, list[float]] = {h: [] for _, h in known}
         previous = None
+        previous_cells: list[str] = []
+        repeats: list[int] = []  # lines of exact repeats of the row before (logger re-sends)
         for row in reader:
             line = reader.line_num
             if not row or (len(row) == 1 and not row[0].strip()):
@@ -142,17 +144,32 @@ def read_kit_csv(path: str | Path, required: Iterable[str] = ()) -> KitData:
                 stamp = parse_time(row[0])
             except ValueError as exc:
                 raise KitCsvError(f"{path}:{line}: column time: bad time {row[0]!r}: {exc}") from None
-            if previous is not None and stamp <= previous:
+            cells = [row[i].strip() for i, _ in known]
+            if stamp == previous and cells == previous_cells:
+                repeats.append(line)  # the same sample twice: keeping one loses nothing
+                continue
+            if stamp == previous:
+                raise KitCsvError(
+                    f"{path}:{line}: column time: {row[0]} repeats the previous row's time with "
+                    f"other values; which one is the measurement?"
+                )
+            if previous is not None and stamp < previous:
                 raise KitCsvError(
                     f"{path}:{line}: column time: {row[0]} is not after the previous row "
                     f"({previous}Z); rows must be in time order"
                 )
-            previous = stamp
+            previous, previous_cells = stamp, cells
             times.append(stamp)
             for i, name in known:
                 values[name].append(_parse_cell(path, line, name, row[i]))
     if not times:
         raise KitCsvError(f"{path}: no data rows")
+    if repeats:
+        notices.append(
+            f"{path}: skipped {len(repeats)} exact repeat(s) of the row before "
+            f"(line(s) {', '.join(map(str, repeats[:5]))}{' …' if len(repeats) > 5 else ''})"
+        )
+        log.warning(notices[-1])
     for name in ("rh_in", "rh_out"):
         rh = np.array(values.get(name, []), dtype=float)
         rh = rh[np.isfinite(rh)]

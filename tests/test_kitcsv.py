@@ -41,6 +41,20 @@ def test_time_going_backwards_is_an_error(tmp_path):
         read_kit_csv(write(tmp_path, body))
 
 
+def test_exact_repeated_rows_are_skipped_with_a_notice(tmp_path):
+    row = "2020-03-27T00:01:00Z,20,50,10,0,1\n"
+    body = "2020-03-27T00:00:00Z,19,50,10,0,1\n" + row + row + "2020-03-27T00:02:00Z,21,50,10,0,1\n"
+    data = read_kit_csv(write(tmp_path, body))
+    np.testing.assert_array_equal(data.columns["t_in"], [19, 20, 21])
+    assert any("skipped 1 exact repeat" in n and "line(s) 4" in n for n in data.notices)
+
+
+def test_repeated_time_with_other_values_is_an_error(tmp_path):
+    body = "2020-03-27T00:00:00Z,20,50,10,0,1\n2020-03-27T00:00:00Z,20.5,50,10,0,1\n"
+    with pytest.raises(KitCsvError, match=r"d\.csv:3: column time: .*repeats .* other values"):
+        read_kit_csv(write(tmp_path, body))
+
+
 def test_time_without_offset_is_an_error(tmp_path):
     with pytest.raises(KitCsvError, match=r":2: column time: .*UTC offset"):
         read_kit_csv(write(tmp_path, "2020-03-27T00:00:00,20,50,10,0,1\n"))

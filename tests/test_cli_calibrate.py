@@ -25,6 +25,10 @@ def test_calibrate_json_report_and_params_file(capsys, tmp_path):
         for mode in ("one_step", "free_run"):
             assert METRIC_KEYS <= set(report["metrics"][part][mode])
     assert report["metrics"]["validation"]["one_step"]["n"] == 1439  # the second day
+    for part in ("calibration", "validation"):  # the naive baseline stands beside the model
+        m = report["metrics"][part]
+        assert m["persistence"]["n"] == m["one_step"]["n"]
+        assert m["one_step"]["mae"] < m["persistence"]["mae"]  # noise-free data, fitted model
     assert report["seconds"] > 0
     assert "[params]" in out.read_text() and 'model = "prototype"' in out.read_text()
 

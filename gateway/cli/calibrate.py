@@ -102,8 +102,8 @@ def _print_human(report: dict) -> None:
         if m is None:
             out.write(f"{part}: no data\n")
             continue
-        for mode in ("one_step", "free_run"):
-            x = m[mode]
+        for mode in ("one_step", "free_run", "persistence"):
+            x = m.get(mode)
             if x:
-                out.write(f"{part:>11} {mode:<8} MAE {x['mae']:.3f} °C  RMSE {x['rmse']:.3f}  "
+                out.write(f"{part:>11} {mode:<11} MAE {x['mae']:.3f} °C  RMSE {x['rmse']:.3f}  "
                           f"MaxAE {x['maxae']:.3f}  R² {x['r2']:.4f}  EF {x['ef']:.4f}\n")

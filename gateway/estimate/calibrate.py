@@ -102,7 +102,9 @@ def _stage(progress, name):
 def evaluate(
     model: Model, theta: np.ndarray, series: Series, gh: Greenhouse, span: tuple[int, int]
 ) -> dict[str, dict[str, float] | None] | None:
-    """One-step and free-run metrics of ``theta`` on rows ``span``; None for an empty span."""
+    """One-step and free-run metrics of ``theta`` on rows ``span``, and beside them the naive
+    baseline ``persistence`` (T_in[t + 1] = T_in[t], on the samples the one-step prediction
+    covers); None for an empty span."""
     a, b = span
     if b - a < 2:
         return None
@@ -112,7 +114,9 @@ def evaluate(
     one = model.one_step(theta2, x, gh, series.step)[0]
     free = model.free_run(theta2, x, gh, series.step)[0]
     meas = x["t_in"]
+    held = np.where(np.isfinite(one[1:]), meas[:-1], np.nan)
     return {
         "one_step": metrics(meas[1:], one[1:]),
         "free_run": metrics(meas[1:], free[1:]),
+        "persistence": metrics(meas[1:], held),
     }

@@ -85,6 +85,8 @@ def test_settings_come_from_the_model_then_the_toml_then_overrides():
     proto = build_model("prototype", load_greenhouse("biskra-prototype"))
     with pytest.raises(ValueError, match="no such estimation group"):
         online_settings(proto, None, {"i_in": {"window": 5}})
+    with pytest.raises(ValueError, match=r"online\.t_in\.window must be a whole number, got 2\.7"):
+        online_settings(ALMERIA, None, {"t_in": {"window": 2.7}})
 
 
 @pytest.mark.parametrize(

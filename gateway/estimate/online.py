@@ -90,7 +90,10 @@ def online_settings(
                 raise ValueError(f"online.{g.output}: unknown setting(s) {', '.join(bad)}")
             for key in ("window", "every", "iterations", "bats"):
                 if key in table:
-                    table[key] = int(table[key])
+                    value = float(table[key])
+                    if value != int(value):  # 2.7 samples is a typo, not 2
+                        raise ValueError(f"online.{g.output}.{key} must be a whole number, got {table[key]}")
+                    table[key] = int(value)
                     if table[key] < (2 if key == "bats" else 1):
                         raise ValueError(f"online.{g.output}.{key} must be positive, got {table[key]}")
             if "prior" in table:

@@ -1,0 +1,70 @@
+"""``python -m gateway export``: a device's stored minutes as a kit CSV for the other tools."""
+
+from __future__ import annotations
+
+import argparse
+import sqlite3
+import sys
+from pathlib import Path
+
+from gateway.cli import CliError
+from gateway.kitcsv import parse_time
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "export",
+        help="write a device's stored minute aggregates as a kit CSV (for calibrate, replay, ...)",
+        description="Write the minute aggregates the ingest service stored for one device as a "
+        "kit CSV (docs/data-format.md). Values the QC flagged as missing, spikes or a stuck "
+        "sensor are left empty and counted; minutes never received stay out (a gap).",
+        epilog="example: python -m gateway export --db serra.db --from 2026-03-01T00:00Z "
+        "--out march.csv && python -m gateway diagnose --data march.csv --greenhouse "
+        "biskra-prototype --model prototype",
+    )
+    p.add_argument("--db", required=True, type=Path, help="the ingest service's SQLite store")
+    p.add_argument("--out", required=True, type=Path, metavar="FILE.csv", help="kit CSV to write")
+    p.add_argument("--device", type=int, help="device id (default: the only one in the store)")
+    p.add_argument("--from", dest="start", metavar="ISO", help="first minute, e.g. 2026-03-01T00:00Z")
+    p.add_argument("--to", dest="end", metavar="ISO", help="end of the span (excluded)")
+    p.add_argument("--json", action="store_true", help="print what was written as one JSON object")
+    p.set_defaults(func=run)
+
+
+def _when(text: str | None, flag: str) -> float | None:
+    if text is None:
+        return None
+    try:
+        return float(parse_time(text).astype("int64"))
+    except ValueError as exc:
+        raise CliError(f"{flag}: bad time {text!r}: {exc}") from None
+
+
+def run(args: argparse.Namespace) -> int:
+    from gateway.cli.common import dump_json
+    from gateway.store.db import open_db
+    from gateway.store.export import ExportError, export_kit_csv
+
+    start, end = _when(args.start, "--from"), _when(args.end, "--to")
+    if not args.db.exists():  # opening would create an empty store
+        raise CliError(f"{args.db}: no such store")
+    try:
+        conn = open_db(args.db)
+    except (sqlite3.Error, RuntimeError) as exc:
+        raise CliError(f"{args.db}: cannot open the store: {exc}") from None
+    try:
+        done = export_kit_csv(conn, args.out, args.device, start, end)
+    except ExportError as exc:
+        raise CliError(f"{args.db}: {exc}") from None
+    finally:
+        conn.close()
+    if args.json:
+        dump_json({"device": done.device_id, "rows": done.rows, "start": done.start,
+                   "end": done.end, "dropped": done.dropped, "aggregated": done.aggregated,
+                   "out": str(args.out)})
+        return 0
+    print(f"wrote {args.out}: device {done.device_id}, {done.rows} minutes, {done.start} → {done.end}")
+    for name, reasons in done.dropped.items():
+        text = ", ".join(f"{n} {why}" for why, n in reasons.items())
+        print(f"  {name}: left empty: {text}", file=sys.stderr)
+    return 0

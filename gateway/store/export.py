@@ -1,0 +1,98 @@
+"""Store → kit CSV: one device's minute aggregates, as the tools read them (docs/data-format.md).
+
+Values the minute QC flagged as missing, a spike or a stuck sensor become empty cells (counted
+per channel and reason), never made-up numbers; a minute with some missing samples
+(``partial``) keeps the mean of the valid ones. Minutes with no row at all stay absent: the
+tools treat the hole as a gap. Samples stored after the last aggregation are aggregated first
+(when the store is writable), so an export never silently misses the newest data.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gateway.kitcsv import write_kit_csv
+from gateway.protocol import CHANNELS
+from gateway.store.aggregate import QC_MISSING, QC_NAMES, QC_SPIKE, QC_STUCK, aggregate
+
+DROP = QC_MISSING | QC_SPIKE | QC_STUCK
+"""QC flags whose value is left out of the export."""
+
+
+class ExportError(ValueError):
+    """The export cannot be made as asked (no such device, nothing in the span, ...)."""
+
+
+@dataclass
+class Export:
+    """What an export wrote: rows, span and the values left empty per channel and reason."""
+
+    device_id: int
+    rows: int
+    start: str | None
+    end: str | None
+    dropped: dict[str, dict[str, int]] = field(default_factory=dict)
+    aggregated: int = 0  # minutes brought up to date before the export
+
+
+def pick_device(conn: sqlite3.Connection, device_id: int | None) -> int:
+    """The device to export: the one asked for, or the only one in the store."""
+    known = [r[0] for r in conn.execute("SELECT device_id FROM devices ORDER BY device_id")]
+    if device_id is not None:
+        if device_id not in known:
+            raise ExportError(f"no device {device_id} in the store (devices: "
+                              f"{', '.join(map(str, known)) or 'none'})")
+        return device_id
+    if len(known) != 1:
+        raise ExportError(
+            "the store holds no device yet" if not known else
+            f"the store holds {len(known)} devices ({', '.join(map(str, known))}): pick one "
+            "with --device")
+    return known[0]
+
+
+def export_kit_csv(
+    conn: sqlite3.Connection,
+    out: str | Path,
+    device_id: int | None = None,
+    start: float | None = None,
+    end: float | None = None,
+    catch_up: bool = True,
+) -> Export:
+    """Write the minute aggregates of a device in [start, end) [unix s] as a kit CSV at ``out``."""
+    aggregated = 0
+    if catch_up:
+        while True:  # bounded steps, as the ingest service does
+            n = aggregate(conn)
+            if not n:
+                break
+            aggregated += n
+    dev = pick_device(conn, device_id)
+    cols = ", ".join(f"{c}, {c}_qc" for c in CHANNELS)
+    rows = conn.execute(
+        f"SELECT minute, {cols} FROM minute WHERE device_id=? AND minute>=? AND minute<? "
+        "ORDER BY minute",
+        (dev, -np.inf if start is None else start, np.inf if end is None else end)).fetchall()
+    if not rows:
+        raise ExportError(f"device {dev}: no minute in the span asked for")
+    table = np.array([[np.nan if v is None else v for v in r] for r in rows], dtype=float)
+    time = table[:, 0].astype(np.int64).astype("datetime64[s]")
+    columns: dict[str, np.ndarray] = {}
+    dropped: dict[str, dict[str, int]] = {}
+    for i, name in enumerate(CHANNELS):
+        values, flags = table[:, 1 + 2 * i], table[:, 2 + 2 * i].astype(int)
+        for bit in (QC_MISSING, QC_SPIKE, QC_STUCK):
+            # each value counted once, under its first reason
+            hit = int(np.count_nonzero(((flags & bit) != 0) & ((flags & (bit - 1) & DROP) == 0)))
+            if hit:
+                dropped.setdefault(name, {})[QC_NAMES[bit]] = hit
+        values = np.where(flags & DROP, np.nan, values)
+        if name == "rain":  # kit CSV: 0/1; a minute with any wet reading is wet
+            values = np.where(np.isfinite(values), (values > 0).astype(float), np.nan)
+        columns[name] = values
+    write_kit_csv(out, time, columns)
+    return Export(dev, len(rows), str(time[0]) + "Z", str(time[-1]) + "Z", dropped, aggregated)

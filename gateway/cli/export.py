@@ -56,6 +56,8 @@ def run(args: argparse.Namespace) -> int:
         done = export_kit_csv(conn, args.out, args.device, start, end)
     except ExportError as exc:
         raise CliError(f"{args.db}: {exc}") from None
+    except sqlite3.Error as exc:  # e.g. a read-only copy that still needs aggregating
+        raise CliError(f"{args.db}: {exc}") from None
     finally:
         conn.close()
     if args.json:

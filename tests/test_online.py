@@ -165,6 +165,8 @@ def test_a_stuck_run_is_struck_out_and_what_it_taught_is_rolled_back():
     recognised = first + STUCK_SAMPLES - 1
     np.testing.assert_array_equal(theta[recognised, air], theta[first, air])  # and unlearnt
     np.testing.assert_array_equal(theta[recognised + 10, air], theta[first, air])  # held after
+    j = ALMERIA.index("c_tsw")  # fitted on i_in, which was not stuck: not rolled back
+    assert theta[recognised, j] == theta[recognised - 1, j]
     # no later window re-uses a struck-out repeat
     assert est.counters.faults["t_in:stuck_struck_out"] == STUCK_SAMPLES - 2
 

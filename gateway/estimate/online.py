@@ -278,8 +278,9 @@ class OnlineEstimator:
         parameters held before the first repeat, so the flat readings do not steer the model
         while it dead-reckons through the fault (the first reading of the run was a real one)."""
         repeats = STUCK_SAMPLES - 2
-        if len(self._theta_before) >= repeats + 1:
-            self.theta[:] = self._theta_before[-(repeats + 1)]
+        air = self._idx.get("t_in")  # the groups fitted on other outputs learnt nothing from it
+        if air is not None and len(self._theta_before) >= repeats + 1:
+            self.theta[air] = self._theta_before[-(repeats + 1)][air]
         if "t_in" in self._buf:
             self._buf["t_in"][max(self._n - repeats, 0) : self._n] = np.nan
         key = "t_in:stuck_struck_out"  # counted apart: these samples were accepted on arrival

@@ -15,10 +15,12 @@ Protocol (docs/effects.md, "How the diagnosis decides"):
    parameters saw C plus the *other* fold only (two-fold blocked cross-fitting): every held-out
    figure comes from data its fit never saw, wherever the effect starts.
 4. Candidates are ranked on all data by ΔBIC of their τ scan; the best ones are tried in turn:
-   τ re-scanned and the base refitted jointly per fold. One is kept only if BIC falls on its fit
-   sets AND the held-out free-run error falls significantly (relative MAE ≥ ``MIN_GAIN`` and a
-   block-paired t ≥ ``MIN_T`` or an MSE cut ≥ ``STRONG_GAIN``). Among the candidates that pass
-   in a round, the one with the lowest held-out free-run MSE wins. Repeat until nothing passes.
+   τ re-scanned and the base refitted jointly per fold; a τ inside C must be borne out by C
+   alone (the effect as fitted, refitted on C: ΔBIC < 0), else τ is re-scanned within H. One
+   is kept only if BIC falls on its fit sets AND the held-out free-run error falls
+   significantly (relative MAE ≥ ``MIN_GAIN`` and a block-paired t ≥ ``MIN_T`` or an MSE
+   cut ≥ ``STRONG_GAIN``). Among the candidates that pass in a round,
+   the one with the lowest held-out free-run MSE wins. Repeat until nothing passes.
 5. Held-out free-run error is measured by free runs restarted at each block start, for the
    model before and after alike (headline: free-run MAE), beside persistence.
 """
@@ -310,7 +312,7 @@ def diagnose(
             new_thetas, dbics = [], []
             for j in (0, 1):
                 th, dbic = _fit_effect(new_model, model, thetas[j], e, x, gh, dt, duration,
-                                       horizon, fit_sets[j], seed + 17 * j)
+                                       horizon, fit_sets[j], seed + 17 * j, s)
                 new_thetas.append(th)
                 dbics.append(dbic)
             pred = _heldout(new_model, new_thetas, x, gh, dt, folds, s, n)
@@ -345,7 +347,7 @@ def diagnose(
                              " fit ΔBIC + humidity + held-out): " + other[5]["why"],
                              "delta_bic": other[5]["delta_bic"]})
         th_all, dbic_full = _fit_effect(new_model, model, theta_all, e, x, gh, dt, duration,
-                                        horizon, all_set, seed + 101)
+                                        horizon, all_set, seed + 101, s)
         findings.append(_finding(e, new_model, th_all, series, current_pred, pred, verdict,
                                  dbic_full, x, s))
         effects.append(e)
@@ -402,18 +404,21 @@ def _traces(findings: list[Finding], model: Structured, theta: np.ndarray, x, gh
 
 
 # -- steps -------------------------------------------------------------------------------------
-def _tau_grid(effect: Effect, duration: float) -> np.ndarray:
+def _tau_grid(effect: Effect, duration: float, earliest: float = 0.0) -> np.ndarray:
     first = 0.0 if effect.from_start else COARSE_TAU_S
+    if earliest > first:
+        return np.arange(earliest, duration, COARSE_TAU_S)
     return np.arange(first, duration, COARSE_TAU_S)
 
 
 def _scan(shoot: Shooting, theta: np.ndarray, e: Effect, duration: float,
-          segments: list[tuple[int, int]]) -> Scan:
-    """Coarse τ grid, then a fine grid around the best coarse τ. A cover transmission change
-    is taken from the measured inside radiation when there is one (fit.radiation_change)."""
+          segments: list[tuple[int, int]], earliest: float = 0.0) -> Scan:
+    """Coarse τ grid, then a fine grid around the best coarse τ, every τ ≥ ``earliest``. A
+    cover transmission change is taken from the measured inside radiation when there is one
+    (fit.radiation_change)."""
     m = shoot.model
     if e.name == "solar_gain_change" and measures_radiation(m, shoot.x):
-        first = 0.0 if e.from_start else COARSE_TAU_S
+        first = max(0.0 if e.from_start else COARSE_TAU_S, earliest)
         tau, d = radiation_change(m, shoot.x, theta, segments, first)
         th = theta.copy()
         th[m.index(e.tau_name)], th[m.index(e.amp_name)] = tau, np.clip(d, e.lower, e.upper)
@@ -422,9 +427,10 @@ def _scan(shoot: Shooting, theta: np.ndarray, e: Effect, duration: float,
     sse0, npair = shoot.sse(theta[None, :])
     # SSE differences below one effective sample's share do not tell start times apart
     rel = 1.0 / max(npair * shoot.dt / EFFECTIVE_S, 1.0)
-    coarse = scan_tau(shoot, theta, e, _tau_grid(e, duration), float(sse0[0])).latest_of_best(rel)
+    coarse = scan_tau(shoot, theta, e, _tau_grid(e, duration, earliest),
+                      float(sse0[0])).latest_of_best(rel)
     t_best = coarse.taus[coarse.best]
-    lo = 0.0 if e.from_start else shoot.dt
+    lo = max(0.0 if e.from_start else shoot.dt, earliest)
     fine_taus = np.unique(np.clip(t_best + np.linspace(-1, 1, 37) * COARSE_TAU_S, lo, duration))
     fine = scan_tau(shoot, theta, e, fine_taus, float(sse0[0])).latest_of_best(rel)
     return fine if fine.sse[fine.best] <= coarse.sse[coarse.best] * (1.0 + rel) else coarse
@@ -448,13 +454,22 @@ def _rank(base, model, theta, effects, candidates, x, gh, dt, duration, horizon,
     return out
 
 
-def _fit_effect(new_model, old_model, theta_old, e, x, gh, dt, duration, horizon, segments, seed):
-    """τ scan then a joint refit (base parameters + amplitude, τ held) on ``segments``."""
+def _fit_effect(new_model, old_model, theta_old, e, x, gh, dt, duration, horizon, segments, seed,
+                split):
+    """τ scan then a joint refit (base parameters + amplitude, τ held) on ``segments``.
+
+    A start inside the calibration part (rows before ``split``) must be borne out by the
+    calibration part alone (``_calibration_supports``); otherwise τ is re-scanned within the
+    held-out part."""
     th = carry(theta_old, old_model, new_model, gh)
     starts = window_starts(segments, horizon, skip=horizon)
     shoot = Shooting(new_model, x, gh, dt, starts, horizon)
     sse_old, npair = shoot.sse(th[None, :])
     sc = _scan(shoot, th, e, duration, segments)
+    t_split = float(x["_index"][split])
+    if sc.taus[sc.best] < t_split and not _calibration_supports(
+            new_model, old_model, theta_old, e, sc, x, gh, dt, horizon, split):
+        sc = _scan(shoot, th, e, duration, segments, earliest=t_split)
     th[new_model.index(e.tau_name)] = sc.taus[sc.best]
     th[new_model.index(e.amp_name)] = sc.amps[sc.best]
     lo, hi = new_model.bounds(gh)
@@ -465,6 +480,40 @@ def _fit_effect(new_model, old_model, theta_old, e, x, gh, dt, duration, horizon
     sse_new, _ = shoot.sse(th[None, :])
     dbic = _bic_delta(float(sse_new[0]), float(sse_old[0]), npair, dt, 2)
     return th, dbic + _radiation_evidence(new_model, e, x, th, segments, sc)
+
+
+def _calibration_supports(new_model, old_model, theta_old, e: Effect, sc: Scan, x, gh, dt,
+                          horizon, split) -> bool:
+    """Does the calibration part C (rows before ``split``) by itself bear out the effect from
+    the scanned τ (inside C)? The model without and the model with the effect (τ and amplitude
+    held as the fit set found them) are both refitted on C alone (Levenberg–Marquardt, base
+    parameters only): the effect is supported if ΔBIC < 0 on C.
+
+    The base was calibrated on C; a start late in C can otherwise stand in for the base's
+    extrapolation error on the held-out part (another weather regime), the effect's own data
+    being mostly after the split. An effect that really began in C, with the size the rest of
+    the data gives it, shows in C's tail. The amplitude is held: C's tail alone could be fitted
+    by a much larger step of the same sign (a local deviation), which is not the same effect."""
+    seg = [(0, split)]
+    starts = window_starts(seg, horizon, skip=horizon)
+    if len(starts) == 0:
+        return False
+    sh_old = Shooting(old_model, x, gh, dt, starts, horizon)
+    lo, hi = old_model.bounds(gh)
+    th_old = fit_lm(sh_old, theta_old.copy(), _free(old_model), lo, hi, REFIT_LM_ITERATIONS)
+    sse_old, npair = sh_old.sse(th_old[None, :])
+    th = carry(th_old, old_model, new_model, gh)
+    ja = new_model.index(e.amp_name)
+    th[new_model.index(e.tau_name)] = sc.taus[sc.best]
+    th[ja] = sc.amps[sc.best]
+    sh_new = Shooting(new_model, x, gh, dt, starts, horizon)
+    lo, hi = new_model.bounds(gh)
+    free = [j for j in _free(new_model) if j != ja]
+    th = fit_lm(sh_new, th, free, lo, hi, REFIT_LM_ITERATIONS)
+    sse_new, _ = sh_new.sse(th[None, :])
+    dbic = _bic_delta(float(sse_new[0]), float(sse_old[0]), npair, dt, 2)
+    dbic += _radiation_evidence(new_model, e, x, th, seg, sc)
+    return bool(dbic < 0 and th[ja] != e.neutral)
 
 
 def _radiation_evidence(model, e: Effect, x, theta, segments, sc: Scan) -> float:

@@ -40,6 +40,16 @@ class Crop:
 
 
 @dataclass(frozen=True)
+class Site:
+    """Where the greenhouse stands: the sun's position and the clear sky follow from it
+    (gateway/model/solar.py)."""
+
+    latitude: float  # [deg] north positive
+    longitude: float  # [deg] east positive
+    elevation: float = 0.0  # [m] above sea level
+
+
+@dataclass(frozen=True)
 class Greenhouse:
     """Static description of one greenhouse (SI units)."""
 
@@ -51,6 +61,9 @@ class Greenhouse:
     cover_transmission: float = 0.7  # [-] c_tsw when no inside radiation is measured
     vents: Vents = field(default_factory=Vents)
     crop: Crop = field(default_factory=Crop)
+    site: Site | None = None
+    """``[site]``; None when the file gives none (then nothing that needs the sun's position
+    can run, and the tools say so)."""
     sensors: tuple[str, ...] = ()
     parameters: dict[str, dict[str, Any]] = field(default_factory=dict)
     source: str = "<memory>"
@@ -82,6 +95,11 @@ _SCHEMA: dict[str, dict[str, tuple[type, float, float]]] = {
         "height_difference": (float, 0.0, 100.0),
     },
     "crop": {"lai": (float, 0.0, 15.0), "extinction": (float, 0.0, 3.0)},
+    "site": {
+        "latitude": (float, -90.0, 90.0),
+        "longitude": (float, -180.0, 180.0),
+        "elevation": (float, -500.0, 9000.0),
+    },
 }
 _TOP = {"name", "description", "sensors", "parameters", "online", *_SCHEMA}
 _PARAM_KEYS = {"value", "bounds", "variation"}
@@ -169,6 +187,12 @@ def parse_greenhouse(raw: dict[str, Any], source: str = "<memory>") -> Greenhous
                 _check_number(source, where, value, float, 0.0, math.inf)
     online = _parse_online(raw.get("online", {}), source)
     air = sections["air"]
+    site = None
+    if sections["site"]:
+        for key in ("latitude", "longitude"):
+            if key not in sections["site"]:
+                raise GreenhouseError(f"{source}: missing 'site.{key}' ([site] needs latitude and longitude)")
+        site = Site(**sections["site"])
     return Greenhouse(
         name=str(raw.get("name", Path(source).stem)),
         floor_area=geometry["floor_area"],
@@ -178,6 +202,7 @@ def parse_greenhouse(raw: dict[str, Any], source: str = "<memory>") -> Greenhous
         cover_transmission=sections["cover"].get("transmission", 0.7),
         vents=Vents(**sections["vents"]),
         crop=Crop(**sections["crop"]),
+        site=site,
         sensors=tuple(sensors),
         parameters={k: dict(v) for k, v in params.items()},
         source=source,

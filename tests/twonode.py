@@ -86,8 +86,8 @@ def sun_elevation_sin(time, lat=52.03, lon=4.53):
     return np.sin(la) * np.sin(decl) + np.cos(la) * np.cos(decl) * np.cos(ha)
 
 
-def sky_temperature(w):
-    s = sun_elevation_sin(w["time"])
+def sky_temperature(w, site=(52.03, 4.53)):
+    s = sun_elevation_sin(w["time"], *site)
     clear = np.where(s > 0.05, 1098 * s * np.exp(-0.057 / np.maximum(s, 0.05)), 0.0)
     kt = np.where(clear > 50, np.clip(w["i_glob"] / np.maximum(clear, 1), 0, 1), np.nan)
     cloud = np.clip(1.0 - (kt - 0.25) / 0.5, 0, 1)  # kt 0.75 clear, 0.25 overcast
@@ -117,10 +117,13 @@ PLANTS = {
 }
 
 
-def simulate(plant, start, days, effect=None, at=None, amp=None, seed=1):
+def simulate(plant, start, days, effect=None, at=None, amp=None, seed=1, weather=None,
+             site=(52.03, 4.53)):
+    """``weather``: arrays (time, t_out, rh_out, vp [Pa], wind, i_glob) on a 60 s grid to use
+    instead of the Bleiswijk file (start and days are then ignored); ``site``: (lat, lon)."""
     p = PLANTS[plant]  # seed: the plant is deterministic, only the sensors are noisy
-    w = read_weather(start, days)
-    t_sky, cloud = sky_temperature(w)
+    w = read_weather(start, days) if weather is None else dict(weather)
+    t_sky, cloud = sky_temperature(w, site)
     n = len(w["time"])
     tsec = (w["time"] - w["time"][0]).astype(float)
     tau_at = None if at is None else float((np.datetime64(at, "s") - w["time"][0]).astype(float))

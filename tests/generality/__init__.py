@@ -1,0 +1,1 @@
+"""Generality study: independent greenhouse generators on several weather windows (issue 10)."""

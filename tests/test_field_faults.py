@@ -372,7 +372,11 @@ def test_a_flood_of_bad_tags_does_not_hide_a_real_device_with_a_wrong_key(
 def test_log_limit_keeps_a_bounded_number_of_keys() -> None:
     from gateway.ingest.counters import RateLimitedLog
 
-    rl = RateLimitedLog(logging.getLogger("t"), clock=lambda: 0.0)
+    now = [0.0]
+    rl = RateLimitedLog(logging.getLogger("t"), clock=lambda: now[0])
     for dev in range(20_000):  # random device ids: one window each would grow without bound
         rl.warning("unknown_device", "device %d", dev, device=dev)
     assert len(rl._win) <= rl.max_keys + 1
+    now[0] = 11.0  # the windows have run out: a new device gets its own again
+    assert rl.warning("bad_tag", "device 7", device=7)
+    assert ("bad_tag", " for device 7") in rl._win and len(rl._win) <= rl.max_keys + 1

@@ -24,17 +24,22 @@ class RateLimitedLog:
         self.max_keys = max_keys
         # (reason, "" | " for device N" | " for other devices") -> [start, emitted, suppressed]
         self._win: dict[tuple[str, str], list] = {}
+        self._next_sweep = float("-inf")
 
     def _label(self, reason: str, device: int | None, now: float) -> tuple[str, str]:
         label = (reason, "" if device is None else f" for device {device}")
         if label in self._win or len(self._win) < self.max_keys:
             return label
-        for old, w in list(self._win.items()):  # make room: windows that have run out
-            if now - w[0] >= self.interval:
-                self._flush(old, w, now)
-                del self._win[old]
-        if len(self._win) < self.max_keys:
-            return label
+        # Full: drop the windows that have run out, at most one sweep per interval (a flood of
+        # new device ids must not cost a scan per packet).
+        if now >= self._next_sweep:
+            self._next_sweep = now + self.interval
+            for old, w in list(self._win.items()):
+                if now - w[0] >= self.interval:
+                    self._flush(old, w, now)
+                    del self._win[old]
+            if len(self._win) < self.max_keys:
+                return label
         return reason, " for other devices"
 
     def _flush(self, label: tuple[str, str], w: list, now: float) -> None:

@@ -17,11 +17,15 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from gateway.ingest.core import IngestCore
 from gateway.ingest.udp import UdpServer
 from gateway.store import Store, StoreError, aggregate, retention
 from gateway.store.keys import KeyFileError, load_keys
+
+if TYPE_CHECKING:
+    from gateway.ingest.serial import SerialTransport
 
 log = logging.getLogger("serra.ingest")
 
@@ -142,7 +146,7 @@ async def serve(config: IngestConfig,
             log.info("ingest stopped; counters %s%s", core.counters.snapshot(), _refused(core))
 
 
-def _open_serial(core: IngestCore, url: str, baudrate: int):
+def _open_serial(core: IngestCore, url: str, baudrate: int) -> SerialTransport:
     from gateway.ingest.serial import SerialTransport
 
     try:

@@ -71,6 +71,9 @@ def open_readonly(path: str | Path) -> sqlite3.Connection:
         raise StoreError(f"{path}: no such store")
     if not path.is_file():
         raise StoreError(f"{path}: not a file")
+    if not os.access(path, os.R_OK):
+        raise StoreError(f"{path}: permission denied (the store is readable by its owner only: "
+                         "run this as that user, e.g. sudo -u serra ...)")
     if path.stat().st_size == 0:
         raise StoreError(f"{path}: empty file, not a Serra store")
     uri = f"file:{urllib.parse.quote(str(path.resolve()))}?mode=ro"
@@ -84,8 +87,10 @@ def open_readonly(path: str | Path) -> sqlite3.Connection:
         missing = SERRA_TABLES - _tables(conn)
     except sqlite3.DatabaseError as e:
         conn.close()
-        why = "not an SQLite database" if "not a database" in str(e) else str(e)
-        raise StoreError(f"{path}: {why}, not a Serra store") from None
+        if "not a database" in str(e):
+            raise StoreError(f"{path}: not an SQLite database, not a Serra store") from None
+        # e.g. a WAL store in a directory this user may not write, with no -shm file yet
+        raise StoreError(f"{path}: cannot read the store: {e}") from None
     if version == 0 or missing:
         conn.close()
         raise StoreError(f"{path}: not a Serra store (schema version {version}; missing tables "

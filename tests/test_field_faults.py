@@ -21,6 +21,7 @@ import pytest
 from gateway import protocol as p
 from gateway.ingest import service
 from gateway.store.keys import write_keys
+from tests.test_ingest import Gateway as IngestGateway
 
 ROOT = Path(__file__).resolve().parents[1]
 KEY_A = hashlib.sha256(b"serra test: board 7, first key").digest()
@@ -34,33 +35,15 @@ def pkt(seq: int, boot: int, key: bytes, t_in: float = 21.5, dev: int = 7) -> by
     return p.encode_record(rec, key)
 
 
-class Gateway:
-    """serve() in the test's event loop, with a UDP client socket."""
+class Gateway(IngestGateway):
+    """test_ingest's in-process gateway on given store and keys files, with helpers that wait
+    for an answer rather than for time."""
 
-    def __init__(self, db: Path, keys: Path) -> None:
+    def __init__(self, db: Path, keys: Path) -> None:  # not super(): it writes its own keys
         self.cfg = service.IngestConfig(db=db, keys=keys, listen=("127.0.0.1", 0),
                                         maintenance_every=3600)
         self.cli = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.cli.setblocking(False)
-
-    async def __aenter__(self) -> Gateway:
-        ready = asyncio.Event()
-
-        def on_ready(r: service.Running) -> None:
-            self.core, self.addr = r.core, r.udp_address
-            ready.set()
-
-        self.task = asyncio.ensure_future(service.serve(self.cfg, on_ready))
-        await asyncio.wait_for(ready.wait(), 30)
-        return self
-
-    async def __aexit__(self, *exc: object) -> None:
-        self.task.cancel()
-        try:
-            await self.task
-        except asyncio.CancelledError:
-            pass
-        self.cli.close()
 
     async def replies(self, packets: list[bytes], marker: bytes, key: bytes) -> list[p.Ack]:
         """Send `packets`, then `marker` (a packet that is answered); return the answers that

@@ -100,3 +100,23 @@ def test_export_span_and_device_choice(tmp_path, kit, capsys):
     assert not (tmp_path / "none.db").exists()  # not created by a typo
     assert main(["export", "--db", str(db), "--out", str(out), "--from", "yesterday"]) == 2
     assert "--from: bad time 'yesterday'" in capsys.readouterr().err
+
+
+def test_export_of_a_partly_aggregated_store_equals_the_fully_aggregated_one(tmp_path, kit):
+    """The read-only export computes the minutes the service has not aggregated yet in memory,
+    with the same QC, across the boundary (here inside the frozen-sensor run)."""
+    from gateway.store import aggregate as agg
+
+    time, cols = kit
+    db = tmp_path / "g.db"
+    store_records(db, time, cols)
+    store = Store(db)
+    try:
+        assert agg.aggregate(store.conn, max_rows=STUCK.start + 20) > 0  # the service, halfway
+        assert main(["export", "--db", str(db), "--out", str(tmp_path / "part.csv")]) == 0
+        while agg.aggregate(store.conn):
+            pass
+    finally:
+        store.close()
+    assert main(["export", "--db", str(db), "--out", str(tmp_path / "full.csv")]) == 0
+    assert (tmp_path / "part.csv").read_bytes() == (tmp_path / "full.csv").read_bytes()

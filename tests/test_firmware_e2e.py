@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import gzip
+import hashlib
 import json
 import math
 import random
@@ -26,7 +27,7 @@ from gateway.store.keys import write_keys
 from tests.mcu_fakes.hostenv import MCU, micropython, mpy_env
 
 ROOT = Path(__file__).resolve().parents[1]
-KEY = bytes(range(32))
+KEY = hashlib.sha256(b"serra test key: device 7").digest()
 WEATHER = ROOT / "training" / "data" / "bleiswijk" / "bleiswijk_weather_5min.csv.gz"
 pytestmark = pytest.mark.skipif(micropython() is None, reason="micropython not installed")
 
@@ -110,11 +111,13 @@ class LossyProxy:
         self.back.close()
 
 
-def start_gateway(db: Path, keys: Path) -> tuple[subprocess.Popen, tuple[str, int]]:
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "gateway.ingest.service", "--db", str(db), "--keys", str(keys),
-         "--listen", "127.0.0.1:0", "--maintenance-every", "0.5"],
-        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+def start_gateway(db: Path, keys: Path, log: Path | None = None
+                  ) -> tuple[subprocess.Popen, tuple[str, int]]:
+    with open(log or "/dev/null", "a") as err:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "gateway.ingest.service", "--db", str(db), "--keys", str(keys),
+             "--listen", "127.0.0.1:0", "--maintenance-every", "0.5"],
+            cwd=ROOT, stdout=subprocess.PIPE, stderr=err, text=True)
     assert proc.stdout is not None
     ready, _, _ = select.select([proc.stdout], [], [], 60)
     assert ready, "gateway did not start"
@@ -190,11 +193,37 @@ def check_exactly_once(recs: dict, rows: dict, n: int) -> None:
                 assert row[2 * i] == pytest.approx(raw * p.SCALES[i]), (seq, p.CHANNELS[i])
 
 
+def wait_for_line(path: Path, text: str, fw: Firmware, timeout: float) -> str:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        for line in path.read_text().splitlines():
+            if text in line:
+                return line
+        if fw.proc.poll() is not None:
+            raise AssertionError("firmware exited:\n" + "\n".join(fw.lines[-30:]))
+        time.sleep(0.2)
+    raise AssertionError(f"no {text!r} in {path} within {timeout} s:\n{path.read_text()}")
+
+
+def reflash(dev: Path, keys: Path) -> None:
+    """What a farm does for a reflashed board: the flash lost its boot counter, the gateway
+    refuses boot 0 naming the command, `keys rotate` makes a new key for config.json."""
+    for f in dev.glob("boot.cnt*"):
+        f.unlink()
+    r = subprocess.run([sys.executable, "-m", "gateway", "keys", "rotate", "7", "--keys",
+                        str(keys)], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    cfg = json.loads((dev / "config.json").read_text())
+    cfg.update(json.loads("{" + r.stdout.strip().rstrip(",") + "}"))
+    (dev / "config.json").write_text(json.dumps(cfg))
+
+
 def test_firmware_delivers_every_record_exactly_once_over_lossy_udp(tmp_path: Path) -> None:
     db, keys, trace = tmp_path / "g.db", tmp_path / "keys", tmp_path / "trace"
+    gw_log = tmp_path / "gateway.log"
     write_keys(keys, {7: KEY})
     make_trace(trace)
-    gw, addr = start_gateway(db, keys)
+    gw, addr = start_gateway(db, keys, gw_log)
     proxy = LossyProxy(addr, loss=0.30, seed=5)
     dev = tmp_path / "board"
     dev.mkdir()
@@ -227,6 +256,31 @@ def test_firmware_delivers_every_record_exactly_once_over_lossy_udp(tmp_path: Pa
         states = [x for x in fw2.lines if x.startswith("serra: wifi")]
         assert states.count("serra: wifi up") >= 2 and "serra: wifi backoff" in states, states
         assert not any("FAKE WDT" in x or "machine.reset" in x for x in fw.lines + fw2.lines)
+        # Reflashed: the flash lost its boot counter, the board starts again at boot 0. The
+        # gateway refuses it (a replay looks the same), naming the device and the command.
+        first = stored(db, 0)
+        for f in dev.glob("boot.cnt*"):
+            f.unlink()
+        fw3 = Firmware(dev, trace)
+        try:
+            line = wait_for_line(gw_log, "device 7 refused", fw3, timeout=60)
+        finally:
+            fw3.stop()
+        assert "serra: device 7 boot 0" in fw3.lines
+        assert f"python -m gateway keys rotate 7 --keys {keys}" in line, line
+        # The recovery: a new key, the gateway restarted, the board back at boot 0.
+        reflash(dev, keys)
+        gw.send_signal(signal.SIGTERM)
+        gw.wait(timeout=30)
+        gw, proxy.gw = start_gateway(db, keys, gw_log)
+        fw4 = Firmware(dev, trace)
+        try:
+            recs4 = run_until_delivered(fw4, db, 2, 20, timeout=90)  # stored after boot 1
+        finally:
+            fw4.stop()
+        assert "serra: device 7 boot 0" in fw4.lines
+        check_exactly_once(recs4, stored(db, 2), 20)
+        assert stored(db, 0) == first  # nothing of the first key's data lost or overwritten
     finally:
         proxy.close()
         gw.send_signal(signal.SIGTERM)

@@ -4,6 +4,7 @@ acks only after commit, replay protection across restarts, COBS framing."""
 from __future__ import annotations
 
 import asyncio
+import hashlib
 import logging
 import os
 import socket
@@ -21,8 +22,8 @@ from gateway.ingest.counters import RateLimitedLog
 from gateway.ingest.framing import Deframer, FramingError, cobs_decode, cobs_encode
 from gateway.store.keys import write_keys
 
-KEY = bytes(range(32))
-OTHER = bytes(32)
+KEY = hashlib.sha256(b"serra test key: device 7").digest()
+OTHER = hashlib.sha256(b"serra test key: device 9").digest()
 OKV = (21.5, 65.0, 12.0, 80.0, 432.1, 3.4, 0.0)
 
 

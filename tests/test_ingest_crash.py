@@ -4,6 +4,7 @@ records, resends)."""
 
 from __future__ import annotations
 
+import hashlib
 import os
 import random
 import select
@@ -19,7 +20,7 @@ from gateway import protocol as p
 from gateway.store.keys import write_keys
 
 ROOT = Path(__file__).resolve().parents[1]
-KEY = bytes(range(32))
+KEY = hashlib.sha256(b"serra test key: device 7").digest()
 N = 30000
 RATE = 3000  # records/s while the gateway is being killed (a busy fleet, not a flood)
 WINDOW = 96

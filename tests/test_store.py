@@ -65,8 +65,9 @@ def test_missing_values_stored_as_null_with_code(tmp_path: Path) -> None:
 
 def test_keys_file_permissions_and_errors(tmp_path: Path) -> None:
     p = tmp_path / "keys"
-    write_keys(p, {7: bytes(32), 9: bytes(range(32))})
-    assert load_keys(p) == {7: bytes(32), 9: bytes(range(32))}
+    k7, k9 = bytes.fromhex("5e" * 31 + "7a"), bytes.fromhex("a1b2" * 16)
+    write_keys(p, {7: k7, 9: k9})
+    assert load_keys(p) == {7: k7, 9: k9}
     os.chmod(p, 0o644)
     with pytest.raises(KeyFileError, match="chmod 600"):
         load_keys(p)

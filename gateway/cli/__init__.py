@@ -18,6 +18,7 @@ COMMANDS = {
     "demo": "gateway.cli.demo",
     "ingest": "gateway.cli.ingest",
     "export": "gateway.cli.export",
+    "keys": "gateway.cli.keys",
 }
 
 
@@ -29,7 +30,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m gateway",
         description="Serra gateway tools: calibrate, replay and diagnose greenhouse climate models "
-        "on kit CSV data (docs/data-format.md); ingest kit packets and export what was stored.",
+        "on kit CSV data (docs/data-format.md); ingest kit packets, manage device keys and export what "
+        "was stored.",
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log details to stderr")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")

@@ -42,21 +42,19 @@ def _when(text: str | None, flag: str) -> float | None:
 
 def run(args: argparse.Namespace) -> int:
     from gateway.cli.common import dump_json
-    from gateway.store.db import open_db
+    from gateway.store import StoreError, open_readonly
     from gateway.store.export import ExportError, export_kit_csv
 
     start, end = _when(args.start, "--from"), _when(args.end, "--to")
-    if not args.db.exists():  # opening would create an empty store
-        raise CliError(f"{args.db}: no such store")
-    try:
-        conn = open_db(args.db)
-    except (sqlite3.Error, RuntimeError) as exc:
-        raise CliError(f"{args.db}: cannot open the store: {exc}") from None
+    try:  # a reader: never creates, converts or writes the file it reads
+        conn = open_readonly(args.db)
+    except StoreError as exc:
+        raise CliError(str(exc)) from None
     try:
         done = export_kit_csv(conn, args.out, args.device, start, end)
     except ExportError as exc:
         raise CliError(f"{args.db}: {exc}") from None
-    except sqlite3.Error as exc:  # e.g. a read-only copy that still needs aggregating
+    except sqlite3.Error as exc:
         raise CliError(f"{args.db}: {exc}") from None
     finally:
         conn.close()

@@ -2,6 +2,11 @@
 
 A packet is acknowledged only after the transaction holding it has committed, so an ack always
 means durable. Duplicates (resends after a lost ack) are acknowledged again without storing.
+
+Boots are stored as the board's boot counter plus the boot base of its key (Store.boot_base):
+a board reflashed with a new key (``python -m gateway keys rotate``) starts above everything
+its old key stored. A device refused as a whole (an old boot: a reflashed board, or a replay)
+is named in `refused` and in one log line with the command that recovers it.
 """
 
 from __future__ import annotations
@@ -13,11 +18,13 @@ from collections.abc import Callable, Hashable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from hmac import compare_digest
+from pathlib import Path
 from typing import TypeVar
 
 from gateway import protocol as p
 from gateway.ingest.counters import Counters, RateLimitedLog
 from gateway.store import Store
+from gateway.store.keys import key_id
 
 log = logging.getLogger("serra.ingest")
 
@@ -33,9 +40,24 @@ _HEADER = p.MAGIC + bytes([p.VERSION, p.TYPE_RECORD])
 @dataclass(slots=True)
 class _Dev:
     key: p.Mac
-    boot: int = -1
+    base: int = 0  # added to the boot the board sends (boot base of its key)
+    boot: int = -1  # as stored: board boot + base
     max_seq: int = -1
     seen: set[int] = field(default_factory=set)  # committed seqs of `boot` inside the window
+
+
+@dataclass(slots=True)
+class Refusal:
+    """A device whose packets are refused as a whole, for the status screen and the logs;
+    kept in IngestCore.refused until the device starts a boot newer than the latest stored."""
+
+    device_id: int
+    reason: str  # "replay_old_boot"
+    count: int  # packets refused since the gateway started
+    boot: int  # boot counter of the latest refused packet, as the board sent it
+    latest: int  # the latest boot stored, in the board's counting (its key's)
+    last: float  # unix time of the latest refused packet
+    recovery: str  # the command that takes the board back
 
 
 @dataclass(slots=True)
@@ -47,14 +69,20 @@ class _Pending:
 
 class IngestCore:
     def __init__(self, store: Store, keys: dict[int, bytes], *, max_pending: int = 50_000,
-                 batch_delay: float = 0.0, alarm_fraction: float = 0.8) -> None:
+                 batch_delay: float = 0.0, alarm_fraction: float = 0.8,
+                 keys_path: str | Path | None = None) -> None:
         self.store = store
         self.counters = Counters()
         self.rlog = RateLimitedLog(log)
+        # A refused device is named once per 10 minutes, not once per packet.
+        self.refusal_log = RateLimitedLog(log, interval=600.0, burst=1)
+        self.keys_path = str(keys_path) if keys_path is not None else "KEYS_FILE"
+        self.refused: dict[int, Refusal] = {}
         self.max_pending = max_pending
         self.alarm_at = int(max_pending * alarm_fraction)
         self.batch_delay = batch_delay
-        self.devs: dict[int, _Dev] = {d: _Dev(p.Mac(k)) for d, k in keys.items()}
+        self.devs: dict[int, _Dev] = {
+            d: _Dev(p.Mac(k), store.boot_base(d, key_id(k))) for d, k in keys.items()}
         for dev, st in store.device_states().items():
             d = self.devs.get(dev)
             if d is not None:
@@ -68,9 +96,31 @@ class IngestCore:
         self.alarm = False
 
     # -- receiving ------------------------------------------------------------------------
-    def _reject(self, reason: str, detail: str, peer: Hashable) -> None:
+    def _reject(self, reason: str, detail: str, peer: Hashable, device: int | None = None) -> None:
         self.counters[reason] += 1
-        self.rlog.warning(reason, "packet from %s rejected: %s %s", peer, reason, detail)
+        self.rlog.warning(reason, "packet from %s rejected: %s %s", peer, reason, detail,
+                          device=device)
+
+    def _refuse_old_boot(self, dev_id: int, d: _Dev, boot: int, peer: Hashable) -> None:
+        """An authenticated record from a boot older than the latest stored: a board whose
+        flash lost its boot counter (reflashed, replaced) or a replay. Either way nothing is
+        stored nor answered; the farm is told which device and how to take it back."""
+        self.counters["replay_old_boot"] += 1
+        latest = d.boot - d.base
+        cmd = f"python -m gateway keys rotate {dev_id} --keys {self.keys_path}"
+        r = self.refused.get(dev_id)
+        if r is None:
+            r = self.refused[dev_id] = Refusal(dev_id, "replay_old_boot", 0, boot, latest, 0.0,
+                                               cmd)
+        r.count, r.boot, r.latest, r.last = r.count + 1, boot, latest, time.time()
+        self.refusal_log.warning(
+            "replay_old_boot",
+            "device %d refused (replay_old_boot): packet from %s carries boot %d, older than "
+            "boot %d already stored, so its records are dropped unanswered. A board reflashed "
+            "or replaced (its boot counter lost) looks like this, and so do replayed packets. "
+            "To take the board back (stored data is kept): %s, restart the gateway, and put the "
+            "printed line in the board's config.json", dev_id, peer, boot, latest, cmd,
+            device=dev_id)
 
     def handle(self, data: bytes, peer: Hashable, send: Send) -> None:
         """Process one datagram/frame; never raises on any input."""
@@ -90,30 +140,32 @@ class IngestCore:
                 return self._reject(e.reason, e.detail, peer)
         d = self.devs.get(dev_id)
         if d is None:
-            return self._reject("unknown_device", f"device {dev_id}", peer)
+            return self._reject("unknown_device", f"device {dev_id}", peer, dev_id)
         if not compare_digest(d.key.tag(data[: p.RECORD_BODY_LEN]), data[p.RECORD_BODY_LEN :]):
-            return self._reject("bad_tag", f"device {dev_id}", peer)
+            return self._reject("bad_tag", f"device {dev_id} (forged, corrupted, or the board's "
+                                "key differs from the keys file)", peer, dev_id)
         try:
             rec = p.parse_fields(data)
         except p.ProtocolError as e:
             # Authenticated, so the firmware is told to drop the record instead of resending it.
-            self._reject(e.reason, f"device {dev_id}: {e.detail}", peer)
+            self._reject(e.reason, f"device {dev_id}: {e.detail}", peer, dev_id)
             boot, seq = int.from_bytes(data[8:12], "big"), int.from_bytes(data[12:16], "big")
             self._send(send, peer, p.encode_ack(dev_id, boot, seq, p.ACK_REJECTED,
                                                 p.REASON_CODES[e.reason], d.key))
             return None
-        if rec.boot < d.boot:
-            return self._reject("replay_old_boot", f"device {dev_id} boot {rec.boot} < "
-                                f"{d.boot}", peer)
-        if rec.boot == d.boot:
+        boot = rec.boot + d.base
+        if boot < d.boot:
+            return self._refuse_old_boot(dev_id, d, rec.boot, peer)
+        if boot == d.boot:
             if rec.seq <= d.max_seq - WINDOW:
-                return self._reject("replay_old_seq", f"device {dev_id} seq {rec.seq}", peer)
+                return self._reject("replay_old_seq", f"device {dev_id} seq {rec.seq}", peer,
+                                    dev_id)
             if rec.seq in d.seen:
                 self.counters["duplicate"] += 1
                 self._send(send, peer, p.encode_ack(dev_id, rec.boot, rec.seq, p.ACK_DUPLICATE,
                                                     0, d.key))
                 return None
-        k = (dev_id, rec.boot, rec.seq)
+        k = (dev_id, boot, rec.seq)
         pend = self._pending.get(k)
         if pend is not None:  # resent while its batch is being committed: ack after commit
             self.counters["duplicate"] += 1
@@ -122,11 +174,14 @@ class IngestCore:
         if len(self._pending) >= self.max_pending:
             # No ack: the firmware keeps the record and resends it later.
             return self._reject("overload", f"{len(self._pending)} records waiting", peer)
-        if rec.boot > d.boot:
-            d.boot, d.max_seq, d.seen = rec.boot, -1, set()
+        if boot > d.boot:
+            d.boot, d.max_seq, d.seen = boot, -1, set()
+            if self.refused:  # taken back (or it was a late packet of the previous boot)
+                self.refused.pop(dev_id, None)
         if rec.seq > d.max_seq:
             d.max_seq = rec.seq
-        self._pending[k] = _Pending(rec, time.time(), [(send, peer)])
+        self._pending[k] = _Pending(rec._replace(boot=boot) if d.base else rec, time.time(),
+                                    [(send, peer)])
         self._queue.append(k)
         self._wake.set()
         alarm = len(self._pending) >= self.alarm_at
@@ -175,7 +230,7 @@ class IngestCore:
                 if len(d.seen) > 2 * WINDOW:
                     lo = d.max_seq - WINDOW
                     d.seen = {s for s in d.seen if s > lo}
-            ack = p.encode_ack(k[0], k[1], k[2], p.ACK_STORED, 0, d.key)
+            ack = p.encode_ack(k[0], k[1] - d.base, k[2], p.ACK_STORED, 0, d.key)
             for send, peer in pend.waiters:
                 self._send(send, peer, ack)
 

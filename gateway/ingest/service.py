@@ -8,18 +8,24 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import ipaddress
 import logging
 import signal
+import socket
 import sqlite3
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from gateway.ingest.core import IngestCore
 from gateway.ingest.udp import UdpServer
-from gateway.store import Store, aggregate, retention
+from gateway.store import Store, StoreError, aggregate, retention
 from gateway.store.keys import KeyFileError, load_keys
+
+if TYPE_CHECKING:
+    from gateway.ingest.serial import SerialTransport
 
 log = logging.getLogger("serra.ingest")
 
@@ -40,11 +46,41 @@ class IngestConfig:
     policy: retention.Policy = field(default_factory=retention.Policy)
 
 
+class ListenError(OSError):
+    """A transport that cannot be opened, said in one line: address (or port) and reason."""
+
+
 def parse_hostport(text: str) -> tuple[str, int]:
+    """ADDRESS:PORT with a numeric address (IPv6 in brackets); never a DNS look-up."""
     host, sep, port = text.rpartition(":")
     if not sep or not port.isdigit() or not 0 <= int(port) <= 65535:
         raise argparse.ArgumentTypeError(f"expected HOST:PORT, got {text!r}")
-    return host.strip("[]") or "0.0.0.0", int(port)
+    host = host.strip("[]")
+    if host == "localhost":
+        host = "127.0.0.1"
+    try:
+        ipaddress.ip_address(host.partition("%")[0] or "0.0.0.0")  # fe80::1%eth0: zone kept
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{host!r} is not an IP address: give the address to listen on, e.g. "
+            f"0.0.0.0:{port} (all interfaces) or 192.168.4.1:{port}; host names are not "
+            "resolved") from None
+    return host or "0.0.0.0", int(port)
+
+
+def _where(host: str, port: int) -> str:
+    return f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
+
+
+def _open_udp(core: IngestCore, host: str, port: int) -> UdpServer:
+    try:
+        return UdpServer(core, host, port)
+    except socket.gaierror:
+        raise ListenError(f"cannot listen on {_where(host, port)}: not an IP address (host "
+                          "names are not resolved)") from None
+    except OSError as e:
+        why = (e.strerror or str(e)).lower()
+        raise ListenError(f"cannot listen on {_where(host, port)}: {why}") from None
 
 
 def _maintenance(store: Store, policy: retention.Policy) -> None:
@@ -66,23 +102,25 @@ async def serve(config: IngestConfig,
                 on_ready: Callable[[Running], None] | None = None) -> None:
     """Run until cancelled. Prints one 'listening' line per transport (tests read the port)."""
     keys = load_keys(config.keys)
+    if not keys:
+        log.warning("keys file %s lists no device: every packet will be refused as "
+                    "unknown_device. Add one with: python -m gateway keys add DEVICE_ID --keys "
+                    "%s, then restart the gateway", config.keys, config.keys)
     store = Store(config.db)
     core = IngestCore(store, keys, max_pending=config.max_pending,
-                      batch_delay=config.batch_delay)
+                      batch_delay=config.batch_delay, keys_path=config.keys)
     transports: list = []
+    started = False
     try:
         if config.listen is not None:
-            udp = UdpServer(core, *config.listen)
+            udp = _open_udp(core, *config.listen)
             udp.start()
             transports.append(udp)
             print(f"serra-ingest listening udp {udp.address[0]}:{udp.address[1]}", flush=True)
         if config.serial:
-            from gateway.ingest.serial import SerialTransport
-
-            ser = SerialTransport(core, config.serial, config.baudrate)
-            ser.start()
-            transports.append(ser)
+            transports.append(_open_serial(core, config.serial, config.baudrate))
             print(f"serra-ingest listening serial {config.serial}", flush=True)
+        started = True
         log.info("%d device keys, store %s", len(keys), config.db)
         if on_ready is not None:
             on_ready(Running(core, store, transports[0].address if config.listen else None))
@@ -96,7 +134,7 @@ async def serve(config: IngestConfig,
             await core.run_in_store_thread(_maintenance, store, config.policy)
             if loop.time() - t_stats >= config.stats_every:
                 t_stats = loop.time()
-                log.info("ingest counters %s", core.counters.snapshot())
+                log.info("ingest counters %s%s", core.counters.snapshot(), _refused(core))
     finally:
         for t in transports:
             t.close()
@@ -104,7 +142,29 @@ async def serve(config: IngestConfig,
             await core.drain()
         core.close()
         store.close()
-        log.info("ingest stopped; counters %s", core.counters.snapshot())
+        if started:
+            log.info("ingest stopped; counters %s%s", core.counters.snapshot(), _refused(core))
+
+
+def _open_serial(core: IngestCore, url: str, baudrate: int) -> SerialTransport:
+    from gateway.ingest.serial import SerialTransport
+
+    try:
+        ser = SerialTransport(core, url, baudrate)
+    except (OSError, ValueError) as e:  # serial.SerialException is an OSError
+        inner = e.__context__ if isinstance(e.__context__, OSError) else e
+        why = (getattr(inner, "strerror", None) or str(e)).lower()
+        raise ListenError(f"cannot open serial port {url}: {why}") from None
+    ser.start()
+    return ser
+
+
+def _refused(core: IngestCore) -> str:
+    if not core.refused:
+        return ""
+    return "; refused devices: " + ", ".join(
+        f"{r.device_id} ({r.reason} x{r.count}, recover: {r.recovery})"
+        for r in core.refused.values())
 
 
 def build_parser(prog: str = "python -m gateway.ingest.service") -> argparse.ArgumentParser:
@@ -116,8 +176,9 @@ def build_parser(prog: str = "python -m gateway.ingest.service") -> argparse.Arg
     ap.add_argument("--db", type=Path, required=True, help="SQLite store (created if absent)")
     ap.add_argument("--keys", type=Path, required=True,
                     help="device keys file, mode 600: '<device_id> <hex key>' per line")
-    ap.add_argument("--listen", type=parse_hostport, default=None,
-                    help=f"UDP HOST:PORT (default 0.0.0.0:{DEFAULT_PORT} unless --serial only)")
+    ap.add_argument("--listen", type=parse_hostport, default=None, metavar="ADDRESS:PORT",
+                    help=f"UDP address (numeric, never resolved) and port (default "
+                         f"0.0.0.0:{DEFAULT_PORT} unless --serial only)")
     ap.add_argument("--serial", default=None,
                     help="pyserial URL of a board on USB, e.g. /dev/ttyUSB0 or loop://")
     ap.add_argument("--baudrate", type=int, default=115200, help="serial speed (default 115200)")
@@ -152,7 +213,10 @@ def main(argv: list[str] | None = None, prog: str = "python -m gateway.ingest.se
         return 2
     try:
         Store(cfg.db).close()
-    except (sqlite3.Error, RuntimeError) as e:
+    except StoreError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    except (sqlite3.Error, RuntimeError, OSError) as e:
         print(f"error: cannot open the store {cfg.db}: {e}", file=sys.stderr)
         return 2
 
@@ -164,7 +228,11 @@ def main(argv: list[str] | None = None, prog: str = "python -m gateway.ingest.se
         with contextlib.suppress(asyncio.CancelledError):
             await task
 
-    asyncio.run(_run())
+    try:
+        asyncio.run(_run())
+    except (ListenError, KeyFileError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     return 0
 
 

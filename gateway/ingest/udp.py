@@ -20,13 +20,21 @@ class UdpServer:
     def __init__(self, core: IngestCore, host: str = "127.0.0.1", port: int = 0,
                  rcvbuf: int = 4 << 20) -> None:
         self.core = core
-        fam = socket.AF_INET6 if ":" in host else socket.AF_INET
+        # Numeric only: a host name here would be a DNS look-up at every start (and a hang or
+        # a wrong address when DNS is down or lies). socket.gaierror (an OSError) otherwise.
+        fam, _, _, _, addr = socket.getaddrinfo(
+            host or None, port, type=socket.SOCK_DGRAM,
+            flags=socket.AI_NUMERICHOST | socket.AI_NUMERICSERV | socket.AI_PASSIVE)[0]
         self.sock = socket.socket(fam, socket.SOCK_DGRAM)
         try:
             self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
         except OSError:
             pass  # the kernel caps it; the default still works
-        self.sock.bind((host, port))
+        try:
+            self.sock.bind(addr)
+        except OSError:
+            self.sock.close()
+            raise
         self.sock.setblocking(False)
         self.address = self.sock.getsockname()[:2]
 

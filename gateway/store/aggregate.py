@@ -28,7 +28,24 @@ _UPSERT = (f"INSERT OR REPLACE INTO minute ({', '.join(_MIN_COLS)}) "
            f"VALUES ({', '.join('?' * len(_MIN_COLS))})")
 
 
-def _minute_row(conn: sqlite3.Connection, dev: int, minute: int) -> list:
+Overlay = dict[int, list]
+"""Minute rows computed but not written (minute -> row as _minute_row returns it)."""
+
+
+def _earlier(conn: sqlite3.Connection, overlay: Overlay | None, dev: int, i: int, lo: int,
+             hi: int) -> list:
+    """Channel i's minute means for minutes in [lo, hi): the table's, or the overlay's."""
+    name = CHANNELS[i]
+    got = dict(conn.execute(
+        f"SELECT minute, {name} FROM minute WHERE device_id=? AND minute>=? AND minute<?",
+        (dev, lo, hi)).fetchall())
+    if overlay:
+        got.update((m, r[3 + 2 * i]) for m, r in overlay.items() if lo <= m < hi)
+    return list(got.values())
+
+
+def _minute_row(conn: sqlite3.Connection, dev: int, minute: int,
+                overlay: Overlay | None = None) -> list:
     rows = conn.execute(f"SELECT {_SEL} FROM samples WHERE device_id=? AND t>=? AND t<?",
                         (dev, minute, minute + 60)).fetchall()
     out: list = [dev, minute, len(rows)]
@@ -41,18 +58,32 @@ def _minute_row(conn: sqlite3.Connection, dev: int, minute: int) -> list:
             flags |= QC_PARTIAL
         mean = sum(vals) / len(vals) if vals else None
         if mean is not None and name in MAX_STEP:
-            prev = conn.execute(f"SELECT {name} FROM minute WHERE device_id=? AND minute=?",
-                                (dev, minute - 60)).fetchone()
+            prev = _earlier(conn, overlay, dev, i, minute - 60, minute)
             if prev and prev[0] is not None and abs(mean - prev[0]) > MAX_STEP[name]:
                 flags |= QC_SPIKE
         if mean is not None and name in STUCK_CHANNELS:
-            hist = conn.execute(
-                f"SELECT {name} FROM minute WHERE device_id=? AND minute<? AND minute>=?",
-                (dev, minute, minute - 60 * (STUCK_MINUTES - 1))).fetchall()
-            if len(hist) == STUCK_MINUTES - 1 and all(h[0] == mean for h in hist):
+            hist = _earlier(conn, overlay, dev, i, minute - 60 * (STUCK_MINUTES - 1), minute)
+            if len(hist) == STUCK_MINUTES - 1 and all(h == mean for h in hist):
                 flags |= QC_STUCK
         out += (mean, flags)
     return out
+
+
+def _last_aggregated(conn: sqlite3.Connection) -> int:
+    return int((conn.execute("SELECT value FROM meta WHERE name='agg_rowid'").fetchone()
+                or ("0",))[0])
+
+
+def pending_minutes(conn: sqlite3.Connection, dev: int) -> Overlay:
+    """The minute rows `aggregate` would write for a device, computed without writing: what a
+    read-only reader adds to the `minute` table so it never misses the newest samples."""
+    touched = [r[0] for r in conn.execute(
+        "SELECT DISTINCT CAST(t / 60 AS INTEGER) * 60 AS m FROM samples "
+        "WHERE rowid>? AND device_id=? ORDER BY m", (_last_aggregated(conn), dev))]
+    overlay: Overlay = {}
+    for minute in touched:  # in time order: a minute's QC sees the minutes computed before it
+        overlay[minute] = _minute_row(conn, dev, minute, overlay)
+    return overlay
 
 
 def aggregate(conn: sqlite3.Connection, max_rows: int = 20_000) -> int:
@@ -60,8 +91,7 @@ def aggregate(conn: sqlite3.Connection, max_rows: int = 20_000) -> int:
 
     At most `max_rows` new samples per call, so a backlog never holds the write lock for long
     (the ingest writer, and so the acknowledgements, wait meanwhile)."""
-    last = int((conn.execute("SELECT value FROM meta WHERE name='agg_rowid'").fetchone()
-                or ("0",))[0])
+    last = _last_aggregated(conn)
     top = conn.execute("SELECT max(rowid) FROM samples").fetchone()[0] or 0
     top = min(top, last + max_rows)
     if top <= last:

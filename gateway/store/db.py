@@ -1,8 +1,11 @@
-"""Connection setup and the batching sample writer."""
+"""Connection setup (the writer's and the readers'), the batching sample writer."""
 
 from __future__ import annotations
 
+import os
+import re
 import sqlite3
+import urllib.parse
 from collections.abc import Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -12,14 +15,91 @@ from gateway.protocol import CHANNELS, Record
 from gateway.store import schema
 
 
+class StoreError(RuntimeError):
+    """A file that cannot serve as the store, named with the reason (one line for the user)."""
+
+
+# The tables every Serra store has had since schema version 1: a file without them is not ours.
+SERRA_TABLES = frozenset({"samples", "devices", "minute", "meta"})
+_OURS = frozenset(re.findall(r"CREATE TABLE IF NOT EXISTS (\w+)", schema.DDL)) | {
+    "sqlite_sequence"}  # SQLite's own, for AUTOINCREMENT
+
+
+def _tables(conn: sqlite3.Connection) -> set[str]:
+    return {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+
+
 def open_db(path: str | Path, *, durable: bool = True) -> sqlite3.Connection:
-    """Open (and create) the store. WAL + synchronous=FULL: a commit survives a power cut."""
+    """Open (and create) the store, for the one writer. WAL + synchronous=FULL: a commit
+    survives a power cut. A new file is created 0600 (SQLite gives its -wal and -shm the same
+    mode); another program's database is refused before anything is written to it."""
+    path = Path(path)
+    try:  # owner-only from the first byte, whatever the umask
+        os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+    except FileExistsError:
+        pass
+    except OSError as e:
+        raise StoreError(f"{path}: cannot open the store: {(e.strerror or str(e)).lower()}"
+                         ) from None
     conn = sqlite3.connect(str(path), isolation_level=None, check_same_thread=False,
                            timeout=30)
+    try:
+        foreign = _tables(conn) - _OURS
+        if conn.execute("PRAGMA user_version").fetchone()[0] == 0 and foreign:
+            raise StoreError(f"{path}: a database of another program (tables "
+                             f"{', '.join(sorted(foreign))}), not a Serra store; give a new file")
+    except BaseException:
+        conn.close()
+        raise
     conn.execute("PRAGMA journal_mode=WAL")
     conn.execute(f"PRAGMA synchronous={'FULL' if durable else 'NORMAL'}")
     conn.execute("PRAGMA busy_timeout=30000")
     schema.create(conn)
+    return conn
+
+
+def open_readonly(path: str | Path) -> sqlite3.Connection:
+    """Open a Serra store for reading only (export, the status screen, any tool that reads).
+
+    The connection cannot write (SQLite ``mode=ro``): no table, journal mode, schema version or
+    aggregate is ever written by a reader. Raises StoreError, naming the file, for a missing
+    file, an empty file, a file that is not SQLite, another program's database, or a store of a
+    newer schema than this gateway knows. Readers of a live store see every committed batch.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise StoreError(f"{path}: no such store")
+    if not path.is_file():
+        raise StoreError(f"{path}: not a file")
+    if not os.access(path, os.R_OK):
+        raise StoreError(f"{path}: permission denied (the store is readable by its owner only: "
+                         "run this as that user, e.g. sudo -u serra ...)")
+    if path.stat().st_size == 0:
+        raise StoreError(f"{path}: empty file, not a Serra store")
+    uri = f"file:{urllib.parse.quote(str(path.resolve()))}?mode=ro"
+    try:
+        conn = sqlite3.connect(uri, uri=True, isolation_level=None, check_same_thread=False,
+                               timeout=30)
+    except sqlite3.Error as e:
+        raise StoreError(f"{path}: cannot open the store: {e}") from None
+    try:
+        version = conn.execute("PRAGMA user_version").fetchone()[0]
+        missing = SERRA_TABLES - _tables(conn)
+    except sqlite3.DatabaseError as e:
+        conn.close()
+        if "not a database" in str(e):
+            raise StoreError(f"{path}: not an SQLite database, not a Serra store") from None
+        # e.g. a WAL store in a directory this user may not write, with no -shm file yet
+        raise StoreError(f"{path}: cannot read the store: {e}") from None
+    if version == 0 or missing:
+        conn.close()
+        raise StoreError(f"{path}: not a Serra store (schema version {version}; missing tables "
+                         f"{', '.join(sorted(missing)) or 'none'})")
+    if version > schema.SCHEMA_VERSION:
+        conn.close()
+        raise StoreError(f"{path}: store schema version {version} is newer than this gateway's "
+                         f"({schema.SCHEMA_VERSION}); update the gateway")
+    conn.execute("PRAGMA busy_timeout=30000")
     return conn
 
 
@@ -101,6 +181,27 @@ class Store:
     def device_states(self) -> dict[int, DeviceState]:
         return {d: DeviceState(b, s) for d, b, s in
                 self.conn.execute("SELECT device_id, boot, max_seq FROM devices")}
+
+    def boot_base(self, device_id: int, key_id: str) -> int:
+        """The offset added to the boots a device sends under the key `key_id`.
+
+        0 for the first key of a device (and for the key of a device seen before keys were
+        recorded); for a new key, one above the latest boot stored, fixed when the key is first
+        met and kept in `meta`. A board reflashed with a new key may so restart its boot counter
+        at 0 without colliding with its stored rows, while the old key's packets stay replays.
+        """
+        name = f"boot_base/{device_id}/{key_id}"
+        with transaction(self.conn):
+            got = self.get_meta(name)
+            if got is not None:
+                return int(got)
+            known = self.conn.execute("SELECT count(*) FROM meta WHERE name LIKE ?",
+                                      (f"boot_base/{device_id}/%",)).fetchone()[0]
+            row = self.conn.execute("SELECT boot FROM devices WHERE device_id=?",
+                                    (device_id,)).fetchone()
+            base = 0 if row is None or not known else row[0] + 1
+            self.set_meta(name, str(base))
+        return base
 
     def stored_seqs(self, device_id: int, boot: int, above: int) -> set[int]:
         cur = self.conn.execute(

@@ -3,8 +3,9 @@
 Values the minute QC flagged as missing, a spike or a stuck sensor become empty cells (counted
 per channel and reason), never made-up numbers; a minute with some missing samples
 (``partial``) keeps the mean of the valid ones. Minutes with no row at all stay absent: the
-tools treat the hole as a gap. Samples stored after the last aggregation are aggregated first
-(when the store is writable), so an export never silently misses the newest data.
+tools treat the hole as a gap. Samples stored after the ingest service's last aggregation pass
+are aggregated in memory (`aggregate.pending_minutes`), so an export never silently misses the
+newest data and never writes: it reads through `open_readonly`.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import numpy as np
 
 from gateway.kitcsv import write_kit_csv
 from gateway.protocol import CHANNELS
-from gateway.store.aggregate import QC_MISSING, QC_NAMES, QC_SPIKE, QC_STUCK, aggregate
+from gateway.store.aggregate import QC_MISSING, QC_NAMES, QC_SPIKE, QC_STUCK, pending_minutes
 
 DROP = QC_MISSING | QC_SPIKE | QC_STUCK
 """QC flags whose value is left out of the export."""
@@ -36,7 +37,7 @@ class Export:
     start: str | None
     end: str | None
     dropped: dict[str, dict[str, int]] = field(default_factory=dict)
-    aggregated: int = 0  # minutes brought up to date before the export
+    aggregated: int = 0  # minutes computed from samples not yet aggregated by the service
 
 
 def pick_device(conn: sqlite3.Connection, device_id: int | None) -> int:
@@ -63,20 +64,20 @@ def export_kit_csv(
     end: float | None = None,
     catch_up: bool = True,
 ) -> Export:
-    """Write the minute aggregates of a device in [start, end) [unix s] as a kit CSV at ``out``."""
-    aggregated = 0
-    if catch_up:
-        while True:  # bounded steps, as the ingest service does
-            n = aggregate(conn)
-            if not n:
-                break
-            aggregated += n
+    """Write the minute aggregates of a device in [start, end) [unix s] as a kit CSV at ``out``.
+
+    Reads only (``conn`` may come from `open_readonly`); with ``catch_up`` the samples stored
+    since the last aggregation pass are aggregated in memory and take their minutes' place."""
     dev = pick_device(conn, device_id)
+    lo, hi = -np.inf if start is None else start, np.inf if end is None else end
     cols = ", ".join(f"{c}, {c}_qc" for c in CHANNELS)
-    rows = conn.execute(
-        f"SELECT minute, {cols} FROM minute WHERE device_id=? AND minute>=? AND minute<? "
-        "ORDER BY minute",
-        (dev, -np.inf if start is None else start, np.inf if end is None else end)).fetchall()
+    by_minute = {r[0]: r for r in conn.execute(
+        f"SELECT minute, {cols} FROM minute WHERE device_id=? AND minute>=? AND minute<?",
+        (dev, lo, hi))}
+    newer = pending_minutes(conn, dev) if catch_up else {}
+    by_minute.update((m, (m, *r[3:])) for m, r in newer.items() if lo <= m < hi)
+    aggregated = len(newer)
+    rows = [by_minute[m] for m in sorted(by_minute)]
     if not rows:
         raise ExportError(f"device {dev}: no minute in the span asked for")
     table = np.array([[np.nan if v is None else v for v in r] for r in rows], dtype=float)

@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: run test bench images lint clean venv stubs
+.PHONY: run demo test bench images lint clean venv stubs
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -24,9 +24,13 @@ $(STUBS): $(STAMP)
 
 stubs: $(STUBS)
 
-## run: the main end-to-end job on embedded defaults
+## run: the main end-to-end job on embedded defaults (the offline demo until the live service lands)
 run: $(STAMP)
-	$(PY) -m gateway demo
+	$(PY) -m training demo
+
+## demo: the offline loop on shipped data: simulate → calibrate → replay → diagnose (out/demo/)
+demo: $(STAMP)
+	$(PY) -m training demo
 
 ## test: the whole suite (CI calls this)
 test: $(STAMP) $(STUBS)

@@ -6,10 +6,16 @@ STAMP  := $(VENV)/.installed
 
 .PHONY: run demo test bench images lint clean venv stubs
 
+# The wheel carries gateway/ only (pyproject.toml); training/ and the other repository tools
+# are importable in the dev venvs, from any folder and in subprocesses, through this .pth.
+CHECKOUT_PTH = -c 'import os, sysconfig; open(os.path.join(sysconfig.get_path("purelib"), \
+	"serra-checkout.pth"), "w").write(os.getcwd() + "\n")'
+
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[dev,training]'
+	$(PY) $(CHECKOUT_PTH)
 	touch $(STAMP)
 
 venv: $(STAMP)
@@ -45,6 +51,7 @@ $(BENCH_STAMP): pyproject.toml
 	$(PYTHON) -m venv $(BENCH_VENV)
 	$(BENCH_VENV)/bin/python -m pip install --quiet --upgrade pip
 	$(BENCH_VENV)/bin/python -m pip install --quiet -e '.[dev,bench]'
+	$(BENCH_VENV)/bin/python $(CHECKOUT_PTH)
 	touch $(BENCH_STAMP)
 
 ## bench: speed and memory, side by side with peers; JSON in bench/results/

@@ -25,8 +25,11 @@ import subprocess
 import sys
 import sysconfig
 import zipfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from subprocess import Popen
 
 import pytest
 
@@ -171,24 +174,51 @@ def _unit(path: Path) -> dict[str, list[str]]:
     return out
 
 
+def _map_paths(text: str, installed: Installed, root: Path) -> str:
+    """The install's paths and the kit's public port → a temp folder and a loopback port."""
+    return (text.replace("/opt/serra/venv/bin/python", str(installed.python))
+            .replace("/var/lib/serra/", f"{root}/").replace("/etc/serra/", f"{root}/")
+            .replace("0.0.0.0:5683", "127.0.0.1:0"))
+
+
+@contextmanager
+def run_unit(name: str, installed: Installed, bundles: Path, root: Path) -> Iterator[Popen[str]]:
+    """Start a shipped unit's ExecStart from the fresh venv, with the bundle's default configs
+    (paths mapped into ``root``); stopped with SIGTERM, as systemd does, and must exit 0."""
+    for config in (bundles / "gateway").glob("*.toml"):
+        (root / config.name).write_text(_map_paths(config.read_text(), installed, root))
+    (cmd,) = _unit(bundles / "gateway" / name)["ExecStart"]
+    log = root / f"{name}.stderr"
+    with log.open("w") as err:
+        proc = subprocess.Popen(shlex.split(_map_paths(cmd, installed, root)), cwd=installed.cwd,
+                                env=installed.env, text=True, stdout=subprocess.PIPE, stderr=err)
+    try:
+        yield proc
+    finally:
+        proc.terminate()
+        try:
+            proc.communicate(timeout=60)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    assert proc.returncode == 0, log.read_text()
+
+
+def _first_line(proc: Popen[str], deadline: float = 120) -> str:
+    assert proc.stdout is not None
+    ready, _, _ = select.select([proc.stdout], [], [], deadline)
+    return proc.stdout.readline() if ready else ""
+
+
 def test_installed_wheel_stores_a_record_through_the_shipped_ingest_unit(
         installed: Installed, bundles: Path, tmp_path: Path) -> None:
-    """serra-ingest.service's ExecStart, paths mapped to a temp folder, on 127.0.0.1."""
-    (cmd,) = _unit(bundles / "gateway" / "serra-ingest.service")["ExecStart"]
     key = secrets.token_bytes(32)
     write_keys(tmp_path / "keys.txt", {7: key})
-    cmd = (cmd.replace("/opt/serra/venv/bin/python", str(installed.python))
-           .replace("/var/lib/serra/", f"{tmp_path}/").replace("/etc/serra/", f"{tmp_path}/")
-           .replace("0.0.0.0:5683", "127.0.0.1:0"))
-    proc = subprocess.Popen(shlex.split(cmd), cwd=installed.cwd, env=installed.env, text=True,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    try:
-        assert proc.stdout is not None
-        ready, _, _ = select.select([proc.stdout], [], [], 120)
-        line = proc.stdout.readline() if ready else ""
-        assert line.startswith("serra-ingest listening udp"), line + (proc.stderr.read()
-                                                                        if proc.poll() else "")
+    with run_unit("serra-ingest.service", installed, bundles, tmp_path) as proc, \
+            socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        line = _first_line(proc)
+        assert line.startswith("serra-ingest listening udp"), line
         host, port = line.split()[-1].rsplit(":", 1)
         rec = protocol.Record(7, 0, 0, 60_000, 0, 60.0, (21.5, 60.0, 15.0, 70.0, 300.0, 2.0, 0),
                               (0,) * 7)
@@ -196,11 +226,6 @@ def test_installed_wheel_stores_a_record_through_the_shipped_ingest_unit(
         sock.sendto(protocol.encode_record(rec, key), (host, int(port)))
         ack = protocol.decode_ack(sock.recv(64), key)
         assert (ack.device_id, ack.seq, ack.status) == (7, 0, protocol.ACK_STORED)
-    finally:
-        sock.close()
-        proc.terminate()
-        out, err = proc.communicate(timeout=60)
-    assert proc.returncode == 0, err
     with sqlite3.connect(tmp_path / "serra.db") as db:
         assert db.execute("SELECT count(*) FROM samples").fetchone()[0] == 1
 

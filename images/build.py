@@ -133,7 +133,8 @@ def tar(folder: Path) -> Path:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python images/build.py", description=__doc__.split(
         "\n\n")[0].replace("``", ""))
-    parser.add_argument("--out", type=Path, default=BUILD, help="output folder (images/build)")
+    parser.add_argument("--out", type=Path, default=BUILD, metavar="DIR",
+                        help="output folder, emptied first (images/build)")
     args = parser.parse_args(argv)
     if args.out.exists():
         shutil.rmtree(args.out)

@@ -27,7 +27,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "demo",
         help="end-to-end offline run on shipped data: simulate → calibrate → replay → diagnose",
-        description=__doc__.split("\n\n")[0] + " Steps: simulate, calibrate, replay, diagnose.",
+        description=__doc__.split("\n\n")[0].replace("``", "")
+        + " Steps: simulate, calibrate, replay, diagnose.",
     )
     p.add_argument("--out", default="out/demo", metavar="DIR", help="output folder (out/demo)")
     p.add_argument("--days", type=float, default=6.0, help="days to simulate (6)")

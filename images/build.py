@@ -39,6 +39,7 @@ GATEWAY_FILES = (
     "router.toml",
     "README.md",
 )
+BUILT = {"firmware", "gateway", "firmware.tar.gz", "gateway.tar.gz"}  # what --out may hold
 IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", "*.egg-info", ".pytest_cache")
 
 
@@ -137,6 +138,10 @@ def main(argv: list[str] | None = None) -> int:
                         help="output folder, emptied first (images/build)")
     args = parser.parse_args(argv)
     if args.out.exists():
+        foreign = sorted(p.name for p in args.out.iterdir() if p.name not in BUILT)
+        if foreign:
+            parser.error(f"{args.out} holds {', '.join(foreign[:5])}, not a previous build: "
+                         "give an empty or new folder")
         shutil.rmtree(args.out)
     fw = build_firmware(args.out / "firmware")
     gw = build_gateway(args.out / "gateway")

@@ -330,3 +330,11 @@ def test_firmware_bundle_runs_on_micropython_and_refuses_the_template_key(
     (fw / "config.json").write_text(json.dumps(cfg))
     r = _run_bundle(fw, "import config; c = config.load('config.json'); print('OK', c.device_id)")
     assert f"OK {cfg['device_id']}" in r.stdout, r.stdout + r.stderr
+
+
+def test_build_refuses_to_empty_a_folder_that_is_not_a_build(tmp_path: Path) -> None:
+    (tmp_path / "notes.txt").write_text("keep me")
+    with pytest.raises(SystemExit) as exc:
+        build.main(["--out", str(tmp_path)])
+    assert exc.value.code == 2
+    assert (tmp_path / "notes.txt").read_text() == "keep me"

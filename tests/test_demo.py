@@ -1,6 +1,6 @@
-"""``make run`` end to end (shortened): the demo's four steps run and leave their outputs."""
+"""``make demo`` end to end (shortened): the offline demo's four steps run and leave their outputs."""
 
-from gateway.cli import main
+from training.__main__ import main
 
 
 def test_demo_runs_the_whole_loop(tmp_path, capsys):

@@ -1,4 +1,4 @@
-"""``python -m training <command>``: offline tools (simulator now; training added later).
+"""``python -m training <command>``: offline tools run from the repository (not in the gateway wheel).
 
 Each command lives in its own module exposing ``add_parser(subparsers)``, which registers the
 subcommand and sets ``func``; add new commands to ``COMMANDS``.
@@ -9,7 +9,10 @@ from __future__ import annotations
 import argparse
 import importlib
 
-COMMANDS = ("training.simulate.cli",)
+COMMANDS = (
+    "training.simulate.cli",
+    "training.demo",
+)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -15,7 +15,6 @@ COMMANDS = {
     "calibrate": "gateway.cli.calibrate",
     "replay": "gateway.cli.replay",
     "diagnose": "gateway.cli.diagnose",
-    "demo": "gateway.cli.demo",
     "ingest": "gateway.cli.ingest",
     "export": "gateway.cli.export",
     "keys": "gateway.cli.keys",

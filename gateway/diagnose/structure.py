@@ -120,7 +120,7 @@ class Modulation:
 
 
 def _phi(z: np.ndarray) -> np.ndarray:
-    """(1 - e^-z)/z, finite at z → 0 (MODEL_NOTES §4)."""
+    """(1 - e^-z)/z, finite at z → 0 (docs/model-notes.md §4)."""
     z = np.maximum(z, 1e-12)
     return -np.expm1(-z) / z
 

@@ -5,7 +5,7 @@
 
 Ten parameters with the hard bounds of table 13 and the variation ratios of table 12, except
 the ventilation coefficients, which follow the standard Kittas/Boulard convention
-(MODEL_NOTES §3): the discharge coefficient C_d is dimensionless around 0.6–0.8 rather than the
+(docs/model-notes.md §3): the discharge coefficient C_d is dimensionless around 0.6–0.8 rather than the
 thesis's 15–35e-4, and the wind coefficient C_w is the usual pressure coefficient.
 Defaults: the offline-calibrated values of table 8 (ventilation: literature values).
 """
@@ -82,7 +82,7 @@ class Transpiration(FluxTerm):
     """Latent heat of crop transpiration (III.28–III.29, Baille et al. form).
 
     The printed III.29 mixes mass and energy units; this is the dimensionally consistent form
-    of MODEL_NOTES §3: ``Q_trp = C_A (1 - exp(-k LAI)) I_in + C_B LAI VPD`` [W m-2] with C_B in
+    of docs/model-notes.md §3: ``Q_trp = C_A (1 - exp(-k LAI)) I_in + C_B LAI VPD`` [W m-2] with C_B in
     W m-2 kPa-1 (C_Bd by day, C_Bn by night). VPD uses the simulated air temperature and the
     measured vapour pressure, so a free run does not read the measured temperature.
     """
@@ -118,7 +118,7 @@ class NaturalVentilation(FluxTerm):
     """Heat lost by natural ventilation and leakage (III.31–III.32, Kittas et al. 1997).
 
     ``G = C_d sqrt((A_r A_s / sqrt(A_r² + A_s²))² 2 g h ΔT/T_out + ((A_r + A_s)/2)² C_w u²)
-    + G_leak`` [m3 s-1] (the standard form; printed III.31 has typos, MODEL_NOTES §3) and
+    + G_leak`` [m3 s-1] (the standard form; printed III.31 has typos, docs/model-notes.md §3) and
     ``Q_vent = rho c_p G (T_in - T_out) / A`` [W m-2].
     """
 

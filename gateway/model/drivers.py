@@ -17,7 +17,7 @@ def roof_vent_area(vents: Vents, opening: np.ndarray) -> np.ndarray:
     """Roof (flap) opening area A_r [m2] from the opening signal [%] (III.34).
 
     ``A_r = n L 2 W sin(U/100 * angle_max / 2)``, the flap's open area as a function of its
-    opening angle (MODEL_NOTES §3).
+    opening angle (docs/model-notes.md §3).
     """
     angle = np.radians(np.asarray(opening, dtype=float) / 100.0 * vents.roof_max_angle / 2.0)
     return vents.roof_count * 2.0 * vents.roof_length * vents.roof_width * np.sin(angle)

@@ -1,7 +1,7 @@
 """A climate model as a list of flux terms, integrated with the exact exponential step.
 
 ``C dT_in/dt = sum_k (g_k - s_k T_in)``; with the coefficients frozen over one step of length
-dt the solution is exact (MODEL_NOTES §4):
+dt the solution is exact (docs/model-notes.md §4):
 
     T+ = T + (G - S T) dt/C * phi(S dt / C),   phi(z) = (1 - exp(-z)) / z
 

@@ -8,7 +8,7 @@ References
 - Tetens (1930) as given by Murray (1967): saturation vapour pressure over water.
 - ASHRAE Handbook Fundamentals (2017), ch. 1: humidity ratio and moist-air density.
 - Swinbank (1963), Q. J. R. Meteorol. Soc. 89: sky temperature.
-- ../shared/MODEL_NOTES.md §1 for the thesis misprints corrected here.
+- docs/model-notes.md §1 for the thesis misprints corrected here.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ def saturation_vapour_pressure(t: ArrayLike) -> np.ndarray:
     """Saturation vapour pressure p_ws [kPa] of air at temperature ``t`` [°C] (Tetens).
 
     Thesis III.5 prints the denominator with the temperature in kelvin; the Tetens form takes
-    °C: ``p_ws = 0.61078 exp(17.2694 t / (t + 237.3))`` (MODEL_NOTES §1).
+    °C: ``p_ws = 0.61078 exp(17.2694 t / (t + 237.3))`` (docs/model-notes.md §1).
     """
     t = np.asarray(t, dtype=float)
     return 0.61078 * np.exp(17.2694 * t / (t + 237.3))
@@ -59,7 +59,7 @@ def humidity_ratio(p_w: ArrayLike, p_atm: ArrayLike = P_ATM) -> np.ndarray:
     """Humidity ratio W [kg water per kg dry air] from vapour pressure p_w [kPa] (III.3).
 
     The thesis calls this a density and adds it to one (III.2); it is a mass ratio
-    (MODEL_NOTES §1, ASHRAE Fundamentals eq. 22).
+    (docs/model-notes.md §1, ASHRAE Fundamentals eq. 22).
     """
     p_w = np.asarray(p_w, dtype=float)
     return EPSILON * p_w / (np.asarray(p_atm, dtype=float) - p_w)
@@ -69,7 +69,7 @@ def moist_air_density(t: ArrayLike, p_w: ArrayLike = 0.0, p_atm: ArrayLike = P_A
     """Density of moist air rho [kg m-3] at ``t`` [°C], vapour pressure p_w [kPa], p_atm [kPa].
 
     ``rho = p_atm / (R_d T) (1 - 0.378 p_w / p_atm)`` (ideal-gas mixture), used in place of the
-    thesis III.2 sum of a density and a humidity ratio (MODEL_NOTES §1).
+    thesis III.2 sum of a density and a humidity ratio (docs/model-notes.md §1).
     """
     p_atm = np.asarray(p_atm, dtype=float)
     t_k = np.asarray(t, dtype=float) + KELVIN

@@ -1,12 +1,12 @@
 """The vocabulary of a climate model: parameters, activity conditions and heat-flux terms.
 
-A model is a list of flux terms (ARCHITECTURE.md). Each term contributes to the air heat
+A model is a list of flux terms (docs/architecture.md). Each term contributes to the air heat
 balance ``C dT_in/dt = sum_k Q_k`` a flux that is affine in the state once the step's
 coefficients are frozen:
 
     Q_k = g_k - s_k * T_in          g_k [W m-2], s_k [W m-2 K-1]
 
-which is what the exact exponential step (MODEL_NOTES §4) needs. ``coefficients`` evaluates
+which is what the exact exponential step (docs/model-notes.md §4) needs. ``coefficients`` evaluates
 (g_k, s_k) for a whole population of parameter sets at once: parameter columns arrive with
 shape (P, 1) and broadcast against the time axis, so the calibrators, the online estimator and
 the diagnosis never loop over candidates.

@@ -8,7 +8,7 @@ References
 - Boulard & Baille (1995), J. Agric. Eng. Res. 61: stack flow through a single roof opening
   ``G = Cd (A_r / 3) sqrt(g dT H_r / T_out)`` with ``H_r`` the opening height; added in quadrature
   so a roof-only opening still breathes on buoyancy.
-- Thesis III.33-III.34 (MODEL_NOTES §3): opening area of side vents (linear in the signal) and
+- Thesis III.33-III.34 (docs/model-notes.md §3): opening area of side vents (linear in the signal) and
   roof flaps (``2 L W sin(angle / 2)``).
 - Muñoz et al. (1999), J. Agric. Eng. Res. 73: insect screens cut the flow roughly by half
   (here a factor on Cd).

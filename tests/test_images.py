@@ -1,0 +1,340 @@
+"""``make images``: the firmware and gateway bundles, and the wheel installed into a fresh venv.
+
+The bundles are built once per module by images/build.py into a temporary folder. The fresh venv
+gets the wheel with ``--no-deps --no-index`` (offline) and sees the test venv's site-packages
+as a plain path for the dependencies (numpy, rich, …): ``.pth`` files there are not processed, so
+neither the editable install nor the checkout (serra-checkout.pth) is visible from it, and
+the subprocesses run outside the checkout. What is checked here is the wheel itself (its files,
+its data, its declared dependencies, its commands); that PyPI serves the dependencies is not.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import json
+import os
+import re
+import secrets
+import select
+import shlex
+import shutil
+import socket
+import sqlite3
+import subprocess
+import sys
+import sysconfig
+import zipfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from subprocess import Popen
+
+import pytest
+
+from gateway import protocol
+from gateway.store.keys import write_keys
+from tests.mcu_fakes.hostenv import FAKES, MCU, ROOT, micropython
+from tests.test_layering import imported_modules
+
+_spec = importlib.util.spec_from_file_location("serra_images_build", ROOT / "images" / "build.py")
+assert _spec and _spec.loader
+build = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(build)
+
+UNITS = ("serra-gateway.service", "serra-router.service", "serra-ingest.service")
+HARDENING = {  # in every unit
+    "User": "serra", "Group": "serra", "NoNewPrivileges": "yes", "ProtectSystem": "strict",
+    "ProtectHome": "yes", "PrivateTmp": "yes", "CapabilityBoundingSet": "", "UMask": "0077",
+    "RestrictSUIDSGID": "yes", "SystemCallFilter": "@system-service",
+}
+STATE = {"StateDirectory": "serra", "ReadWritePaths": "/var/lib/serra"}  # units that write
+EXEC = {
+    "serra-gateway.service": "/opt/serra/venv/bin/python -m gateway run --config /etc/serra/gateway.toml",
+    "serra-router.service": "/opt/serra/venv/bin/python -m gateway router --config /etc/serra/router.toml",
+    "serra-ingest.service": "/opt/serra/venv/bin/python -m gateway.ingest.service --db "
+                            "/var/lib/serra/serra.db --keys /etc/serra/keys.txt --listen 0.0.0.0:5683",
+}
+
+
+@pytest.fixture(scope="module")
+def bundles(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("images")
+    assert build.main(["--out", str(out)]) == 0
+    return out
+
+
+@dataclass
+class Installed:
+    python: Path
+    cwd: Path  # outside the checkout, so `python -m` cannot pick the repository's gateway/
+    env: dict[str, str]
+
+    def run(self, *args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([str(self.python), *args], cwd=self.cwd, env=self.env,
+                              capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def installed(bundles: Path, tmp_path_factory: pytest.TempPathFactory) -> Installed:
+    """The bundle's wheel in a fresh venv (see the module docstring)."""
+    base = tmp_path_factory.mktemp("fresh")
+    venv = base / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True,
+                   timeout=120)
+    python = venv / "bin" / "python"
+    (wheel,) = (bundles / "gateway").glob("serra-*.whl")
+    subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "--quiet",
+                    "--no-deps", "--no-index", str(wheel)], check=True, timeout=300)
+    site = subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
+                          check=True, capture_output=True, text=True).stdout.strip()
+    deps = {sysconfig.get_path("purelib"), sysconfig.get_path("platlib")}
+    Path(site, "serra-test-deps.pth").write_text("\n".join(sorted(deps)) + "\n")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("PYTHON")}
+    cwd = base / "work"
+    cwd.mkdir()
+    return Installed(python, cwd, env)
+
+
+# --- the wheel ----------------------------------------------------------------------------------
+
+def _repo_package_files() -> set[str]:
+    return {str(p.relative_to(ROOT)) for p in (ROOT / "gateway").rglob("*")
+            if p.is_file() and "__pycache__" not in p.parts and p.suffix != ".pyc"}
+
+
+def test_wheel_holds_the_gateway_package_and_nothing_else(bundles: Path) -> None:
+    (wheel,) = (bundles / "gateway").glob("serra-*.whl")
+    names = set(zipfile.ZipFile(wheel).namelist())
+    package = {n for n in names if not n.startswith("serra-")}
+    assert all(n.startswith("gateway/") for n in package), sorted(package)
+    assert not [n for n in names if "training" in n or n.endswith(".csv.gz")]
+    # Every module and data file of gateway/ is in it: a subpackage without __init__.py or a
+    # data file no package-data pattern matches would be missing on the Pi.
+    missing = _repo_package_files() - package
+    assert not missing, f"not in the wheel (package-data in pyproject.toml?): {sorted(missing)}"
+    assert "gateway/presets/almeria-palmerillas.toml" in package
+
+
+def _requires(wheel: Path) -> set[str]:
+    with zipfile.ZipFile(wheel) as z:
+        meta = z.read(next(n for n in z.namelist() if n.endswith(".dist-info/METADATA"))).decode()
+    reqs = [line.split(":", 1)[1].strip() for line in meta.splitlines()
+            if line.startswith("Requires-Dist:")]
+    return {_norm(re.match(r"[A-Za-z0-9._-]+", r)[0]) for r in reqs if "extra ==" not in r}
+
+
+def _norm(name: str) -> str:
+    return re.sub(r"[-_.]+", "-", name).lower()
+
+
+def test_wheel_declares_every_library_the_gateway_imports(bundles: Path) -> None:
+    import importlib.metadata
+
+    (wheel,) = (bundles / "gateway").glob("serra-*.whl")
+    declared = _requires(wheel)
+    providers = importlib.metadata.packages_distributions()
+    top = {mod.split(".")[0] for f in (ROOT / "gateway").rglob("*.py")
+           for _, mod in imported_modules(f)}
+    third_party = sorted(top - set(sys.stdlib_module_names) - {"gateway"})
+    assert "numpy" in third_party
+    undeclared = [f"{m} ({', '.join(providers.get(m, ['not installed']))})" for m in third_party
+                  if not {_norm(d) for d in providers.get(m, [])} & declared]
+    assert not undeclared, f"imported by gateway/ but not in [project] dependencies: {undeclared}"
+
+
+def test_installed_wheel_runs_without_the_checkout(installed: Installed) -> None:
+    r = installed.run("-c", "import gateway, importlib.util; print(gateway.__file__); "
+                      "print(importlib.util.find_spec('training'))")
+    assert r.returncode == 0, r.stderr
+    where, training = r.stdout.split()
+    assert Path(where).is_relative_to(installed.python.parents[1]), where
+    assert not Path(where).is_relative_to(ROOT)
+    assert training == "None"  # the offline tools are not part of the appliance
+    r = installed.run("-m", "gateway", "--help")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("usage: python -m gateway")
+    for command in ("calibrate", "replay", "diagnose", "ingest", "export"):
+        assert command in r.stdout
+    assert "demo" not in r.stdout
+    r = installed.run("-m", "gateway", "calibrate", "--help")  # presets come from package data
+    assert r.returncode == 0 and "almeria-palmerillas" in r.stdout, r.stderr
+
+
+def _unit(path: Path) -> dict[str, list[str]]:
+    """systemd unit → {key: [values]} over all sections (keys may repeat; \\ continues a line)."""
+    text = path.read_text(encoding="utf-8").replace("\\\n", " ")
+    out: dict[str, list[str]] = {}
+    for line in text.splitlines():
+        line = line.strip()
+        if line and not line.startswith(("#", ";", "[")):
+            key, _, value = line.partition("=")
+            out.setdefault(key.strip(), []).append(" ".join(value.split()))
+    return out
+
+
+def _map_paths(text: str, installed: Installed, root: Path) -> str:
+    """The install's paths and the kit's public port → a temp folder and a loopback port."""
+    return (text.replace("/opt/serra/venv/bin/python", str(installed.python))
+            .replace("/var/lib/serra/", f"{root}/").replace("/etc/serra/", f"{root}/")
+            .replace("0.0.0.0:5683", "127.0.0.1:0"))
+
+
+@contextmanager
+def run_unit(name: str, installed: Installed, bundles: Path, root: Path) -> Iterator[Popen[str]]:
+    """Start a shipped unit's ExecStart from the fresh venv, with the bundle's default configs
+    (paths mapped into ``root``); stopped with SIGTERM, as systemd does, and must exit 0."""
+    for config in (bundles / "gateway").glob("*.toml"):
+        (root / config.name).write_text(_map_paths(config.read_text(), installed, root))
+    (cmd,) = _unit(bundles / "gateway" / name)["ExecStart"]
+    log = root / f"{name}.stderr"
+    with log.open("w") as err:
+        proc = subprocess.Popen(shlex.split(_map_paths(cmd, installed, root)), cwd=installed.cwd,
+                                env=installed.env, text=True, stdout=subprocess.PIPE, stderr=err)
+    try:
+        yield proc
+    finally:
+        proc.terminate()
+        try:
+            proc.communicate(timeout=60)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    assert proc.returncode == 0, log.read_text()
+
+
+def _first_line(proc: Popen[str], deadline: float = 120) -> str:
+    assert proc.stdout is not None
+    ready, _, _ = select.select([proc.stdout], [], [], deadline)
+    return proc.stdout.readline() if ready else ""
+
+
+def test_installed_wheel_stores_a_record_through_the_shipped_ingest_unit(
+        installed: Installed, bundles: Path, tmp_path: Path) -> None:
+    key = secrets.token_bytes(32)
+    write_keys(tmp_path / "keys.txt", {7: key})
+    with run_unit("serra-ingest.service", installed, bundles, tmp_path) as proc, \
+            socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        line = _first_line(proc)
+        assert line.startswith("serra-ingest listening udp"), line
+        host, port = line.split()[-1].rsplit(":", 1)
+        rec = protocol.Record(7, 0, 0, 60_000, 0, 60.0, (21.5, 60.0, 15.0, 70.0, 300.0, 2.0, 0),
+                              (0,) * 7)
+        sock.settimeout(60)
+        sock.sendto(protocol.encode_record(rec, key), (host, int(port)))
+        ack = protocol.decode_ack(sock.recv(64), key)
+        assert (ack.device_id, ack.seq, ack.status) == (7, 0, protocol.ACK_STORED)
+    with sqlite3.connect(tmp_path / "serra.db") as db:
+        assert db.execute("SELECT count(*) FROM samples").fetchone()[0] == 1
+
+
+# --- the gateway bundle ---------------------------------------------------------------------------
+
+def test_units_run_the_documented_commands_hardened(bundles: Path) -> None:
+    for name in UNITS:
+        unit = _unit(bundles / "gateway" / name)
+        assert unit["ExecStart"] == [EXEC[name]], name
+        want = HARDENING | (STATE if name != "serra-router.service" else {})
+        wrong = {k: unit.get(k) for k, v in want.items() if unit.get(k) != [v]}
+        assert not wrong, f"{name}: {wrong}"
+        assert unit["WantedBy"] == ["multi-user.target"]
+    # the full gateway and the ingest-only unit share the UDP port: one excludes the other
+    assert _unit(bundles / "gateway" / "serra-gateway.service")["Conflicts"] == ["serra-ingest.service"]
+
+
+@pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="systemd-analyze not installed")
+@pytest.mark.parametrize("name", UNITS)
+def test_units_pass_systemd_analyze(bundles: Path, tmp_path: Path, name: str) -> None:
+    """`verify`: every key known, syntax right; `security`: exposure ≤ 2.5 (systemd's "OK")."""
+    text = (bundles / "gateway" / name).read_text(encoding="utf-8")
+    unit = tmp_path / name  # the interpreter must exist for verify: point it at this one
+    unit.write_text(text.replace("/opt/serra/venv/bin/python", os.path.realpath(sys.executable)))
+    r = subprocess.run(["systemd-analyze", "verify", str(unit)], capture_output=True, text=True,
+                       timeout=60)
+    assert r.returncode == 0 and not r.stdout.strip() and not r.stderr.strip(), r.stdout + r.stderr
+    r = subprocess.run(["systemd-analyze", "security", "--offline=yes", "--threshold=25", str(unit)],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stdout[-400:] + r.stderr
+
+
+def test_install_steps_create_the_keys_file_0600_and_install_every_shipped_file(bundles: Path) -> None:
+    readme = (bundles / "gateway" / "README.md").read_text(encoding="utf-8")
+    assert "sudo install -m 0600 -o serra -g serra /dev/null /etc/serra/keys.txt" in readme
+    assert "useradd --system" in readme and "python3 -m venv /opt/serra/venv" in readme
+    for name in [*UNITS, "gateway.toml", "router.toml", "serra-*.whl"]:
+        assert name in readme, name
+    shipped = {p.name for p in (bundles / "gateway").iterdir()}
+    assert shipped == {*UNITS, "gateway.toml", "router.toml", "README.md",
+                       next(n for n in shipped if n.endswith(".whl"))}
+
+
+def test_readme_deploy_commands_are_the_bundles_commands(bundles: Path) -> None:
+    """The README's Deploy section shows commands from the bundle READMEs, not a diverging copy."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    deploy = readme[readme.index("\n## Deploy"):]
+    deploy = deploy[:deploy.find("\n## ", 5) if "\n## " in deploy[5:] else None]
+    blocks = re.findall(r"```sh\n(.*?)```", deploy, re.S)
+    lines = [ln.strip() for b in blocks for ln in b.splitlines() if ln.strip()
+             and not ln.lstrip().startswith("#")]
+    assert len(lines) >= 10
+    shipped = "".join((bundles / b / "README.md").read_text(encoding="utf-8")
+                      for b in ("gateway", "firmware"))
+    assert not [ln for ln in lines if ln not in shipped]
+
+
+# --- the firmware bundle --------------------------------------------------------------------------
+
+def test_firmware_bundle_holds_every_module_compiled_for_the_esp32(bundles: Path) -> None:
+    fw = bundles / "firmware"
+    for src in build.firmware_sources():
+        if src.name == "main.py":
+            assert (fw / "main.py").read_bytes() == src.read_bytes()
+        else:
+            mpy = (fw / src.relative_to(MCU)).with_suffix(".mpy")
+            assert mpy.read_bytes()[:2] == b"M\x06", mpy  # .mpy version 6
+    manifest = (fw / "MANIFEST.txt").read_text()
+    assert "mpy-cross emitting mpy v6" in manifest
+    for line in manifest.splitlines():
+        if not line.startswith("#"):
+            digest, name = line.split()
+            assert hashlib.sha256((fw / name).read_bytes()).hexdigest() == digest, name
+    readme = (fw / "README.md").read_text()
+    assert "mpremote connect PORT cp *.mpy main.py config.json : + reset" in readme
+
+
+def _run_bundle(fw: Path, code: str) -> subprocess.CompletedProcess[str]:
+    """MicroPython with only the bundle (and the fake hardware modules) on its path."""
+    exe = micropython()
+    assert exe
+    env = dict(os.environ, MICROPYPATH=f"{FAKES}:{fw}:.frozen")
+    return subprocess.run([exe, "-X", "heapsize=96K", "-c", code], cwd=fw, env=env,
+                          capture_output=True, text=True, timeout=60)
+
+
+@pytest.mark.skipif(micropython() is None, reason="micropython not installed")
+def test_firmware_bundle_runs_on_micropython_and_refuses_the_template_key(
+        bundles: Path, tmp_path: Path) -> None:
+    fw = tmp_path / "firmware"
+    shutil.copytree(bundles / "firmware", fw)
+    modules = [p.stem for p in fw.glob("*.mpy")]
+    r = _run_bundle(fw, f"import {', '.join(modules)}; print('LOADED')")
+    assert "LOADED" in r.stdout, r.stdout + r.stderr  # the .mpy files load, no .py beside them
+    shutil.copy(fw / "config.template.json", fw / "config.json")
+    r = _run_bundle(fw, "import main; main.main()")
+    assert "serra: CONFIG ERROR: config.json: field 'key' is not hexadecimal" in r.stdout, r.stdout
+    assert not (fw / "boot.cnt").exists()  # stopped before anything started
+    cfg = json.loads((fw / "config.template.json").read_text())
+    cfg["key"] = secrets.token_hex(32)
+    (fw / "config.json").write_text(json.dumps(cfg))
+    r = _run_bundle(fw, "import config; c = config.load('config.json'); print('OK', c.device_id)")
+    assert f"OK {cfg['device_id']}" in r.stdout, r.stdout + r.stderr
+
+
+def test_build_refuses_to_empty_a_folder_that_is_not_a_build(tmp_path: Path) -> None:
+    (tmp_path / "notes.txt").write_text("keep me")
+    with pytest.raises(SystemExit) as exc:
+        build.main(["--out", str(tmp_path)])
+    assert exc.value.code == 2
+    assert (tmp_path / "notes.txt").read_text() == "keep me"

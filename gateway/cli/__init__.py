@@ -18,6 +18,8 @@ COMMANDS = {
     "demo": "gateway.cli.demo",
     "ingest": "gateway.cli.ingest",
     "export": "gateway.cli.export",
+    "certs": "gateway.cli.certs",
+    "router": "gateway.cli.router",
 }
 
 

@@ -193,12 +193,12 @@ class RouterProc:
         """Everything the router printed so far (this run and earlier runs of the same file)."""
         return self.log.read_text(encoding="utf-8", errors="replace") if self.log.exists() else ""
 
-    def stop(self, timeout: float = DEADLINE) -> int:
-        """SIGTERM and wait; the router must exit by itself (a hang is a failure)."""
+    def stop(self, timeout: float = DEADLINE, sig: int = signal.SIGTERM) -> int:
+        """Signal (SIGTERM) and wait; the router must exit by itself (a hang is a failure)."""
         if self.proc is None:
             return 0
         if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
+            self.proc.send_signal(sig)
             try:
                 self.proc.wait(timeout)
             except subprocess.TimeoutExpired:

@@ -7,6 +7,8 @@ from collections.abc import Iterator
 import pytest
 
 from tests.fleet.kit import Pki, make_pki
+from tests.fleet.pg import PgCluster
+from tests.fleet.pg import available as pg_available
 
 FARMS = ("farm-a", "farm-b")
 ROUTERS = ("cloud", "region-1", "region-2")
@@ -35,3 +37,14 @@ def pki(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Pki]:
 def other_pki(tmp_path_factory: pytest.TempPathFactory) -> Pki:
     """Another CA that signs a certificate with a valid-looking farm name."""
     return make_pki(tmp_path_factory.mktemp("other-pki"), gateways=("farm-a",))
+
+
+@pytest.fixture(scope="session")
+def pg() -> Iterator[PgCluster]:
+    """A throwaway PostgreSQL 15 cluster for the whole session, always stopped after. Tests
+    isolate themselves by schema (PgStore.connect(pg.dsn, schema=...))."""
+    why = pg_available()
+    if why:
+        pytest.skip(f"no PostgreSQL cluster: {why}")
+    with PgCluster() as cluster:
+        yield cluster

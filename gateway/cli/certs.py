@@ -12,6 +12,7 @@ examples:
   python -m gateway certs --out certs --router cloud=cloud.example.org \\
       --router region-1=10.0.0.5 --gateway farm-a --gateway farm-b --client cloud-store
   python -m gateway certs --out certs --gateway farm-c      # later: the same CA signs farm-c
+  python -m gateway certs --out certs --sign gateway:farm-d.csr   # a request made on the device
 
 The CA (ca.pem, ca.key) is made on the first run and reused after. A gateway's certificate has
 its farm as common name: the routers' access control lets it speak only under serra/<farm>/**.
@@ -32,6 +33,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="a gateway certificate whose common name is the farm")
     p.add_argument("--client", action="append", default=[], metavar="NAME",
                    help="a subscriber or client certificate (cloud store, dashboard)")
+    p.add_argument("--sign", action="append", default=[], metavar="ROLE:REQUEST.csr",
+                   help="sign a request made on the device (its key never leaves it); ROLE is "
+                   "gateway, client or router; the CN comes from the request")
     p.add_argument("--days", type=float, default=825, metavar="N",
                    help="validity of the certificates made now, in days (825)")
     p.add_argument("--ca-name", default="serra-fleet-ca", metavar="CN",
@@ -42,11 +46,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gateway.net.certs import CertError, issue, load_ca, make_ca
+    from gateway.net.certs import CertError, issue, load_ca, make_ca, sign_csr
 
     out = Path(args.out)
-    if not (args.router or args.gateway or args.client) and (out / "ca.pem").exists():
-        raise CliError("nothing to do: name at least one --router, --gateway or --client")
+    if not (args.router or args.gateway or args.client or args.sign) and (out / "ca.pem").exists():
+        raise CliError("nothing to do: name at least one --router, --gateway, --client or --sign")
     if args.days <= 0:
         raise CliError(f"--days must be positive, got {args.days:g}")
     try:
@@ -68,8 +72,16 @@ def run(args: argparse.Namespace) -> int:
             made.append(issue(ca, "gateway", farm, out, days=args.days, overwrite=args.force))
         for name in args.client:
             made.append(issue(ca, "client", name, out, days=args.days, overwrite=args.force))
+        for spec in args.sign:
+            role, sep, csr = spec.partition(":")
+            if not sep or role not in ("gateway", "client", "router"):
+                raise CliError(f"--sign {spec!r}: expected ROLE:FILE.csr, ROLE one of gateway, "
+                               "client, router")
+            made.append(sign_csr(ca, role, csr, out, hosts=["127.0.0.1", "localhost"],
+                                 days=args.days, overwrite=args.force))
     except CertError as exc:
         raise CliError(str(exc)) from None
     for m in made:
-        print(f"{m.role:8} CN={m.name:20} {m.cert}  key {m.key} (0600)")
+        key = f"  key {m.key} (0600)" if m.key is not None else "  (key stays on the device)"
+        print(f"{m.role:8} CN={m.name:20} {m.cert}{key}")
     return 0

@@ -38,7 +38,7 @@ class Issued:
     name: str  # the common name
     role: str  # one of ROLES
     cert: Path
-    key: Path
+    key: Path | None  # None: the key stayed on the device (sign_csr)
 
 
 def check_name(name: str, what: str = "name") -> str:
@@ -102,6 +102,7 @@ def _write(path: Path, data: bytes, mode: int, overwrite: bool) -> None:
 
 def _save(issued: Issued, cert: x509.Certificate, key: ec.EllipticCurvePrivateKey,
           overwrite: bool) -> Issued:
+    assert issued.key is not None
     if not overwrite:
         for path in (issued.cert, issued.key):
             if path.exists():
@@ -150,21 +151,15 @@ def _san(hosts: list[str]) -> x509.SubjectAlternativeName:
     return x509.SubjectAlternativeName(names)
 
 
-def issue(ca: Issued, role: str, name: str, directory: str | Path, *, hosts: list[str] | None = None,
-          days: float = 825, not_before: dt.datetime | None = None, file_stem: str | None = None,
-          overwrite: bool = False) -> Issued:
-    """A certificate for `name` (its CN) signed by `ca`, as <directory>/<stem>.pem and .key.
-
-    Routers get serverAuth and clientAuth (they accept links and open links upstream) and a
-    SAN with `hosts` (127.0.0.1 and localhost by default); gateways and clients get clientAuth.
-    `not_before` and `days` exist for tests (an expired certificate).
-    """
+def _sign(ca: Issued, role: str, name: str, public_key: ec.EllipticCurvePublicKey,
+          hosts: list[str] | None, days: float, not_before: dt.datetime | None) -> x509.Certificate:
     if role not in ROLES[1:]:
         raise CertError(f"role {role!r}: expected one of {', '.join(ROLES[1:])}")
     check_name(name, f"{role} name")
+    if ca.key is None:
+        raise CertError(f"{ca.cert}: the CA's private key is needed to sign")
     ca_key = load_private_key(ca.key)
     ca_cert = load_certificate(ca.cert)
-    key = ec.generate_private_key(ec.SECP256R1())
     start, end = _validity(days, not_before)
     usages = [ExtendedKeyUsageOID.CLIENT_AUTH]
     if role == "router":
@@ -172,7 +167,7 @@ def issue(ca: Issued, role: str, name: str, directory: str | Path, *, hosts: lis
     builder = (
         x509.CertificateBuilder()
         .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, name)]))
-        .issuer_name(ca_cert.subject).public_key(key.public_key())
+        .issuer_name(ca_cert.subject).public_key(public_key)
         .serial_number(x509.random_serial_number()).not_valid_before(start).not_valid_after(end)
         .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
         .add_extension(x509.KeyUsage(True, False, False, False, False, False, False, False, False),
@@ -185,12 +180,66 @@ def issue(ca: Issued, role: str, name: str, directory: str | Path, *, hosts: lis
         builder = builder.add_extension(_san(hosts or ["127.0.0.1", "localhost"]), critical=False)
     elif hosts:
         builder = builder.add_extension(_san(hosts), critical=False)
-    cert = builder.sign(ca_key, hashes.SHA256())
+    return builder.sign(ca_key, hashes.SHA256())
+
+
+def issue(ca: Issued, role: str, name: str, directory: str | Path, *, hosts: list[str] | None = None,
+          days: float = 825, not_before: dt.datetime | None = None, file_stem: str | None = None,
+          overwrite: bool = False) -> Issued:
+    """A new key and a certificate for `name` (its CN) signed by `ca`, as
+    <directory>/<role>-<name>.pem and .key.
+
+    Routers get serverAuth and clientAuth (they accept links and open links upstream) and a
+    SAN with `hosts` (127.0.0.1 and localhost by default); gateways and clients get clientAuth.
+    `not_before` and `days` exist for tests (an expired certificate).
+    """
+    key = ec.generate_private_key(ec.SECP256R1())
+    cert = _sign(ca, role, name, key.public_key(), hosts, days, not_before)
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     stem = file_stem or f"{role}-{name}"
     issued = Issued(name, role, directory / f"{stem}.pem", directory / f"{stem}.key")
     return _save(issued, cert, key, overwrite)
+
+
+def sign_csr(ca: Issued, role: str, csr_path: str | Path, directory: str | Path, *,
+             hosts: list[str] | None = None, days: float = 825, overwrite: bool = False) -> Issued:
+    """A certificate for a request made on the device itself (its private key never leaves it).
+
+    Only the request's public key, CN and (for a router) SAN names are used; the roles'
+    usages are ours. Written as <directory>/<role>-<CN>.pem."""
+    csr_path = Path(csr_path)
+    try:
+        csr = x509.load_pem_x509_csr(csr_path.read_bytes())
+    except OSError as exc:
+        raise CertError(f"{csr_path}: cannot read request: {exc.strerror}") from None
+    except ValueError as exc:
+        raise CertError(f"{csr_path}: not a PEM certificate request ({exc})") from None
+    if not csr.is_signature_valid:
+        raise CertError(f"{csr_path}: the request's signature does not match its key")
+    public_key = csr.public_key()
+    if not isinstance(public_key, ec.EllipticCurvePublicKey):
+        raise CertError(f"{csr_path}: expected an EC (P-256) key, got {type(public_key).__name__}")
+    attrs = csr.subject.get_attributes_for_oid(NameOID.COMMON_NAME)
+    if not attrs:
+        raise CertError(f"{csr_path}: the request has no common name (CN)")
+    name = str(attrs[0].value)
+    hosts = list(hosts or [])
+    try:  # a router's request may name the hosts its clients dial
+        san = csr.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+        hosts += [str(v) for v in san.get_values_for_type(x509.IPAddress) + san.get_values_for_type(
+            x509.DNSName) if str(v) not in hosts]
+    except x509.ExtensionNotFound:
+        pass
+    try:
+        cert = _sign(ca, role, name, public_key, hosts or None, days, None)
+    except CertError as exc:
+        raise CertError(f"{csr_path}: {exc}") from None
+    path = Path(directory) / f"{role}-{name}.pem"
+    if path.exists() and not overwrite:
+        raise CertError(f"{path}: exists; not overwriting it (use --force to replace)")
+    _write(path, cert.public_bytes(serialization.Encoding.PEM), 0o644, True)
+    return Issued(name, role, path, None)
 
 
 def load_ca(directory: str | Path) -> Issued:

@@ -122,3 +122,29 @@ def test_certs_command_makes_a_ca_then_reuses_it(tmp_path: Path) -> None:
     os.chmod(out / "ca.key", 0o644)
     r = _cli("certs", "--out", str(out), "--gateway", "farm-c")
     assert r.returncode == 2 and "ca.key: private key mode is 0644" in r.stderr
+
+
+def test_a_request_made_on_the_device_is_signed_without_its_key(tmp_path: Path) -> None:
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.hazmat.primitives.asymmetric import ec
+    from cryptography.x509.oid import NameOID
+
+    device_key = ec.generate_private_key(ec.SECP256R1())  # made and kept on the gateway
+    csr = (x509.CertificateSigningRequestBuilder()
+           .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "farm-d")]))
+           .sign(device_key, hashes.SHA256()))
+    request = tmp_path / "farm-d.csr"
+    request.write_bytes(csr.public_bytes(serialization.Encoding.PEM))
+    out = tmp_path / "certs"
+    r = _cli("certs", "--out", str(out), "--sign", f"gateway:{request}")
+    assert r.returncode == 0, r.stderr
+    assert "key stays on the device" in r.stdout
+    cert = load_certificate(out / "gateway-farm-d.pem")
+    cert.verify_directly_issued_by(load_certificate(out / "ca.pem"))
+    assert common_name(cert) == "farm-d" and cert.public_key() == device_key.public_key()
+    assert not (out / "gateway-farm-d.key").exists()
+    r = _cli("certs", "--out", str(out), "--sign", f"admin:{request}")
+    assert r.returncode == 2 and "expected ROLE:FILE.csr" in r.stderr
+    request.write_text("junk")
+    r = _cli("certs", "--out", str(out), "--sign", f"gateway:{request}")
+    assert r.returncode == 2 and "not a PEM certificate request" in r.stderr

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from gateway.cli import CliError
 
+DESCRIPTION = "Make the fleet's CA and its router, gateway and client certificates (EC P-256)."
 EPILOG = """\
 examples:
   python -m gateway certs --out certs --router cloud=cloud.example.org \\
@@ -23,7 +24,7 @@ only ca.pem and that machine's own .pem and .key (docs/fleet.md).
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("certs", help="make the fleet CA and router/gateway/client certificates",
-                       description=__doc__, epilog=EPILOG,
+                       description=DESCRIPTION, epilog=EPILOG,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", required=True, metavar="DIR", help="folder for ca.pem and the certificates")
     p.add_argument("--router", action="append", default=[], metavar="NAME[=HOST,...]",

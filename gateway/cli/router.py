@@ -10,6 +10,7 @@ import threading
 
 from gateway.cli import CliError
 
+DESCRIPTION = "Run a Zenoh router: TLS endpoints, mutual TLS, access control, links to upstream routers."
 EPILOG = """\
 The router is the Zenoh library itself in router mode. It listens on router.listen, links to
 every router in router.connect (retried for ever), requires certificates signed by tls.ca when
@@ -21,7 +22,7 @@ SIGTERM or Ctrl-C closes the session and exits 0. RUST_LOG, when set, overrides 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("router", help="run a Zenoh router (TLS, access control, upstream links)",
-                       description=__doc__, epilog=EPILOG,
+                       description=DESCRIPTION, epilog=EPILOG,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--config", required=True, metavar="ROUTER.toml", help="router configuration")
     p.add_argument("--check", action="store_true",

@@ -14,7 +14,7 @@ CHECKOUT_PTH = -c 'import os, sysconfig; open(os.path.join(sysconfig.get_path("p
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[dev,training]'
+	$(PY) -m pip install --quiet -e '.[dev,training,cloud]'
 	$(PY) $(CHECKOUT_PTH)
 	touch $(STAMP)
 

@@ -18,6 +18,8 @@ COMMANDS = {
     "ingest": "gateway.cli.ingest",
     "export": "gateway.cli.export",
     "keys": "gateway.cli.keys",
+    "certs": "gateway.cli.certs",
+    "router": "gateway.cli.router",
 }
 
 

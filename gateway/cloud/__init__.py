@@ -1,0 +1,1 @@
+"""Cloud-side storage of what the fleet publishes (PostgreSQL; SQLite stays the embedded default)."""

@@ -1,0 +1,259 @@
+"""The cloud history store on PostgreSQL (psycopg 3): many farms' messages in one table.
+
+    store = PgStore.connect("postgresql://serra@db.example.org/serra")   # creates the schema
+    store.insert_batch(messages)      # -> rows inserted; repeats are dropped, never doubled
+    store.history("farm-a", "gh1", "measurement/inside", t_from, t_to, limit=1000)
+    store.close()
+
+The table ``serra.message`` (schema name configurable) is what a cloud engineer queries::
+
+    SELECT observed, payload->>'temperature' FROM serra.message
+     WHERE farm = 'farm-a' AND greenhouse = 'gh1' AND kind = 'measurement/inside'
+       AND observed >= '2026-11-01' ORDER BY observed;
+
+An idempotency key is unique per farm (``UNIQUE (farm, idem)``): a message delivered twice
+(an outbox resending after a reconnection, two routers, a replay) is stored once, and one farm
+cannot shadow another farm's keys. Payloads are JSONB (their text comes back normalised).
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+try:
+    import psycopg
+    from psycopg import sql
+except ImportError as exc:  # an optional dependency: the gateway appliance never needs it
+    raise ImportError("the PostgreSQL cloud store needs psycopg 3: pip install 'serra[cloud]'") from exc
+
+log = logging.getLogger("serra.cloud.postgres")
+SCHEMA_VERSION = 1
+MAX_LIMIT = 100_000
+CHUNK = 10_000  # rows per INSERT statement (arrays of this length)
+_SCHEMA_NAME = re.compile(r"^[a-z_][a-z0-9_]{0,62}$")
+
+DDL = """
+CREATE SCHEMA IF NOT EXISTS {schema};
+CREATE TABLE IF NOT EXISTS {schema}.message (
+    id         bigint GENERATED ALWAYS AS IDENTITY PRIMARY KEY,
+    farm       text        NOT NULL,
+    greenhouse text        NOT NULL,
+    kind       text        NOT NULL,   -- measurement/inside, forecast, device/7, ...
+    observed   timestamptz NOT NULL,   -- what the message is about (gateway clock)
+    received   timestamptz NOT NULL,   -- when the subscriber got it
+    stored     timestamptz NOT NULL DEFAULT now(),
+    key        text        NOT NULL,   -- the Zenoh key expression it came on
+    idem       text        NOT NULL,   -- the idempotency key
+    payload    jsonb       NOT NULL,
+    CONSTRAINT message_farm_idem UNIQUE (farm, idem)
+);
+CREATE INDEX IF NOT EXISTS message_series ON {schema}.message (farm, greenhouse, kind, observed);
+CREATE INDEX IF NOT EXISTS message_farm_time ON {schema}.message (farm, observed);
+CREATE TABLE IF NOT EXISTS {schema}.schema_version (version integer NOT NULL);
+"""
+
+INSERT = """
+INSERT INTO {schema}.message (farm, greenhouse, kind, observed, received, key, idem, payload)
+SELECT f, g, k, to_timestamp(o), to_timestamp(r), ke, i, p::jsonb
+  FROM unnest(%s::text[], %s::text[], %s::text[], %s::float8[], %s::float8[], %s::text[],
+              %s::text[], %s::text[]) AS m(f, g, k, o, r, ke, i, p)
+ON CONFLICT (farm, idem) DO NOTHING
+"""
+
+
+class CloudStoreError(RuntimeError):
+    """The store cannot do its job (connection, schema); one line, no password in it."""
+
+
+class MessageLike(Protocol):
+    """What insert_batch reads from a message (the subscriber's record, or CloudMessage)."""
+
+    key: str
+    idem: str
+    farm: str
+    greenhouse: str
+    kind: str
+    t: float  # observed [unix s]
+    payload: str  # JSON text
+    received: float  # [unix s]
+
+
+@dataclass(frozen=True)
+class CloudMessage:
+    key: str  # serra/<farm>/<greenhouse>/<kind>
+    idem: str  # idempotency key
+    farm: str
+    greenhouse: str
+    kind: str
+    t: float  # observed [unix s]
+    payload: str  # JSON text
+    received: float  # [unix s]
+
+
+@dataclass(frozen=True)
+class Rejected:
+    idem: str
+    key: str
+    reason: str
+
+
+def redact(dsn: str) -> str:
+    """The DSN without its password, for messages."""
+    try:
+        parts = psycopg.conninfo.conninfo_to_dict(dsn)
+    except psycopg.Error:
+        return "<unparsable DSN>"
+    parts.pop("password", None)
+    return " ".join(f"{k}={v}" for k, v in parts.items()) or "<default connection>"
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return text[0] if text else type(exc).__name__
+
+
+class PgStore:
+    """Messages of many farms in PostgreSQL; one connection, used by one thread at a time."""
+
+    def __init__(self, conn: psycopg.Connection, dsn: str, schema: str = "serra") -> None:
+        self.conn, self.dsn, self.schema = conn, dsn, schema
+        self.rejected: list[Rejected] = []  # messages refused for bad payloads (logged too)
+        self._insert = sql.SQL(INSERT).format(schema=sql.Identifier(schema))
+
+    @classmethod
+    def connect(cls, dsn: str, schema: str = "serra", create: bool = True,
+                connect_timeout: float = 10.0) -> PgStore:
+        if not _SCHEMA_NAME.match(schema):
+            raise CloudStoreError(f"schema name {schema!r}: use lower-case letters, digits and _")
+        store = cls(cls._open(dsn, connect_timeout), dsn, schema)
+        if create:
+            store.create_schema()
+        return store
+
+    @staticmethod
+    def _open(dsn: str, connect_timeout: float) -> psycopg.Connection:
+        try:
+            return psycopg.connect(dsn, connect_timeout=max(1, round(connect_timeout)))
+        except psycopg.Error as exc:
+            raise CloudStoreError(f"PostgreSQL ({redact(dsn)}): cannot connect: "
+                                  f"{_first_line(exc)}") from None
+
+    def create_schema(self) -> None:
+        """Tables and indexes, if missing (several subscribers may start at once: locked)."""
+        ddl = sql.SQL(DDL).format(schema=sql.Identifier(self.schema))
+        try:
+            with self.conn.transaction():
+                self.conn.execute("SELECT pg_advisory_xact_lock(hashtext('serra.schema'))")
+                self.conn.execute(ddl)
+                row = self.conn.execute(sql.SQL("SELECT max(version) FROM {}.schema_version")
+                                        .format(sql.Identifier(self.schema))).fetchone()
+                if row is None or row[0] is None:
+                    self.conn.execute(sql.SQL("INSERT INTO {}.schema_version VALUES (%s)")
+                                      .format(sql.Identifier(self.schema)), (SCHEMA_VERSION,))
+                elif row[0] > SCHEMA_VERSION:
+                    raise CloudStoreError(f"schema {self.schema} is version {row[0]}, newer than "
+                                          f"this code ({SCHEMA_VERSION}): upgrade Serra")
+        except psycopg.Error as exc:
+            raise CloudStoreError(f"PostgreSQL ({redact(self.dsn)}): cannot create schema "
+                                  f"{self.schema}: {_first_line(exc)}") from None
+
+    def insert_batch(self, messages: Iterable[MessageLike]) -> int:
+        """Store `messages` in one transaction; returns how many were new. A repeat (same farm
+        and idempotency key) is dropped. A message PostgreSQL refuses (a payload that is not
+        JSON, a NaN time, a NUL character) is left out, logged and kept in `rejected`; the rest
+        of the batch is stored. A lost connection is re-opened once; if that fails,
+        CloudStoreError, and nothing of the batch was stored (the caller keeps it)."""
+        batch = list(messages)
+        if not batch:
+            return 0
+        try:
+            return self._insert_all(batch)
+        except psycopg.OperationalError as exc:
+            if not self.conn.closed and not self.conn.broken:
+                raise CloudStoreError(f"PostgreSQL ({redact(self.dsn)}): {_first_line(exc)}") from None
+            log.warning("PostgreSQL connection lost (%s); reconnecting", _first_line(exc))
+            self.conn = self._open(self.dsn, 10.0)
+            try:
+                return self._insert_all(batch)
+            except psycopg.Error as again:
+                raise CloudStoreError(f"PostgreSQL ({redact(self.dsn)}): {_first_line(again)}") from None
+
+    def _insert_all(self, batch: list[MessageLike]) -> int:
+        try:
+            with self.conn.transaction():
+                return sum(self._insert_chunk(batch[i:i + CHUNK]) for i in range(0, len(batch), CHUNK))
+        except psycopg.DataError:
+            pass  # some row is not storable: find it, store the others
+        inserted = 0
+        with self.conn.transaction():
+            for m in batch:
+                try:
+                    with self.conn.transaction():  # a savepoint per row, on this rare path only
+                        inserted += self._insert_chunk([m])
+                except psycopg.DataError as exc:
+                    reason = _first_line(exc)
+                    log.warning("message %s on %s not stored: %s", m.idem, m.key, reason)
+                    self.rejected.append(Rejected(m.idem, m.key, reason))
+        return inserted
+
+    def _insert_chunk(self, chunk: Sequence[MessageLike]) -> int:
+        columns: list[list[Any]] = [[] for _ in range(8)]
+        for m in chunk:
+            row = (str(m.farm), str(m.greenhouse), str(m.kind), float(m.t), float(m.received),
+                   str(m.key), str(m.idem), str(m.payload))
+            for col, value in zip(columns, row, strict=True):
+                col.append(value)
+        cur = self.conn.execute(self._insert, columns)
+        return max(cur.rowcount, 0)
+
+    def history(self, farm: str, greenhouse: str | None = None, kind: str | None = None,
+                t_from: float | None = None, t_to: float | None = None,
+                limit: int = 1000) -> list[CloudMessage]:
+        """Messages of `farm` (a greenhouse and kind, or every one when None; a kind ending in
+        ``/**`` takes every kind below it) observed in [t_from, t_to], oldest first, at most
+        `limit` (1..100000)."""
+        if not 1 <= limit <= MAX_LIMIT:
+            raise ValueError(f"limit {limit}: expected 1..{MAX_LIMIT}")
+        where = [sql.SQL("farm = %s")]
+        args: list[Any] = [farm]
+        if greenhouse not in (None, "*", "**"):
+            where.append(sql.SQL("greenhouse = %s"))
+            args.append(greenhouse)
+        if kind is not None and kind != "**":
+            if kind.endswith("/**"):
+                where.append(sql.SQL("(kind = %s OR kind LIKE %s)"))
+                stem = kind[:-3]
+                args += [stem, stem.replace("\\", "\\\\").replace("%", "\\%").replace("_", "\\_") + "/%"]
+            else:
+                where.append(sql.SQL("kind = %s"))
+                args.append(kind)
+        if t_from is not None:
+            where.append(sql.SQL("observed >= to_timestamp(%s)"))
+            args.append(t_from)
+        if t_to is not None:
+            where.append(sql.SQL("observed <= to_timestamp(%s)"))
+            args.append(t_to)
+        query = sql.SQL(
+            "SELECT key, idem, farm, greenhouse, kind, extract(epoch FROM observed)::float8, "
+            "payload::text, extract(epoch FROM received)::float8 FROM {}.message WHERE {} "
+            "ORDER BY observed, id LIMIT %s").format(sql.Identifier(self.schema),
+                                                      sql.SQL(" AND ").join(where))
+        rows = self.conn.execute(query, [*args, limit]).fetchall()
+        self.conn.commit()  # end the read transaction: no idle-in-transaction connection
+        return [CloudMessage(*row) for row in rows]
+
+    def count(self, farm: str | None = None) -> int:
+        query = sql.SQL("SELECT count(*) FROM {}.message").format(sql.Identifier(self.schema))
+        if farm is not None:
+            query = query + sql.SQL(" WHERE farm = %s")
+        row = self.conn.execute(query, [farm] if farm is not None else []).fetchone()
+        self.conn.commit()
+        return int(row[0]) if row else 0
+
+    def close(self) -> None:
+        self.conn.close()
+

@@ -117,12 +117,22 @@ def test_wheel_holds_the_gateway_package_and_nothing_else(bundles: Path) -> None
     assert "gateway/presets/almeria-palmerillas.toml" in package
 
 
+APPLIANCE_EXTRAS = {"cloud"}
+"""Extras of the wheel that gateway/ code may import (the cloud side's PostgreSQL store)."""
+
+
 def _requires(wheel: Path) -> set[str]:
+    """Names the wheel requires: its main dependencies and those of APPLIANCE_EXTRAS."""
     with zipfile.ZipFile(wheel) as z:
         meta = z.read(next(n for n in z.namelist() if n.endswith(".dist-info/METADATA"))).decode()
     reqs = [line.split(":", 1)[1].strip() for line in meta.splitlines()
             if line.startswith("Requires-Dist:")]
-    return {_norm(re.match(r"[A-Za-z0-9._-]+", r)[0]) for r in reqs if "extra ==" not in r}
+    out = set()
+    for r in reqs:
+        extra = re.search(r"extra\s*==\s*['\"]([^'\"]+)['\"]", r)
+        if extra is None or extra[1] in APPLIANCE_EXTRAS:
+            out.add(_norm(re.match(r"[A-Za-z0-9._-]+", r)[0]))
+    return out
 
 
 def _norm(name: str) -> str:

@@ -12,6 +12,7 @@ import logging
 import signal
 import sqlite3
 import sys
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,6 +39,11 @@ class IngestConfig:
     maintenance_every: float = 10.0  # aggregation, retention, capacity alarms [s]
     stats_every: float = 60.0
     policy: retention.Policy = field(default_factory=retention.Policy)
+    # The live gateway (gateway/service/run.py): its clock, device→gateway time scale (test/demo
+    # accelerated clock) and a callback after each durable batch.
+    clock: Callable[[], float] = time.time
+    time_scale: float = 1.0
+    on_commit: Callable[[int], None] | None = None
 
 
 def parse_hostport(text: str) -> tuple[str, int]:
@@ -47,9 +53,9 @@ def parse_hostport(text: str) -> tuple[str, int]:
     return host.strip("[]") or "0.0.0.0", int(port)
 
 
-def _maintenance(store: Store, policy: retention.Policy) -> None:
+def _maintenance(store: Store, policy: retention.Policy, now: float) -> None:
     aggregate.aggregate(store.conn)
-    retention.apply(store.conn, policy)
+    retention.apply(store.conn, policy, now)
     retention.capacity_alarms(store.path, policy)
 
 
@@ -68,7 +74,8 @@ async def serve(config: IngestConfig,
     keys = load_keys(config.keys)
     store = Store(config.db)
     core = IngestCore(store, keys, max_pending=config.max_pending,
-                      batch_delay=config.batch_delay)
+                      batch_delay=config.batch_delay, clock=config.clock,
+                      time_scale=config.time_scale, on_commit=config.on_commit)
     transports: list = []
     try:
         if config.listen is not None:
@@ -93,7 +100,7 @@ async def serve(config: IngestConfig,
             await asyncio.sleep(config.maintenance_every)
             if writer.done():
                 writer.result()  # surface a writer crash
-            await core.run_in_store_thread(_maintenance, store, config.policy)
+            await core.run_in_store_thread(_maintenance, store, config.policy, config.clock())
             if loop.time() - t_stats >= config.stats_every:
                 t_stats = loop.time()
                 log.info("ingest counters %s", core.counters.snapshot())

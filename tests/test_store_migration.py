@@ -9,8 +9,7 @@ from pathlib import Path
 import pytest
 
 from gateway.protocol import CHANNELS
-from gateway.store import Store
-from gateway.store import schema
+from gateway.store import Store, schema
 from gateway.store.outbox import Message, Outbox
 
 V1_TABLES = ("devices", "samples", "minute", "estimates", "outbox", "meta")

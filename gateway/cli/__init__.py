@@ -18,6 +18,8 @@ COMMANDS = {
     "demo": "gateway.cli.demo",
     "ingest": "gateway.cli.ingest",
     "export": "gateway.cli.export",
+    "run": "gateway.cli.run",
+    "subscribe": "gateway.cli.subscribe",
 }
 
 
@@ -29,7 +31,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m gateway",
         description="Serra gateway tools: calibrate, replay and diagnose greenhouse climate models "
-        "on kit CSV data (docs/data-format.md); ingest kit packets and export what was stored.",
+        "on kit CSV data (docs/data-format.md); ingest kit packets and export what was stored; run "
+        "the live gateway and subscribe to it over Zenoh.",
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log details to stderr")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")

@@ -48,14 +48,12 @@ class _Pending:
 class IngestCore:
     def __init__(self, store: Store, keys: dict[int, bytes], *, max_pending: int = 50_000,
                  batch_delay: float = 0.0, alarm_fraction: float = 0.8,
-                 clock: Callable[[], float] = time.time, time_scale: float = 1.0,
+                 clock: Callable[[], float] = time.time,
                  on_commit: Callable[[int], None] | None = None) -> None:
-        """``clock``: receive time [unix s] (the live gateway's clock); ``time_scale``: device
-        time → gateway time for ages and periods (test/demo accelerated clock, 1 otherwise);
-        ``on_commit(n)``: called on the event loop after each batch of n records is durable."""
+        """``clock``: receive time [unix s] (the live gateway's clock); ``on_commit(n)``: called
+        on the event loop after each batch of n records is durable."""
         self.store = store
         self.clock = clock
-        self.time_scale = time_scale
         self.on_commit = on_commit
         self.counters = Counters()
         self.rlog = RateLimitedLog(log)
@@ -134,9 +132,6 @@ class IngestCore:
             d.boot, d.max_seq, d.seen = rec.boot, -1, set()
         if rec.seq > d.max_seq:
             d.max_seq = rec.seq
-        if self.time_scale != 1.0:  # accelerated test/demo clock: device time runs as fast
-            rec = rec._replace(age_ms=round(rec.age_ms * self.time_scale),
-                               period_s=rec.period_s * self.time_scale)
         self._pending[k] = _Pending(rec, self.clock(), [(send, peer)])
         self._queue.append(k)
         self._wake.set()

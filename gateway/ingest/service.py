@@ -39,10 +39,8 @@ class IngestConfig:
     maintenance_every: float = 10.0  # aggregation, retention, capacity alarms [s]
     stats_every: float = 60.0
     policy: retention.Policy = field(default_factory=retention.Policy)
-    # The live gateway (gateway/service/run.py): its clock, device→gateway time scale (test/demo
-    # accelerated clock) and a callback after each durable batch.
+    # The live gateway (gateway/service/run.py): its clock and a callback after each durable batch.
     clock: Callable[[], float] = time.time
-    time_scale: float = 1.0
     on_commit: Callable[[int], None] | None = None
 
 
@@ -75,7 +73,7 @@ async def serve(config: IngestConfig,
     store = Store(config.db)
     core = IngestCore(store, keys, max_pending=config.max_pending,
                       batch_delay=config.batch_delay, clock=config.clock,
-                      time_scale=config.time_scale, on_commit=config.on_commit)
+                      on_commit=config.on_commit)
     transports: list = []
     try:
         if config.listen is not None:

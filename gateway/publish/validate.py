@@ -113,7 +113,8 @@ def errors(payload: Mapping[str, Any]) -> list[str]:
                         out += [f"Device (key-values): {name}: {e.message}"
                                 for e in sub.iter_errors(kv[name])]
     elif kind in OWN_TYPES:
-        out += [f"{kind}: {_where(e)}: {e.message}" for e in _validator(f"{ENTITIES}#/$defs/{kind}").iter_errors(payload)]
+        own = _validator(f"{ENTITIES}#/$defs/{kind}")
+        out += [f"{kind}: {_where(e)}: {e.message}" for e in own.iter_errors(payload)]
     else:
         out.append(f"type: {kind!r} is not a Serra payload type")
     if "idempotencyKey" not in payload:

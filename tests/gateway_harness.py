@@ -5,11 +5,13 @@ and waiting on conditions with generous deadlines (never sleeping to synchronise
 from __future__ import annotations
 
 import math
+import queue
 import select
 import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -86,15 +88,15 @@ class GatewayProcess:
             [sys.executable, "-m", "gateway", "run", "--config", str(self.config)],
             cwd=self.config.parent, stdout=subprocess.PIPE, stderr=log, text=True)
         self.starts += 1
-        assert self.proc.stdout is not None
+        lines: queue.Queue[str] = queue.Queue()
+        threading.Thread(target=self._read, args=(self.proc, lines), daemon=True).start()
         deadline = time.monotonic() + timeout
         while True:
-            left = deadline - time.monotonic()
-            ready, _, _ = select.select([self.proc.stdout], [], [], max(left, 0))
-            if not ready:
+            try:
+                line = lines.get(timeout=max(deadline - time.monotonic(), 0.01))
+            except queue.Empty:
                 self.kill()
-                raise AssertionError(f"gateway not ready in {timeout} s:\n{self.log_tail()}")
-            line = self.proc.stdout.readline()
+                raise AssertionError(f"gateway not ready in {timeout} s:\n{self.log_tail()}") from None
             if not line:
                 raise AssertionError(f"gateway exited at start:\n{self.log_tail()}")
             if line.startswith("serra-gateway ready"):
@@ -103,6 +105,13 @@ class GatewayProcess:
         host, port = parts[parts.index("udp") + 1].rsplit(":", 1)
         self.udp = (host, int(port))
         self.zenoh = parts[parts.index("zenoh") + 1]
+
+    @staticmethod
+    def _read(proc: subprocess.Popen, lines: queue.Queue) -> None:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            lines.put(line)
+        lines.put("")  # end of output
 
     def log_tail(self, n: int = 30) -> str:
         path = self.config.parent / "gateway.log"
@@ -118,9 +127,6 @@ class GatewayProcess:
             self.proc.kill()
             self.proc.wait()
             raise AssertionError(f"gateway did not stop on SIGTERM:\n{self.log_tail()}") from None
-        finally:
-            if self.proc.stdout:
-                self.proc.stdout.close()
         self.proc = None
         return code
 
@@ -128,8 +134,6 @@ class GatewayProcess:
         if self.proc is not None:
             self.proc.kill()
             self.proc.wait(timeout=30)
-            if self.proc.stdout:
-                self.proc.stdout.close()
             self.proc = None
 
 
@@ -166,22 +170,29 @@ class PyKit:
                        tuple(vals), tuple(st))
         return p.encode_record(rec, KEY)
 
-    def pump(self, addr: tuple[str, int] | None, until: float | None = None) -> None:
-        """Send what is due, read acks; one round (call it in a loop)."""
+    def send_due(self, addr: tuple[str, int] | None) -> int:
+        """Send the records that are due (new ones, and resends after ``resend_s``); no ack is
+        read. Returns how many were sent."""
         now_wall = time.monotonic()
         low = min(self.unacked, default=self.next)
-        while self.next - low < self.window and self.t(self.next) <= self.now() and (
-                until is None or self.t(self.next) <= until):
+        while self.next - low < self.window and self.t(self.next) <= self.now():
             self.unacked[self.next] = 0.0
             self.next += 1
+        sent = 0
         if addr is not None:
-            for seq, sent in list(self.unacked.items()):
-                if now_wall - sent > self.resend_s:
+            for seq, when in list(self.unacked.items()):
+                if now_wall - when > self.resend_s:
                     try:
                         self.sock.sendto(self.packet(seq), addr)
+                        sent += 1
                     except OSError:
                         pass
                     self.unacked[seq] = now_wall
+        return sent
+
+    def pump(self, addr: tuple[str, int] | None) -> None:
+        """Send what is due, read acks; one round (call it in a loop)."""
+        self.send_due(addr)
         select.select([self.sock], [], [], 0.02)
         while True:
             try:

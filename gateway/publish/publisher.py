@@ -12,8 +12,8 @@ no matching API, so a plain publisher on the same key reports the matching statu
 
 Crash safety: messages are marked sent after they were handed to Zenoh. A crash before the mark
 costs a repeat after the restart; one after it could lose what was still in Zenoh's queues, so a
-restart first puts again what was sent in the last ``resend_s`` (repeats are dropped by the
-subscriber by their idempotency key).
+restart first puts again (before anything newer on the same key) what was sent in the last
+``resend_s`` before it; repeats are dropped by the subscriber by their idempotency key.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ import zenoh
 from zenoh.ext import CacheConfig, MissDetectionConfig, declare_advanced_publisher
 
 from gateway.store.db import open_db
-from gateway.store.outbox import Outbox
+from gateway.store.outbox import Outbox, Pending
 
 log = logging.getLogger("serra.publish")
 BATCH = 256
@@ -82,6 +82,7 @@ class OutboxPublisher:
         self.session, self.db, self.cache, self.resend_s, self.clock = session, db, cache, resend_s, clock
         self.max_rows, self.alarm_fraction = max_rows, alarm_fraction
         self.keys: dict[str, _Key] = {}
+        self.resend: list[Pending] = []  # sent just before a restart: put again first
         self.state = LinkState(mode=mode, zid=str(session.info.zid()))
         self.wake = threading.Event()
         self._stop = threading.Event()
@@ -111,11 +112,11 @@ class OutboxPublisher:
         try:
             outbox = Outbox(conn, self.max_rows, self.alarm_fraction)
             if self.resend_s > 0:
-                self.state.resent_on_start = outbox.resend_recent(self.resend_s)
-                if self.state.resent_on_start:
+                self.resend = outbox.sent_recently(self.resend_s)
+                self.state.resent_on_start = len(self.resend)
+                if self.resend:
                     log.info("putting again the %d messages sent in the last %g s before the "
-                             "restart (the cloud drops repeats)", self.state.resent_on_start,
-                             self.resend_s)
+                             "restart (the cloud drops repeats)", len(self.resend), self.resend_s)
             self._ready.set()
             while not self._stop.is_set():
                 waiting = self.drain(outbox)
@@ -136,11 +137,25 @@ class OutboxPublisher:
             k = self.keys[key] = _Key(self.session, key, self.cache)
         return k
 
+    def _put_resends(self, blocked: set[str]) -> list[Pending]:
+        """Put again, in order, the messages sent just before the restart whose key matches;
+        returns those still waiting (their keys are added to ``blocked``: order per key)."""
+        left = []
+        for m in self.resend:
+            if m.key not in blocked and self._key(m.key).matching():
+                self._key(m.key).adv.put(m.payload)
+            else:
+                blocked.add(m.key)
+                left.append(m)
+        return left
+
     def drain(self, outbox: Outbox, final: bool = False) -> int:
         """Put every unsent message whose key is matched, per key in order; returns how many
         keys hold messages that nobody listens to."""
         after = 0
         blocked: set[str] = set()
+        if self.resend:
+            self.resend = self._put_resends(blocked)
         while final or not self._stop.is_set():
             batch = outbox.peek(BATCH, after)
             if not batch:

@@ -120,12 +120,13 @@ class Outbox:
             self.conn.executemany("UPDATE outbox SET sent=?, attempts=attempts+1 WHERE id=?",
                                   [(now, i) for i in ids])
 
-    def resend_recent(self, seconds: float) -> int:
-        """Mark unsent again the messages sent in the last ``seconds`` before the newest send.
+    def sent_recently(self, seconds: float) -> list[Pending]:
+        """The messages sent in the last ``seconds`` before the newest send, in order.
 
-        Called at start: a message handed to Zenoh just before a crash may still have been in
-        its queues. Putting it again costs a repeat the cloud drops by its idempotency key."""
-        with transaction(self.conn):
-            return self.conn.execute(
-                "UPDATE outbox SET sent=NULL WHERE sent >= "
-                "(SELECT max(sent) FROM outbox) - ?", (seconds,)).rowcount
+        The publisher puts them again at start: a message handed to Zenoh just before a crash may
+        still have been in its queues. Their ``sent`` time is left as it was, so a restart that
+        sends nothing new finds the same ones again (and nothing snowballs). Repeats cost the
+        cloud nothing: it drops them by idempotency key."""
+        return [Pending(*r) for r in self.conn.execute(
+            "SELECT id, key, idem, payload FROM outbox WHERE sent >= "
+            "(SELECT max(sent) FROM outbox) - ? ORDER BY id", (seconds,))]

@@ -37,8 +37,12 @@ CHANNEL_STATUS = {0x00: "ok", 0x01: "partial", 0x10: "no_sensor", 0x11: "timeout
 
 
 def iso(t: float) -> str:
-    """Unix seconds → ``2009-11-01T00:00:00Z`` (whole seconds)."""
-    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(round(t)))
+    """Unix seconds → ``2009-11-01T00:00:00Z``, with milliseconds (truncated, so an instant
+    never moves into the next second or minute) when ``t`` is not whole."""
+    ms = math.floor(t * 1000.0 + 1e-6)
+    whole, frac = divmod(ms, 1000)
+    stamp = time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(whole))
+    return f"{stamp}Z" if frac == 0 else f"{stamp}.{frac:03d}Z"
 
 
 def date_time(t: float) -> dict:

@@ -3,8 +3,8 @@
 - ``firmware/``: every mcu/ module compiled with mpy-cross for the ESP32 (xtensawin) except
   ``main.py`` (MicroPython runs it as source), plus ``config.example.json``; and
   ``firmware.tar.gz``, the same files ready for ``mpremote cp``.
-- ``gateway/``: the wheel of this project, the systemd unit, an example keys file and
-  ``INSTALL.md``; and ``gateway.tar.gz``.
+- ``gateway/``: the wheel of this project, the systemd units (the live gateway; ingest alone), the
+  documented example config, an example keys file and ``INSTALL.md``; and ``gateway.tar.gz``.
 """
 
 from __future__ import annotations
@@ -51,7 +51,8 @@ def build_gateway(out: Path) -> list[Path]:
         [sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "-w", str(out), str(ROOT)],
         check=True,
     )
-    for name in ("serra-ingest.service", "keys.example.txt"):
+    for name in ("serra-gateway.service", "gateway.example.toml", "serra-ingest.service",
+                 "keys.example.txt"):
         shutil.copy2(ROOT / "images" / "gateway" / name, out / name)
     (out / "INSTALL.md").write_text(INSTALL, encoding="utf-8")
     return sorted(out.iterdir())
@@ -64,8 +65,13 @@ INSTALL = """# Installing the Serra gateway (64-bit Raspberry Pi OS or any aarch
     sudo python3 -m venv /opt/serra/venv
     sudo /opt/serra/venv/bin/pip install serra-*.whl
     sudo install -m 600 -o serra keys.example.txt /etc/serra/keys.txt   # then edit the keys
-    sudo cp serra-ingest.service /etc/systemd/system/
-    sudo systemctl enable --now serra-ingest
+    sudo install -m 644 gateway.example.toml /etc/serra/gateway.toml     # then edit farm, greenhouses
+    sudo -u serra /opt/serra/venv/bin/python -m gateway run --config /etc/serra/gateway.toml --check
+    sudo cp serra-gateway.service /etc/systemd/system/
+    sudo systemctl enable --now serra-gateway
+    journalctl -u serra-gateway -f
+
+serra-ingest.service runs ingest alone (no estimator, no Zenoh): enable one or the other.
 
 onnxruntime has no 32-bit ARM wheel: use a 64-bit OS.
 """

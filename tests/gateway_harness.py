@@ -77,6 +77,7 @@ class GatewayProcess:
 
     def __init__(self, config: Path) -> None:
         self.config = config
+        self.argv = [sys.executable, "-m", "gateway", "run", "--config", str(config)]
         self.proc: subprocess.Popen | None = None
         self.udp: tuple[str, int] = ("", 0)
         self.zenoh = ""
@@ -84,9 +85,8 @@ class GatewayProcess:
 
     def start(self, timeout: float = 90.0) -> None:
         log = open(self.config.parent / "gateway.log", "a")  # noqa: SIM115 - kept by the child
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "gateway", "run", "--config", str(self.config)],
-            cwd=self.config.parent, stdout=subprocess.PIPE, stderr=log, text=True)
+        self.proc = subprocess.Popen(self.argv, cwd=self.config.parent, stdout=subprocess.PIPE,
+                                     stderr=log, text=True)
         self.starts += 1
         lines: queue.Queue[str] = queue.Queue()
         threading.Thread(target=self._read, args=(self.proc, lines), daemon=True).start()
@@ -194,6 +194,9 @@ class PyKit:
         """Send what is due, read acks; one round (call it in a loop)."""
         self.send_due(addr)
         select.select([self.sock], [], [], 0.02)
+        self.read_acks()
+
+    def read_acks(self) -> None:
         while True:
             try:
                 data = self.sock.recv(256)

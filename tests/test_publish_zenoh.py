@@ -136,3 +136,29 @@ def test_a_restart_puts_recent_messages_again_and_the_cloud_drops_the_repeats(
         sub.stop()
         pub.stop()
         cloud.close()
+
+
+def test_the_cloud_page_example_works_with_stock_zenoh(gateway_side) -> None:
+    """docs/examples/subscribe_stock.py, as a cloud engineer would run it (stock Zenoh only)."""
+    import importlib.util
+
+    db, session, endpoint = gateway_side
+    spec = importlib.util.spec_from_file_location(
+        "subscribe_stock", Path(__file__).resolve().parents[1] / "docs" / "examples" / "subscribe_stock.py")
+    assert spec is not None and spec.loader is not None
+    example = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
+    pub = OutboxPublisher(session, db, cache=4)
+    hist = HistoryQueryable(session, db, "f1")
+    lines: list[str] = []
+    try:
+        pub.start()
+        conf = zconfig.build(connect=[endpoint])
+        seen = example.main(conf, "serra/**", count=60, seconds=60,
+                            history_selector="serra/f1/north/history/forecast?limit=2",
+                            show=lines.append)
+    finally:
+        hist.close()
+        pub.stop()
+    assert len(seen) == 60
+    assert lines[:2] == ["history X f1/north/forecast/0", "history X f1/north/forecast/2"]

@@ -85,10 +85,19 @@ class OutboxPublisher:
         self.resend: list[Pending] = []  # sent just before a restart: put again first
         self.state = LinkState(mode=mode, zid=str(session.info.zid()))
         self.wake = threading.Event()
+        self.drained = threading.Event()  # set after each drain pass
         self._stop = threading.Event()
         self._ready = threading.Event()
         self._error: BaseException | None = None
         self._thread = threading.Thread(target=self._run, name="serra-publish", daemon=True)
+
+    def kick(self, wait: float = 0.0) -> None:
+        """Wake the publisher; with ``wait``, give it up to that long [s] to put what is new
+        (the caller's CPU work would otherwise slow it down through the GIL)."""
+        self.drained.clear()
+        self.wake.set()
+        if wait > 0:
+            self.drained.wait(wait)
 
     def start(self) -> None:
         self._thread.start()
@@ -120,6 +129,7 @@ class OutboxPublisher:
             self._ready.set()
             while not self._stop.is_set():
                 waiting = self.drain(outbox)
+                self.drained.set()
                 # Nobody listens on some key: look again soon (a subscriber may have come).
                 self.wake.wait(0.2 if waiting else 1.0)
                 self.wake.clear()

@@ -63,9 +63,9 @@ class Gateway:
         self.diagnosis: DiagnosisScheduler | None = None
         self.worker = Worker(cfg, resources, self.clock, self._wake_publisher, self._status_extra)
 
-    def _wake_publisher(self) -> None:
+    def _wake_publisher(self, wait: float = 0.0) -> None:
         if self.publisher is not None:
-            self.publisher.wake.set()
+            self.publisher.kick(wait)
 
     def _status_extra(self) -> dict[str, Any]:
         out: dict[str, Any] = {"ingest": dict(self.ingest_counters)}

@@ -27,11 +27,12 @@ log = logging.getLogger("serra.gateway")
 TICK = 1.0  # [wall s]
 STATUS_EVERY = 5.0  # [wall s] between gateway_status writes
 MAX_BATCHES = 4  # estimator batches per greenhouse per pass: records keep flowing while catching up
+PUBLISH_FIRST_S = 0.05  # [wall s] the longest the estimators wait for new records to be put
 
 
 class Worker:
     def __init__(self, cfg: GatewayConfig, resources: list[GreenhouseResources], clock: Clock,
-                 wake_publisher: Callable[[], None],
+                 wake_publisher: Callable[[float], None],
                  status_extra: Callable[[], dict[str, Any]] = dict) -> None:
         self.cfg, self.resources, self.clock = cfg, resources, clock
         self.wake_publisher, self.status_extra = wake_publisher, status_extra
@@ -106,8 +107,8 @@ class Worker:
         assert self.producers is not None
         est = self.cfg.estimator
         made = self.producers.run()  # records first: their latency is what the kit sees
-        if made:
-            self.wake_publisher()
+        if made:  # let the publisher put them before the estimators take the CPU (and the GIL)
+            self.wake_publisher(PUBLISH_FIRST_S)
         while aggregate(conn):
             pass
         now = self.clock.now()
@@ -120,7 +121,7 @@ class Worker:
         made = self.producers.run()
         made += self.producers.snapshots(now, self.cfg.status_every_s, self._gh_state())
         if made:
-            self.wake_publisher()
+            self.wake_publisher(0.0)
         self.passes += 1
         return more
 

@@ -127,3 +127,40 @@ def test_the_shipped_example_parses_and_every_key_is_documented() -> None:
     keys |= set(re.findall(r"^# (\w+) = ", text, re.M))  # the commented-out ones
     missing = sorted(k for k in keys if f"`{k}`" not in doc)
     assert not missing, f"keys of the example not in docs/gateway.md: {missing}"
+
+
+def test_log_lines_fit_journald(monkeypatch) -> None:
+    import logging
+
+    from gateway.cli.run import JournalFormatter
+
+    rec = logging.LogRecord("serra.gateway", logging.WARNING, "x", 1, "outbox alarm\nsecond", (), None)
+    monkeypatch.setenv("JOURNAL_STREAM", "8:1234")
+    assert JournalFormatter().format(rec) == "<4>WARNING serra.gateway: outbox alarm | second"
+    monkeypatch.delenv("JOURNAL_STREAM")
+    assert JournalFormatter().format(rec).endswith(" WARNING serra.gateway: outbox alarm | second")
+
+
+def test_subscribe_cli_exports_a_kit_csv_per_greenhouse(tmp_path: Path, capsys) -> None:
+    from gateway.cloud.store import SqliteCloudStore, parse
+    from gateway.kitcsv import read_kit_csv
+    from gateway.publish import payloads as P
+
+    place = P.Place("f1", "north", 34.85, 5.73)
+    store = SqliteCloudStore(tmp_path / "cloud.db")
+    msgs = []
+    for seq in range(3):
+        r = P.Reading(7, 0, seq, 1_257_055_230.0 + 60 * seq,
+                      {"t_in": (20.0 + seq, 0), "rh_in": (60.0, 0), "t_out": (10.0, 0),
+                       "rh_out": (80.0, 0), "i_glob": (100.0, 0), "wind": (2.0, 0), "rain": (0.0, 0)})
+        for side in ("inside", "outside"):
+            idem = f"f1/north/{side}/{seq}"
+            msgs.append(parse(f"serra/f1/north/measurement/{side}",
+                              P.dumps(P.weather_observed(place, side, r, idem))))
+    assert store.add(msgs) == 6 and store.add(msgs) == 0  # repeats dropped
+    store.close()
+    assert main(["subscribe", "--db", str(tmp_path / "cloud.db"), "--export", str(tmp_path / "csv")]) == 0
+    data = read_kit_csv(tmp_path / "csv" / "f1-north.csv")
+    assert list(data.columns["t_in"]) == [20.0, 21.0, 22.0] and list(data.columns["rh_in"]) == [60.0] * 3
+    assert main(["subscribe", "--db", str(tmp_path / "cloud.db")]) == 2
+    assert "give --connect" in capsys.readouterr().err

@@ -216,3 +216,31 @@ def test_findings_keep_their_identity_and_are_published_once_per_revision(tmp_pa
 
 def test_trace_is_usable() -> None:
     assert np.isfinite(TRACE["t_in"]).mean() > 0.95
+
+
+def test_a_ventilation_sensor_feeds_the_ventilation_messages(tmp_path: Path) -> None:
+    """The hook the virtual ventilation sensor plugs into: whatever gives flow and heat loss each
+    minute is stored and published as ``ventilation`` (a stand-in sensor here)."""
+    from gateway.service.pipeline import VentilationEstimate
+
+    calls = []
+
+    def sensor(t, drivers, fluxes):
+        calls.append((t, sorted(fluxes)))
+        return VentilationEstimate(0.002, fluxes["q_loss"], out_of_range=t > EPOCH + 600)
+
+    s = Store(tmp_path / "g.db")
+    outbox = Outbox(s.conn)
+    prod = Producers(s.conn, "f1", infos(), outbox)
+    fill(s, range(20))
+    pl = GreenhousePipeline("north", GH, MODEL, 7, 7, None, ventilation=sensor)
+    pl.resume(s.conn)
+    pl.step_pending(s.conn, end(19), 0.0, 600.0)
+    assert calls and calls[0][1] == ["q_cnv_cnd", "q_loss", "q_solar", "q_thermal"]
+    prod.run()
+    vent = [json.loads(m.payload) for m in outbox.peek(1000) if m.key.endswith("/ventilation")]
+    assert len(vent) == len(calls)
+    assert vent[0]["ventilationFlow"]["value"] == 0.002
+    assert vent[-1]["outOfTrainingRange"]["value"] is True
+    for doc in vent:
+        assert validate.errors(doc) == []

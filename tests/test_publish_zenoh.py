@@ -162,3 +162,39 @@ def test_the_cloud_page_example_works_with_stock_zenoh(gateway_side) -> None:
         pub.stop()
     assert len(seen) == 60
     assert lines[:2] == ["history X f1/north/forecast/0", "history X f1/north/forecast/2"]
+
+
+def test_client_mode_through_a_router_holds_until_a_subscriber_reaches_the_router(tmp_path) -> None:
+    """Gateway and cloud both in client mode, linked by a router (the Python library in router
+    mode): the outbox holds until a subscriber is behind the router, then drains."""
+    db = tmp_path / "gw.db"
+    store = Store(db)
+    for i in range(10):
+        Outbox(store.conn).put(message(i))
+    before = zconfig.listening_ports()
+    router = zenoh.open(zconfig.build(mode="router", listen=["tcp/127.0.0.1:0"]))
+    gw = cloud_s = None
+    pub = None
+    try:
+        (ep,) = zconfig.resolve_listen(["tcp/127.0.0.1:0"], before)
+        gw = zenoh.open(zconfig.build(mode="client", connect=[ep]))
+        pub = OutboxPublisher(gw, db, mode="client")
+        pub.start()
+        wait_for(lambda: len(pub.state.waiting_keys) == 2 and pub.state.routers == 1, 30,
+                 "the client gateway to see the router and nobody behind it")
+        assert Outbox(store.conn).pending() == 10
+        cloud_s = zenoh.open(zconfig.build(mode="client", connect=[ep]))
+        got: list[int] = []
+        sub = cloud_s.declare_subscriber(
+            "serra/**", lambda s: got.append(json.loads(s.payload.to_string())["n"]))
+        pub.wake.set()
+        wait_for(lambda: len(got) == 10, 30, "the backlog through the router")
+        assert sorted(got) == list(range(10)) and Outbox(store.conn).pending() == 0
+        sub.undeclare()
+    finally:
+        if pub is not None:
+            pub.stop()
+        for s in (cloud_s, gw, router):
+            if s is not None:
+                s.close()
+        store.close()

@@ -214,6 +214,17 @@ def bare_rss(model: str) -> float:
     return rss
 
 
+def drive(fleet: list[PyKit], addr: tuple[str, int], seconds: float) -> None:
+    """Every kit sends what is due and reads its acks, for ``seconds``."""
+    t_end = time.monotonic() + seconds
+    while time.monotonic() < t_end:
+        for k in fleet:
+            k.send_due(addr)
+        select.select([k.sock for k in fleet], [], [], 0.01)
+        for k in fleet:
+            k.read_acks()
+
+
 def fleet_run(folder: Path, kits: int, scale: float, seconds: float) -> dict:
     """``kits`` kits, one greenhouse each: the gateway's CPU as a fraction of one core at real time."""
     clock = KitClock(scale, EPOCH)
@@ -229,21 +240,9 @@ def fleet_run(folder: Path, kits: int, scale: float, seconds: float) -> dict:
     n = [0]
     sub = s.declare_subscriber("serra/**", lambda smp: n.__setitem__(0, n[0] + 1))
     try:
-        t_warm = time.monotonic() + min(20.0, seconds / 3)  # estimators start, backlog settles
-        while time.monotonic() < t_warm:
-            for k in fleet:
-                k.send_due(gw.udp)
-            select.select([k.sock for k in fleet], [], [], 0.01)
-            for k in fleet:
-                k.read_acks()
+        drive(fleet, gw.udp, min(20.0, seconds / 3))  # estimators start, the backlog settles
         s0, m0 = proc_stats(gw.proc.pid), n[0]
-        t_end = time.monotonic() + seconds
-        while time.monotonic() < t_end:
-            for k in fleet:
-                k.send_due(gw.udp)
-            select.select([k.sock for k in fleet], [], [], 0.01)
-            for k in fleet:
-                k.read_acks()
+        drive(fleet, gw.udp, seconds)
         s1, m1 = proc_stats(gw.proc.pid), n[0]
         behind = sum(len(k.unacked) for k in fleet)
     finally:

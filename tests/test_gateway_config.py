@@ -164,3 +164,26 @@ def test_subscribe_cli_exports_a_kit_csv_per_greenhouse(tmp_path: Path, capsys) 
     assert list(data.columns["t_in"]) == [20.0, 21.0, 22.0] and list(data.columns["rh_in"]) == [60.0] * 3
     assert main(["subscribe", "--db", str(tmp_path / "cloud.db")]) == 2
     assert "give --connect" in capsys.readouterr().err
+
+
+def test_a_port_in_use_is_one_line_naming_it(tmp_path: Path) -> None:
+    import socket
+    import subprocess
+    import sys
+
+    from tests.gateway_harness import write_config
+
+    busy = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    busy.bind(("127.0.0.1", 0))
+    try:
+        cfg = write_config(tmp_path, anchor=0.0)
+        port = busy.getsockname()[1]
+        cfg.write_text(cfg.read_text().replace('listen = "127.0.0.1:0"', f'listen = "127.0.0.1:{port}"'))
+        r = subprocess.run([sys.executable, "-m", "gateway", "run", "--config", str(cfg)],
+                           capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    finally:
+        busy.close()
+    assert r.returncode == 1
+    last = r.stderr.strip().splitlines()[-1]
+    assert f"ERROR serra.gateway: ingest cannot start on udp 127.0.0.1:{port}: Address already in use" in last
+    assert "Traceback" not in r.stderr

@@ -39,9 +39,12 @@ def pump_until(kit: PyKit, addr, sim_t: float, timeout: float = 120) -> None:
 
 def test_link_cut_for_30_minutes_then_restored(tmp_path: Path) -> None:
     clock = KitClock(SCALE, EPOCH)
-    cfg = write_config(tmp_path, anchor=clock.anchor, scale=SCALE, status_every_s=300)
+    cfg = write_config(tmp_path, anchor=clock.anchor, scale=SCALE, status_every_s=300,
+                       devices=(7, 8))  # kit 8 has a key but no greenhouse
     db = tmp_path / "gw.db"
-    kit = PyKit(7, sim_trace(), clock.now)
+    trace = sim_trace()
+    kit = PyKit(7, trace, clock.now)
+    stray = PyKit(8, trace, clock.now)
     gw = GatewayProcess(cfg)
     cloud = SqliteCloudStore(tmp_path / "cloud.db")
     sub = proxy = None
@@ -52,6 +55,7 @@ def test_link_cut_for_30_minutes_then_restored(tmp_path: Path) -> None:
         sub.start()
         start = clock.now()
         pump_until(kit, gw.udp, start + 10 * 60)
+        wait_for(lambda: stray.pump(gw.udp) or len(stray.acked) >= 3, 60, "the stray kit acked")
         wait_for(lambda: cloud.count() >= 20, 60, "messages before the cut")
         proxy.cut()
         cut_at = clock.now()
@@ -75,6 +79,7 @@ def test_link_cut_for_30_minutes_then_restored(tmp_path: Path) -> None:
             proxy.close()
         gw.kill()
         kit.close()
+        stray.close()
     assert received_during_cut < len(final)
     cloud_msgs = list(cloud.messages())
     assert {m.idem for m in cloud_msgs} == {r[2] for r in final}  # every message, once
@@ -87,6 +92,12 @@ def test_link_cut_for_30_minutes_then_restored(tmp_path: Path) -> None:
     kinds = {m.kind for m in cloud_msgs}
     assert {"measurement/inside", "forecast", "parameters", "fluxes", "status"} <= kinds
     with sqlite3.connect(db) as c:
-        stored = {r[0] for r in c.execute("SELECT seq FROM samples")}
+        stored = {r[0] for r in c.execute("SELECT seq FROM samples WHERE device_id=7")}
+        strays = {r[0] for r in c.execute("SELECT seq FROM samples WHERE device_id=8")}
     assert kit.acked <= stored
+    # a kit no greenhouse uses: stored, reported in the log and under serra/<farm>/unassigned
+    assert stray.acked <= strays and len(strays) >= 3
+    assert "device 8 is in no greenhouse" in (tmp_path / "gateway.log").read_text()
+    assert any(m.key == "serra/f1/unassigned/device/8" for m in cloud_msgs)
+    assert not any("measurement" in m.kind and m.idem.split("/")[4] == "8" for m in cloud_msgs)
     cloud.close()

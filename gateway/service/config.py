@@ -96,6 +96,7 @@ class GatewayConfig:
     baudrate: int
     retention_days: float
     history_days: float
+    estimates_days: float
     max_db_mb: float
     maintenance_s: float
     greenhouses: tuple[GreenhouseSettings, ...]
@@ -231,6 +232,7 @@ def parse_config(raw: dict[str, Any], source: str = "<config>", base: Path = Pat
     baud = ing.get("baudrate", int, 115200, lo=300, hi=4_000_000)
     retention = ing.get("retention_days", float, 400.0, lo=1.0)
     history = ing.get("history_days", float, 30.0, lo=0.01)
+    estimates_days = ing.get("estimates_days", float, 400.0, lo=1.0)
     max_db = ing.get("max_db_mb", float, 4096.0, lo=1.0)
     maint = ing.get("maintenance_s", float, 10.0, lo=0.05)
     ing.done()
@@ -262,7 +264,8 @@ def parse_config(raw: dict[str, Any], source: str = "<config>", base: Path = Pat
     top.done()
     return GatewayConfig(
         source=source, farm=farm, db=db, keys=keys, listen=listen, serial=serial, baudrate=baud,
-        retention_days=retention, history_days=history, max_db_mb=max_db, maintenance_s=maint,
+        retention_days=retention, history_days=history, estimates_days=estimates_days,
+        max_db_mb=max_db, maintenance_s=maint,
         greenhouses=ghs, zenoh=zen, estimator=est, diagnosis=dia, clock=clock,
         outbox_max=outbox_max, outbox_alarm=outbox_alarm, status_every_s=status_every,
         log_level=log_level)

@@ -135,11 +135,7 @@ class Producers:
         dev, boot, seq, t = r[1:5]
         roles = self.roles.get(dev)
         if not roles:
-            if dev not in self.counts.unassigned:
-                self.counts.unassigned.add(dev)
-                log.warning("device %d is in no greenhouse of the config: its records are "
-                            "stored (python -m gateway export --device %d), reported as "
-                            "unassigned, not estimated", dev, dev)
+            self.counts.unassigned.add(dev)  # reported by the worker (and device snapshots)
             return []
         ch = {c: (r[5 + 2 * i], r[6 + 2 * i]) for i, c in enumerate(CHANNELS)}
         reading = P.Reading(dev, boot, seq, t, ch)

@@ -61,7 +61,8 @@ class Gateway:
         self.running: Running | None = None
         self.ingest_counters: dict[str, int] = {}
         self.diagnosis: DiagnosisScheduler | None = None
-        self.worker = Worker(cfg, resources, self.clock, self._wake_publisher, self._status_extra)
+        self.worker = Worker(cfg, resources, self.clock, self._wake_publisher, self._status_extra,
+                             publish=cfg.zenoh.enabled)
 
     def _wake_publisher(self, wait: float = 0.0) -> None:
         if self.publisher is not None:
@@ -127,6 +128,7 @@ async def run_gateway(cfg: GatewayConfig, resources: list[GreenhouseResources],
         db=cfg.db, keys=cfg.keys, listen=cfg.listen, serial=cfg.serial, baudrate=cfg.baudrate,
         maintenance_every=cfg.maintenance_s,
         policy=retention.Policy(samples_days=cfg.retention_days, outbox_sent_days=cfg.history_days,
+                                estimates_days=cfg.estimates_days,
                                 max_db_bytes=int(cfg.max_db_mb * 2**20)),
         clock=gw.clock.now, on_commit=lambda n: gw.worker.wake.set())
     tasks: list[asyncio.Task] = []
@@ -134,6 +136,10 @@ async def run_gateway(cfg: GatewayConfig, resources: list[GreenhouseResources],
         try:
             if cfg.zenoh.enabled:
                 await asyncio.to_thread(gw.start_zenoh)
+                z = cfg.zenoh
+                if not (z.listen or z.connect or z.multicast_scouting):
+                    log.warning("zenoh: no listen or connect endpoint and no scouting: nobody can "
+                                "reach this gateway; messages wait in the outbox")
             await asyncio.to_thread(gw.worker.start)
             ingest = asyncio.create_task(serve(icfg, ingest_ready), name="ingest")
             tasks.append(ingest)
@@ -141,7 +147,7 @@ async def run_gateway(cfg: GatewayConfig, resources: list[GreenhouseResources],
             await asyncio.wait({ingest, waiter}, return_when=asyncio.FIRST_COMPLETED)
             waiter.cancel()
             if ingest.done():
-                ingest.result()  # raises why ingest could not start
+                _ingest_failed(ingest, cfg)
             if cfg.diagnosis.enabled:
                 gw.diagnosis = DiagnosisScheduler(cfg, resources, gw.clock.now, Path(tmp),
                                                   gw.worker.wake.set)
@@ -152,6 +158,17 @@ async def run_gateway(cfg: GatewayConfig, resources: list[GreenhouseResources],
             await _supervise(gw, tasks, stop)
         finally:
             await _shutdown(gw, tasks)
+
+
+def _ingest_failed(ingest: asyncio.Task, cfg: GatewayConfig) -> None:
+    """Raise why ingest could not start, naming what it was to listen on."""
+    try:
+        ingest.result()
+    except OSError as e:
+        where = [f"udp {cfg.listen[0]}:{cfg.listen[1]}"] if cfg.listen else []
+        where += [f"serial {cfg.serial}"] if cfg.serial else []
+        raise OSError(f"ingest cannot start on {' and '.join(where)}: {e.strerror or e}") from None
+    raise RuntimeError("ingest stopped at start")
 
 
 def _announce(gw: Gateway) -> None:

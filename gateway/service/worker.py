@@ -33,8 +33,9 @@ PUBLISH_FIRST_S = 0.05  # [wall s] the longest the estimators wait for new recor
 class Worker:
     def __init__(self, cfg: GatewayConfig, resources: list[GreenhouseResources], clock: Clock,
                  wake_publisher: Callable[[float], None],
-                 status_extra: Callable[[], dict[str, Any]] = dict) -> None:
-        self.cfg, self.resources, self.clock = cfg, resources, clock
+                 status_extra: Callable[[], dict[str, Any]] = dict, publish: bool = True) -> None:
+        """``publish``: make messages (False with Zenoh off: the estimators still run and store)."""
+        self.cfg, self.resources, self.clock, self.publish = cfg, resources, clock, publish
         self.wake_publisher, self.status_extra = wake_publisher, status_extra
         self.wake = threading.Event()
         self._stop = threading.Event()
@@ -45,6 +46,7 @@ class Worker:
         self.producers: Producers | None = None
         self.outbox: Outbox | None = None
         self.passes = 0
+        self.unassigned: set[int] = set()  # kits that send but no greenhouse uses (reported)
         self._thread = threading.Thread(target=self._run, name="serra-worker", daemon=True)
 
     def start(self) -> None:
@@ -106,7 +108,7 @@ class Worker:
         """One round; True when an estimator still has minutes to catch up on."""
         assert self.producers is not None
         est = self.cfg.estimator
-        made = self.producers.run()  # records first: their latency is what the kit sees
+        made = self.producers.run() if self.publish else 0  # records first: the kit sees it
         if made:  # let the publisher put them before the estimators take the CPU (and the GIL)
             self.wake_publisher(PUBLISH_FIRST_S)
         while aggregate(conn):
@@ -118,8 +120,9 @@ class Worker:
             more |= rep.more
             for note in rep.notes:
                 log.info(note)
-        made = self.producers.run()
-        made += self.producers.snapshots(now, self.cfg.status_every_s, self._gh_state())
+        if self.publish:
+            made = self.producers.run()
+            made += self.producers.snapshots(now, self.cfg.status_every_s, self._gh_state())
         if made:
             self.wake_publisher(0.0)
         self.passes += 1
@@ -137,8 +140,18 @@ class Worker:
             out[p.name] = s
         return out
 
+    def _report_unassigned(self, conn) -> None:
+        known = self.cfg.devices()
+        for (dev,) in conn.execute("SELECT device_id FROM devices ORDER BY device_id"):
+            if dev not in known and dev not in self.unassigned:
+                self.unassigned.add(dev)
+                log.warning("device %d is in no greenhouse of the config: its records are stored "
+                            "(python -m gateway export --device %d) and it is reported as "
+                            "unassigned; it is not estimated", dev, dev)
+
     def _write_status(self, conn) -> None:
         assert self.producers is not None and self.outbox is not None
+        self._report_unassigned(conn)
         pending, oldest = outbox_backlog(conn)
         c = self.producers.counts
         items: dict[str, Any] = {
@@ -151,7 +164,7 @@ class Worker:
                        "full_rounds": c.full, "made": c.made},
             "greenhouses": {p.name: {"state": p.state, "cursor": p.cursor,
                                      "counters": asdict(p.est.counters)} for p in self.pipelines},
-            "devices": {"unassigned": sorted(c.unassigned)},
+            "devices": {"unassigned": sorted(self.unassigned)},
         }
         items.update(self.status_extra())
         set_status(conn, items, self.clock.now())

@@ -65,7 +65,7 @@ s.close()
 def onnx_model(folder: Path) -> tuple[str, str]:
     """A model for onnxruntime to load: the shipped virtual sensor if there is one, else a small
     MLP (16-30-20-1) built with onnx.helper, else none (onnxruntime imported only)."""
-    shipped = sorted(p for p in ROOT.glob("**/*.onnx") if ".venv" not in p.parts)
+    shipped = sorted(p for d in ("gateway", "training") for p in (ROOT / d).glob("**/*.onnx"))
     if shipped:
         return str(shipped[0]), f"shipped {shipped[0].relative_to(ROOT)}"
     try:

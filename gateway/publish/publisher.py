@@ -107,7 +107,8 @@ class OutboxPublisher:
         """Finish the batch in hand, then undeclare every publisher (before the session closes)."""
         self._stop.set()
         self.wake.set()
-        self._thread.join(timeout)
+        if self._thread.ident is not None:  # started
+            self._thread.join(timeout)
         for k in self.keys.values():
             k.close()
         self.keys.clear()

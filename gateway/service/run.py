@@ -87,8 +87,11 @@ class Gateway:
 
         z = self.cfg.zenoh
         before = zconfig.listening_ports()
-        self.session = zenoh.open(zconfig.build(z.mode, z.connect, z.listen, z.multicast_scouting,
-                                                extra=z.extra))
+        try:
+            self.session = zenoh.open(zconfig.build(z.mode, z.connect, z.listen,
+                                                    z.multicast_scouting, extra=z.extra))
+        except zenoh.ZError as e:  # a bad endpoint or raw key: one line, no traceback
+            raise RuntimeError(f"{self.cfg.source}: [zenoh]: cannot open the session: {e}") from None
         self.endpoints = zconfig.resolve_listen(z.listen, before)
         self.publisher = OutboxPublisher(
             self.session, self.cfg.db, cache=z.cache, resend_s=z.resend_on_start_s * self.clock.scale,

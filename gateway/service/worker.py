@@ -59,7 +59,8 @@ class Worker:
         """Finish the pass in hand (a last pass turns what was just stored into messages)."""
         self._stop.set()
         self.wake.set()
-        self._thread.join(timeout)
+        if self._thread.ident is not None:  # started
+            self._thread.join(timeout)
 
     def _setup(self, conn) -> None:
         est = self.cfg.estimator

@@ -187,3 +187,34 @@ def test_a_port_in_use_is_one_line_naming_it(tmp_path: Path) -> None:
     last = r.stderr.strip().splitlines()[-1]
     assert f"ERROR serra.gateway: ingest cannot start on udp 127.0.0.1:{port}: Address already in use" in last
     assert "Traceback" not in r.stderr
+
+
+def test_zenoh_off_stores_and_estimates_but_makes_no_message(tmp_path: Path) -> None:
+    import sqlite3
+    import time
+
+    from tests.gateway_harness import EPOCH, GatewayProcess, PyKit, sim_trace, wait_for, write_config
+    from training.kitsim import KitClock
+
+    clock = KitClock(300.0, EPOCH)
+    cfg = write_config(tmp_path, anchor=clock.anchor)
+    cfg.write_text(cfg.read_text().replace("[zenoh]", "[zenoh]\nenabled = false"))
+    gw = GatewayProcess(cfg)
+    kit = PyKit(7, sim_trace(), clock.now)
+
+    def count(sql: str) -> int:
+        with sqlite3.connect(tmp_path / "gw.db") as c:
+            return c.execute(sql).fetchone()[0]
+
+    try:
+        gw.start()
+        assert gw.zenoh == "off"
+        wait_for(lambda: kit.pump(gw.udp) or count("SELECT count(*) FROM estimates "
+                                                    "WHERE source='forecast'") >= 6,
+                 90, "forecasts stored")
+        assert gw.stop() == 0
+    finally:
+        gw.kill()
+        kit.close()
+    assert count("SELECT count(*) FROM samples") >= 3 and count("SELECT count(*) FROM outbox") == 0
+    assert time.time() - clock.anchor < 300

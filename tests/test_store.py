@@ -11,7 +11,7 @@ from gateway.protocol import CHANNELS, ST_OK, ST_PARTIAL, ST_TIMEOUT, Record
 from gateway.store import Store, retention
 from gateway.store import aggregate as agg
 from gateway.store.keys import KeyFileError, load_keys, parse_keys, write_keys
-from gateway.store.outbox import Outbox
+from gateway.store.outbox import Message, Outbox, OutboxFull
 
 T0 = 1_700_000_000.0 // 60 * 60  # a minute boundary
 OKV = (21.5, 65.0, 12.0, 80.0, 432.1, 3.4, 0.0)
@@ -126,21 +126,30 @@ def test_qc_missing_and_stuck(tmp_path: Path) -> None:
     assert not _minute(s, agg.STUCK_MINUTES + 1, "i_glob")[1] & agg.QC_STUCK
 
 
-def test_outbox_bounded_with_alarm(tmp_path: Path) -> None:
+def test_outbox_bounded_with_alarm_never_drops(tmp_path: Path) -> None:
     s = Store(tmp_path / "g.db")
     ob = Outbox(s.conn, max_rows=10, alarm_fraction=0.5)
+
+    def msg(i: int) -> Message:
+        return Message("serra/x", "k", float(i), f"m{i}", f"{i}")
+
     for i in range(4):
-        ob.put("serra/x", f"{i}")
+        ob.put(msg(i))
     assert not ob.alarm
-    ob.put("serra/x", "4")
+    ob.put(msg(4))
     assert ob.alarm
-    for i in range(5, 15):
-        ob.put("serra/x", f"{i}")
-    assert ob.pending() == 10 and ob.dropped == 5
+    for i in range(5, 10):
+        ob.put(msg(i))
+    with pytest.raises(OutboxFull):  # full: refused, nothing dropped, the producer retries
+        ob.put(msg(10))
+    assert ob.pending() == 10 and ob.refused == 1
     batch = ob.peek(3)
-    assert [p for _, _, p in batch] == ["5", "6", "7"]
-    ob.mark_sent([i for i, _, _ in batch])
+    assert [m.payload for m in batch] == ["0", "1", "2"]
+    ob.mark_sent([m.id for m in batch])
     assert ob.pending() == 7
+    assert ob.put(msg(1)) == 0  # the same idempotency key is never added twice
+    ob.put(msg(10))
+    assert [m.payload for m in ob.peek(100)] == [str(i) for i in range(3, 11)]
 
 
 def test_retention_and_capacity(tmp_path: Path) -> None:

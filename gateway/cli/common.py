@@ -115,26 +115,12 @@ def _stamp(text: str) -> np.datetime64:
 
 def read_params_file(path: str, model: Model) -> np.ndarray:
     """Parameters written by ``calibrate --out`` (TOML ``[params]``), checked against the model."""
-    import tomllib
+    from gateway.model.params_file import ParamsFileError, read_params
 
     try:
-        raw = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        raise CliError(f"{path}: cannot read parameters: {exc}") from None
-    params = raw.get("params")
-    if not isinstance(params, dict):
-        raise CliError(f"{path}: no [params] table")
-    if raw.get("model") not in (None, model.name):
-        raise CliError(f"{path}: parameters are for model '{raw.get('model')}', not '{model.name}'")
-    unknown = [k for k in params if k not in model.names]
-    if unknown:
-        raise CliError(f"{path}: unknown parameter(s) {', '.join(unknown)} for model {model.name}")
-    theta = model.defaults()
-    for k, v in params.items():
-        if not isinstance(v, int | float) or not math.isfinite(v):
-            raise CliError(f"{path}: params.{k} must be a finite number")
-        theta[model.index(k)] = float(v)
-    return theta
+        return read_params(path, model)
+    except ParamsFileError as exc:
+        raise CliError(str(exc)) from None
 
 
 def write_params_file(path: str, model: Model, params: dict[str, float], header: str) -> None:

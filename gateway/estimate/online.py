@@ -26,17 +26,13 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from gateway.estimate.settings import DEFAULT_ITERATIONS, GroupSettings, online_settings  # noqa: F401 (re-exported)
 from gateway.estimate.swarm import ALMERIA_OFFLINE, SearchResult, bat
 from gateway.greenhouse import Greenhouse
 from gateway.kitcsv import COLUMNS
 from gateway.model.drivers import prepare_drivers
 from gateway.model.model import Model
 from gateway.series import Series
-
-DEFAULT_ITERATIONS = 50
-"""RSBA iterations per estimation. The thesis does not print its online count. In boxes of
-±0.2–10 % around the current values, 50 iterations × 20 bats (1000 virtual-model runs) already
-give the error of 100 (docs/online-estimator.md, "Iterations") at half the time per step."""
 
 STUCK_SAMPLES = 30
 """An inside temperature repeated bit for bit this many samples in a row (30 min at 1 min) is a
@@ -46,71 +42,6 @@ are rolled back (``OnlineEstimator._strike_stuck_run``)."""
 
 MIN_RADIATION_PAIRS = 10
 """The radiation sub-model is only re-estimated with at least this many sunlit samples."""
-
-
-@dataclass(frozen=True)
-class GroupSettings:
-    """Settings of one estimation group (thesis §IV.2.2.2).
-
-    ``parameters``: the names searched (resolved: never empty); ``window``: n past samples
-    re-simulated; ``every``: period in model steps; ``iterations``/``bats``: RSBA budget;
-    ``prior``: weight λ [°C² or (W m-2)²] of the pull toward the starting values, added to the
-    window MSE as λ mean_j ((θ_j - θ0_j)/(hi_j - lo_j))² (0 = the thesis's estimator).
-    """
-
-    output: str
-    parameters: tuple[str, ...]
-    window: int
-    every: int
-    iterations: int = DEFAULT_ITERATIONS
-    bats: int = ALMERIA_OFFLINE.bats
-    prior: float = 0.0
-
-
-def online_settings(
-    model: Model, gh: Greenhouse | None = None, overrides: Mapping[str, Mapping[str, float]] | None = None
-) -> tuple[GroupSettings, ...]:
-    """The model's estimation groups (``Model.online``) with the greenhouse's ``[online.<output>]``
-    settings and then ``overrides`` applied on top.
-
-    A group whose ``parameters`` is empty takes every parameter no other group claims.
-    """
-    claimed = {n for g in model.online for n in g.parameters}
-    groups = []
-    for g in model.online:
-        names = g.parameters or tuple(n for n in model.names if n not in claimed)
-        unknown = [n for n in names if n not in model.names]
-        if unknown:
-            raise ValueError(f"{model.name}: online group '{g.output}' names unknown {unknown}")
-        s = GroupSettings(g.output, names, g.window, g.every)
-        for source in (gh.online if gh is not None else {}, overrides or {}):
-            table = dict(source.get(g.output, {}))
-            bad = [k for k in table if k not in ("window", "every", "iterations", "bats", "prior")]
-            if bad:
-                raise ValueError(f"online.{g.output}: unknown setting(s) {', '.join(bad)}")
-            for key in ("window", "every", "iterations", "bats"):
-                if key in table:
-                    value = float(table[key])
-                    if value != int(value):  # 2.7 samples is a typo, not 2
-                        raise ValueError(f"online.{g.output}.{key} must be a whole number, got {table[key]}")
-                    table[key] = int(value)
-                    if table[key] < (2 if key == "bats" else 1):
-                        raise ValueError(f"online.{g.output}.{key} must be positive, got {table[key]}")
-            if "prior" in table:
-                table["prior"] = float(table["prior"])
-                if not table["prior"] >= 0:
-                    raise ValueError(f"online.{g.output}.prior must be >= 0, got {table['prior']}")
-            s = replace(s, **table)
-        groups.append(s)
-    known = {g.output for g in model.online}
-    for source in (gh.online if gh is not None else {}, overrides or {}):
-        extra = [k for k in source if k not in known]
-        if extra:
-            raise ValueError(
-                f"online.{extra[0]}: the '{model.name}' model has no such estimation group "
-                f"(groups: {', '.join(sorted(known))})"
-            )
-    return tuple(groups)
 
 
 @dataclass
@@ -234,6 +165,57 @@ class OnlineEstimator:
             self.counters.no_prediction += 1
         self._last_prediction = t_next
         return Prediction(t_next, self.theta.copy(), tuple(estimated), tuple(faults), dead)
+
+    def restart_window(self) -> None:
+        """Forget the window (after a gap in the data, e.g. the kit was off for hours): the next
+        estimations wait for a full window of new samples. The parameters are kept."""
+        self._buf, self._n = {}, 0
+        self._stuck_value, self._stuck_run = np.nan, 0
+        self._theta_before.clear()
+        self._last_prediction = None
+
+    def snapshot(self) -> dict:
+        """Everything ``update`` depends on, as JSON-ready values (NaN stays NaN), so a restarted
+        gateway resumes exactly where it stopped (``restore``)."""
+        keep = min(self._n, self.history)
+        a = self._n - keep
+        return {
+            "model": self.model.name, "names": self.model.names,
+            "theta": self.theta.tolist(), "theta0": self.theta0.tolist(),
+            "rng": self.rng.bit_generator.state,
+            "window": {k: v[a : self._n].tolist() for k, v in self._buf.items()},
+            "stuck": [self._stuck_value, self._stuck_run],
+            "theta_before": [t.tolist() for t in self._theta_before],
+            "last_prediction": self._last_prediction,
+            "counters": {"samples": self.counters.samples,
+                         "faulty_samples": self.counters.faulty_samples,
+                         "faults": self.counters.faults, "estimated": self.counters.estimated,
+                         "skipped": self.counters.skipped,
+                         "no_prediction": self.counters.no_prediction},
+        }
+
+    def restore(self, snap: Mapping) -> None:
+        """Continue from a ``snapshot`` of an estimator of the same model (ValueError if not)."""
+        if snap.get("model") != self.model.name or list(snap.get("names", [])) != self.model.names:
+            raise ValueError(f"saved estimator state is for model {snap.get('model')!r} "
+                             f"{snap.get('names')}, not {self.model.name!r} {self.model.names}")
+        theta = np.clip(np.asarray(snap["theta"], dtype=float), self.lower, self.upper)
+        if theta.shape != self.theta.shape or not np.all(np.isfinite(theta)):
+            raise ValueError("saved estimator state: bad parameter vector")
+        self.theta = theta
+        self.rng.bit_generator.state = snap["rng"]
+        self.restart_window()
+        rows = {k: np.asarray(v, dtype=float) for k, v in snap["window"].items()}
+        self._n = min((len(v) for v in rows.values()), default=0)
+        for k, v in rows.items():
+            self._buf[k] = np.full(self._cap, np.nan)
+            self._buf[k][: self._n] = v[len(v) - self._n :]
+        self._stuck_value, self._stuck_run = float(snap["stuck"][0]), int(snap["stuck"][1])
+        self._theta_before.extend(np.asarray(t, dtype=float) for t in snap["theta_before"])
+        self._last_prediction = snap["last_prediction"]
+        c = snap["counters"]
+        self.counters = Counters(c["samples"], c["faulty_samples"], dict(c["faults"]),
+                                 dict(c["estimated"]), dict(c["skipped"]), c["no_prediction"])
 
     # -- checks and buffer ----------------------------------------------------------------
     def _check(self, sample: Mapping[str, float]) -> tuple[dict[str, float], list[str]]:

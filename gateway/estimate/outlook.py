@@ -54,3 +54,25 @@ class HoldLatest:
         if horizon < 0:
             raise ValueError(f"horizon must be >= 0, got {horizon}")
         return {k: np.full(horizon, latest_finite(v)) for k, v in history.items()}
+
+
+OUTLOOKS: dict[str, str] = {
+    "hold-latest": "gateway.estimate.outlook:HoldLatest",
+}
+"""Outlooks the gateway config can name (``outlook = "..."``): name → ``module:class``. A new
+outlook adds one line here (imported only when chosen, so no import cycle). The class is built
+without arguments and its ``name`` must be the key."""
+
+
+def make_outlook(name: str) -> Outlook:
+    """The outlook registered as ``name`` (ValueError naming the known ones otherwise)."""
+    import importlib
+
+    target = OUTLOOKS.get(name)
+    if target is None:
+        raise ValueError(f"unknown weather outlook {name!r} (known: {', '.join(sorted(OUTLOOKS))})")
+    module, _, attr = target.partition(":")
+    outlook = getattr(importlib.import_module(module), attr)()
+    if outlook.name != name:
+        raise ValueError(f"outlook {target} calls itself {outlook.name!r}, registered as {name!r}")
+    return outlook

@@ -70,8 +70,15 @@ class _Pending:
 class IngestCore:
     def __init__(self, store: Store, keys: dict[int, bytes], *, max_pending: int = 50_000,
                  batch_delay: float = 0.0, alarm_fraction: float = 0.8,
-                 keys_path: str | Path | None = None) -> None:
+                 keys_path: str | Path | None = None,
+                 clock: Callable[[], float] = time.time,
+                 on_commit: Callable[[int], None] | None = None) -> None:
+        """``keys_path``: the keys file (named in the refusal's recovery command); ``clock``:
+        receive time [unix s] (the live gateway's clock); ``on_commit(n)``: called on the event
+        loop after each batch of n records is durable."""
         self.store = store
+        self.clock = clock
+        self.on_commit = on_commit
         self.counters = Counters()
         self.rlog = RateLimitedLog(log)
         # A refused device is named once per 10 minutes, not once per packet.
@@ -112,7 +119,7 @@ class IngestCore:
         if r is None:
             r = self.refused[dev_id] = Refusal(dev_id, "replay_old_boot", 0, boot, latest, 0.0,
                                                cmd)
-        r.count, r.boot, r.latest, r.last = r.count + 1, boot, latest, time.time()
+        r.count, r.boot, r.latest, r.last = r.count + 1, boot, latest, self.clock()
         self.refusal_log.warning(
             "replay_old_boot",
             "device %d refused (replay_old_boot): packet from %s carries boot %d, older than "
@@ -180,7 +187,7 @@ class IngestCore:
                 self.refused.pop(dev_id, None)
         if rec.seq > d.max_seq:
             d.max_seq = rec.seq
-        self._pending[k] = _Pending(rec._replace(boot=boot) if d.base else rec, time.time(),
+        self._pending[k] = _Pending(rec._replace(boot=boot) if d.base else rec, self.clock(),
                                     [(send, peer)])
         self._queue.append(k)
         self._wake.set()
@@ -233,6 +240,11 @@ class IngestCore:
             ack = p.encode_ack(k[0], k[1] - d.base, k[2], p.ACK_STORED, 0, d.key)
             for send, peer in pend.waiters:
                 self._send(send, peer, ack)
+        if self.on_commit is not None:
+            try:
+                self.on_commit(len(keys))
+            except Exception:  # a listener's bug must not stop ingest
+                log.exception("on_commit listener failed")
 
     async def drain(self) -> None:
         """Commit whatever is queued (graceful shutdown)."""

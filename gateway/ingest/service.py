@@ -14,6 +14,7 @@ import signal
 import socket
 import sqlite3
 import sys
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,6 +45,9 @@ class IngestConfig:
     maintenance_every: float = 10.0  # aggregation, retention, capacity alarms [s]
     stats_every: float = 60.0
     policy: retention.Policy = field(default_factory=retention.Policy)
+    # The live gateway (gateway/service/run.py): its clock and a callback after each durable batch.
+    clock: Callable[[], float] = time.time
+    on_commit: Callable[[int], None] | None = None
 
 
 class ListenError(OSError):
@@ -83,9 +87,9 @@ def _open_udp(core: IngestCore, host: str, port: int) -> UdpServer:
         raise ListenError(f"cannot listen on {_where(host, port)}: {why}") from None
 
 
-def _maintenance(store: Store, policy: retention.Policy) -> None:
+def _maintenance(store: Store, policy: retention.Policy, now: float) -> None:
     aggregate.aggregate(store.conn)
-    retention.apply(store.conn, policy)
+    retention.apply(store.conn, policy, now)
     retention.capacity_alarms(store.path, policy)
 
 
@@ -108,7 +112,8 @@ async def serve(config: IngestConfig,
                     "%s, then restart the gateway", config.keys, config.keys)
     store = Store(config.db)
     core = IngestCore(store, keys, max_pending=config.max_pending,
-                      batch_delay=config.batch_delay, keys_path=config.keys)
+                      batch_delay=config.batch_delay, keys_path=config.keys,
+                      clock=config.clock, on_commit=config.on_commit)
     transports: list = []
     started = False
     try:
@@ -131,7 +136,7 @@ async def serve(config: IngestConfig,
             await asyncio.sleep(config.maintenance_every)
             if writer.done():
                 writer.result()  # surface a writer crash
-            await core.run_in_store_thread(_maintenance, store, config.policy)
+            await core.run_in_store_thread(_maintenance, store, config.policy, config.clock())
             if loop.time() - t_stats >= config.stats_every:
                 t_stats = loop.time()
                 log.info("ingest counters %s%s", core.counters.snapshot(), _refused(core))

@@ -86,20 +86,27 @@ def pending_minutes(conn: sqlite3.Connection, dev: int) -> Overlay:
     return overlay
 
 
+def _span(conn: sqlite3.Connection, max_rows: int) -> tuple[int, int]:
+    last = _last_aggregated(conn)
+    top = conn.execute("SELECT max(rowid) FROM samples").fetchone()[0] or 0
+    return last, min(top, last + max_rows)
+
+
 def aggregate(conn: sqlite3.Connection, max_rows: int = 20_000) -> int:
     """Recompute the minutes touched by samples stored since the last call; returns how many.
 
     At most `max_rows` new samples per call, so a backlog never holds the write lock for long
-    (the ingest writer, and so the acknowledgements, wait meanwhile)."""
-    last = _last_aggregated(conn)
-    top = conn.execute("SELECT max(rowid) FROM samples").fetchone()[0] or 0
-    top = min(top, last + max_rows)
+    (the ingest writer, and so the acknowledgements, wait meanwhile). Safe to call from two
+    connections at once (the ingest service and the live gateway): the span is read again
+    under the write lock."""
+    last, top = _span(conn, max_rows)
     if top <= last:
         return 0
-    touched = sorted(conn.execute(
-        "SELECT DISTINCT device_id, CAST(t / 60 AS INTEGER) * 60 FROM samples "
-        "WHERE rowid>? AND rowid<=?", (last, top)).fetchall(), key=lambda r: (r[0], r[1]))
     with transaction(conn):
+        last, top = _span(conn, max_rows)
+        touched = sorted(conn.execute(
+            "SELECT DISTINCT device_id, CAST(t / 60 AS INTEGER) * 60 FROM samples "
+            "WHERE rowid>? AND rowid<=?", (last, top)).fetchall(), key=lambda r: (r[0], r[1]))
         for dev, minute in touched:
             conn.execute(_UPSERT, _minute_row(conn, dev, minute))
         conn.execute("INSERT OR REPLACE INTO meta (name, value) VALUES ('agg_rowid', ?)",

@@ -1,4 +1,11 @@
-"""SQLite schema (version in PRAGMA user_version). Documented in docs/wire-format.md."""
+"""SQLite schema (version in PRAGMA user_version). Documented in docs/store.md.
+
+Version 2 (the live gateway) adds the greenhouse to ``estimates``; kind, observation time and
+idempotency key to ``outbox`` (which is also the log the history queryable answers from); and the
+tables ``greenhouses``, ``estimator_state``, ``findings`` and ``gateway_status``. A version-1
+file is migrated in place, in one transaction, keeping every row (:func:`migrate_v1_v2`).
+New columns are appended, so a migrated file and a new one have the same tables.
+"""
 
 from __future__ import annotations
 
@@ -6,12 +13,12 @@ import sqlite3
 
 from gateway.protocol import CHANNELS
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 
 _chan_cols = ",\n".join(f"  {c} REAL,\n  {c}_st INTEGER NOT NULL" for c in CHANNELS)
 _qc_cols = ",\n".join(f"  {c} REAL,\n  {c}_qc INTEGER NOT NULL" for c in CHANNELS)
 
-DDL = f"""
+DDL_V1 = f"""
 CREATE TABLE IF NOT EXISTS devices (
   device_id INTEGER PRIMARY KEY,
   boot INTEGER NOT NULL,          -- latest boot counter seen (older boots are replays)
@@ -63,11 +70,84 @@ CREATE TABLE IF NOT EXISTS meta (
   value TEXT NOT NULL
 );
 """
+"""Version 1, frozen: what a version-1 gateway created (the migration starts from it)."""
+
+_V2_COLUMNS = (
+    ("estimates", "greenhouse", "TEXT NOT NULL DEFAULT ''"),  # '' = not tied to a greenhouse
+    ("outbox", "kind", "TEXT NOT NULL DEFAULT ''"),  # e.g. measurement/inside, forecast
+    ("outbox", "t", "REAL"),  # observation time of the message [unix s, gateway clock]
+    ("outbox", "idem", "TEXT"),  # idempotency key, unique; the cloud drops repeats by it
+)
+
+DDL_V2_TABLES = """
+CREATE INDEX IF NOT EXISTS estimates_gh ON estimates(greenhouse, name, t);
+CREATE UNIQUE INDEX IF NOT EXISTS outbox_idem ON outbox(idem);
+CREATE INDEX IF NOT EXISTS outbox_key_t ON outbox(key, t);
+CREATE TABLE IF NOT EXISTS greenhouses (
+  name TEXT PRIMARY KEY,          -- greenhouse name in the gateway config and the key space
+  farm TEXT NOT NULL,
+  inside_device INTEGER NOT NULL,
+  outside_device INTEGER NOT NULL,
+  model TEXT NOT NULL,
+  config TEXT NOT NULL,           -- JSON: the greenhouse's resolved config section
+  updated REAL NOT NULL
+);
+CREATE TABLE IF NOT EXISTS estimator_state (
+  greenhouse TEXT PRIMARY KEY,
+  model TEXT NOT NULL,
+  minute INTEGER NOT NULL,        -- last minute stepped [unix s]
+  state TEXT NOT NULL,            -- JSON snapshot of the online estimator
+  updated REAL NOT NULL
+);
+CREATE TABLE IF NOT EXISTS findings (
+  id TEXT PRIMARY KEY,            -- stable identity: effect@greenhouse@start of first detection
+  greenhouse TEXT NOT NULL,
+  effect TEXT NOT NULL,
+  start REAL,                     -- start of the effect [unix s], NULL: before the data
+  first_seen REAL NOT NULL,
+  last_seen REAL NOT NULL,
+  revision INTEGER NOT NULL,      -- bumped when the finding changes
+  published_revision INTEGER NOT NULL DEFAULT 0,
+  detail TEXT NOT NULL            -- JSON: the diagnosis's finding (params, summary, evidence)
+);
+CREATE TABLE IF NOT EXISTS gateway_status (
+  name TEXT PRIMARY KEY,          -- gateway, zenoh, outbox, ingest, devices, ...
+  value TEXT NOT NULL,            -- JSON
+  updated REAL NOT NULL           -- gateway clock [unix s]
+);
+"""
+
+
+def _columns(conn: sqlite3.Connection, table: str) -> list[str]:
+    return [r[1] for r in conn.execute(f"PRAGMA table_info({table})")]
+
+
+def migrate_v1_v2(conn: sqlite3.Connection) -> None:
+    """Version 1 → 2 in one transaction: columns appended, v1 outbox rows get the idempotency
+    key ``v1:<id>``; no row is changed otherwise, none is removed."""
+    conn.execute("BEGIN IMMEDIATE")
+    try:
+        for table, col, decl in _V2_COLUMNS:
+            if col not in _columns(conn, table):
+                conn.execute(f"ALTER TABLE {table} ADD COLUMN {col} {decl}")
+        conn.execute("UPDATE outbox SET idem = 'v1:' || id WHERE idem IS NULL")
+        for stmt in DDL_V2_TABLES.split(";"):
+            if stmt.strip():
+                conn.execute(stmt)
+        conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+    except BaseException:
+        conn.execute("ROLLBACK")
+        raise
+    conn.execute("COMMIT")
 
 
 def create(conn: sqlite3.Connection) -> None:
+    """Create the tables of a new store or migrate a version-1 store; a current one is left as
+    it is. A new file is made the same way as a migrated one (version 1, then the migration), so
+    the two cannot differ."""
     ver = conn.execute("PRAGMA user_version").fetchone()[0]
-    if ver not in (0, SCHEMA_VERSION):
+    if ver not in (0, 1, SCHEMA_VERSION):
         raise RuntimeError(f"database schema version {ver}, this gateway knows {SCHEMA_VERSION}")
-    conn.executescript(DDL)
-    conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+    if ver < SCHEMA_VERSION:
+        conn.executescript(DDL_V1)  # IF NOT EXISTS: nothing happens to a version-1 file
+        migrate_v1_v2(conn)

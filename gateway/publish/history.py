@@ -1,0 +1,84 @@
+"""The history queryable: ``serra/<farm>/<greenhouse>/history/<kind>?from=ISO;to=ISO;limit=N``.
+
+Answered from the gateway's own store (the outbox is also the log of every message made, sent or
+not, kept ``history_days``): each reply is the stored payload, unchanged (same idempotency key,
+so a cloud can merge history with what it received live), on the key
+``serra/<farm>/<greenhouse>/history/<kind>``, oldest first by observation time, at most ``limit``
+replies in all (default 1000). Wildcards work (``serra/farm1/*/history/measurement/**``). A bad
+parameter gets one error reply naming it. Ask with ``ConsolidationMode.NONE``: Zenoh keeps only the
+latest reply per key otherwise.
+"""
+
+from __future__ import annotations
+
+import logging
+import sqlite3
+import threading
+import time
+from pathlib import Path
+
+import zenoh
+
+from gateway.publish import keyspace as K
+
+log = logging.getLogger("serra.publish")
+KEYS_TTL = 10.0  # [s] how long the list of stored keys is reused
+
+
+class HistoryQueryable:
+    """Declared on ``serra/<farm>/*/history/**`` with its own read-only SQLite connection."""
+
+    def __init__(self, session: zenoh.Session, db: Path, farm: str) -> None:
+        self.conn = sqlite3.connect(f"file:{db}?mode=ro", uri=True, check_same_thread=False,
+                                    timeout=30)
+        self.conn.execute("PRAGMA busy_timeout=30000")
+        self.lock = threading.Lock()
+        self._keys: list[str] = []
+        self._keys_at = -KEYS_TTL
+        self.answered = 0
+        self.queryable = session.declare_queryable(
+            f"{K.PREFIX}/{farm}/*/{K.HISTORY}/**", self._on_query, complete=False)
+
+    def close(self) -> None:
+        """Undeclare (before the session closes: a declared callback blocks interpreter exit)."""
+        try:
+            self.queryable.undeclare()
+        except zenoh.ZError:
+            pass
+        with self.lock:
+            self.conn.close()
+
+    def _stored_keys(self) -> list[str]:
+        if time.monotonic() - self._keys_at > KEYS_TTL:
+            self._keys = [r[0] for r in self.conn.execute("SELECT DISTINCT key FROM outbox")]
+            self._keys_at = time.monotonic()
+        return self._keys
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        with query:
+            try:
+                rng = K.parse_range(lambda name: query.parameters.get(name))
+            except K.SelectorError as e:
+                query.reply_err(str(e))
+                return
+            asked = query.key_expr
+            try:
+                with self.lock:
+                    keys = [k for k in self._stored_keys()
+                            if k.startswith(K.PREFIX + "/") and asked.intersects(K.history_key(k))]
+                    rows = self._rows(keys, rng) if keys else []
+            except sqlite3.Error as e:
+                log.warning("history query %s failed: %s", asked, e)
+                query.reply_err(f"store error: {e}")
+                return
+            for key, payload in rows:
+                query.reply(K.history_key(key), payload, encoding=zenoh.Encoding.APPLICATION_JSON)
+            self.answered += 1
+
+    def _rows(self, keys: list[str], rng: K.HistoryRange) -> list[tuple[str, str]]:
+        marks = ", ".join("?" * len(keys))
+        start = rng.start if rng.start > -1e300 else -1e300
+        end = rng.end if rng.end < 1e300 else 1e300
+        return self.conn.execute(
+            f"SELECT key, payload FROM outbox WHERE key IN ({marks}) AND t >= ? AND t <= ? "
+            "ORDER BY t, id LIMIT ?", (*keys, start, end, rng.limit)).fetchall()

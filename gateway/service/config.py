@@ -1,0 +1,366 @@
+"""The gateway's TOML config: devices → greenhouses, store, ingest, Zenoh, estimator, diagnosis.
+
+Validated at start: every error names the file and the key (``gateway.toml: greenhouse[2].inside:
+device 9 has no key in /etc/serra/keys.txt``). The documented example is
+``images/gateway/gateway.toml``; docs/gateway.md explains every key.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from gateway.ingest.service import DEFAULT_PORT
+
+NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,62}$")
+"""Farm and greenhouse names: one Zenoh key chunk (no /, *, $, ?, #, @), at most 63 characters."""
+RESERVED = {"unassigned", "history"}
+"""Greenhouse names the key space uses itself."""
+_REQUIRED = object()
+
+
+class ConfigError(ValueError):
+    """A config that cannot be used; the message names the file and the key."""
+
+
+@dataclass(frozen=True)
+class ZenohSettings:
+    """How the gateway joins Zenoh (security and routers: docs/gateway.md)."""
+
+    enabled: bool = True
+    mode: str = "peer"  # peer | client
+    connect: tuple[str, ...] = ()
+    listen: tuple[str, ...] = ()
+    multicast_scouting: bool = False
+    cache: int = 256  # samples per key kept by the advanced publisher for late/missed recovery
+    resend_on_start_s: float = 5.0  # wall seconds of sent messages put again after a restart
+    extra: dict[str, Any] = field(default_factory=dict)  # raw zenoh config keys (json5 values)
+
+
+@dataclass(frozen=True)
+class GreenhouseSettings:
+    """One greenhouse: where its data comes from and how it is modelled."""
+
+    name: str
+    greenhouse: str  # preset name or TOML path (resolved against the config file's folder)
+    model: str
+    inside: int  # device id carrying t_in, rh_in
+    outside: int  # device id carrying t_out, rh_out, i_glob, wind, rain
+    params: Path | None = None  # calibrated parameters (calibrate --out)
+    outlook: str = "hold-latest"
+    vsensor: Path | None = None  # ONNX model of the virtual ventilation sensor (issue 11)
+    latitude: float | None = None  # from the greenhouse's [site], else [location]
+    longitude: float | None = None
+
+
+@dataclass(frozen=True)
+class EstimatorSettings:
+    horizons_min: tuple[int, ...] = (15, 30, 60)
+    seed: int = 0
+    max_wait_s: float = 600.0  # a minute waits this long for a lagging device, then goes on
+    settle_s: float = 60.0  # a minute is final this long after the next one started
+    gap_s: float = 300.0  # a longer hole restarts the estimator's window (not its parameters)
+    history_min: int = 1440  # minutes of history handed to the weather outlook
+
+
+@dataclass(frozen=True)
+class DiagnosisSettings:
+    enabled: bool = True
+    every_hours: float = 24.0
+    days: float = 7.0
+    min_days: float = 2.0  # less data than this: the run is skipped
+    timeout_s: float = 1800.0  # wall seconds before a diagnosis run is abandoned
+
+
+@dataclass(frozen=True)
+class ClockSettings:
+    """Test/demo only: a gateway clock running ``scale`` times faster than the wall clock."""
+
+    scale: float = 1.0
+    epoch: float | None = None  # gateway time [unix s] at ``anchor``
+    anchor: float | None = None  # wall time [unix s] at which the clock read ``epoch``
+
+
+@dataclass(frozen=True)
+class GatewayConfig:
+    source: str
+    farm: str
+    db: Path
+    keys: Path
+    listen: tuple[str, int] | None
+    serial: str | None
+    baudrate: int
+    retention_days: float
+    history_days: float
+    estimates_days: float
+    max_db_mb: float
+    maintenance_s: float
+    greenhouses: tuple[GreenhouseSettings, ...]
+    zenoh: ZenohSettings
+    estimator: EstimatorSettings
+    diagnosis: DiagnosisSettings
+    clock: ClockSettings
+    outbox_max: int = 100_000
+    outbox_alarm: float = 0.8
+    status_every_s: float = 300.0
+    log_level: str = "info"
+
+    def devices(self) -> set[int]:
+        """Devices the greenhouses use."""
+        return {d for g in self.greenhouses for d in (g.inside, g.outside)}
+
+
+class _Table:
+    """One TOML table being read: typed getters and a check that no unknown key is left."""
+
+    def __init__(self, source: str, path: str, raw: Any) -> None:
+        self.source, self.path = source, path
+        if not isinstance(raw, dict):
+            self.fail("", "must be a table")
+        self.raw: dict[str, Any] = raw
+        self.seen: set[str] = set()
+
+    def where(self, key: str) -> str:
+        return f"{self.path}.{key}" if self.path and key else (self.path or key)
+
+    def fail(self, key: str, what: str) -> None:
+        raise ConfigError(f"{self.source}: {self.where(key)}: {what}")
+
+    def get(self, key: str, kind: type, default: Any = _REQUIRED, lo: float | None = None,
+            hi: float | None = None, choices: tuple | None = None) -> Any:
+        self.seen.add(key)
+        if key not in self.raw:
+            if default is _REQUIRED:
+                self.fail(key, "missing (required)")
+            return default
+        v = self.raw[key]
+        if kind is float and isinstance(v, int) and not isinstance(v, bool):
+            v = float(v)
+        if not isinstance(v, kind) or (isinstance(v, bool) and kind is not bool):
+            self.fail(key, f"must be {_kind_name(kind)}, got {v!r}")
+        if kind is float and not math.isfinite(v):
+            self.fail(key, f"must be a finite number, got {v!r}")
+        if (lo is not None and v < lo) or (hi is not None and v > hi):
+            self.fail(key, f"{v!r} is outside {lo if lo is not None else '-inf'}.."
+                           f"{hi if hi is not None else 'inf'}")
+        if choices is not None and v not in choices:
+            self.fail(key, f"{v!r} is not one of {', '.join(map(str, choices))}")
+        return v
+
+    def sub(self, key: str) -> _Table:
+        self.seen.add(key)
+        return _Table(self.source, self.where(key), self.raw.get(key, {}))
+
+    def done(self) -> None:
+        extra = sorted(set(self.raw) - self.seen)
+        if extra:
+            self.fail(extra[0], f"unknown key (allowed here: {', '.join(sorted(self.seen))})")
+
+
+def _kind_name(kind: type) -> str:
+    return {str: "a string", int: "a whole number", float: "a number", bool: "true or false",
+            list: "a list", dict: "a table"}.get(kind, kind.__name__)
+
+
+def _path(base: Path, text: str) -> Path:
+    p = Path(text).expanduser()
+    return p if p.is_absolute() else base / p
+
+
+def _hostport(t: _Table, key: str, default: str) -> tuple[str, int] | None:
+    text = t.get(key, str, default)
+    if not text:
+        return None
+    host, sep, port = text.rpartition(":")
+    if not sep or not port.isdigit() or not 0 <= int(port) <= 65535:
+        t.fail(key, f"expected HOST:PORT (an IP address), got {text!r}")
+    return host.strip("[]") or "0.0.0.0", int(port)
+
+
+def _endpoints(t: _Table, key: str) -> tuple[str, ...]:
+    items = t.get(key, list, [])
+    for i, e in enumerate(items):
+        if not isinstance(e, str) or not re.match(r"^[a-z0-9]+/.+", e):
+            t.fail(f"{key}[{i}]", f"expected a Zenoh endpoint like 'tcp/192.168.1.10:7447', got {e!r}")
+    return tuple(items)
+
+
+def _time(t: _Table, key: str) -> float | None:
+    import numpy as np
+
+    v = t.get(key, str, None) if isinstance(t.raw.get(key), str) else t.get(key, float, None)
+    if isinstance(v, str):
+        try:
+            return float(np.datetime64(v.rstrip("Z"), "s").astype("int64"))
+        except ValueError:
+            t.fail(key, f"expected an ISO UTC time like 2009-11-01T00:00:00Z, got {v!r}")
+    return v
+
+
+def load_config(path: str | Path) -> GatewayConfig:
+    """Read and validate ``path``; raises :class:`ConfigError` naming the key."""
+    path = Path(path)
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as e:
+        raise ConfigError(f"{path}: cannot read: {e.strerror or e}") from None
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"{path}: not UTF-8 text ({e.reason} at byte {e.start})") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"{path}: invalid TOML: {e}") from None
+    return parse_config(raw, str(path), path.resolve().parent)
+
+
+def parse_config(raw: dict[str, Any], source: str = "<config>", base: Path = Path(".")) -> GatewayConfig:
+    top = _Table(source, "", raw)
+    g = top.sub("gateway")
+    farm = g.get("farm", str)
+    if not NAME.match(farm):
+        g.fail("farm", f"{farm!r} is not usable in a Zenoh key (letters, digits, _ . -)")
+    db = _path(base, g.get("db", str))
+    keys = _path(base, g.get("keys", str))
+    log_level = g.get("log_level", str, "info", choices=("debug", "info", "warning", "error"))
+    status_every = g.get("status_every_s", float, 300.0, lo=1.0)
+    g.done()
+    ing = top.sub("ingest")
+    listen = _hostport(ing, "listen", f"0.0.0.0:{DEFAULT_PORT}")
+    serial = ing.get("serial", str, "") or None
+    baud = ing.get("baudrate", int, 115200, lo=300, hi=4_000_000)
+    retention = ing.get("retention_days", float, 400.0, lo=1.0)
+    history = ing.get("history_days", float, 30.0, lo=0.01)
+    estimates_days = ing.get("estimates_days", float, 400.0, lo=1.0)
+    max_db = ing.get("max_db_mb", float, 4096.0, lo=1.0)
+    maint = ing.get("maintenance_s", float, 10.0, lo=0.05)
+    ing.done()
+    if listen is None and serial is None:
+        ing.fail("listen", "no transport: set listen (UDP) or serial")
+    loc = top.sub("location")
+    lat = loc.get("latitude", float, None, lo=-90, hi=90)
+    lon = loc.get("longitude", float, None, lo=-180, hi=180)
+    loc.done()
+    zen = _zenoh(top.sub("zenoh"))
+    ob = top.sub("outbox")
+    outbox_max = ob.get("max_messages", int, 100_000, lo=10)
+    outbox_alarm = ob.get("alarm_fraction", float, 0.8, lo=0.05, hi=1.0)
+    ob.done()
+    est = _estimator(top.sub("estimator"))
+    dia = _diagnosis(top.sub("diagnosis"))
+    clock = _clock(top.sub("clock"))
+    top.seen.add("greenhouse")
+    items = raw.get("greenhouse", [])
+    if not isinstance(items, list) or not items:
+        top.fail("greenhouse", "at least one [[greenhouse]] table is required")
+    ghs = tuple(_greenhouse(_Table(source, f"greenhouse[{i + 1}]", item), base, lat, lon,
+                            est_outlook=top.raw.get("estimator", {}).get("outlook", "hold-latest"))
+                for i, item in enumerate(items))
+    names = [x.name for x in ghs]
+    for i, n in enumerate(names):
+        if n in names[:i]:
+            raise ConfigError(f"{source}: greenhouse[{i + 1}].name: {n!r} is used twice")
+    top.done()
+    return GatewayConfig(
+        source=source, farm=farm, db=db, keys=keys, listen=listen, serial=serial, baudrate=baud,
+        retention_days=retention, history_days=history, estimates_days=estimates_days,
+        max_db_mb=max_db, maintenance_s=maint,
+        greenhouses=ghs, zenoh=zen, estimator=est, diagnosis=dia, clock=clock,
+        outbox_max=outbox_max, outbox_alarm=outbox_alarm, status_every_s=status_every,
+        log_level=log_level)
+
+
+def _zenoh(z: _Table) -> ZenohSettings:
+    s = ZenohSettings(
+        enabled=z.get("enabled", bool, True),
+        mode=z.get("mode", str, "peer", choices=("peer", "client")),
+        connect=_endpoints(z, "connect"),
+        listen=_endpoints(z, "listen"),
+        multicast_scouting=z.get("multicast_scouting", bool, False),
+        cache=z.get("cache", int, 256, lo=1, hi=1_000_000),
+        resend_on_start_s=z.get("resend_on_start_s", float, 5.0, lo=0.0),
+        extra=z.get("config", dict, {}),
+    )
+    z.done()
+    if s.enabled and s.mode == "client" and not s.connect:
+        z.fail("connect", "client mode needs at least one router endpoint to connect to")
+    return s
+
+
+def _estimator(e: _Table) -> EstimatorSettings:
+    horizons = e.get("horizons_min", list, [15, 30, 60])
+    if not horizons or not all(isinstance(h, int) and not isinstance(h, bool) and 1 <= h <= 1440
+                               for h in horizons):
+        e.fail("horizons_min", f"must be whole minutes in 1..1440, got {horizons!r}")
+    e.get("outlook", str, "hold-latest")  # checked per greenhouse
+    s = EstimatorSettings(
+        horizons_min=tuple(sorted(set(horizons))),
+        seed=e.get("seed", int, 0, lo=0),
+        max_wait_s=e.get("max_wait_s", float, 600.0, lo=0.0),
+        settle_s=e.get("settle_s", float, 60.0, lo=0.0),
+        gap_s=e.get("gap_s", float, 300.0, lo=60.0),
+        history_min=e.get("history_min", int, 1440, lo=1, hi=100_000),
+    )
+    e.done()
+    return s
+
+
+def _diagnosis(d: _Table) -> DiagnosisSettings:
+    s = DiagnosisSettings(
+        enabled=d.get("enabled", bool, True),
+        every_hours=d.get("every_hours", float, 24.0, lo=0.01),
+        days=d.get("days", float, 7.0, lo=0.1),
+        min_days=d.get("min_days", float, 2.0, lo=0.05),
+        timeout_s=d.get("timeout_s", float, 1800.0, lo=1.0),
+    )
+    d.done()
+    if s.min_days > s.days:
+        d.fail("min_days", f"{s.min_days} is more than days = {s.days}")
+    return s
+
+
+def _clock(c: _Table) -> ClockSettings:
+    s = ClockSettings(scale=c.get("scale", float, 1.0, lo=1e-3, hi=1e5),
+                      epoch=_time(c, "epoch"), anchor=c.get("anchor", float, None, lo=0.0))
+    c.done()
+    if s.scale != 1.0 and s.epoch is None:
+        c.fail("epoch", "a scaled clock needs the time it starts from (epoch)")
+    return s
+
+
+def _greenhouse(t: _Table, base: Path, lat: float | None, lon: float | None,
+                est_outlook: str) -> GreenhouseSettings:
+    from gateway.estimate.outlook import OUTLOOKS
+    from gateway.greenhouse import GreenhouseError, load_greenhouse
+    from gateway.model import MODEL_NAMES
+
+    name = t.get("name", str)
+    if not NAME.match(name) or name in RESERVED:
+        t.fail("name", f"{name!r} is not usable in a Zenoh key (letters, digits, _ . -; not "
+                       f"{', '.join(sorted(RESERVED))})")
+    spec = t.get("greenhouse", str)
+    gh_path = spec if "/" not in spec and not spec.endswith(".toml") else str(_path(base, spec))
+    try:
+        gh = load_greenhouse(gh_path)
+    except GreenhouseError as e:
+        t.fail("greenhouse", str(e))
+    model = t.get("model", str, choices=MODEL_NAMES)
+    inside = t.get("inside", int, lo=0, hi=0xFFFFFFFF)
+    outside = t.get("outside", int, inside, lo=0, hi=0xFFFFFFFF)
+    params = t.get("params", str, None)
+    vsensor = t.get("vsensor", str, None)
+    outlook = t.get("outlook", str, est_outlook)
+    if outlook not in OUTLOOKS:
+        t.fail("outlook", f"unknown weather outlook {outlook!r} (known: {', '.join(sorted(OUTLOOKS))})")
+    t.done()
+    site = gh.site
+    g_lat = site.latitude if site else lat
+    g_lon = site.longitude if site else lon
+    if g_lat is None or g_lon is None:
+        t.fail("greenhouse", f"{gh.source} has no [site] and the config has no [location]: the "
+                             "published payloads need latitude and longitude")
+    return GreenhouseSettings(
+        name=name, greenhouse=gh_path, model=model, inside=inside, outside=outside,
+        params=_path(base, params) if params else None, outlook=outlook,
+        vsensor=_path(base, vsensor) if vsensor else None, latitude=g_lat, longitude=g_lon)

@@ -1,0 +1,194 @@
+"""The daily diagnosis, in a separate process, and its findings with a stable identity.
+
+Every ``every_hours`` (gateway clock) each greenhouse's last ``days`` of minutes are written as a
+kit CSV and handed to ``python -m gateway diagnose --json`` (the diagnosis's own entry point) in a
+subprocess at low priority, so ingest and the estimators never wait for it. Its findings are
+stored under a stable identity: a finding of the same effect in the same greenhouse whose start
+is within ``MATCH_S`` of a known one *is* that one (a daily re-run moves the estimated start a
+little); it is published again only when it changed (start moved by more than ``MOVE_S`` or
+amplitude by more than ``CHANGE_REL``), as a new revision, never re-announced daily.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import os
+import sqlite3
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gateway.kitcsv import write_kit_csv
+from gateway.service.config import GatewayConfig
+from gateway.service.minutes import KIT_COLUMNS, read_minutes
+from gateway.service.resources import GreenhouseResources
+from gateway.store.db import open_db, transaction
+
+log = logging.getLogger("serra.gateway")
+MATCH_S = 12 * 3600.0
+MOVE_S = 3600.0
+CHANGE_REL = 0.10
+
+
+def export_window(conn: sqlite3.Connection, r: GreenhouseResources, start: float, end: float,
+                  path: Path) -> int:
+    """The greenhouse's minutes in [start, end) as a kit CSV (QC-dropped values empty)."""
+    s = r.settings
+    minutes = read_minutes(conn, s.inside, s.outside, int(start), int(end))
+    if not minutes:
+        return 0
+    t = np.array([m.minute for m in minutes], dtype="int64").astype("datetime64[s]")
+    cols = {c: np.array([m.values[c] for m in minutes], dtype=float) for c in KIT_COLUMNS}
+    write_kit_csv(path, t, cols)
+    return len(minutes)
+
+
+def _parse(start: str | None) -> float | None:
+    if not start:
+        return None
+    return float(np.datetime64(start.rstrip("Z"), "s").astype("int64"))
+
+
+def _amplitude(f: dict[str, Any]) -> float:
+    return next((float(v) for k, v in f.get("params", {}).items()
+                 if k != "unit" and isinstance(v, int | float)), 0.0)
+
+
+def store_findings(conn: sqlite3.Connection, greenhouse: str, found: list[dict[str, Any]],
+                   now: float) -> list[str]:
+    """Merge a diagnosis run's findings into the store; returns a line per new or changed one."""
+    notes = []
+    with transaction(conn):
+        known = conn.execute("SELECT id, effect, start, revision, detail FROM findings "
+                             "WHERE greenhouse=?", (greenhouse,)).fetchall()
+        for f in found:
+            effect, start = f["effect"], _parse(f.get("start"))
+            same = [k for k in known if k[1] == effect and (
+                (k[2] is None and start is None) or
+                (k[2] is not None and start is not None and abs(k[2] - start) <= MATCH_S))]
+            detail = json.dumps(f)
+            if not same:
+                stamp = time.strftime("%Y%m%dT%H%MZ", time.gmtime(start)) if start is not None else "before"
+                fid = f"{greenhouse}:{effect}-{stamp}"
+                conn.execute("INSERT OR IGNORE INTO findings (id, greenhouse, effect, start, "
+                             "first_seen, last_seen, revision, detail) VALUES (?, ?, ?, ?, ?, ?, 1, ?)",
+                             (fid, greenhouse, effect, start, now, now, detail))
+                known.append((fid, effect, start, 1, detail))
+                notes.append(f"greenhouse {greenhouse}: new finding {effect} ({f.get('summary', '')})")
+                continue
+            fid, _, old_start, rev, old = same[0]
+            old_amp, amp = _amplitude(json.loads(old)), _amplitude(f)
+            moved = (start is not None and old_start is not None and abs(start - old_start) > MOVE_S)
+            changed = moved or abs(amp - old_amp) > CHANGE_REL * max(abs(old_amp), 1e-12)
+            if changed:
+                conn.execute("UPDATE findings SET revision=?, start=?, last_seen=?, detail=? "
+                             "WHERE id=?", (rev + 1, start, now, detail, fid))
+                notes.append(f"greenhouse {greenhouse}: finding {fid} changed (revision {rev + 1})")
+            else:
+                conn.execute("UPDATE findings SET last_seen=? WHERE id=?", (now, fid))
+    return notes
+
+
+def _save_last(conn: sqlite3.Connection, t: float) -> None:
+    conn.execute("INSERT OR REPLACE INTO meta (name, value) VALUES ('diagnosis_last', ?)", (repr(t),))
+
+
+@dataclass
+class DiagnosisRun:
+    greenhouse: str
+    when: float
+    ok: bool
+    note: str
+    findings: int = 0
+
+
+class DiagnosisScheduler:
+    """The asyncio task that runs the diagnosis on schedule (``run_forever``)."""
+
+    def __init__(self, cfg: GatewayConfig, resources: list[GreenhouseResources],
+                 clock: Callable[[], float], workdir: Path, on_findings: Callable[[], None]) -> None:
+        self.cfg, self.resources, self.clock = cfg, resources, clock
+        self.workdir, self.on_findings = workdir, on_findings
+        self.last: dict[str, DiagnosisRun] = {}
+        self.proc: asyncio.subprocess.Process | None = None
+
+    def status(self) -> dict[str, Any]:
+        return {g: {"when": r.when, "ok": r.ok, "note": r.note, "findings": r.findings}
+                for g, r in self.last.items()}
+
+    async def run_forever(self, tick: float = 5.0) -> None:
+        d = self.cfg.diagnosis
+        conn = await asyncio.to_thread(open_db, self.cfg.db)
+        try:
+            row = await asyncio.to_thread(
+                lambda: conn.execute("SELECT value FROM meta WHERE name='diagnosis_last'").fetchone())
+            last = float(row[0]) if row else None
+            if last is None:  # first start: the first run comes one period from now
+                last = self.clock()
+                await asyncio.to_thread(_save_last, conn, last)
+            while True:
+                now = self.clock()
+                if now - last >= d.every_hours * 3600:
+                    for r in self.resources:
+                        self.last[r.settings.name] = await self.run_one(conn, r, now)
+                    last = now
+                    await asyncio.to_thread(_save_last, conn, last)
+                await asyncio.sleep(tick)
+        finally:
+            conn.close()
+
+    async def run_one(self, conn: sqlite3.Connection, r: GreenhouseResources, now: float) -> DiagnosisRun:
+        d, name = self.cfg.diagnosis, r.settings.name
+        path = self.workdir / f"diagnosis-{name}.csv"
+        rows = await asyncio.to_thread(export_window, conn, r, now - d.days * 86400, now, path)
+        if rows < d.min_days * 1440:
+            note = (f"greenhouse {name}: diagnosis skipped, {rows / 1440:.1f} days of data "
+                    f"(needs {d.min_days:g})")
+            log.info(note)
+            return DiagnosisRun(name, now, True, note)
+        cmd = [sys.executable, "-m", "gateway", "diagnose", "--data", str(path), "--greenhouse",
+               r.settings.greenhouse, "--model", r.settings.model, "--json"]
+        t0 = time.monotonic()
+        self.proc = proc = await asyncio.create_subprocess_exec(
+            *cmd, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)
+        try:
+            os.setpriority(os.PRIO_PROCESS, proc.pid, 10)  # the estimators and ingest come first
+        except OSError:
+            pass
+        try:
+            out, err = await asyncio.wait_for(proc.communicate(), d.timeout_s)
+        except TimeoutError:
+            proc.kill()
+            await proc.wait()
+            note = f"greenhouse {name}: diagnosis abandoned after {d.timeout_s:g} s"
+            log.warning(note)
+            return DiagnosisRun(name, now, False, note)
+        finally:
+            self.proc = None
+        if proc.returncode != 0:
+            msg = err.decode(errors="replace").strip().splitlines()[-1:] or ["no message"]
+            note = f"greenhouse {name}: diagnosis failed (exit {proc.returncode}): {msg[0]}"
+            log.warning(note)
+            return DiagnosisRun(name, now, False, note)
+        result = json.loads(out)
+        notes = await asyncio.to_thread(store_findings, conn, name, result["findings"], now)
+        for n in notes:
+            log.info(n)
+        if notes:
+            self.on_findings()
+        note = (f"greenhouse {name}: diagnosis of {rows / 1440:.1f} days in "
+                f"{time.monotonic() - t0:.0f} s: {len(result['findings'])} finding(s)")
+        log.info(note)
+        return DiagnosisRun(name, now, True, note, len(result["findings"]))
+
+    def kill(self) -> None:
+        if self.proc is not None and self.proc.returncode is None:
+            self.proc.kill()
+

@@ -1,0 +1,226 @@
+"""One greenhouse's live estimator: every final minute → online estimator → causal forecasts,
+fluxes, (virtual ventilation sensor) → estimate rows, saved with the estimator's state.
+
+Forecasts are causal: over the horizon the outside drivers come from the greenhouse's weather
+outlook (gateway/estimate/outlook.py, ``hold-latest`` unless the config names another), which
+sees only what was measured up to now; each forecast row names the outlook. A hole in the data
+longer than ``gap_s`` restarts the estimator's window and keeps its parameters; shorter holes
+are stepped as missing minutes (the estimator dead-reckons through them, as in ``replay``).
+Each batch of minutes is one transaction: its rows and the estimator's snapshot after it, so a
+restart resumes exactly where the last commit left off.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import sqlite3
+import time
+from collections import deque
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gateway.estimate.online import OnlineEstimator, online_settings
+from gateway.estimate.outlook import Outlook, make_outlook
+from gateway.greenhouse import Greenhouse
+from gateway.model.drivers import prepare_drivers
+from gateway.model.model import Model
+from gateway.series import Series
+from gateway.service.minutes import KIT_COLUMNS, Minute, final_before, first_minute, read_minutes
+from gateway.store.db import transaction
+from gateway.store.live import EstimateRow, add_estimates, load_state, save_state
+
+log = logging.getLogger("serra.gateway")
+DT = 60.0
+BATCH = 30  # minutes per transaction while catching up
+COMMIT_S = 0.5  # [wall s] a batch is committed early when it takes longer than this
+
+
+@dataclass
+class VentilationEstimate:
+    flow: float  # [m3 s-1]
+    heat_loss: float  # [W m-2 of floor]
+    out_of_range: bool = False
+
+
+Ventilation = Callable[[float, Mapping[str, float], Mapping[str, float]], VentilationEstimate | None]
+"""The virtual ventilation sensor's per-minute call (gateway/service/ventilation.py):
+``(t, drivers of the minute, heat fluxes [W m-2]) → estimate or None``."""
+
+
+@dataclass
+class StepReport:
+    stepped: int = 0
+    restarts: int = 0
+    last_minute: int | None = None
+    rows: int = 0
+    more: bool = False  # stopped after max_batches with final minutes still to step
+    notes: list[str] = field(default_factory=list)
+
+
+class GreenhousePipeline:
+    """The estimator of one greenhouse, resumed from (and saved to) the store."""
+
+    def __init__(self, name: str, gh: Greenhouse, model: Model, inside: int, outside: int,
+                 theta0: np.ndarray | None, *, horizons: tuple[int, ...] = (15, 30, 60),
+                 outlook: str = "hold-latest", seed: int = 0, gap_s: float = 300.0,
+                 history_min: int = 1440, ventilation: Ventilation | None = None) -> None:
+        self.name, self.gh, self.model = name, gh, model
+        self.inside, self.outside = inside, outside
+        self.devices = {inside, outside}
+        self.horizons = horizons
+        self.outlook: Outlook = make_outlook(outlook)
+        self.gap_s = gap_s
+        self.ventilation = ventilation
+        self.est = OnlineEstimator(model, gh, theta0, online_settings(model, gh), dt=DT, seed=seed)
+        self.cursor: int | None = None  # last minute stepped
+        self.history_min = history_min
+        self.hist: dict[str, deque[float]] = {c: deque(maxlen=history_min) for c in KIT_COLUMNS}
+        self.hist_minute: int | None = None
+        self.state = "waiting for data"
+
+    # -- start ------------------------------------------------------------------------------
+    def resume(self, conn: sqlite3.Connection) -> str:
+        """Load the saved state (or choose where a new estimator starts); returns a log line."""
+        saved = load_state(conn, self.name)
+        if saved is not None:
+            try:
+                self.est.restore(saved.state)
+            except (ValueError, KeyError, TypeError) as e:
+                msg = f"greenhouse {self.name}: saved estimator state not used ({e}); starting anew"
+                saved = None
+            else:
+                self.cursor = saved.minute
+                self._load_history(conn)
+                self.state = "running"
+                return (f"greenhouse {self.name}: estimator resumed at {_iso(saved.minute)} "
+                        f"({self.est.counters.samples} minutes stepped so far)")
+        else:
+            msg = f"greenhouse {self.name}: new estimator ({self.model.name})"
+        first = first_minute(conn, self.inside)
+        if first is not None:  # a store with history: warm up on its last `history_min` minutes
+            last = conn.execute("SELECT max(minute) FROM minute WHERE device_id=?",
+                                (self.inside,)).fetchone()[0]
+            self.cursor = max(first, last - 60 * self.history_min) - 60
+        return msg
+
+    def _load_history(self, conn: sqlite3.Connection) -> None:
+        assert self.cursor is not None
+        start = self.cursor - 60 * (self.history_min - 1)
+        for m in read_minutes(conn, self.inside, self.outside, start, self.cursor + 60):
+            self._remember(m)
+
+    # -- stepping ---------------------------------------------------------------------------
+    def step_pending(self, conn: sqlite3.Connection, now: float, settle_s: float,
+                     max_wait_s: float, max_batches: int = 1_000_000) -> StepReport:
+        """Step the final minutes after the cursor, one transaction per batch of ``BATCH``, at
+        most ``max_batches`` batches (``report.more`` says whether some are left)."""
+        report = StepReport()
+        bound = final_before(conn, self.devices, now, settle_s, max_wait_s)
+        start = (self.cursor + 60) if self.cursor is not None else -(2**62)
+        for _ in range(max_batches):
+            nxt = conn.execute("SELECT min(minute) FROM minute WHERE device_id=? AND minute>=? "
+                               "AND minute<?", (self.inside, start, bound)).fetchone()[0]
+            if nxt is None:
+                return report
+            minutes = read_minutes(conn, self.inside, self.outside, nxt, min(bound, nxt + 60 * BATCH))
+            rows: list[EstimateRow] = []
+            t0 = time.monotonic()
+            for m in minutes:
+                rows += self._advance_to(m, report)
+                if time.monotonic() - t0 > COMMIT_S:
+                    break  # a slow machine commits more often: a crash loses less work
+            assert self.cursor is not None
+            with transaction(conn):
+                add_estimates(conn, rows)
+                save_state(conn, self.name, self.model.name, self.cursor, self.est.snapshot(), now)
+            report.rows += len(rows)
+            report.last_minute = self.cursor
+            start = self.cursor + 60
+        report.more = True
+        return report
+
+    def _advance_to(self, m: Minute, report: StepReport) -> list[EstimateRow]:
+        rows: list[EstimateRow] = []
+        if self.cursor is not None and m.minute - self.cursor > self.gap_s:
+            gap_h = (m.minute - self.cursor) / 3600
+            self.est.restart_window()
+            report.restarts += 1
+            report.notes.append(f"greenhouse {self.name}: window restarted after a {gap_h:.1f} h "
+                                f"gap in the data (parameters kept)")
+        elif self.cursor is not None:
+            for hole in range(self.cursor + 60, m.minute, 60):  # short hole: missing minutes
+                rows += self._step(Minute(hole, dict.fromkeys(KIT_COLUMNS, math.nan)))
+                report.stepped += 1
+        rows += self._step(m)
+        report.stepped += 1
+        return rows
+
+    def _remember(self, m: Minute) -> None:
+        if self.hist_minute is not None:
+            missing = min((m.minute - self.hist_minute) // 60 - 1, self.history_min)
+            for _ in range(max(missing, 0)):
+                for c in KIT_COLUMNS:
+                    self.hist[c].append(math.nan)
+        for c in KIT_COLUMNS:
+            self.hist[c].append(m.values.get(c, math.nan))
+        self.hist_minute = m.minute
+
+    def _step(self, m: Minute) -> list[EstimateRow]:
+        self._remember(m)
+        pred = self.est.update(m.values)
+        self.cursor = m.minute
+        self.state = "running"
+        t, g = float(m.minute), self.name
+        rows = [EstimateRow(g, t, "online", n, float(v), p.unit)
+                for n, v, p in zip(self.model.names, pred.theta, self.model.parameters, strict=True)]
+        t_in = m.values.get("t_in", math.nan)
+        if math.isfinite(t_in):
+            rows.append(EstimateRow(g, t, "measured", "t_in", t_in, "degC"))
+        if pred.t_in is not None:
+            info = "dead_reckoning" if pred.dead_reckoning else ""
+            rows.append(EstimateRow(g, t, "online", "t_in_next", pred.t_in, "degC", info))
+        if not math.isfinite(t_in):
+            return rows
+        flux = self._fluxes(pred.theta, t_in)
+        rows += [EstimateRow(g, t, "flux", n, v, "W m-2") for n, v in flux.items()]
+        rows += [EstimateRow(g, t, "forecast", f"t_in+{h}min", v, "degC", self.outlook.name)
+                 for h, v in self._forecasts(pred.theta, t)]
+        if self.ventilation is not None and flux:
+            vent = self.ventilation(t, self.est.last_row, flux)
+            if vent is not None:
+                flag = "out_of_range" if vent.out_of_range else ""
+                rows += [EstimateRow(g, t, "vsensor", "ventilation_flow", vent.flow, "m3 s-1", flag),
+                         EstimateRow(g, t, "vsensor", "ventilation_heat_loss", vent.heat_loss,
+                                     "W m-2", flag)]
+        return rows
+
+    def _fluxes(self, theta: np.ndarray, t_in: float) -> dict[str, float]:
+        x = {k: np.array([v]) for k, v in self.est.last_row.items()}
+        q = self.model.fluxes(theta, x, np.array([t_in]))
+        out = {k: float(np.asarray(v).reshape(-1)[0]) for k, v in q.items()}
+        return out if all(math.isfinite(v) for v in out.values()) else {}
+
+    def _forecasts(self, theta: np.ndarray, t: float) -> list[tuple[int, float]]:
+        """T_in at t + h for each horizon, from the measured T_in at t, with the outlook's
+        drivers over (t, t + h]: nothing after t is read."""
+        n_hist = len(self.hist["t_in"])
+        time = np.datetime64(int(t), "s") + np.arange(-n_hist + 1, 1) * np.timedelta64(60, "s")
+        history = {c: np.fromiter(v, float, n_hist) for c, v in self.hist.items()}
+        horizon = max(self.horizons)
+        ahead = self.outlook.drivers(history, time, horizon, DT)
+        cols = {c: np.concatenate([history[c][-1:], ahead[c][: horizon - 1]]) for c in history}
+        grid = time[-1] + np.arange(horizon) * np.timedelta64(60, "s")
+        x = prepare_drivers(Series(grid, DT, cols), self.gh)
+        out = []
+        for h in self.horizons:
+            v = float(self.model.forecast(theta[None, :], x, self.gh, DT, np.array([0]), h)[0])
+            if math.isfinite(v):
+                out.append((h, v))
+        return out
+
+
+def _iso(t: float) -> str:
+    return time.strftime("%Y-%m-%dT%H:%MZ", time.gmtime(t))

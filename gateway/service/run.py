@@ -1,0 +1,216 @@
+"""The live gateway on asyncio: ingest (UDP/serial) → store → worker thread (estimators, message
+producers) → outbox → publisher thread → Zenoh; history queryable; daily diagnosis subprocess.
+
+Stops cleanly on SIGTERM/SIGINT: transports close, queued records are committed and acknowledged,
+the worker makes its last messages, the publisher undeclares, the Zenoh session closes.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import tempfile
+from collections.abc import Callable
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+from gateway.ingest.service import IngestConfig, Running, serve
+from gateway.service.clock import Clock, make_clock
+from gateway.service.config import GatewayConfig
+from gateway.service.diagnosis import DiagnosisScheduler
+from gateway.service.resources import GreenhouseResources
+from gateway.service.worker import Worker
+from gateway.store import Store, retention
+from gateway.store.live import save_greenhouses
+
+log = logging.getLogger("serra.gateway")
+READY = "serra-gateway ready"
+
+
+def open_store(cfg: GatewayConfig) -> Clock:
+    """Create or migrate the store, record the greenhouses, set up the clock (continuing a
+    scaled clock's time line across restarts)."""
+    store = Store(cfg.db)
+    try:
+        saved = {n: v for n, v in store.conn.execute(
+            "SELECT name, value FROM meta WHERE name LIKE 'clock_%'")}
+        c = cfg.clock
+        clock, meta = make_clock(c.scale, c.epoch, c.anchor, saved)
+        for k, v in meta.items():
+            store.set_meta(k, v)
+        save_greenhouses(store.conn, [
+            {"name": g.name, "farm": cfg.farm, "inside_device": g.inside, "outside_device": g.outside,
+             "model": g.model, "config": asdict(g)} for g in cfg.greenhouses], clock.now())
+    finally:
+        store.close()
+    return clock
+
+
+class Gateway:
+    """The running service's parts (tests and the status views read them)."""
+
+    def __init__(self, cfg: GatewayConfig, resources: list[GreenhouseResources]) -> None:
+        self.cfg, self.resources = cfg, resources
+        self.clock: Clock = open_store(cfg)
+        self.session: Any = None
+        self.publisher: Any = None
+        self.history: Any = None
+        self.endpoints: list[str] = []
+        self.running: Running | None = None
+        self.ingest_counters: dict[str, int] = {}
+        self.diagnosis: DiagnosisScheduler | None = None
+        self.worker = Worker(cfg, resources, self.clock, self._wake_publisher, self._status_extra,
+                             publish=cfg.zenoh.enabled)
+
+    def _wake_publisher(self, wait: float = 0.0) -> None:
+        if self.publisher is not None:
+            self.publisher.kick(wait)
+
+    def _status_extra(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"ingest": dict(self.ingest_counters)}
+        if self.publisher is not None:
+            out["zenoh"] = {"enabled": True, "endpoints": self.endpoints, **asdict(self.publisher.state)}
+        else:
+            out["zenoh"] = {"enabled": False}
+        if self.diagnosis is not None:
+            out["diagnosis"] = self.diagnosis.status()
+        return out
+
+    def start_zenoh(self) -> None:
+        import zenoh
+
+        from gateway.publish import zconfig
+        from gateway.publish.history import HistoryQueryable
+        from gateway.publish.publisher import OutboxPublisher
+
+        z = self.cfg.zenoh
+        before = zconfig.listening_ports()
+        try:
+            self.session = zenoh.open(zconfig.build(z.mode, z.connect, z.listen,
+                                                    z.multicast_scouting, extra=z.extra))
+        except zenoh.ZError as e:  # a bad endpoint or raw key: one line, no traceback
+            raise RuntimeError(f"{self.cfg.source}: [zenoh]: cannot open the session: {e}") from None
+        self.endpoints = zconfig.resolve_listen(z.listen, before)
+        self.publisher = OutboxPublisher(
+            self.session, self.cfg.db, cache=z.cache, resend_s=z.resend_on_start_s * self.clock.scale,
+            clock=self.clock.now, mode=z.mode, max_rows=self.cfg.outbox_max,
+            alarm_fraction=self.cfg.outbox_alarm)
+        self.publisher.start()
+        self.history = HistoryQueryable(self.session, self.cfg.db, self.cfg.farm)
+
+    def stop_zenoh(self) -> None:
+        if self.publisher is not None:
+            self.publisher.stop()
+        if self.history is not None:
+            self.history.close()
+        if self.session is not None:
+            self.session.close()
+        self.publisher = self.history = self.session = None
+
+    def failure(self) -> BaseException | None:
+        if self.worker.error is not None:
+            return self.worker.error
+        if self.publisher is not None and self.publisher.error is not None:
+            return self.publisher.error
+        return None
+
+
+async def run_gateway(cfg: GatewayConfig, resources: list[GreenhouseResources],
+                      stop: asyncio.Event, on_ready: Callable[[Gateway], None] | None = None) -> None:
+    """Run until ``stop`` is set (or a part fails: re-raised after a clean shutdown)."""
+    gw = await asyncio.to_thread(Gateway, cfg, resources)
+    ready = asyncio.Event()
+
+    def ingest_ready(r: Running) -> None:
+        gw.running = r
+        ready.set()
+
+    icfg = IngestConfig(
+        db=cfg.db, keys=cfg.keys, listen=cfg.listen, serial=cfg.serial, baudrate=cfg.baudrate,
+        maintenance_every=cfg.maintenance_s,
+        policy=retention.Policy(samples_days=cfg.retention_days, outbox_sent_days=cfg.history_days,
+                                estimates_days=cfg.estimates_days,
+                                max_db_bytes=int(cfg.max_db_mb * 2**20)),
+        clock=gw.clock.now, on_commit=lambda n: gw.worker.wake.set())
+    tasks: list[asyncio.Task] = []
+    with tempfile.TemporaryDirectory(prefix="serra-") as tmp:
+        try:
+            if cfg.zenoh.enabled:
+                await asyncio.to_thread(gw.start_zenoh)
+                z = cfg.zenoh
+                if not (z.listen or z.connect or z.multicast_scouting):
+                    log.warning("zenoh: no listen or connect endpoint and no scouting: nobody can "
+                                "reach this gateway; messages wait in the outbox")
+            await asyncio.to_thread(gw.worker.start)
+            ingest = asyncio.create_task(serve(icfg, ingest_ready), name="ingest")
+            tasks.append(ingest)
+            waiter = asyncio.create_task(ready.wait())
+            await asyncio.wait({ingest, waiter}, return_when=asyncio.FIRST_COMPLETED)
+            waiter.cancel()
+            if ingest.done():
+                _ingest_failed(ingest, cfg)
+            if cfg.diagnosis.enabled:
+                gw.diagnosis = DiagnosisScheduler(cfg, resources, gw.clock.now, Path(tmp),
+                                                  gw.worker.wake.set)
+                tasks.append(asyncio.create_task(gw.diagnosis.run_forever(), name="diagnosis"))
+            _announce(gw)
+            if on_ready is not None:
+                on_ready(gw)
+            await _supervise(gw, tasks, stop)
+        finally:
+            await _shutdown(gw, tasks)
+
+
+def _ingest_failed(ingest: asyncio.Task, cfg: GatewayConfig) -> None:
+    """Raise why ingest could not start, naming what it was to listen on."""
+    try:
+        ingest.result()
+    except OSError as e:
+        where = [f"udp {cfg.listen[0]}:{cfg.listen[1]}"] if cfg.listen else []
+        where += [f"serial {cfg.serial}"] if cfg.serial else []
+        raise OSError(f"ingest cannot start on {' and '.join(where)}: {e.strerror or e}") from None
+    raise RuntimeError("ingest stopped at start")
+
+
+def _announce(gw: Gateway) -> None:
+    assert gw.running is not None
+    parts = [READY]
+    if gw.running.udp_address:
+        parts.append(f"udp {gw.running.udp_address[0]}:{gw.running.udp_address[1]}")
+    if gw.cfg.serial:
+        parts.append(f"serial {gw.cfg.serial}")
+    parts.append("zenoh " + (",".join(gw.endpoints) or "-") if gw.cfg.zenoh.enabled else "zenoh off")
+    print(" ".join(parts), flush=True)
+    log.info("farm %s: %d greenhouse(s) %s; store %s", gw.cfg.farm, len(gw.cfg.greenhouses),
+             ", ".join(f"{g.name} (kits {g.inside}/{g.outside}, {g.model})" for g in gw.cfg.greenhouses),
+             gw.cfg.db)
+
+
+async def _supervise(gw: Gateway, tasks: list[asyncio.Task], stop: asyncio.Event) -> None:
+    while not stop.is_set():
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(stop.wait(), 1.0)
+        for t in tasks:
+            if t.done():
+                t.result()  # a task that ended by itself failed: raise it
+        err = gw.failure()
+        if err is not None:
+            raise RuntimeError(f"a gateway part stopped: {type(err).__name__}: {err}")
+        if gw.running is not None:
+            gw.ingest_counters = gw.running.core.counters.snapshot()
+
+
+async def _shutdown(gw: Gateway, tasks: list[asyncio.Task]) -> None:
+    if gw.diagnosis is not None:
+        gw.diagnosis.kill()
+    for t in reversed(tasks):  # the diagnosis first, then ingest (commits and acks what it holds)
+        t.cancel()
+        with contextlib.suppress(asyncio.CancelledError, Exception):
+            await t
+    if gw.running is not None:
+        gw.ingest_counters = gw.running.core.counters.snapshot()
+    await asyncio.to_thread(gw.worker.stop)
+    await asyncio.to_thread(gw.stop_zenoh)
+    log.info("gateway stopped; ingest counters %s", gw.ingest_counters)

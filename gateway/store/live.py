@@ -1,0 +1,159 @@
+"""The live gateway's tables (schema 2, docs/store.md): writers for the service, readers for the
+status screen and tools. Readers only run SELECTs, so they work on a read-only connection.
+
+Writers marked "in the caller's transaction" never commit themselves: the service groups them
+with the cursor they advance, so a crash leaves either all of a step or none of it.
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from gateway.protocol import CHANNELS, STATUS_NAMES
+from gateway.store.db import transaction
+
+
+@dataclass(frozen=True)
+class EstimateRow:
+    """One value the live gateway derived for a greenhouse at time t [unix s, gateway clock].
+
+    ``source``/``name`` vocabulary (docs/store.md): ``measured``/``t_in``; ``online``/<parameter>
+    and ``online``/``t_in_next``; ``forecast``/``t_in+<h>min`` (info: the outlook);
+    ``flux``/<term>; ``vsensor``/``ventilation_flow``, ``ventilation_heat_loss`` (info:
+    ``out_of_range`` when flagged)."""
+
+    greenhouse: str
+    t: float
+    source: str
+    name: str
+    value: float | None
+    unit: str = ""
+    info: str = ""
+
+
+def add_estimates(conn: sqlite3.Connection, rows: Iterable[EstimateRow]) -> None:
+    """Insert estimate rows (in the caller's transaction)."""
+    conn.executemany(
+        "INSERT INTO estimates (t, source, name, value, unit, info, greenhouse) "
+        "VALUES (?, ?, ?, ?, ?, ?, ?)",
+        [(r.t, r.source, r.name, r.value, r.unit, r.info, r.greenhouse) for r in rows])
+
+
+def save_greenhouses(conn: sqlite3.Connection, rows: Sequence[dict[str, Any]], now: float) -> None:
+    """The config's greenhouses (name, farm, inside_device, outside_device, model, config)."""
+    with transaction(conn):
+        for r in rows:
+            conn.execute(
+                "INSERT OR REPLACE INTO greenhouses (name, farm, inside_device, outside_device, "
+                "model, config, updated) VALUES (?, ?, ?, ?, ?, ?, ?)",
+                (r["name"], r["farm"], r["inside_device"], r["outside_device"], r["model"],
+                 json.dumps(r["config"], default=str), now))
+
+
+@dataclass(frozen=True)
+class SavedState:
+    model: str
+    minute: int  # last minute stepped [unix s]
+    state: dict[str, Any]
+
+
+def load_state(conn: sqlite3.Connection, greenhouse: str) -> SavedState | None:
+    r = conn.execute("SELECT model, minute, state FROM estimator_state WHERE greenhouse=?",
+                     (greenhouse,)).fetchone()
+    return SavedState(r[0], r[1], json.loads(r[2])) if r else None
+
+
+def save_state(conn: sqlite3.Connection, greenhouse: str, model: str, minute: int,
+               state: dict[str, Any], now: float) -> None:
+    """The estimator's snapshot and its cursor (in the caller's transaction)."""
+    conn.execute("INSERT OR REPLACE INTO estimator_state (greenhouse, model, minute, state, "
+                 "updated) VALUES (?, ?, ?, ?, ?)",
+                 (greenhouse, model, minute, json.dumps(state), now))
+
+
+def set_status(conn: sqlite3.Connection, items: dict[str, Any], now: float) -> None:
+    """Gateway status rows (JSON values), e.g. ``gateway``, ``zenoh``, ``outbox``, ``ingest``."""
+    with transaction(conn):
+        conn.executemany("INSERT OR REPLACE INTO gateway_status (name, value, updated) "
+                         "VALUES (?, ?, ?)",
+                         [(k, json.dumps(v, default=str), now) for k, v in items.items()])
+
+
+def read_status(conn: sqlite3.Connection) -> dict[str, tuple[Any, float]]:
+    """name → (value, updated) of every gateway status row."""
+    return {n: (json.loads(v), u) for n, v, u in
+            conn.execute("SELECT name, value, updated FROM gateway_status")}
+
+
+def latest_estimates(conn: sqlite3.Connection, greenhouse: str
+                     ) -> dict[tuple[str, str], EstimateRow]:
+    """(source, name) → the newest row of each, for one greenhouse."""
+    rows = conn.execute(
+        "SELECT e.t, e.source, e.name, e.value, e.unit, e.info FROM estimates e JOIN "
+        "(SELECT name, max(t) AS t FROM estimates WHERE greenhouse=? GROUP BY name) m "
+        "ON e.name = m.name AND e.t = m.t WHERE e.greenhouse=?", (greenhouse, greenhouse))
+    return {(r[1], r[2]): EstimateRow(greenhouse, *r) for r in rows}
+
+
+def estimate_series(conn: sqlite3.Connection, greenhouse: str, name: str, since: float
+                    ) -> list[tuple[float, float | None]]:
+    """(t, value) of one estimate name since ``since`` (e.g. 24 h of ``t_in_next``)."""
+    return list(conn.execute("SELECT t, value FROM estimates WHERE greenhouse=? AND name=? "
+                             "AND t>=? ORDER BY t", (greenhouse, name, since)))
+
+
+@dataclass(frozen=True)
+class FindingRow:
+    id: str
+    greenhouse: str
+    effect: str
+    start: float | None
+    first_seen: float
+    last_seen: float
+    revision: int
+    published_revision: int
+    detail: dict[str, Any]
+
+
+def findings(conn: sqlite3.Connection, greenhouse: str | None = None) -> list[FindingRow]:
+    sql = ("SELECT id, greenhouse, effect, start, first_seen, last_seen, revision, "
+           "published_revision, detail FROM findings")
+    args: tuple = ()
+    if greenhouse is not None:
+        sql, args = sql + " WHERE greenhouse=?", (greenhouse,)
+    return [FindingRow(*r[:8], json.loads(r[8])) for r in conn.execute(sql + " ORDER BY first_seen", args)]
+
+
+@dataclass(frozen=True)
+class DeviceHealth:
+    """What the store knows about a kit: boot counter, records, last sample and its channels."""
+
+    device_id: int
+    boot: int
+    records: int
+    first_seen: float
+    last_seen: float
+    last_sample_t: float | None
+    channels: dict[str, str] = field(default_factory=dict)  # channel → status name
+
+
+def device_health(conn: sqlite3.Connection) -> list[DeviceHealth]:
+    out = []
+    cols = ", ".join(f"{c}_st" for c in CHANNELS)
+    for dev, boot, n, first, last in conn.execute(
+            "SELECT device_id, boot, n_samples, first_seen, last_seen FROM devices ORDER BY device_id"):
+        r = conn.execute(f"SELECT t, {cols} FROM samples WHERE device_id=? "
+                         "ORDER BY boot DESC, seq DESC LIMIT 1", (dev,)).fetchone()
+        chans = {c: STATUS_NAMES.get(s, str(s)) for c, s in zip(CHANNELS, r[1:], strict=True)} if r else {}
+        out.append(DeviceHealth(dev, boot, n, first, last, r[0] if r else None, chans))
+    return out
+
+
+def outbox_backlog(conn: sqlite3.Connection) -> tuple[int, float | None]:
+    """(unsent messages, observation time of the oldest unsent one)."""
+    n, oldest = conn.execute("SELECT count(*), min(t) FROM outbox WHERE sent IS NULL").fetchone()
+    return n, oldest

@@ -1,0 +1,99 @@
+"""Schema version 2: a version-1 store is migrated in place and keeps every row; a new store and a
+migrated one have the same tables; an unknown version is refused."""
+
+from __future__ import annotations
+
+import sqlite3
+from pathlib import Path
+
+import pytest
+
+from gateway.protocol import CHANNELS
+from gateway.store import Store, schema
+from gateway.store.outbox import Message, Outbox
+
+V1_TABLES = ("devices", "samples", "minute", "estimates", "outbox", "meta")
+
+
+def make_v1(path: Path) -> None:
+    """A version-1 file as a version-1 gateway left it, with rows in every table."""
+    c = sqlite3.connect(path, isolation_level=None)
+    c.executescript(schema.DDL_V1)
+    c.execute("PRAGMA user_version = 1")
+    chans = [x for ch in CHANNELS for x in (ch, f"{ch}_st")]
+    c.execute("INSERT INTO devices VALUES (7, 2, 41, 1.7e9, 1.7e9 + 600, 42)")
+    for seq in range(42):
+        vals = [None if (seq + i) % 9 == 0 else 10.0 + seq / 7 + i for i in range(len(CHANNELS))]
+        row = [7, 2, seq, 1.7e9 + 60 * seq, 1.7e9 + 60 * seq + 0.2, seq * 60_000, 60.0]
+        for v in vals:
+            row += [v, 0x11 if v is None else 0]
+        c.execute(f"INSERT INTO samples (device_id, boot, seq, t, t_recv, tick_ms, period_s, "
+                  f"{', '.join(chans)}) VALUES ({', '.join('?' * len(row))})", row)
+    qc = [x for ch in CHANNELS for x in (ch, f"{ch}_qc")]
+    for m in range(5):
+        row = [7, 1.7e9 // 60 * 60 + 60 * m, 1] + [v for i in range(len(CHANNELS))
+                                                   for v in (float(i + m), m % 3)]
+        c.execute(f"INSERT INTO minute (device_id, minute, n, {', '.join(qc)}) "
+                  f"VALUES ({', '.join('?' * len(row))})", row)
+    c.executemany("INSERT INTO estimates (t, source, name, value, unit, info) VALUES (?,?,?,?,?,?)",
+                  [(1.7e9 + i, "online", "c_solar", 1e-5 * i, "1", "") for i in range(6)])
+    c.executemany("INSERT INTO outbox (created, key, payload, attempts, sent) VALUES (?,?,?,?,?)",
+                  [(1.7e9 + i, "serra/a/b/x", f'{{"i": {i}}}', i % 2, None if i > 2 else 1.7e9)
+                   for i in range(6)])
+    c.execute("INSERT INTO meta VALUES ('agg_rowid', '40')")
+    c.close()
+
+
+def dump(path: Path) -> dict[str, list[tuple]]:
+    with sqlite3.connect(path) as c:
+        out = {}
+        for t in V1_TABLES:
+            cols = [r[1] for r in sqlite3.connect(path).execute(f"PRAGMA table_info({t})")]
+            v1 = [x for x in cols if (t, x) not in {("estimates", "greenhouse"), ("outbox", "kind"),
+                                                   ("outbox", "t"), ("outbox", "idem")}]
+            out[t] = c.execute(f"SELECT {', '.join(v1)} FROM {t} ORDER BY rowid").fetchall()
+        return out
+
+
+def tables(path: Path) -> dict[str, list[tuple]]:
+    with sqlite3.connect(path) as c:
+        names = [r[0] for r in c.execute(
+            "SELECT name FROM sqlite_master WHERE type IN ('table', 'index') ORDER BY name")]
+        return {n: c.execute(f"PRAGMA index_info({n})").fetchall() or
+                c.execute(f"PRAGMA table_info({n})").fetchall() for n in names}
+
+
+def test_v1_store_migrates_keeping_every_row(tmp_path: Path) -> None:
+    old = tmp_path / "v1.db"
+    make_v1(old)
+    before = dump(old)
+    assert all(before[t] for t in V1_TABLES)
+    s = Store(old)  # opening migrates
+    assert s.conn.execute("PRAGMA user_version").fetchone()[0] == schema.SCHEMA_VERSION == 2
+    assert s.integrity_ok()
+    s.close()
+    assert dump(old) == before  # every row of every version-1 table, unchanged
+    with sqlite3.connect(old) as c:
+        idem = [r[0] for r in c.execute("SELECT idem FROM outbox ORDER BY id")]
+        assert idem == [f"v1:{i}" for i in range(1, 7)]
+        assert c.execute("SELECT count(*) FROM outbox WHERE sent IS NULL").fetchone()[0] == 3
+    # the migrated file has exactly the tables, columns and indexes of a new one
+    new = tmp_path / "new.db"
+    Store(new).close()
+    assert tables(old) == tables(new)
+    # and works as a version-2 store: its unsent v1 messages come first, then new ones
+    s = Store(old)
+    ob = Outbox(s.conn)
+    ob.put(Message("serra/a/b/forecast", "forecast", 1.7e9, "a/b/forecast/1", "{}"))
+    assert [m.idem for m in ob.peek(10)] == ["v1:4", "v1:5", "v1:6", "a/b/forecast/1"]
+    s.close()
+    Store(old).close()  # opening a current store again changes nothing
+    assert dump(old)["samples"] == before["samples"]
+
+
+def test_unknown_schema_version_is_refused(tmp_path: Path) -> None:
+    p = tmp_path / "future.db"
+    with sqlite3.connect(p) as c:
+        c.execute("PRAGMA user_version = 9")
+    with pytest.raises(RuntimeError, match="version 9"):
+        Store(p)

@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
     where = f"{args.keys} (created, mode 600)" if done.created_file else str(args.keys)
     print(f"{what} in {where}.\nNext: put the line above in the board's config.json (it "
           "replaces the \"device_id\" and \"key\" lines), then restart the gateway so it reads "
-          "the new key (e.g. systemctl restart serra-ingest).", file=sys.stderr)
+          "the new key (e.g. systemctl restart serra-gateway).", file=sys.stderr)
     return 0
 
 

@@ -21,7 +21,8 @@ class StoreError(RuntimeError):
 
 # The tables every Serra store has had since schema version 1: a file without them is not ours.
 SERRA_TABLES = frozenset({"samples", "devices", "minute", "meta"})
-_OURS = frozenset(re.findall(r"CREATE TABLE IF NOT EXISTS (\w+)", schema.DDL)) | {
+_OURS = frozenset(re.findall(r"CREATE TABLE IF NOT EXISTS (\w+)",
+                             schema.DDL_V1 + schema.DDL_V2_TABLES)) | {
     "sqlite_sequence"}  # SQLite's own, for AUTOINCREMENT
 
 

@@ -18,6 +18,7 @@ COMMANDS = {
     "demo": "gateway.cli.demo",
     "ingest": "gateway.cli.ingest",
     "export": "gateway.cli.export",
+    "vsensor": "gateway.cli.vsensor",
 }
 
 

@@ -159,16 +159,20 @@ class FlowLimits:
 
     def upper(self, dt_in_out: np.ndarray | float, t_out: np.ndarray | float,
               wind: np.ndarray | float) -> np.ndarray:
-        """Largest possible flow [m3 s-1] now (NaN inputs give the no-wind, 30 K value)."""
+        """Largest possible flow [m3 s-1] now (a non-finite input gives the no-wind, 30 K value)."""
         a_r, a_s = self.a_roof, self.a_side
         norm = math.hypot(a_r, a_s)
         a_eff = a_r * a_s / norm if norm > 0 else 0.0
-        dt = np.nan_to_num(np.abs(np.asarray(dt_in_out, dtype=float)), nan=30.0)
-        tk = np.nan_to_num(np.asarray(t_out, dtype=float), nan=0.0) + psy.KELVIN
-        u = np.nan_to_num(np.asarray(wind, dtype=float), nan=0.0)
+        dt = _finite(np.abs(np.asarray(dt_in_out, dtype=float)), 30.0)
+        tk = _finite(np.asarray(t_out, dtype=float), 0.0) + psy.KELVIN
+        u = _finite(np.asarray(wind, dtype=float), 0.0)
         buoy = a_eff**2 * 2.0 * psy.GRAVITY * self.height * dt / np.maximum(tk, 200.0)
         wind_term = ((a_r + a_s) / 2.0) ** 2 * self.cw * u * u
         return self.cd * np.sqrt(buoy + wind_term) + self.leak
+
+
+def _finite(x: np.ndarray, default: float) -> np.ndarray:
+    return np.where(np.isfinite(x), x, default)
 
 
 def flow_limits(gh: Greenhouse, kind: str) -> FlowLimits:

@@ -97,12 +97,16 @@ def read_info(path: str | Path, session) -> ModelInfo:
         raise ModelMismatch(f"{path}: not a Serra ventilation sensor model (format "
                             f"{raw.get('format')!r}, expected {FORMAT!r})")
     meta = {k: (v if k == "format" else _json(v)) for k, v in raw.items()}
+    missing = [k for k in ("features", "model_kind", "training_ranges", "input_mean", "y0") if k not in meta]
+    if missing:
+        raise ModelMismatch(f"{path}: metadata lacks {', '.join(missing)}")
     feats = meta["features"]
+    names = tuple(f.get("name", "?") for f in feats)
+    nan2 = [math.nan, math.nan]
     return ModelInfo(
-        path=str(path), kind=meta["model_kind"], network=meta.get("network", "?"),
-        names=tuple(f["name"] for f in feats),
-        ranges=np.array([meta["training_ranges"][f["name"]] for f in feats], dtype=float),
-        mean=np.array([meta["input_mean"][f["name"]] for f in feats], dtype=float),
+        path=str(path), kind=meta["model_kind"], network=meta.get("network", "?"), names=names,
+        ranges=np.array([meta["training_ranges"].get(n, nan2) for n in names], dtype=float),
+        mean=np.array([meta["input_mean"].get(n, math.nan) for n in names], dtype=float),
         y0=float(meta["y0"]), greenhouse=meta.get("greenhouse", {}), meta=meta,
     )
 
@@ -139,6 +143,10 @@ def check_model(info: ModelInfo, kind: str, n_graph_features: int | None = None)
     if float(info.meta.get("step_s", -1)) != STEP_S:
         raise ModelMismatch(
             f"{where}: trained at a {info.meta.get('step_s')} s step, the code runs {STEP_S:g} s")
+    bad = [n for n, r, m in zip(info.names, info.ranges, info.mean, strict=True)
+           if not (np.all(np.isfinite(r)) and np.isfinite(m))]
+    if bad:
+        raise ModelMismatch(f"{where}: no training range or mean for {', '.join(bad)}")
     if n_graph_features is not None and n_graph_features != len(code):
         raise ModelMismatch(
             f"{where}: the graph takes {n_graph_features} inputs, the metadata names {len(code)}")

@@ -42,18 +42,18 @@ class Run:
 
 
 TRAIN = (
-    Run("almeria-winter-controller", "sim", "almeria", "2020-01-08", 8, "controller", 11),
-    Run("almeria-winter-grower", "sim", "almeria", "2020-02-05", 8, "grower", 12),
-    Run("almeria-summer-grower", "sim", "almeria", "2020-07-10", 8, "grower", 13),
-    Run("almeria-summer-controller", "sim", "almeria", "2020-08-10", 8, "controller", 14),
-    Run("almeria-autumn-grower", "sim", "almeria", "2020-10-15", 8, "grower", 15),
-    Run("bleiswijk-autumn-controller", "sim", "bleiswijk", "2009-10-21", 8, "controller", 16),
-    Run("bleiswijk-autumn-grower", "sim", "bleiswijk", "2009-11-10", 8, "grower", 17),
-    Run("twonode-bleiswijk-autumn", "twonode", "bleiswijk", "2009-10-20", 8, "controller", 18),
+    Run("almeria-winter-controller", "sim", "almeria", "2020-01-08", 6, "controller", 11),
+    Run("almeria-winter-grower", "sim", "almeria", "2020-02-05", 6, "grower", 12),
+    Run("almeria-summer-grower", "sim", "almeria", "2020-07-10", 6, "grower", 13),
+    Run("almeria-summer-controller", "sim", "almeria", "2020-08-10", 6, "controller", 14),
+    Run("almeria-autumn-grower", "sim", "almeria", "2020-10-15", 6, "grower", 15),
+    Run("bleiswijk-autumn-controller", "sim", "bleiswijk", "2009-10-21", 6, "controller", 16),
+    Run("bleiswijk-autumn-grower", "sim", "bleiswijk", "2009-11-10", 6, "grower", 17),
+    Run("twonode-bleiswijk-autumn", "twonode", "bleiswijk", "2009-10-20", 6, "controller", 18),
 )
 TEST = (
-    Run("biskra-spring-grower", "sim", "biskra", "2019-04-10", 7, "grower", 21),
-    Run("biskra-spring-controller", "sim", "biskra", "2019-04-20", 7, "controller", 22),
+    Run("biskra-spring-grower", "sim", "biskra", "2019-04-10", 5, "grower", 21),
+    Run("biskra-spring-controller", "sim", "biskra", "2019-04-20", 5, "controller", 22),
 )
 UTC_OFFSET = {"almeria": -0.18, "biskra": 0.38, "bleiswijk": 0.3}
 """Local solar time minus UTC [h] at each weather site (longitude / 15)."""

@@ -100,10 +100,9 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
     kept = loadings.shape[1]
     nets, logs = {}, {}
     progress(description="fitting")
-    nets["pca_narx"], logs["pca_narx"] = fit.fit_narx("pca_narx", split, mean, std, loadings, seed,
-                                                      hidden, epochs, rounds, progress=progress)
-    nets["narx_no_pca"], logs["narx_no_pca"] = fit.fit_narx("narx_no_pca", split, mean, std, None, seed,
-                                                            hidden, epochs, rounds, progress=progress)
+    for name, proj in (("pca_narx", loadings), ("narx_no_pca", None)):
+        nets[name], logs[name] = fit.fit_narx(name, split, mean, std, proj, seed, hidden, epochs,
+                                              rounds, min(30, epochs), progress=progress)
     nets["linear_arx"] = fit.fit_arx(split, mean, std)
     nets["pca_narx"].explained = share[:kept]
     seconds["fit"] = time.perf_counter() - t1

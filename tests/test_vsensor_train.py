@@ -124,3 +124,28 @@ def test_onnx_matches_the_numpy_network():
     got = sess.run(None, {"u": u.astype(np.float32), "y_past": yp.astype(np.float32)})[0][:, 0]
     assert np.allclose(got, net.predict(u, yp), rtol=1e-4, atol=1e-4)
     del fit
+
+
+def test_prototype_kind_trains_and_runs(tmp_path):
+    """The kit's own model: fluxes of the prototype model, the Kittas vent term added in its
+    units for the explicit estimate, the prototype's q_loss as the leakage."""
+    from threadpoolctl import threadpool_limits
+
+    from gateway.series import load_series
+    from gateway.vsensor import VentSensor
+    from gateway.vsensor.adaptive import run_adaptive
+    from gateway.vsensor.batch import run_sensor
+    from training.vsensor.train import train
+
+    gh = load_greenhouse(vd.GREENHOUSE)
+    seg = build_segment(vd.train_files()[0], gh, "prototype", vd.workdir() / "cache", vd.TINY)
+    assert seg.inputs.shape[1] == len(feature_names("prototype")) == 7
+    flow = seg.flow[60:]
+    assert np.all(np.isfinite(flow)) and flow.min() > 0
+    out = tmp_path / "proto.onnx"
+    with threadpool_limits(1):
+        train([str(vd.train_files()[0])], gh, "prototype", out, vd.workdir() / "cache", vd.TINY,
+              hidden=(6,), epochs=3, rounds=0)
+    novent = run_adaptive("prototype", load_series(str(vd.test_file())), gh, False, vd.TINY)
+    run = run_sensor(VentSensor(out, gh, "prototype"), novent)
+    assert np.all(np.isfinite(run.flow)) and run.flow.min() >= 0

@@ -71,6 +71,13 @@ def without_vents(series: Series) -> Series:
     return Series(series.time, series.step, cols, series.source, list(series.notices))
 
 
+def settings_for(model: Model, gh: Greenhouse, overrides: Overrides | None):
+    """The model's online settings with ``overrides`` for the groups it has (one set of
+    overrides serves both model kinds: the prototype has no radiation group)."""
+    groups = {g.output for g in model.online}
+    return online_settings(model, gh, {k: v for k, v in (overrides or {}).items() if k in groups})
+
+
 @dataclass
 class AdaptiveRun:
     """One replay of the online estimator, reduced to what the sensor needs (length T)."""
@@ -101,7 +108,7 @@ def run_adaptive(
     """
     model = explicit_model(kind, gh) if vents else build_model(kind, gh)
     data = series if vents else without_vents(series)
-    settings = online_settings(model, gh, overrides)
+    settings = settings_for(model, gh, overrides)
     result = replay(model, data, gh, model.defaults(gh), settings, seed=seed, horizons=(),
                     progress=progress)
     theta = result.theta

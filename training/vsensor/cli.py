@@ -66,9 +66,9 @@ def overrides(items: list[str]) -> dict[str, dict[str, float]]:
 
 
 def _corpus(args: argparse.Namespace) -> int:
-    from training.vsensor.corpus import TEST, TRAIN, write_corpus
+    from training.vsensor.corpus import OTHER, TEST, TRAIN, write_corpus
 
-    runs = tuple(r for r in TRAIN + TEST if args.only is None or r.name in args.only)
+    runs = tuple(r for r in TRAIN + TEST + OTHER if args.only is None or r.name in args.only)
     t0 = time.perf_counter()
     for path in write_corpus(Path(args.out), runs):
         print(f"wrote {path}")

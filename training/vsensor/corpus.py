@@ -8,8 +8,9 @@
   on the real Bleiswijk weather.
 
 ``TRAIN`` and ``TEST`` below are the split the README's figures use: the test site (Biskra)
-and season (spring) appear nowhere in training. ``python -m training.vsensor corpus --out
-DIR`` writes ``DIR/train/*.csv`` and ``DIR/test/*.csv`` with the simulator's truth files.
+and season (spring) appear nowhere in training; ``OTHER`` is another house. ``python -m
+training.vsensor corpus --out DIR`` writes ``DIR/train``, ``DIR/test`` and ``DIR/other`` kit
+CSVs with the simulator's truth files.
 """
 
 from __future__ import annotations
@@ -55,6 +56,12 @@ TEST = (
     Run("biskra-spring-grower", "sim", "biskra", "2019-04-10", 5, "grower", 21),
     Run("biskra-spring-controller", "sim", "biskra", "2019-04-20", 5, "controller", 22),
 )
+OTHER = (
+    Run("other-house-spring", "sim", "almeria", "2020-04-15", 3, "controller", 31),
+)
+"""Another house (2 roof flaps instead of 5, one side vent instead of two:
+docs/examples/other-house.toml), to show that the sensor flags it rather than trusting itself."""
+OTHER_HOUSE = {"roof_n": 2, "side_n": 1}
 UTC_OFFSET = {"almeria": -0.18, "biskra": 0.38, "bleiswijk": 0.3}
 """Local solar time minus UTC [h] at each weather site (longitude / 15)."""
 GROWER_SHIFT = {"bleiswijk": -6.0}
@@ -82,6 +89,8 @@ def generate(run: Run, path: Path) -> Path:
                                        seed=run.seed)
         return path
     plant = PRESETS["almeria"]
+    if run in OTHER:
+        plant = plant.with_(**OTHER_HOUSE)
     if run.vents == "grower":
         shift = GROWER_SHIFT.get(run.weather, 0.0)
         base = GrowerVents()
@@ -93,10 +102,10 @@ def generate(run: Run, path: Path) -> Path:
     return path
 
 
-def write_corpus(out: Path, runs: tuple[Run, ...] = TRAIN + TEST) -> list[Path]:
-    """Every run of ``runs`` under ``out/train`` or ``out/test``."""
+def write_corpus(out: Path, runs: tuple[Run, ...] = TRAIN + TEST + OTHER) -> list[Path]:
+    """Every run of ``runs`` under ``out/train``, ``out/test`` or ``out/other``."""
     paths = []
     for run in runs:
-        part = "test" if run in TEST else "train"
+        part = "test" if run in TEST else "other" if run in OTHER else "train"
         paths.append(generate(run, out / part / f"{run.name}.csv"))
     return paths

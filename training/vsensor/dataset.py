@@ -18,12 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-from gateway.estimate.online import online_settings
 from gateway.greenhouse import Greenhouse
 from gateway.model import build_model
 from gateway.model.model import check_columns
 from gateway.series import Series, load_series
-from gateway.vsensor.adaptive import Overrides, explicit_model, has_vents, run_adaptive
+from gateway.vsensor.adaptive import Overrides, explicit_model, has_vents, run_adaptive, settings_for
 from gateway.vsensor.features import feature_names, filter_gains, heat_loss, low_pass, raw_features
 
 CACHE_VERSION = 1
@@ -80,7 +79,7 @@ def build_segment(
     progress: Callable[[int], None] | None = None,
 ) -> Segment:
     """Inputs and target of one kit CSV (cached). ``progress(rows)`` during the replays."""
-    online_settings(build_model(kind, gh), gh, overrides)  # bad overrides fail before minutes of work
+    settings_for(build_model(kind, gh), gh, overrides)  # bad overrides fail before minutes of work
     sha = file_sha256(path)
     cache = None
     if cache_dir is not None:

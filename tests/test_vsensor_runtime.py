@@ -190,3 +190,33 @@ def test_gateway_never_imports_sklearn_or_training():
     for path in [*(ROOT / "gateway/vsensor").rglob("*.py"), ROOT / "gateway/cli/vsensor.py"]:
         text = path.read_text()
         assert "from training" not in text and "import training" not in text, path
+
+
+@pytest.mark.parametrize("kind", ["almeria"])
+def test_shipped_model_matches_the_code_that_feeds_it(kind):
+    """The model in the wheel: its metadata names exactly what gateway/vsensor/features.py
+    computes, it is small, it loads and runs, and the baselines sit beside it."""
+    from gateway.vsensor.batch import BASELINES
+    from gateway.vsensor.features import INPUT_DELAYS, OUTPUT_DELAYS, features
+    from gateway.vsensor.models import shipped_model
+
+    path = shipped_model(kind)
+    assert path.stat().st_size <= 1_000_000
+    gh = load_greenhouse("almeria-palmerillas")
+    sensor = VentSensor(path, gh, kind)  # raises ModelMismatch if anything differs
+    meta = sensor.info.meta
+    assert [f["name"] for f in meta["features"]] == [f.name for f in features(kind)]
+    assert [f["unit"] for f in meta["features"]] == [f.unit for f in features(kind)]
+    assert meta["input_delays"] == list(INPUT_DELAYS) and meta["output_delays"] == list(OUTPUT_DELAYS)
+    assert meta["model_kind"] == kind and meta["network"] == "pca_narx"
+    assert meta["pca"]["variance_total"] >= 0.90
+    assert 2 <= len(meta["hidden_layers"]) <= 3 and all(20 <= h <= 50 for h in meta["hidden_layers"])
+    assert not sensor.mismatch  # trained on the preset's house
+    for name in BASELINES:
+        VentSensor(path.with_name(f"{kind}.{name}.onnx"), gh, kind)
+    assert path.with_suffix(".md").exists()
+    est = sensor.step({"t_in": 24.0, "t_out": 18.0, "rh_in": 70.0, "rh_out": 55.0, "wind": 3.0},
+                      dict.fromkeys(feature_names(kind)[3:], 0.0))
+    assert math.isfinite(est.flow) and est.flow >= 0
+    pyproject = (ROOT / "pyproject.toml").read_text()
+    assert '"vsensor/models/*.onnx"' in pyproject  # package data: the appliance wheel carries it

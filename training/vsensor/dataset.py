@@ -52,7 +52,8 @@ def file_sha256(path: str | Path) -> str:
 
 def cache_key(csv_sha: str, gh: Greenhouse, kind: str, overrides: Overrides | None, seed: int) -> str:
     gh_text = Path(gh.source).read_bytes().hex() if Path(gh.source).exists() else repr(gh)
-    blob = json.dumps([CACHE_VERSION, csv_sha, gh_text, kind, overrides or {}, seed], sort_keys=True)
+    settings = {g: {k: float(v) for k, v in t.items()} for g, t in (overrides or {}).items()}
+    blob = json.dumps([CACHE_VERSION, csv_sha, gh_text, kind, settings, seed], sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:24]
 
 

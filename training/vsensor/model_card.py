@@ -18,7 +18,7 @@ def model_card(out: Path, meta: dict, metrics: dict, t18: dict, circle: dict, na
     """The Markdown text of the card."""
     pca = meta["pca"]
     gh = meta["greenhouse"]
-    rel = rep_dir.name
+    rel = rep_dir.as_posix() if not rep_dir.is_absolute() else rep_dir.name
     lines = [
         f"# Virtual ventilation sensor `{out.name}` (PCA-NARX, thesis §IV.3)",
         "",

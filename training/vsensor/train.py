@@ -77,8 +77,10 @@ def _ranges(split: fit.Split, names: list[str]) -> tuple[dict, dict]:
 
 def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: str | Path | None,
           overrides=None, seed: int = 0, hidden=fit.HIDDEN, epochs: int = 150, rounds: int = 3,
-          progress: Callable[..., None] | None = None) -> TrainResult:
-    """Build the datasets, fit the three networks, write the models, card and report."""
+          progress: Callable[..., None] | None = None, report_dir: str | Path | None = None
+          ) -> TrainResult:
+    """Build the datasets, fit the three networks, write the models, card and report (PNGs in
+    ``report_dir``, default ``<out stem>.report/`` beside the model)."""
     progress = progress or (lambda **k: None)
     out = Path(out)
     t0 = time.perf_counter()
@@ -137,7 +139,7 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
         meta = {**base_meta, "network": name, "hidden_layers": list(net.hidden), "y0": float(net.y_mean)}
         write_model(net, len(names), meta, path)
         written[name] = path
-    rep_dir = out.with_name(f"{out.stem}.report")
+    rep_dir = Path(report_dir) if report_dir else out.with_name(f"{out.stem}.report")
     rep_dir.mkdir(parents=True, exist_ok=True)
     circle = report.correlation_circle(segments, names, rep_dir / "correlation_circle.png")
     report.variance_plot(share, kept, rep_dir / "pca_variance.png")

@@ -76,7 +76,7 @@ def _ranges(split: fit.Split, names: list[str]) -> tuple[dict, dict]:
 
 
 def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: str | Path | None,
-          overrides=None, seed: int = 0, hidden=fit.HIDDEN, epochs: int = 150, rounds: int = 3,
+          overrides=None, seed: int = 0, hidden=fit.HIDDEN, epochs: int = 100, rounds: int = 6,
           progress: Callable[..., None] | None = None, report_dir: str | Path | None = None
           ) -> TrainResult:
     """Build the datasets, fit the three networks, write the models, card and report (PNGs in

@@ -21,8 +21,8 @@ def add_train_parser(sub: argparse._SubParsersAction, data_args) -> None:
     p.add_argument("--out", required=True, metavar="MODEL.onnx", help="where to write the sensor")
     p.add_argument("--hidden", default="30,50,20", metavar="N,N,N",
                    help="hidden layer sizes (default 30,50,20, the thesis's)")
-    p.add_argument("--epochs", type=int, default=150, help="series-parallel epochs at most (150)")
-    p.add_argument("--rounds", type=int, default=3, help="closed-loop refinement rounds (3)")
+    p.add_argument("--epochs", type=int, default=100, help="series-parallel epochs at most (100)")
+    p.add_argument("--rounds", type=int, default=6, help="closed-loop refinement rounds (6)")
     p.add_argument("--report", metavar="DIR",
                    help="where the report's PNGs go (default: MODEL.report/ beside the model)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")

@@ -171,6 +171,18 @@ class FlowLimits:
         return self.cd * np.sqrt(buoy + wind_term) + self.leak
 
 
+    def upper_now(self, dt_in_out: float, t_out: float, wind: float) -> float:
+        """:meth:`upper` for one step in plain floats (the live path: no numpy call per step)."""
+        a_r, a_s = self.a_roof, self.a_side
+        norm = math.hypot(a_r, a_s)
+        a_eff = a_r * a_s / norm if norm > 0 else 0.0
+        dt = abs(dt_in_out) if math.isfinite(dt_in_out) else 30.0
+        tk = (t_out if math.isfinite(t_out) else 0.0) + psy.KELVIN
+        u = wind if math.isfinite(wind) else 0.0
+        buoy = a_eff**2 * 2.0 * psy.GRAVITY * self.height * dt / max(tk, 200.0)
+        return self.cd * math.sqrt(buoy + ((a_r + a_s) / 2.0) ** 2 * self.cw * u * u) + self.leak
+
+
 def _finite(x: np.ndarray, default: float) -> np.ndarray:
     return np.where(np.isfinite(x), x, default)
 

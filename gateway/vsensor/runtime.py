@@ -181,6 +181,8 @@ class VentSensor:
         pad = RANGE_MARGIN * np.maximum(hi - lo, 1e-9)
         self._lo, self._hi = [float(v) for v in lo - pad], [float(v) for v in hi + pad]
         self._flux_names = self.info.names[3:]
+        self._out = [self.session.get_outputs()[0].name]
+        self._feeds: dict[str, np.ndarray] = {}
         self.counts = SensorCounts()
         self.reset()
 
@@ -206,12 +208,13 @@ class VentSensor:
         else:
             self._u[0, 1:] = self._u[0, :-1].copy()
             self._u[0, 0] = row
-        y = float(self.session.run(None, {"u": self._u, "y_past": self._y})[0][0, 0])
+        self._feeds["u"], self._feeds["y_past"] = self._u, self._y
+        y = float(self.session.run(self._out, self._feeds)[0][0, 0])
         c = self.counts
         if not math.isfinite(y):
             c.non_finite_output += 1
             y = float(self._y[0, 0])
-        upper = float(self.limits.upper(dt, _num(m.get("t_out")), _num(m.get("wind"))))
+        upper = self.limits.upper_now(dt, _num(m.get("t_out")), raw[0])
         clamped = not 0.0 <= y <= upper
         y = min(max(y, 0.0), upper)
         self._y[0, 1:] = self._y[0, :-1].copy()

@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: run test bench images lint clean venv stubs
+.PHONY: run test bench bench-generality images lint clean venv stubs
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -46,6 +46,12 @@ $(BENCH_STAMP): pyproject.toml
 ## bench: speed and memory, side by side with peers; JSON in bench/results/
 bench: $(BENCH_STAMP)
 	$(BENCH_VENV)/bin/python tests/bench/run.py
+
+## bench-generality: diagnosis and forecasts on three independent generators (one held out),
+## 3 weather windows, every change kind, 11 effect-free windows each; parallel processes.
+## JSON in bench/results/generality.json, Markdown into docs/effects.md ("Generality suite").
+bench-generality: $(STAMP)
+	$(PY) tests/generality/suite.py --jobs 2
 
 ## images: MCU firmware bundle and gateway bundle in images/build/
 images: $(STAMP)

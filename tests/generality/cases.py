@@ -29,7 +29,6 @@ PIECE_S = 6 * 3600.0
 hours, as the diagnosis's judge assumes)."""
 
 EXTRA_WINDOWS = {
-    "bleiswijk-10-24": lambda: bleiswijk_window("2009-10-24T00:00", 14.0, "bleiswijk-10-24"),
     "bleiswijk-10-29": lambda: bleiswijk_window("2009-10-29T00:00", 14.0, "bleiswijk-10-29"),
     "bleiswijk-11-03": lambda: bleiswijk_window("2009-11-03T00:00", 14.0, "bleiswijk-11-03"),
     "bleiswijk-11-08": lambda: bleiswijk_window("2009-11-08T00:00", 14.0, "bleiswijk-11-08"),
@@ -41,7 +40,7 @@ EXTRA_WINDOWS = {
                                           "summer-from-11-19"),
 }
 """Effect-free windows beside the three main ones (other Bleiswijk stretches, and the summer
-transform of two of them): 11 effect-free windows per generator in all."""
+transform of two of them): 10 effect-free windows per generator in all."""
 
 
 def _renamed(w: Window, name: str) -> Window:

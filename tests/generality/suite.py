@@ -1,7 +1,7 @@
 """``make bench-generality``: the generality suite, every case in parallel processes.
 
 Three generators (tests/generality/generators.py; ``vanthoor`` held out) × the autumn, winter
-and summer windows × every change kind (7 in the diagnosis library, 2 outside it), plus 11
+and summer windows × every change kind (7 in the diagnosis library, 2 outside it), plus 10
 effect-free windows per generator, each diagnosed with the kit's prototype model; and the
 forecast replay (measured weather and the causal outlook, beside persistence and the RLS ARX)
 on each generator's three main windows. Writes ``bench/results/generality.json`` and the
@@ -84,6 +84,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--kinds", default=",".join(ALL_KINDS), help="changes to diagnose (all)")
     ap.add_argument("--json", default=str(RESULTS), help=f"results file ({RESULTS.relative_to(ROOT)})")
     ap.add_argument("--no-docs", action="store_true", help="do not rewrite docs/effects.md")
+    ap.add_argument("--merge", action="store_true",
+                    help="keep the other cases of an existing results file (rerun a part only)")
     a = ap.parse_args(argv)
     gens = tuple(g for g in a.generators.split(",") if g)
     bad = [g for g in gens if g not in GENERATORS]
@@ -107,10 +109,16 @@ def main(argv: list[str] | None = None) -> int:
             print(f"[{i:3d}/{len(cases)}] {label}: {_line(r)} ({r['seconds']:.0f} s; "
                   f"elapsed {spent / 60:.1f} min, ~{eta / 60:.0f} min left)", flush=True)
     minutes = (time.perf_counter() - t0) / 60.0
-    meta = {"command": "make bench-generality", "cases": len(cases), "jobs": a.jobs,
+    out = Path(a.json)
+    if a.merge and out.exists():
+        done = {Case(**r["case"]) for r in results}
+        old = json.loads(out.read_text(encoding="utf-8"))
+        kept = [r for r in old["results"] if Case(**r["case"]) not in done]
+        results = kept + results
+        minutes += old["meta"].get("minutes", 0.0)
+    meta = {"command": "make bench-generality", "cases": len(results), "jobs": a.jobs,
             "minutes": minutes, "when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
             "commit": _commit(), "model": MODEL, "generators": list(gens)}
-    out = Path(a.json)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"meta": meta, "results": results}, indent=1) + "\n", encoding="utf-8")
     print(f"wrote {out} in {minutes:.1f} min", flush=True)

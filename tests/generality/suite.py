@@ -86,11 +86,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-docs", action="store_true", help="do not rewrite docs/effects.md")
     ap.add_argument("--merge", action="store_true",
                     help="keep the other cases of an existing results file (rerun a part only)")
+    ap.add_argument("--combine", nargs="+", metavar="RESULTS.json",
+                    help="run nothing: join these results files (later ones win) into --json and docs")
     a = ap.parse_args(argv)
     gens = tuple(g for g in a.generators.split(",") if g)
     bad = [g for g in gens if g not in GENERATORS]
     if bad:
         ap.error(f"unknown generator(s) {bad}; known: {', '.join(GENERATORS)}")
+    if a.combine:
+        return _combine([Path(f) for f in a.combine], Path(a.json), not a.no_docs)
     kinds = tuple(k for k in a.kinds.split(",") if k)
     unknown = [k for k in kinds if k not in ALL_KINDS]
     if unknown:
@@ -123,6 +127,25 @@ def main(argv: list[str] | None = None) -> int:
     out.write_text(json.dumps({"meta": meta, "results": results}, indent=1) + "\n", encoding="utf-8")
     print(f"wrote {out} in {minutes:.1f} min", flush=True)
     if not a.no_docs:
+        update_docs(DOCS, markdown(results, meta))
+        print(f"updated {DOCS.relative_to(ROOT)}", flush=True)
+    return 0
+
+
+def _combine(files: list[Path], out: Path, docs: bool) -> int:
+    by_case: dict[Case, dict] = {}
+    minutes = 0.0
+    for f in files:
+        data = json.loads(f.read_text(encoding="utf-8"))
+        minutes += data["meta"].get("minutes", 0.0)
+        for r in data["results"]:
+            by_case[Case(**r["case"])] = r
+    results = list(by_case.values())
+    meta = {**data["meta"], "cases": len(results), "minutes": minutes, "combined": [str(f) for f in files]}
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"meta": meta, "results": results}, indent=1) + "\n", encoding="utf-8")
+    print(f"wrote {out} ({len(results)} cases)", flush=True)
+    if docs:
         update_docs(DOCS, markdown(results, meta))
         print(f"updated {DOCS.relative_to(ROOT)}", flush=True)
     return 0

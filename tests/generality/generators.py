@@ -83,13 +83,14 @@ class KitData:
         write_kit_csv(path, self.time, self.columns)
 
 
-def generate(generator: str, window: Window, kind: str = "none", seed: int = 1) -> KitData:
-    """Kit data of ``generator`` on ``window`` with the change ``kind`` from day 6.4."""
+def generate(generator: str, window: Window, kind: str = "none", seed: int = 1,
+             change_day: float = CHANGE_DAY) -> KitData:
+    """Kit data of ``generator`` on ``window`` with the change ``kind`` from ``change_day``."""
     if generator not in GENERATORS:
         raise ValueError(f"unknown generator {generator!r} (known: {', '.join(GENERATORS)})")
     if kind != "none" and kind not in KINDS + OUTSIDE:
         raise ValueError(f"unknown change {kind!r} (known: {', '.join(KINDS + OUTSIDE)})")
-    start = None if kind == "none" else window.at_day(CHANGE_DAY)
+    start = None if kind == "none" else window.at_day(change_day)
     make = {"refsim": _refsim, "twonode": _twonode, "vanthoor": _vanthoor}[generator]
     time, cols, size = make(window, kind, start, seed)
     return KitData(time, cols, generator, window, kind, start, size)

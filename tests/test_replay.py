@@ -41,7 +41,7 @@ def result(drifting):
 def test_report_has_the_promised_shape_and_adaptation_pays(result):
     rep = report(result, warmup=60)
     assert rep["model"] == "almeria" and rep["samples"] == 1440 and rep["skipped"] == 0
-    assert set(rep["metrics"]) == {"adaptive", "constant", "persistence"}
+    assert set(rep["metrics"]) == {"adaptive", "constant", "persistence", "arx"}
     for m in rep["metrics"].values():
         assert set(m) == METRIC_KEYS and m["n"] == rep["metrics"]["adaptive"]["n"]
     assert set(rep["horizons"]) == {"15", "60"}

@@ -70,12 +70,14 @@ def _summary_row(gen: str, rows: list[dict]) -> str:
     alarms = sum(1 for r in free if r.get("verdict", {}).get("false_alarm", True))
     outside = [r for r in rows if r["case"]["kind"] in OUTSIDE]
     unexp = sum(1 for r in outside if r.get("verdict", {}).get("ok"))
+    flagged = sum(1 for r in free if r.get("unexplained"))
     base = [r["before"] for r in free if r.get("before") is not None]
     pers = [r["persistence"] for r in free if r.get("persistence") is not None]
     mean = (f"{sum(base) / len(base):.3f} / {sum(pers) / len(pers):.3f}" if base and pers else "–")
     held = " (held out)" if gen in HELD_OUT else ""
     return (f"| {gen}{held} | " + " | ".join(per_window)
-            + f" | {len(free) - alarms} of {len(free)} | {unexp} of {len(outside)} | {mean} |")
+            + f" | {len(free) - alarms} of {len(free)} | {unexp} of {len(outside)} "
+              f"({flagged} of {len(free)}) | {mean} |")
 
 
 def _summary(rows: list[dict]) -> list[str]:
@@ -116,9 +118,12 @@ def markdown(results: list[dict], meta: dict) -> str:
         c = r["case"]
         part = "forecast" if c["task"] == "forecast" else ("free" if c["kind"] == "none" else "effects")
         groups[(c["generator"], part)].append(r)
-    lines = [BEGIN, "", f"Reproduce: `{meta['command']}` ({meta['cases']} cases, {meta['jobs']} "
-             f"processes, {meta['minutes']:.0f} min on this machine; JSON in "
-             f"`bench/results/generality.json`). Run on {meta['when']}, commit {meta['commit']}.",
+    runs = meta.get("runs") or [{"minutes": meta["minutes"], "jobs": meta["jobs"]}]
+    took = " + ".join(f"{r['minutes']:.0f} min on {r['jobs']} process{'es' if r['jobs'] > 1 else ''}"
+                      for r in runs)
+    lines = [BEGIN, "", f"Reproduce: `{meta['command']}` ({meta['cases']} cases; {took} on the "
+             f"shared, loaded 2-core machine; JSON in `bench/results/generality.json`). Run on "
+             f"{meta['when']}, commit {meta['commit']}.",
              f"Model `{meta['model']}` (kit sensors only), 14 days of 5-minute rows, one change from "
              "day 6.4, diagnosis split 0.5. Named = the first finding is one of "
              f"{', '.join(f'{k}: {sorted(v)}' for k, v in EXPECTED.items())}. A kind passes "
@@ -127,7 +132,8 @@ def markdown(results: list[dict], meta: dict) -> str:
              "heater). Goal (issue 10): ≥ 5 of 6 kinds, ≥ 9 of 10 effect-free windows quiet, "
              "changes outside the library unexplained.", "",
              "| generator | autumn kinds | winter kinds | summer kinds | effect-free windows quiet "
-             "| outside library unexplained | mean base / persistence free-run MAE, effect-free [K] |",
+             "| outside library unexplained (effect-free flagged too) | mean base / persistence "
+             "free-run MAE, effect-free [K] |",
              "| --- | --- | --- | --- | --- | --- | --- |"]
     for g in GENERATORS:
         lines.append(_summary_row(g, groups[(g, "effects")] + groups[(g, "free")]))

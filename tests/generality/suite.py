@@ -121,8 +121,9 @@ def main(argv: list[str] | None = None) -> int:
         results = kept + results
         minutes += old["meta"].get("minutes", 0.0)
     meta = {"command": "make bench-generality", "cases": len(results), "jobs": a.jobs,
-            "minutes": minutes, "when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
-            "commit": _commit(), "model": MODEL, "generators": list(gens)}
+            "minutes": minutes, "runs": [{"minutes": minutes, "jobs": a.jobs}],
+            "when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": _commit(),
+            "model": MODEL, "generators": list(gens)}
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"meta": meta, "results": results}, indent=1) + "\n", encoding="utf-8")
     print(f"wrote {out} in {minutes:.1f} min", flush=True)
@@ -135,13 +136,17 @@ def main(argv: list[str] | None = None) -> int:
 def _combine(files: list[Path], out: Path, docs: bool) -> int:
     by_case: dict[Case, dict] = {}
     minutes = 0.0
+    runs: list[dict] = []
     for f in files:
         data = json.loads(f.read_text(encoding="utf-8"))
         minutes += data["meta"].get("minutes", 0.0)
+        runs += data["meta"].get("runs") or [{"minutes": data["meta"].get("minutes", 0.0),
+                                               "jobs": data["meta"].get("jobs", 1)}]
         for r in data["results"]:
             by_case[Case(**r["case"])] = r
     results = list(by_case.values())
-    meta = {**data["meta"], "cases": len(results), "minutes": minutes, "combined": [str(f) for f in files]}
+    meta = {**data["meta"], "cases": len(results), "minutes": minutes, "runs": runs,
+            "combined": [str(f) for f in files]}
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"meta": meta, "results": results}, indent=1) + "\n", encoding="utf-8")
     print(f"wrote {out} ({len(results)} cases)", flush=True)

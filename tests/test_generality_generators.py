@@ -51,3 +51,4 @@ def test_verdicts():
     assert verdict("none", found)["false_alarm"]
     assert verdict("none", {**found, "findings": []})["ok"]
     assert verdict("misting", {**found, "unexplained": True})["ok"]
+    assert verdict("drift", {**found, "findings": [{"effect": "sensor_drift"}], "p_value": None})["ok"]

@@ -5,12 +5,12 @@ sensor. Every problem is a :class:`ConfigError` naming the config key."""
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from gateway.greenhouse import Greenhouse, GreenhouseError, load_greenhouse
+from gateway.greenhouse import Greenhouse, GreenhouseError, Site, load_greenhouse
 from gateway.model import build_model, check_parameters
 from gateway.model.model import Model
 from gateway.model.params_file import ParamsFileError, read_params
@@ -79,6 +79,8 @@ def prepare(cfg: GatewayConfig) -> list[GreenhouseResources]:
                                   f"(devices there: {', '.join(map(str, sorted(keys))) or 'none'})")
         try:
             gh = load_greenhouse(g.greenhouse)
+            if gh.site is None and g.latitude is not None and g.longitude is not None:
+                gh = replace(gh, site=Site(g.latitude, g.longitude))  # the config's [location]
             model = build_model(g.model, gh)
             check_parameters(model, gh)
         except GreenhouseError as e:

@@ -22,8 +22,8 @@ class Evidence:
         return False
 
     def scan(self, model: Model, x: dict[str, np.ndarray], theta: np.ndarray,
-             segments: list[tuple[int, int]], first: float) -> tuple[float, float]:
-        """(τ [s], amplitude) fitted on this output over ``segments``, τ ≥ ``first``."""
+             segments: list[tuple[int, int]], first: float, last: float) -> tuple[float, float]:
+        """(τ [s], amplitude) fitted on this output over ``segments``, ``first`` ≤ τ ≤ ``last``."""
         raise NotImplementedError
 
     def delta_bic(self, model: Model, x: dict[str, np.ndarray], theta: np.ndarray,

@@ -30,11 +30,12 @@ def _sunlit(x: dict[str, np.ndarray], z: np.ndarray, segments: list[tuple[int, i
 
 
 def radiation_change(model: Model, x: dict[str, np.ndarray], theta: np.ndarray,
-                     segments: list[tuple[int, int]], first: float) -> tuple[float, float]:
+                     segments: list[tuple[int, int]], first: float,
+                     last: float = np.inf) -> tuple[float, float]:
     """Start τ [s] and relative size d of a step change of the cover transmission seen on the
     measured inside radiation: ``i_in = c_tsw (1 + d [t ≥ τ]) i_glob`` (III.35), least squares
-    over sunlit samples of ``segments``, every τ ≥ ``first`` at once through reverse cumulative
-    sums."""
+    over sunlit samples of ``segments``, every ``first`` ≤ τ ≤ ``last`` at once through reverse
+    cumulative sums."""
     j = model.index(model.radiation.parameter.name)
     z = theta[j] * x["i_glob"]  # predicted i_in
     r = x["i_in"] - z
@@ -43,7 +44,7 @@ def radiation_change(model: Model, x: dict[str, np.ndarray], theta: np.ndarray,
     s_rz = np.cumsum((r * z)[::-1])[::-1]  # Σ_{t ≥ τ}
     s_zz = np.cumsum((z * z)[::-1])[::-1]
     gain = np.where(s_zz > 0, s_rz**2 / np.where(s_zz > 0, s_zz, 1.0), 0.0)
-    gain[x["_index"] < first] = -1.0
+    gain[(x["_index"] < first) | (x["_index"] > last)] = -1.0
     k = int(np.argmax(gain))
     while k + 1 < len(gain) and gain[k + 1] >= gain[k] * (1.0 - 1e-9):  # latest of equals
         k += 1
@@ -72,8 +73,8 @@ class RadiationEvidence(Evidence):
     def fits_start(self, model, x) -> bool:
         return measures_radiation(model, x)
 
-    def scan(self, model, x, theta, segments, first):
-        return radiation_change(model, x, theta, segments, first)
+    def scan(self, model, x, theta, segments, first, last):
+        return radiation_change(model, x, theta, segments, first, last)
 
     def delta_bic(self, model, x, theta, segments, tau, amp) -> float:
         if not measures_radiation(model, x):

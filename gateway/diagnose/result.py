@@ -8,6 +8,7 @@ import numpy as np
 
 from gateway.diagnose import residuals as res
 from gateway.diagnose.effects import Effect
+from gateway.diagnose.judge import Verdict
 from gateway.diagnose.structure import Structured, model_unit
 from gateway.greenhouse import Greenhouse
 from gateway.model.model import Model
@@ -68,10 +69,12 @@ class Diagnosis:
     seconds: float = 0.0
     structure: list[dict] = field(default_factory=list)
     """The base structure choices on the calibration part, in order tried."""
+    trials: list[dict] = field(default_factory=list)
+    """Every candidate the judge saw: round, effect, its statistics and the decision."""
 
 
 def make_finding(e: Effect, model: Model, theta: np.ndarray, series: Series, pred_before: dict,
-                 verdict: dict, dbic: float, x: dict, s: int) -> Finding:
+                 verdict: Verdict, dbic: float, x: dict, s: int) -> Finding:
     """The finding of ``e`` as fitted on all data (``theta``), with its evidence."""
     tau = float(theta[model.index(e.tau_name)])
     amp = float(theta[model.index(e.amp_name)])
@@ -82,10 +85,10 @@ def make_finding(e: Effect, model: Model, theta: np.ndarray, series: Series, pre
     r = x["t_in"][s:] - pred_before["free_run"]
     t_c = series.time[0] + x["_index"].astype("timedelta64[s]")
     sig = res.short_signature(t_c[s:], r, x, s, float(x["_index"][1] - x["_index"][0]))
-    evidence = (f"{verdict['why']}; ΔBIC {dbic:.0f} on all data; residual before it: {sig}; "
+    evidence = (f"{verdict.why}; ΔBIC {dbic:.0f} on all data; residual before it: {sig}; "
                 f"expected signature: {e.signature}")
-    return Finding(e, tau, start, amp, summary, evidence, verdict["mae_before"],
-                   verdict["mae_after"], dbic)
+    return Finding(e, tau, start, amp, summary, evidence, verdict.mae_before,
+                   verdict.mae_after, dbic)
 
 
 def traces(findings: list[Finding], model: Structured, theta: np.ndarray, x, gh: Greenhouse,

@@ -7,8 +7,8 @@ data (docs/effects.md, "How the diagnosis decides").
 3. The rest (H) is cut into blocks dealt into two folds; each fold is judged by a model fitted
    on C plus the other fold only (judge.py).
 4. Candidates are ranked on all data by ΔBIC of their τ scan; the best ones are tried in turn:
-   τ re-scanned and the base refitted jointly per fold; a τ inside C must be borne out by C
-   alone, else τ is re-scanned within H. The judge keeps one or none; repeat.
+   τ re-scanned and the base refitted jointly per fold, judged against the model so far refitted
+   the same way without it (judge.py). The judge keeps one or none; repeat.
 5. Held-out error before and after, beside persistence; the residual's signature.
 
 Each effect carries its own part of the model and its second-output evidence (effects.py);
@@ -82,6 +82,7 @@ def diagnose(
     current_pred = jd.heldout(model, thetas, x, gh, dt, folds, s, n)
     findings: list[Finding] = []
     rejected: list[dict] = []
+    trials: list[dict] = []
     ctx = _Context(x, gh, dt, duration, horizon, s)
 
     for rnd in range(1, MAX_EFFECTS + 1):
@@ -90,6 +91,9 @@ def diagnose(
             break
         say(f"round {rnd}: ranking {len(candidates)} candidate effects")
         ranked = _rank(ctx, model0, model, theta_all, effects, candidates, [(0, n)])
+        # the reference: the model so far, refitted on each fold's fit set as a candidate is
+        ref = [_refit(ctx, model, thetas[j], fit_sets[j]) for j in (0, 1)]
+        ref_pred = jd.heldout(model, ref, x, gh, dt, folds, s, n)
         passed = []
         for scan_all, dbic_all in ranked[:TRIES_PER_ROUND]:
             if dbic_all >= 0:
@@ -101,13 +105,17 @@ def diagnose(
                       for j in (0, 1)]
             new_thetas = [f[0] for f in fitted]
             pred = jd.heldout(new_model, new_thetas, x, gh, dt, folds, s, n)
-            verdict = jd.judge(current_pred, pred, x["t_in"], blocks, s, dt)
-            verdict["delta_bic"] = [float(f[1]) for f in fitted]  # second output included
-            if max(verdict["delta_bic"]) < 0 and verdict["ok"]:
+            starts = [float(th[new_model.index(e.tau_name)]) for th in new_thetas]
+            verdict = jd.judge(current_pred, ref_pred, pred, x["t_in"], blocks, s, dt, starts,
+                               duration)
+            verdict.delta_bic = [float(f[1]) for f in fitted]  # second output included
+            trials.append({"round": rnd, "effect": e.name, "ok": verdict.ok,
+                           "delta_bic": verdict.delta_bic, **verdict.stats})
+            if max(verdict.delta_bic) < 0 and verdict.ok:
                 passed.append((e, new_model, new_thetas, pred, verdict))
             else:
-                rejected.append({"effect": e.name, "reason": verdict["why"],
-                                 "delta_bic": verdict["delta_bic"]})
+                rejected.append({"effect": e.name, "reason": verdict.why,
+                                 "delta_bic": verdict.delta_bic})
         if not passed:
             break
         score = jd.scores([c[4] for c in passed], x["t_in"], s, dt)
@@ -117,8 +125,8 @@ def diagnose(
             other = passed[i]
             rejected.append({"effect": other[0].name, "reason": "passed, but a rival has "
                              f"more evidence (score {score[i]:.0f} vs {score[order[0]]:.0f},"
-                             " fit ΔBIC with second output + held-out): " + other[4]["why"],
-                             "delta_bic": other[4]["delta_bic"]})
+                             " fit ΔBIC with second output + held-out): " + other[4].why,
+                             "delta_bic": other[4].delta_bic})
         th_all, dbic_full = _fit_effect(ctx, new_model, model, theta_all, e, [(0, n)], seed + 101)
         findings.append(make_finding(e, new_model, th_all, series, current_pred, verdict,
                                      dbic_full, x, s))
@@ -126,8 +134,10 @@ def diagnose(
         model, thetas, theta_all, current_pred = new_model, new_thetas, th_all, pred
         say(f"kept {e.name}: {findings[-1].summary}")
 
-    return _report(series, gh, model0, base_theta, model, thetas, theta_all, findings, rejected,
-                   structure_log, k, s, n, blocks, folds, duration, t_start)
+    d = _report(series, gh, model0, base_theta, model, thetas, theta_all, findings, rejected,
+                structure_log, k, s, n, blocks, folds, duration, t_start)
+    d.trials = trials
+    return d
 
 
 def _report(series, gh, model0, base_theta, model, thetas, theta_all, findings, rejected,
@@ -170,9 +180,14 @@ class _Context:
         return Shooting(model, self.x, self.gh, self.dt, starts, self.horizon)
 
 
+def _latest(duration: float) -> float:
+    """The latest start time an effect may have: ``MIN_AFTER_S`` of data must follow it."""
+    return duration - jd.MIN_AFTER_S
+
+
 def _tau_grid(effect: Effect, duration: float, earliest: float = 0.0) -> np.ndarray:
     first = 0.0 if effect.from_start else COARSE_TAU_S
-    return np.arange(max(earliest, first), duration, COARSE_TAU_S)
+    return np.arange(max(earliest, first), _latest(duration) + 1.0, COARSE_TAU_S)
 
 
 def _scan(shoot: Shooting, theta: np.ndarray, e: Effect, duration: float,
@@ -183,7 +198,7 @@ def _scan(shoot: Shooting, theta: np.ndarray, e: Effect, duration: float,
     m = shoot.model
     if e.evidence.fits_start(m, shoot.x):
         first = max(0.0 if e.from_start else COARSE_TAU_S, earliest)
-        tau, amp = e.evidence.scan(m, shoot.x, theta, segments, first)
+        tau, amp = e.evidence.scan(m, shoot.x, theta, segments, first, _latest(duration))
         th = theta.copy()
         th[m.index(e.tau_name)], th[m.index(e.amp_name)] = tau, np.clip(amp, e.lower, e.upper)
         sse, npair = shoot.sse(th[None, :])
@@ -191,11 +206,14 @@ def _scan(shoot: Shooting, theta: np.ndarray, e: Effect, duration: float,
     sse0, npair = shoot.sse(theta[None, :])
     # SSE differences below one effective sample's share do not tell start times apart
     rel = 1.0 / max(npair * shoot.dt / EFFECTIVE_S, 1.0)
-    coarse = scan_tau(shoot, theta, e, _tau_grid(e, duration, earliest),
-                      float(sse0[0])).latest_of_best(rel)
+    grid = _tau_grid(e, duration, earliest)
+    if len(grid) == 0:  # no start time leaves enough data after it
+        return Scan(e, np.array([duration]), np.array([e.neutral]), sse0, npair)
+    coarse = scan_tau(shoot, theta, e, grid, float(sse0[0])).latest_of_best(rel)
     t_best = coarse.taus[coarse.best]
     lo = max(0.0 if e.from_start else shoot.dt, earliest)
-    fine_taus = np.unique(np.clip(t_best + np.linspace(-1, 1, 37) * COARSE_TAU_S, lo, duration))
+    fine_taus = np.unique(np.clip(t_best + np.linspace(-1, 1, 37) * COARSE_TAU_S, lo,
+                                  max(_latest(duration), lo)))
     fine = scan_tau(shoot, theta, e, fine_taus, float(sse0[0])).latest_of_best(rel)
     return fine if fine.sse[fine.best] <= coarse.sse[coarse.best] * (1.0 + rel) else coarse
 
@@ -221,19 +239,20 @@ def _rank(ctx: _Context, base, model, theta, effects, candidates, segments):
     return out
 
 
-def _fit_effect(ctx: _Context, new_model, old_model, theta_old, e: Effect, segments, seed):
-    """τ scan then a joint refit (base parameters + amplitude, τ held) on ``segments``.
+def _refit(ctx: _Context, model: Model, theta: np.ndarray, segments) -> np.ndarray:
+    """``model`` refitted on ``segments`` (base parameters and amplitudes, starts held), as
+    :func:`_fit_effect` refits a candidate: the judge's reference."""
+    lo, hi = model.bounds(ctx.gh)
+    return fit_lm(ctx.shooting(model, segments), theta.copy(), free_parameters(model), lo, hi,
+                  REFIT_LM_ITERATIONS)
 
-    A start inside the calibration part must be borne out by the calibration part alone
-    (``_calibration_supports``); otherwise τ is re-scanned within the held-out part."""
+
+def _fit_effect(ctx: _Context, new_model, old_model, theta_old, e: Effect, segments, seed):
+    """τ scan then a joint refit (base parameters + amplitude, τ held) on ``segments``."""
     th = carry(theta_old, old_model, new_model, ctx.gh)
     shoot = ctx.shooting(new_model, segments)
     sse_old, npair = shoot.sse(th[None, :])
     sc = _scan(shoot, th, e, ctx.duration, segments)
-    t_split = float(ctx.x["_index"][ctx.split])
-    if sc.taus[sc.best] < t_split and not _calibration_supports(
-            ctx, new_model, old_model, theta_old, e, sc):
-        sc = _scan(shoot, th, e, ctx.duration, segments, earliest=t_split)
     th[new_model.index(e.tau_name)] = sc.taus[sc.best]
     th[new_model.index(e.amp_name)] = sc.amps[sc.best]
     lo, hi = new_model.bounds(ctx.gh)
@@ -244,37 +263,3 @@ def _fit_effect(ctx: _Context, new_model, old_model, theta_old, e: Effect, segme
     sse_new, _ = shoot.sse(th[None, :])
     dbic = delta_bic(float(sse_new[0]), float(sse_old[0]), effective_samples(npair, ctx.dt), 2)
     return th, dbic + _evidence(e, new_model, ctx.x, th, segments, sc)
-
-
-def _calibration_supports(ctx: _Context, new_model, old_model, theta_old, e: Effect,
-                          sc: Scan) -> bool:
-    """Does the calibration part C by itself bear out the effect from the scanned τ (inside C)?
-    The model without and the model with the effect (τ and amplitude held as the fit set found
-    them) are both refitted on C alone (Levenberg–Marquardt, base parameters only): the effect
-    is supported if ΔBIC < 0 on C.
-
-    The base was calibrated on C; a start late in C can otherwise stand in for the base's
-    extrapolation error on the held-out part (another weather regime), the effect's own data
-    being mostly after the split. An effect that really began in C, with the size the rest of
-    the data gives it, shows in C's tail. The amplitude is held: C's tail alone could be fitted
-    by a much larger step of the same sign (a local deviation), which is not the same effect."""
-    seg = [(0, ctx.split)]
-    sh_old = ctx.shooting(old_model, seg)
-    if len(sh_old.starts) == 0:
-        return False
-    lo, hi = old_model.bounds(ctx.gh)
-    th_old = fit_lm(sh_old, theta_old.copy(), free_parameters(old_model), lo, hi,
-                    REFIT_LM_ITERATIONS)
-    sse_old, npair = sh_old.sse(th_old[None, :])
-    th = carry(th_old, old_model, new_model, ctx.gh)
-    ja = new_model.index(e.amp_name)
-    th[new_model.index(e.tau_name)] = sc.taus[sc.best]
-    th[ja] = sc.amps[sc.best]
-    sh_new = ctx.shooting(new_model, seg)
-    lo, hi = new_model.bounds(ctx.gh)
-    free = [j for j in free_parameters(new_model) if j != ja]
-    th = fit_lm(sh_new, th, free, lo, hi, REFIT_LM_ITERATIONS)
-    sse_new, _ = sh_new.sse(th[None, :])
-    dbic = delta_bic(float(sse_new[0]), float(sse_old[0]), effective_samples(npair, ctx.dt), 2)
-    dbic += _evidence(e, new_model, ctx.x, th, seg, sc)
-    return bool(dbic < 0 and th[ja] != e.neutral)

@@ -2,11 +2,11 @@
 
 Writes one JSON line per case (``--out``, default bench/results/diagnosis_study.jsonl) and
 prints a Markdown summary (``--summary`` reads an existing file). Cases are listed in
-docs/effects.md, "Generality"; the data come from tests/generality/diagnosis_cases.py.
+docs/effects.md, "Generality"; the data come from tests.generality.diagnosis_cases.py.
 
-    python tests/bench/diagnosis_study.py --set effects      # 2 generators x 3 windows x 8 cases
-    python tests/bench/diagnosis_study.py --set null         # 2 generators x 10 effect-free windows
-    python tests/bench/diagnosis_study.py --summary bench/results/diagnosis_study.jsonl
+    python tests/generality/diagnosis_study.py --set effects      # 2 generators x 3 windows x 8 cases
+    python tests/generality/diagnosis_study.py --set null         # 2 generators x 10 effect-free windows
+    python tests/generality/diagnosis_study.py --summary bench/results/diagnosis_study.jsonl
 """
 
 from __future__ import annotations
@@ -78,6 +78,7 @@ def run_one(gen: str, plant: str, window: str, kind: str, seed: int) -> dict:
         "structure": [s["structure"] for s in d.structure if s["kept"]],
         "rejected": [{k: v for k, v in r.items() if k in ("effect", "reason")}
                      for r in d.rejected],
+        "trials": getattr(d, "trials", []),
         "seconds": seconds,
     }
 

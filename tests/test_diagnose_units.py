@@ -15,10 +15,10 @@ from gateway.diagnose.fit import (
     coarsen,
     drivers,
     fit_lm,
-    radiation_change,
     scan_tau,
     window_starts,
 )
+from gateway.diagnose.radiation import radiation_change
 from gateway.diagnose.structure import STORE, structure
 from gateway.greenhouse import load_greenhouse
 from gateway.model import build_model

@@ -45,3 +45,21 @@ def test_restore_refuses_another_model_and_gap_keeps_parameters() -> None:
     proto = OnlineEstimator(build_model("prototype", GH), GH)
     with pytest.raises(ValueError, match="almeria"):
         proto.restore(est.snapshot())
+
+
+def test_the_cloud_tracker_resumes_exactly() -> None:
+    """The sky's cloudiness is part of the saved state: a tracker restored from a snapshot gives
+    bit for bit what the uninterrupted one gives."""
+    from gateway.model.sky import CloudTracker
+
+    t0 = np.datetime64("2009-10-20T06:00:00", "s")
+    times = t0 + np.arange(0, 3 * 1440) * np.timedelta64(60, "s")
+    hours = (np.arange(len(times)) / 60.0) % 24
+    i_glob = np.clip(500 * np.sin((hours - 6) / 12 * np.pi), 0, None) * (0.5 + 0.4 * np.sin(hours))
+    a = CloudTracker((52.03, 4.53), 60.0)
+    first = [a.update(t, g) for t, g in zip(times[:2000], i_glob[:2000], strict=True)]
+    b = CloudTracker((52.03, 4.53), 60.0)
+    b.restore(json.loads(json.dumps(a.state())))
+    rest_a = [a.update(t, g) for t, g in zip(times[2000:], i_glob[2000:], strict=True)]
+    rest_b = [b.update(t, g) for t, g in zip(times[2000:], i_glob[2000:], strict=True)]
+    assert rest_a == rest_b and len(set(first)) > 10

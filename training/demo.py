@@ -44,6 +44,7 @@ def _step(title: str) -> float:
 def run(args: argparse.Namespace) -> int:
     from gateway.cli import main as gateway_main
     from training.simulate import simulate
+    from training.simulate.weather import BLEISWIJK_LATITUDE, BLEISWIJK_LONGITUDE
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -53,7 +54,10 @@ def run(args: argparse.Namespace) -> int:
                       effects=[EFFECT], seed=args.seed)
     result.write(data)
     print(f"wrote {data} (+ truth) in {time.perf_counter() - t0:.1f} s; undeclared effect: {EFFECT}")
-    common = ["--data", str(data), "--greenhouse", "almeria-palmerillas", "--model", "almeria"]
+    # the weather is Bleiswijk's: the sun (and with it the cloudiness the sky temperature is read
+    # from) is computed there, not at the preset's Almería site
+    common = ["--data", str(data), "--greenhouse", "almeria-palmerillas", "--model", "almeria",
+              "--site", f"{BLEISWIJK_LATITUDE},{BLEISWIJK_LONGITUDE}"]
     params = out / "params.toml"
     _step("2/4 calibrate the almeria model on the first 2 days (RSBA), validate on the rest")
     code = gateway_main(["calibrate", *common, "--algorithm", "rsba", "--seed", str(args.seed),

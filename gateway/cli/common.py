@@ -8,16 +8,18 @@ import math
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from gateway.cli import CliError
-from gateway.greenhouse import Greenhouse, GreenhouseError, list_presets, load_greenhouse
+from gateway.greenhouse import Greenhouse, GreenhouseError, Site, list_presets, load_greenhouse
 from gateway.kitcsv import KitCsvError, parse_time
 from gateway.model import MODEL_NAMES, build_model, check_parameters
 from gateway.model.model import Model, check_columns
+from gateway.model.sky import DEFAULT_CLOUD
 from gateway.series import Series, load_series
 
 
@@ -32,6 +34,14 @@ def add_data_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", required=True, choices=MODEL_NAMES, help="climate model")
     p.add_argument("--step", type=_positive, default=60.0, metavar="S", help="model step [s] (60)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    p.add_argument(
+        "--site",
+        type=_site,
+        metavar="LAT,LON",
+        help="where the data was recorded [deg N, deg E], overriding the greenhouse's [site]: the "
+        "sun's position there sets the clear sky that the cloudiness, and so the sky "
+        "temperature, is read against (docs/effects.md, 'Sky temperature')",
+    )
 
 
 def _positive(text: str) -> float:
@@ -43,6 +53,18 @@ def _positive(text: str) -> float:
     if not (math.isfinite(value) and value > 0):
         raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
     return value
+
+
+def _site(text: str) -> tuple[float, float]:
+    """argparse type: ``LAT,LON`` in degrees (north and east positive)."""
+    try:
+        lat, lon = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected LAT,LON in degrees, got {text!r}") from None
+    if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+        raise argparse.ArgumentTypeError(f"latitude must be in [-90, 90] and longitude in "
+                                         f"[-180, 180] degrees, got {text!r}")
+    return lat, lon
 
 
 def positive_int(text: str) -> int:
@@ -60,6 +82,8 @@ def load_inputs(args: argparse.Namespace) -> tuple[Series, Greenhouse, Model]:
     """Greenhouse, model and resampled data, with errors turned into one clear line."""
     try:
         gh = load_greenhouse(args.greenhouse)
+        if getattr(args, "site", None) is not None:
+            gh = replace(gh, site=Site(*args.site))
         model = build_model(args.model, gh)
         check_parameters(model, gh)
     except GreenhouseError as exc:
@@ -83,6 +107,10 @@ def load_inputs(args: argparse.Namespace) -> tuple[Series, Greenhouse, Model]:
         check_columns(model, [c for c in series.columns if c in series], args.data)
     except ValueError as exc:
         raise CliError(str(exc)) from None
+    if gh.site is None:
+        print(f"note: {args.greenhouse} gives no [site] and no --site was given: the cloudiness "
+              f"cannot be read from the radiation, so the sky temperature takes a cloud fraction "
+              f"of {DEFAULT_CLOUD:g} and the outside humidity only", file=sys.stderr)
     return series, gh, model
 
 

@@ -24,6 +24,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gateway.diagnose.evidence import NONE, Evidence
+from gateway.diagnose.humidity import HumidityEvidence
+from gateway.diagnose.radiation import RadiationEvidence
 from gateway.diagnose.structure import (
     INDEX,
     SOLAR_PARAMETERS,
@@ -113,9 +116,14 @@ class Drift(SensorTerm):
 
 
 # -- the library -----------------------------------------------------------------------------
+Part = FluxTerm | Modulation | SensorTerm
+Make = Callable[["Effect", Structured, Greenhouse, Parameter, Parameter], Part]
+
+
 @dataclass(frozen=True)
 class Effect:
-    """A library entry: name, kind, meaning, amplitude parameter, and how to build its term."""
+    """A library entry: name, kind, meaning, amplitude parameter, how to build its part of the
+    model (``make``) and what a second output says about it (``evidence``)."""
 
     name: str
     kind: str  # "flux" | "modulation" | "sensor"
@@ -128,9 +136,13 @@ class Effect:
     neutral: float
     describe: Callable[[float], str]
     """Amplitude → a short phrase, e.g. ``"solar gain fell 31 %"``."""
+    make: Make
+    """(effect, base model, greenhouse, amplitude parameter, start parameter) → its part."""
     from_start: bool = True
     """May the effect act from the first sample (τ = 0)? False when the base structure already
     holds its constant version (a capacity change must start inside the data)."""
+    evidence: Evidence = NONE
+    """The second output that must bear the effect out too (radiation.py, humidity.py)."""
 
     def parameters(self, duration: float) -> tuple[Parameter, Parameter]:
         amp = Parameter(self.amp_name, self.unit, self.lower, self.upper, self.neutral, None,
@@ -143,26 +155,40 @@ class Effect:
     def tau_name(self) -> str:
         return f"tau_{self.name}"
 
-    def build(self, model: Structured, gh: Greenhouse, duration: float):
+    def build(self, model: Structured, gh: Greenhouse, duration: float) -> Part:
         """The term, modulation or sensor term of this effect for ``model``."""
         amp, tau = self.parameters(duration)
-        unit = model_unit(model, gh)
-        if self.name == "solar_gain_change":
-            targets = tuple(n for n in SOLAR_PARAMETERS if n in model.names)
-            if model.radiation is not None:  # c_tsw carries every solar path (III.35)
-                targets = tuple(n for n in targets if n != "c_solar")
-            return Modulation(self.name, targets, amp, tau, self.neutral)
-        if self.name == "thermal_mass":
-            return Modulation(self.name, ("m_cap",), amp, tau, self.neutral)
-        if self.name == "extra_ventilation":
-            return ExtraVentilation(model.capacity(gh), amp, tau)
-        if self.name in ("heat_source", "night_heat_source"):
-            return HeatSource(unit, amp, tau, night_only=self.name == "night_heat_source")
-        if self.name == "sensor_radiation_bias":
-            return RadiationBias(amp, tau)
-        if self.name == "sensor_drift":
-            return Drift(amp, tau)
-        raise ValueError(f"no term for effect {self.name!r}")
+        return self.make(self, model, gh, amp, tau)
+
+
+def _solar(e: Effect, model: Structured, gh: Greenhouse, amp: Parameter, tau: Parameter) -> Part:
+    targets = tuple(n for n in SOLAR_PARAMETERS if n in model.names)
+    if model.radiation is not None:  # c_tsw carries every solar path (III.35)
+        targets = tuple(n for n in targets if n != "c_solar")
+    return Modulation(e.name, targets, amp, tau, e.neutral)
+
+
+def _capacity(e: Effect, model: Structured, gh: Greenhouse, amp: Parameter, tau: Parameter) -> Part:
+    return Modulation(e.name, ("m_cap",), amp, tau, e.neutral)
+
+
+def _exchange(e: Effect, model: Structured, gh: Greenhouse, amp: Parameter, tau: Parameter) -> Part:
+    return ExtraVentilation(model.capacity(gh), amp, tau)
+
+
+def _heat(night_only: bool) -> Make:
+    def make(e: Effect, model: Structured, gh: Greenhouse, amp: Parameter, tau: Parameter) -> Part:
+        return HeatSource(model_unit(model, gh), amp, tau, night_only=night_only)
+
+    return make
+
+
+def _sun_sensor(e: Effect, model: Structured, gh: Greenhouse, amp: Parameter, tau: Parameter) -> Part:
+    return RadiationBias(amp, tau)
+
+
+def _drift(e: Effect, model: Structured, gh: Greenhouse, amp: Parameter, tau: Parameter) -> Part:
+    return Drift(amp, tau)
 
 
 def _pct(word_up: str, word_down: str) -> Callable[[float], str]:
@@ -174,35 +200,38 @@ LIBRARY: tuple[Effect, ...] = (
            "step change of the cover's solar transmission (whitening, shading, second cover, "
            "dust): every solar gain of the model scaled by 1 + d",
            "daytime residual proportional to radiation, lagging it when mass stores the sun",
-           "d_solar", "-", -0.9, 1.5, 0.0, _pct("solar gain rose", "solar gain fell")),
+           "d_solar", "-", -0.9, 1.5, 0.0, _pct("solar gain rose", "solar gain fell"), _solar,
+           evidence=RadiationEvidence()),
     Effect("extra_ventilation", "flux",
            "added air exchange (door left open, torn cover, extra leakage)",
            "residual proportional to T_in - T_out (pulls towards outside), day and night",
-           "n_extra", "h-1", 0.0, 60.0, 0.0, lambda a: f"{a:.2g} extra air changes per hour"),
+           "n_extra", "h-1", 0.0, 60.0, 0.0, lambda a: f"{a:.2g} extra air changes per hour",
+           _exchange, evidence=HumidityEvidence()),
     Effect("heat_source", "flux",
            "undeclared constant heat input (heater, warm pipe, machine)",
            "warm offset at all hours, largest at night when the house is closed",
-           "p_heat", "W m-2", 0.0, 400.0, 0.0, lambda a: f"{a:.3g} W m-2 of heat added"),
+           "p_heat", "W m-2", 0.0, 400.0, 0.0, lambda a: f"{a:.3g} W m-2 of heat added",
+           _heat(night_only=False)),
     Effect("night_heat_source", "flux",
            "undeclared heat input at night only (night heater, night screen heating)",
            "warm offset at night only",
            "p_night_heat", "W m-2", 0.0, 400.0, 0.0,
-           lambda a: f"{a:.3g} W m-2 of heat added at night"),
+           lambda a: f"{a:.3g} W m-2 of heat added at night", _heat(night_only=True)),
     Effect("thermal_mass", "modulation",
            "change of the heat capacity coupled to the air (water barrels, concrete, more crop)",
            "damped, lagging daily swing: residual opposite to dT/dt",
-           "m_capacity", "-", 0.25, 8.0, 1.0, lambda a: f"heat capacity x {a:.2f}",
+           "m_capacity", "-", 0.25, 8.0, 1.0, lambda a: f"heat capacity x {a:.2f}", _capacity,
            from_start=False),
     Effect("sensor_radiation_bias", "sensor",
            "inside sensor heated by the sun (missing or poor radiation shield)",
            "reading too warm in proportion to radiation, no lag, zero at night",
            "k_rad", "K W-1 m2", 0.0, 0.03, 0.0,
-           lambda a: f"sensor reads {a * 1000:.2f} mK per W m-2 too warm"),
+           lambda a: f"sensor reads {a * 1000:.2f} mK per W m-2 too warm", _sun_sensor),
     Effect("sensor_drift", "sensor",
            "drifting inside temperature sensor (ageing, contamination)",
            "residual growing linearly with time",
            "a_drift", "K d-1", -3.0, 3.0, 0.0, lambda a: f"sensor drifts {a:+.3g} K per day",
-           from_start=False),
+           _drift, from_start=False),
 )
 EFFECTS = {e.name: e for e in LIBRARY}
 

@@ -35,6 +35,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from gateway.diagnose.bic import delta_bic
+from gateway.diagnose.evidence import Evidence
 from gateway.diagnose.structure import INDEX
 from gateway.model import psychrometrics as psy
 from gateway.model.terms import SUN_THRESHOLD
@@ -106,8 +108,8 @@ def exchange_step_bic(x: dict[str, np.ndarray], segments: list[tuple[int, int]],
     coef, sse1 = _lstsq(x1, y)
     n = _effective(nh["t"])
     if coef[-1] >= 0.0:  # exchange did not rise: the constrained step is c = 0
-        return float(np.log(n)), float(coef[-1])
-    return float(n * np.log(max(sse1, 1e-300) / max(sse0, 1e-300)) + np.log(n)), float(coef[-1])
+        return delta_bic(sse0, sse0, n, 1), float(coef[-1])
+    return delta_bic(sse1, sse0, n, 1), float(coef[-1])
 
 
 def _lstsq(a: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
@@ -122,3 +124,13 @@ def _effective(t: np.ndarray, hour_s: float = 3600.0) -> float:
     dew on the cover) persists through the night: the hourly residuals of (1) are nearly as
     correlated within a night as a random walk, while nights are nearly independent."""
     return max(float(1 + np.count_nonzero(np.diff(t) > 1.5 * hour_s)), 2.0)
+
+
+class HumidityEvidence(Evidence):
+    """Added air exchange on the night-time vapour balance: only a positive fitted rate
+    starting inside the data predicts a change (n = 0 predicts none)."""
+
+    def delta_bic(self, model, x, theta, segments, tau, amp) -> float:
+        if amp <= 0.0 or tau <= 0.0:
+            return 0.0
+        return exchange_step_bic(x, segments, tau)[0]

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gateway.diagnose.search import Diagnosis
+from gateway.diagnose.result import Diagnosis
 
 MODES = (("free_run", "free run"), ("one_step", "one-step"))
 

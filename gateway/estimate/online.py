@@ -30,8 +30,9 @@ from gateway.estimate.settings import DEFAULT_ITERATIONS, GroupSettings, online_
 from gateway.estimate.swarm import ALMERIA_OFFLINE, SearchResult, bat
 from gateway.greenhouse import Greenhouse
 from gateway.kitcsv import COLUMNS
-from gateway.model.drivers import prepare_drivers
+from gateway.model.drivers import prepare_drivers, site_of
 from gateway.model.model import Model
+from gateway.model.sky import CloudTracker
 from gateway.series import Series
 
 STUCK_SAMPLES = 30
@@ -125,13 +126,17 @@ class OnlineEstimator:
         # stuck run taught the estimator before it was recognised.
         self._theta_before: deque[np.ndarray] = deque(maxlen=STUCK_SAMPLES)
         self._last_prediction: float | None = None
+        self._sky = CloudTracker(site_of(gh), self.dt)  # cloudiness carried sample to sample
         self.counters = Counters()
         self.last_row: dict[str, float] = {}
         """The checked and derived drivers of the last sample (what replay records)."""
 
     # -- public API ----------------------------------------------------------------------
-    def update(self, sample: Mapping[str, float]) -> Prediction:
-        """Take the measured sample at t (kit column name → value), adapt, predict t + 1."""
+    def update(self, sample: Mapping[str, float], time: np.datetime64 | None = None) -> Prediction:
+        """Take the measured sample at t (kit column name → value), adapt, predict t + 1.
+
+        ``time`` (UTC) lets the sky temperature follow the cloudiness read from the radiation
+        (gateway/model/sky.py); without it the cloud fraction stays at its prior."""
         self.counters.samples += 1
         step = self.counters.samples - 1  # index of this sample since start
         self._theta_before.append(self.theta.copy())
@@ -142,10 +147,10 @@ class OnlineEstimator:
             self.counters.faulty_samples += 1
         if not np.isfinite(values.get("t_in", np.nan)) and self._last_prediction is not None:
             # T_in missing: the inside vapour pressure (III.4) is derived from the bridged state
-            row = self._derive({**values, "t_in": self._last_prediction})
+            row = self._derive({**values, "t_in": self._last_prediction}, time)
             row["t_in"] = np.nan
         else:
-            row = self._derive(values)
+            row = self._derive(values, time)
         self._append(row)
         self.last_row = row
         estimated = []
@@ -187,6 +192,7 @@ class OnlineEstimator:
             "stuck": [self._stuck_value, self._stuck_run],
             "theta_before": [t.tolist() for t in self._theta_before],
             "last_prediction": self._last_prediction,
+            "sky": self._sky.state(),
             "counters": {"samples": self.counters.samples,
                          "faulty_samples": self.counters.faulty_samples,
                          "faults": self.counters.faults, "estimated": self.counters.estimated,
@@ -213,6 +219,8 @@ class OnlineEstimator:
         self._stuck_value, self._stuck_run = float(snap["stuck"][0]), int(snap["stuck"][1])
         self._theta_before.extend(np.asarray(t, dtype=float) for t in snap["theta_before"])
         self._last_prediction = snap["last_prediction"]
+        if "sky" in snap:  # states saved before the cloud tracker existed start it afresh
+            self._sky.restore(snap["sky"])
         c = snap["counters"]
         self.counters = Counters(c["samples"], c["faulty_samples"], dict(c["faults"]),
                                  dict(c["estimated"]), dict(c["skipped"]), c["no_prediction"])
@@ -268,10 +276,13 @@ class OnlineEstimator:
         key = "t_in:stuck_struck_out"  # counted apart: these samples were accepted on arrival
         self.counters.faults[key] = self.counters.faults.get(key, 0) + repeats
 
-    def _derive(self, values: dict[str, float]) -> dict[str, float]:
-        """The same derived drivers as a whole-series replay (``prepare_drivers``), for one row."""
+    def _derive(self, values: dict[str, float], time: np.datetime64 | None) -> dict[str, float]:
+        """The same derived drivers as a whole-series replay (``prepare_drivers``), for one row;
+        the cloud fraction from the tracker (the same as over a whole series)."""
         cols = {k: np.array([v]) for k, v in values.items()}
-        x = prepare_drivers(Series(np.zeros(1, "datetime64[s]"), self.dt, cols), self.gh)
+        cloud = np.array([self._sky.update(time, values.get("i_glob", np.nan))])
+        stamp = np.array([np.datetime64(0, "s") if time is None else np.datetime64(time, "s")])
+        x = prepare_drivers(Series(stamp, self.dt, cols), self.gh, cloud=cloud)
         return {k: float(v[0]) for k, v in x.items()}
 
     def _append(self, row: Mapping[str, float]) -> None:

@@ -103,7 +103,7 @@ def replay(
     for t in range(n):
         sample = {c: float(v[t]) for c, v in zip(names, cols, strict=True)}
         t0 = clock()
-        pred = est.update(sample)
+        pred = est.update(sample, time=series.time[t])
         step_ms[t] = (clock() - t0) * 1e3
         if t + 1 < n and pred.t_in is not None:
             adaptive[t + 1] = pred.t_in

@@ -10,6 +10,7 @@ import numpy as np
 
 from gateway.greenhouse import Greenhouse, Vents
 from gateway.model import psychrometrics as psy
+from gateway.model import sky
 from gateway.series import Series
 
 
@@ -28,14 +29,22 @@ def side_vent_area(vents: Vents, opening: np.ndarray) -> np.ndarray:
     return vents.side_count * vents.side_length * vents.side_height * np.asarray(opening) / 100.0
 
 
-def prepare_drivers(series: Series, gh: Greenhouse) -> dict[str, np.ndarray]:
+def site_of(gh: Greenhouse) -> tuple[float, float] | None:
+    """(latitude, longitude) of the greenhouse, None when its description gives no site."""
+    return None if gh.site is None else (gh.site.latitude, gh.site.longitude)
+
+
+def prepare_drivers(series: Series, gh: Greenhouse, cloud: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Arrays (length T) that the flux terms read.
 
     Measured columns pass through (NaN for gaps); optional columns get physically neutral
     values when absent (closed vents, the crop's LAI of the greenhouse description, no soil
-    flux is not possible: terms that need ``t_soil`` must find it). Derived: ``t_sky`` [°C]
-    (III.13), ``h_o`` [W m-2 K-1] (III.9), ``p_w_in`` inside vapour pressure [kPa] (III.4),
-    ``a_roof``/``a_side`` [m2] (III.33–III.34).
+    flux is not possible: terms that need ``t_soil`` must find it). Derived: ``cloud`` [-] and
+    ``t_sky`` [°C] from the outside humidity and the cloudiness read from the radiation at the
+    greenhouse's site (sky.py; in place of III.13), ``h_o`` [W m-2 K-1] (III.9), ``p_w_in``
+    inside vapour pressure [kPa] (III.4), ``a_roof``/``a_side`` [m2] (III.33–III.34).
+    ``cloud``: the cloud fraction when the caller tracks it itself (the online estimator, one
+    row at a time: sky.CloudTracker), else computed from the whole series.
     """
     n = len(series)
     x: dict[str, np.ndarray] = {}
@@ -45,7 +54,10 @@ def prepare_drivers(series: Series, gh: Greenhouse) -> dict[str, np.ndarray]:
     for name in ("t_in", "t_out", "rh_in", "i_glob", "wind"):
         x.setdefault(name, nan)
     x["i_glob"] = np.maximum(x["i_glob"], 0.0)
-    x["t_sky"] = psy.sky_temperature(x["t_out"])
+    if cloud is None:
+        cloud = sky.cloud_fraction(series.time, x["i_glob"], site_of(gh), series.step)
+    x["cloud"] = np.asarray(cloud, dtype=float)
+    x["t_sky"] = sky.sky_temperature(x["t_out"], x.get("rh_out"), x["cloud"])
     x["h_o"] = 2.8 + 1.2 * x["wind"]
     x["p_w_in"] = psy.vapour_pressure(x["t_in"], x["rh_in"])
     if "lai" not in series:

@@ -170,7 +170,7 @@ class GreenhousePipeline:
 
     def _step(self, m: Minute) -> list[EstimateRow]:
         self._remember(m)
-        pred = self.est.update(m.values)
+        pred = self.est.update(m.values, time=np.datetime64(int(m.minute), "s"))
         self.cursor = m.minute
         self.state = "running"
         t, g = float(m.minute), self.name

@@ -1,0 +1,111 @@
+"""The judge (gateway/diagnose/judge.py): its null calibration and its guards, on synthetic
+held-out errors (fast; the end-to-end false-alarm promise is tests/test_diagnose_false_alarm.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gateway.diagnose import judge as jd
+from gateway.diagnose.bic import delta_bic, effective_samples
+
+
+def _ar1(rng: np.random.Generator, n: int, phi: float) -> np.ndarray:
+    e = rng.normal(size=n)
+    out = np.empty(n)
+    out[0] = e[0] / np.sqrt(1 - phi**2)
+    for i in range(1, n):
+        out[i] = phi * out[i - 1] + e[i]
+    return out
+
+
+@pytest.mark.parametrize("phi", [0.0, 0.5, 0.8])
+def test_paired_p_has_its_nominal_size_under_the_null(phi):
+    """28 pieces (7 held-out days of 6-h pieces), differences of mean zero, correlated from
+    piece to piece as the weather makes them: p ≤ α in about α of the draws; at the per-
+    candidate level of the rule (5 % / 7) within a factor 3."""
+    rng = np.random.default_rng(1)
+    p = np.array([jd.paired_p(_ar1(rng, 28, phi)) for _ in range(2000)])
+    assert np.mean(p <= 0.05) <= 0.065, np.mean(p <= 0.05)
+    assert np.mean(p <= 0.2) <= 0.22, np.mean(p <= 0.2)
+    assert np.mean(p <= jd.ALPHA / 7) <= 3 * jd.ALPHA / 7, np.mean(p <= jd.ALPHA / 7)
+    assert np.mean(p <= 0.5) == pytest.approx(0.5, abs=0.05)  # not degenerate either
+
+
+def test_student_t_tail_matches_published_quantiles():
+    # one-sided critical values of Student's t (any table): df 6 → 1.943 (5 %), 3.143 (1 %),
+    # 3.707 (0.5 %); df 1 → 6.314 (5 %); df 30 → 1.697 (5 %)
+    for t, df, p in ((1.943, 6, 0.05), (3.143, 6, 0.01), (3.707, 6, 0.005), (6.314, 1, 0.05),
+                     (1.697, 30, 0.05)):
+        assert jd.student_t_sf(t, df) == pytest.approx(p, rel=2e-3)
+    assert jd.student_t_sf(0.0, 5) == pytest.approx(0.5)
+    assert jd.student_t_sf(-1.943, 6) == pytest.approx(0.95, rel=1e-3)
+
+
+def test_paired_p_sees_a_real_improvement():
+    rng = np.random.default_rng(2)
+    d = 0.8 + _ar1(rng, 28, 0.5) * 0.5
+    assert jd.paired_p(d) < 0.001
+
+
+END = 14 * 86400.0
+LAST = jd.last_start(END, 7 * 86400.0)
+
+
+def _case(cut_per_piece: np.ndarray, dt: float = 300.0, noise: float = 0.0):
+    """Held-out errors over 7 days after a 7-day calibration part: the model before and the
+    reference are 1 K off, the model after lower by ``cut`` per 6-h piece."""
+    piece = int(jd.JUDGE_PIECE_S / dt)
+    n_h = piece * len(cut_per_piece)
+    s = int(7 * 86400 / dt)
+    rng = np.random.default_rng(4)
+    meas = np.zeros(s + n_h)
+    before = {"free_run": 1.0 + noise * rng.normal(size=n_h)}
+    after = {"free_run": np.repeat(1.0 - cut_per_piece, piece) + noise * rng.normal(size=n_h)}
+    return before, after, meas, jd.heldout_blocks(s, s + n_h, dt), s
+
+
+def test_a_lasting_significant_change_passes_and_a_spell_does_not():
+    rng = np.random.default_rng(3)
+    lasting = np.clip(0.3 + 0.05 * rng.normal(size=28), 0, 1)
+    before, after, meas, blocks, s = _case(lasting)
+    v = jd.judge(before, before, after, meas, blocks, s, 300.0, [0.0], LAST)
+    assert v.ok, v.why
+    spell = np.where(np.arange(28) < 10, 0.6, 0.0)  # better only over the first 2.5 days
+    before, after, meas, blocks, s = _case(spell)
+    v = jd.judge(before, before, after, meas, blocks, s, 300.0, [0.0], LAST)
+    assert not v.ok and "both halves" in v.why
+
+
+def test_small_or_insignificant_cuts_do_not_pass():
+    before, after, meas, blocks, s = _case(np.full(28, 0.15))  # 15 %: below the size asked
+    assert not jd.judge(before, before, after, meas, blocks, s, 300.0, [0.0], LAST).ok
+    rng = np.random.default_rng(5)
+    noisy = 0.25 + 1.5 * _ar1(rng, 28, 0.5)  # 25 % on average, but from a few pieces
+    before, after, meas, blocks, s = _case(noisy)
+    v = jd.judge(before, before, after, meas, blocks, s, 300.0, [0.0], LAST)
+    assert v.p > jd.ALPHA and not v.ok
+
+
+def test_a_change_in_the_last_days_does_not_pass():
+    before, after, meas, blocks, s = _case(np.full(28, 0.3))
+    assert LAST == END - 3 * 86400.0  # three days must follow a start
+    v = jd.judge(before, before, after, meas, blocks, s, 300.0, [END - 60 * 3600.0], LAST)
+    assert not v.ok and "end of the data" in v.why
+    assert jd.last_start(6 * 86400.0, 3 * 86400.0) == 4.5 * 86400.0  # half a short held-out part
+
+
+def test_the_reference_refit_takes_its_own_share():
+    """An effect that is no better than the base refitted on the same data does not pass,
+    however much it beats the base as calibrated."""
+    before, after, meas, blocks, s = _case(np.full(28, 0.3))
+    v = jd.judge(before, after, after, meas, blocks, s, 300.0, [0.0], LAST)
+    assert not v.ok and v.gain == pytest.approx(0.3)
+
+
+def test_one_delta_bic():
+    n_e = effective_samples(7200, 60.0)  # 5 days of 1-minute residuals: 120 effective samples
+    assert n_e == pytest.approx(120.0)
+    assert delta_bic(1.0, 1.0, n_e, 2) == pytest.approx(2 * np.log(120.0))
+    assert delta_bic(0.5, 1.0, n_e, 1) == pytest.approx(120 * np.log(0.5) + np.log(120.0))
+    assert effective_samples(3, 60.0) == 2.0

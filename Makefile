@@ -50,11 +50,11 @@ BENCH_STAMP := $(BENCH_VENV)/.installed
 $(BENCH_STAMP): pyproject.toml
 	$(PYTHON) -m venv $(BENCH_VENV)
 	$(BENCH_VENV)/bin/python -m pip install --quiet --upgrade pip
-	$(BENCH_VENV)/bin/python -m pip install --quiet -e '.[dev,bench]'
+	$(BENCH_VENV)/bin/python -m pip install --quiet -e '.[dev,bench,cloud]'
 	$(BENCH_VENV)/bin/python $(CHECKOUT_PTH)
 	touch $(BENCH_STAMP)
 
-## bench: speed and memory, side by side with peers; JSON in bench/results/
+## bench: speed and memory, side by side with peers (the fleet bench needs the cloud extra and PostgreSQL's server binaries); JSON in bench/results/
 bench: $(BENCH_STAMP)
 	$(BENCH_VENV)/bin/python tests/bench/run.py
 

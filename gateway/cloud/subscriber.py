@@ -44,6 +44,7 @@ class SubscribeStats:
     not_messages: int = 0
     missed: int = 0  # samples Zenoh reported missed (then recovered from the publisher's cache, or not)
     store_retries: int = 0  # batches the store refused at first (kept and retried)
+    store_s: float = 0.0  # wall seconds spent storing (rows / store_s: what the store sustains)
 
 
 class Subscriber:
@@ -159,6 +160,7 @@ class Subscriber:
         (:attr:`error` then says how many messages were not stored)."""
         wait, failing = 0.5, ""
         while True:
+            t0 = time.perf_counter()
             try:
                 new = self.store.add(msgs)
             except Exception as e:
@@ -173,6 +175,7 @@ class Subscriber:
                     return None
                 wait = min(wait * 2, RETRY_MAX_S)
                 continue
+            self.stats.store_s = round(self.stats.store_s + time.perf_counter() - t0, 6)
             if failing:
                 log.info("cloud store back: stored the kept batch")
             return new

@@ -308,10 +308,10 @@ key = "{tls.key}"
         return FleetCheck(len(expected), len(seen), len(expected - seen), dup, unexpected,
                           sorted(bad), len(last))
 
-    def subscriber_stats(self) -> dict[str, int]:
+    def subscriber_stats(self) -> dict[str, float]:
         """The subscriber's last stats line (printed every 10 s and at exit)."""
         assert self.subscriber is not None
         found = re.findall(r"SubscribeStats\(([^)]*)\)", self.subscriber.text())
         if not found:
             return {}
-        return {k: int(v) for k, v in re.findall(r"(\w+)=(\d+)", found[-1])}
+        return {k: float(v) for k, v in re.findall(r"(\w+)=([\d.]+)", found[-1])}

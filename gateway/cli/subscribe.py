@@ -39,7 +39,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "from the stored measurements (without an endpoint: export only).",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--config", type=Path, metavar="SUBSCRIBER.toml",
-                   help="settings file ([subscribe], [tls]; images/gateway/subscriber.toml)")
+                   help="settings file ([subscribe], [tls]; docs/examples/subscriber.toml)")
     p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
                    help="Zenoh endpoint of a gateway or router, e.g. tcp/127.0.0.1:7447 (repeatable; "
                    "in client mode the routers to fail over between)")

@@ -1,6 +1,6 @@
 """``subscribe --config subscriber.toml`` → SubscribeSettings (command-line options override it).
 
-The documented example is ``images/gateway/subscriber.toml``; every error names the key::
+The documented example is ``docs/examples/subscriber.toml``; every error names the key::
 
     [subscribe]
     mode = "client"

@@ -109,6 +109,7 @@ class WorkerProc:
                                      stderr=open(log, "a"), text=True)  # noqa: SIM115
         self.events: queue.Queue[dict[str, Any]] = queue.Queue()
         self.ready: dict[str, Any] = {}
+        self._kept: list[dict[str, Any]] = []  # events read while waiting for another
         self._n = 0
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
@@ -127,13 +128,22 @@ class WorkerProc:
         return self._n
 
     def wait(self, event: str, ident: int | None = None, timeout: float = DEADLINE) -> dict[str, Any]:
+        """The next `event` (with that `ident`); other events are kept for their own waits."""
+        def wanted(e: dict[str, Any]) -> bool:
+            return e["event"] == event and (ident is None or e.get("id") == ident)
+
+        for e in self._kept:
+            if wanted(e):
+                self._kept.remove(e)
+                return e
         try:
             while True:
                 e = self.events.get(timeout=timeout)
                 if e["event"] == "exit":
                     raise AssertionError(f"fleet worker exited (code {self.proc.wait()})")
-                if e["event"] == event and (ident is None or e.get("id") == ident):
+                if wanted(e):
                     return e
+                self._kept.append(e)
         except queue.Empty:
             raise AssertionError(f"fleet worker: no {event} in {timeout:g} s") from None
 

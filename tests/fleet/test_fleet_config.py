@@ -135,3 +135,25 @@ def test_subscribe_command_line_errors_are_one_line(pki: Pki, tmp_path: Path, ca
     assert "--tls-cert/--tls-key need --tls-ca" in capsys.readouterr().err
     assert main(["subscribe", "--connect", "tcp/127.0.0.1:7447"]) == 2
     assert "give --db FILE (SQLite) or --dsn DSN (PostgreSQL)" in capsys.readouterr().err
+
+
+def test_the_documented_subscriber_example_parses_and_every_key_is_documented(tmp_path: Path) -> None:
+    import re
+    import shutil
+
+    from tests.fleet.kit import ROOT, make_pki
+
+    example = ROOT / "docs" / "examples" / "subscriber.toml"
+    folder = tmp_path / "etc"
+    pki = make_pki(folder / "certs", routers=["cloud-1"], clients=["cloud-store"])
+    shutil.copy(example, folder / "subscriber.toml")
+    write_router_toml(folder / "router.toml", "cloud-1", pki,
+                      access={"gateways": ["farm-a", "farm-b"], "routers": ["cloud-1"],
+                              "subscribers": {"cloud-store": {"farms": ["*"], "store": True}}})
+    s = load_settings(folder / "subscriber.toml").check()
+    assert s.mode == "client" and s.farms == ("farm-a", "farm-b") and s.history
+    assert s.dsn and s.connect[0] == "tls/cloud-1.example.org:7447"
+    text = example.read_text()
+    keys = set(re.findall(r"^#? ?(\w+) = ", text, re.M))
+    doc = (ROOT / "docs" / "cloud.md").read_text()
+    assert not sorted(k for k in keys if f"`{k}`" not in doc)

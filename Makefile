@@ -54,7 +54,7 @@ $(BENCH_STAMP): pyproject.toml
 	$(BENCH_VENV)/bin/python $(CHECKOUT_PTH)
 	touch $(BENCH_STAMP)
 
-## bench: speed and memory, side by side with peers; JSON in bench/results/
+## bench: speed and memory, side by side with peers (the fleet bench needs the cloud extra and PostgreSQL's server binaries); JSON in bench/results/
 bench: $(BENCH_STAMP)
 	$(BENCH_VENV)/bin/python tests/bench/run.py
 

@@ -1,4 +1,4 @@
-"""``python -m gateway subscribe``: the cloud side over Zenoh (docs/cloud.md)."""
+"""``python -m gateway subscribe``: the cloud side over Zenoh (docs/cloud.md, docs/fleet.md)."""
 
 from __future__ import annotations
 
@@ -11,28 +11,80 @@ from pathlib import Path
 
 from gateway.cli import CliError
 
+EPILOG = """\
+examples:
+  python -m gateway subscribe --connect tcp/192.168.1.20:7447 --db cloud.db
+  python -m gateway subscribe --db cloud.db --export csv/          # export only
+  python -m gateway subscribe --mode client --connect tls/cloud-1.example.org:7447 \\
+      --tls-ca certs/ca.pem --tls-cert certs/client-cloud-store.pem \\
+      --tls-key certs/client-cloud-store.key --farm farm-a --farm farm-b \\
+      --dsn 'host=/run/postgresql dbname=serra user=serra' --history
+  python -m gateway subscribe --config /etc/serra/subscriber.toml  # the same, from a file
+
+Behind the routers' access control, subscribe per farm (--farm, or farms/access in the file):
+a gateway is only told of subscriptions inside its own farm. Options given here override the
+file. In client mode the subscriber waits for a router (retried) and prints its ready line once
+subscribed. Keep a DSN's password out of the command line: use ~/.pgpass or PGPASSFILE.
+"""
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "subscribe",
-        help="play the cloud: store what the gateway publishes (dropping repeats), export kit CSVs",
-        description="Subscribe to Serra messages over Zenoh and store each one once in SQLite "
-        "(repeats dropped by idempotency key); recover what was missed from the publishers' "
-        "caches. With --export, write a kit CSV per greenhouse from the stored measurements "
-        "(without --connect: export only).",
-        epilog="example: python -m gateway subscribe --connect tcp/192.168.1.20:7447 --db cloud.db; "
-        "python -m gateway subscribe --db cloud.db --export csv/")
+        help="play the cloud: store what the gateways publish (dropping repeats), export kit CSVs",
+        description="Subscribe to Serra messages over Zenoh and store each one once, in SQLite "
+        "(the default) or PostgreSQL (--dsn); repeats are dropped by idempotency key, and what "
+        "was missed is recovered from the publishers' caches. With --history, answer history "
+        "queries for the farms from the store. With --export, write a kit CSV per greenhouse "
+        "from the stored measurements (without an endpoint: export only).",
+        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--config", type=Path, metavar="SUBSCRIBER.toml",
+                   help="settings file ([subscribe], [tls]; docs/examples/subscriber.toml)")
     p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
-                   help="Zenoh endpoint of a gateway or router, e.g. tcp/127.0.0.1:7447 (repeatable)")
+                   help="Zenoh endpoint of a gateway or router, e.g. tcp/127.0.0.1:7447 (repeatable; "
+                   "in client mode the routers to fail over between)")
     p.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
                    help="also listen for gateways on this endpoint (peer mode)")
-    p.add_argument("--mode", choices=("peer", "client"), default="peer", help="Zenoh mode (peer)")
-    p.add_argument("--key", default="serra/**", help="key expression to subscribe to (serra/**)")
-    p.add_argument("--db", required=True, type=Path, help="the cloud store (SQLite, created if absent)")
+    p.add_argument("--mode", choices=("peer", "client"), help="Zenoh mode (peer)")
+    p.add_argument("--key", action="append", default=[], metavar="KEYEXPR",
+                   help="key expression to subscribe to (repeatable; default serra/**, or one per --farm)")
+    p.add_argument("--farm", action="append", default=[], metavar="FARM",
+                   help="subscribe to serra/FARM/** (repeatable); also the farms --history answers for")
+    p.add_argument("--db", type=Path, help="SQLite cloud store (created if absent)")
+    p.add_argument("--dsn", metavar="DSN", help="PostgreSQL cloud store instead (needs serra[cloud])")
+    p.add_argument("--schema", metavar="NAME", help="PostgreSQL schema (serra)")
+    p.add_argument("--history", action="store_true",
+                   help="answer history queries for the farms from the store")
+    p.add_argument("--tls-ca", type=Path, metavar="PEM", help="the fleet CA (tls/ endpoints)")
+    p.add_argument("--tls-cert", type=Path, metavar="PEM", help="this subscriber's certificate")
+    p.add_argument("--tls-key", type=Path, metavar="KEY", help="its private key (mode 0600)")
     p.add_argument("--export", type=Path, metavar="DIR",
                    help="write <farm>-<greenhouse>.csv kit CSVs here (at exit when subscribed)")
     p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
     p.set_defaults(func=run)
+
+
+def settings(args: argparse.Namespace):
+    """The file's settings (if any) with the command line's on top, checked."""
+    from gateway.cloud.settings import SubscribeSettings, load_settings, with_overrides
+    from gateway.net.certs import CertError
+    from gateway.net.tomlcheck import ConfigError
+    from gateway.net.zenohcfg import TlsFiles
+
+    try:
+        s = load_settings(args.config) if args.config else SubscribeSettings()
+        tls = None
+        if args.tls_ca or args.tls_cert or args.tls_key:
+            if args.tls_ca is None:
+                raise ConfigError("--tls-cert/--tls-key need --tls-ca (the fleet CA)")
+            tls = TlsFiles(args.tls_ca, args.tls_cert, args.tls_key, mutual=args.tls_cert is not None)
+            tls.check("--tls")
+        return with_overrides(s, mode=args.mode, connect=tuple(args.connect),
+                              listen=tuple(args.listen), keys=tuple(args.key), farms=tuple(args.farm),
+                              db=args.db, dsn=args.dsn, schema=args.schema, history=args.history,
+                              tls=tls).check()
+    except (ConfigError, CertError) as e:
+        raise CliError(str(e)) from None
 
 
 def _export(store, folder: Path) -> None:
@@ -51,18 +103,24 @@ def _export(store, folder: Path) -> None:
 def run(args: argparse.Namespace) -> int:
     import sqlite3
 
-    from gateway.cloud.store import SqliteCloudStore
-    from gateway.cloud.subscriber import Subscriber
+    from gateway.cloud.store import open_store
 
-    if not args.connect and not args.listen and not args.export:
+    s = settings(args)
+    if not s.connect and not s.listen and not args.export:
         raise CliError("give --connect ENDPOINT (or --listen) to subscribe, or --export DIR")
+    if s.db is None and not s.dsn:
+        raise CliError("give --db FILE (SQLite) or --dsn DSN (PostgreSQL) for the cloud store")
     try:
-        store = SqliteCloudStore(args.db)
+        store = open_store(s.db, s.dsn, s.schema)
     except sqlite3.Error as e:
-        raise CliError(f"{args.db}: cannot open the cloud store: {e}") from None
+        raise CliError(f"{s.db}: cannot open the cloud store: {e}") from None
+    except ImportError as e:
+        raise CliError(str(e)) from None
+    except RuntimeError as e:  # CloudStoreError: one line, no password
+        raise CliError(str(e)) from None
     try:
-        if args.connect or args.listen:
-            _subscribe(args, store, Subscriber)
+        if s.connect or s.listen:
+            _subscribe(args, s, store)
         if args.export:
             _export(store, args.export)
     finally:
@@ -70,25 +128,34 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _subscribe(args: argparse.Namespace, store, subscriber_cls) -> None:
+def _subscribe(args: argparse.Namespace, s, store) -> None:
+    from gateway.cloud.subscriber import Subscriber
+
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
-    sub = subscriber_cls(store, args.connect, args.key, args.mode, args.listen)
+    keys = s.subscriptions()
+    sub = Subscriber(store, s.connect, keys, s.mode, s.listen, extra=s.zenoh_entries(),
+                     history_farms=s.farms if s.history else (), retry=s.retry)
     try:
         sub.start()
     except Exception as e:
         sub.stop()
         raise CliError(f"cannot open the Zenoh session: {e}") from None
-    print(f"serra-subscribe ready {args.key} on {', '.join(args.connect + args.listen)}", flush=True)
     t0 = time.monotonic()
+    announced = False
     last = t0
     try:
-        while not stop.wait(0.5):
+        while not stop.wait(0.2):
+            if not announced and sub.ready.is_set():
+                if sub.opener.error is not None:
+                    raise CliError(f"cannot subscribe: {sub.opener.error}")
+                what = f"{keys[0]} (+{len(keys) - 1} more)" if len(keys) > 1 else keys[0]
+                print(f"serra-subscribe ready {what} on {', '.join(s.connect + s.listen)} "
+                      f"store {store.path}{' history' if sub.history else ''}", flush=True)
+                announced = True
             if args.duration is not None and time.monotonic() - t0 >= args.duration:
                 break
-            if sub.error is not None:
-                raise CliError(f"{args.db}: {sub.error}")
             if time.monotonic() - last >= 10:
                 last = time.monotonic()
                 print(f"subscribe: {sub.stats}", file=sys.stderr, flush=True)
@@ -96,3 +163,5 @@ def _subscribe(args: argparse.Namespace, store, subscriber_cls) -> None:
         sub.stop()
         print(f"subscribe stopped: {sub.stats}; {store.count()} messages stored", file=sys.stderr,
               flush=True)
+        if sub.error is not None:
+            raise CliError(str(sub.error))

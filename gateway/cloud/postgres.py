@@ -5,6 +5,9 @@
     store.history("farm-a", "gh1", "measurement/inside", t_from, t_to, limit=1000)
     store.close()
 
+It implements ``gateway.cloud.store.CloudStore`` (``add`` is ``insert_batch``), so
+``python -m gateway subscribe --dsn DSN`` stores here and answers history queries from here.
+
 The table ``serra.message`` (schema name configurable) is what a cloud engineer queries::
 
     SELECT observed, payload->>'temperature' FROM serra.message
@@ -20,7 +23,8 @@ from __future__ import annotations
 
 import logging
 import re
-from collections.abc import Iterable, Sequence
+import uuid
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -29,6 +33,8 @@ try:
     from psycopg import sql
 except ImportError as exc:  # an optional dependency: the gateway appliance never needs it
     raise ImportError("the PostgreSQL cloud store needs psycopg 3: pip install 'serra[cloud]'") from exc
+
+from gateway.cloud.store import Received, kind_clause  # noqa: E402
 
 log = logging.getLogger("serra.cloud.postgres")
 SCHEMA_VERSION = 1
@@ -77,21 +83,12 @@ class MessageLike(Protocol):
     farm: str
     greenhouse: str
     kind: str
-    t: float  # observed [unix s]
+    t: float | None  # observed [unix s]; None: the message had no time (stored as received)
     payload: str  # JSON text
     received: float  # [unix s]
 
 
-@dataclass(frozen=True)
-class CloudMessage:
-    key: str  # serra/<farm>/<greenhouse>/<kind>
-    idem: str  # idempotency key
-    farm: str
-    greenhouse: str
-    kind: str
-    t: float  # observed [unix s]
-    payload: str  # JSON text
-    received: float  # [unix s]
+CloudMessage = Received  # one record type for every cloud store (gateway.cloud.store)
 
 
 @dataclass(frozen=True)
@@ -203,19 +200,23 @@ class PgStore:
     def _insert_chunk(self, chunk: Sequence[MessageLike]) -> int:
         columns: list[list[Any]] = [[] for _ in range(8)]
         for m in chunk:
-            row = (str(m.farm), str(m.greenhouse), str(m.kind), float(m.t), float(m.received),
+            observed = m.t if m.t is not None else m.received
+            row = (str(m.farm), str(m.greenhouse), str(m.kind), float(observed), float(m.received),
                    str(m.key), str(m.idem), str(m.payload))
             for col, value in zip(columns, row, strict=True):
                 col.append(value)
         cur = self.conn.execute(self._insert, columns)
         return max(cur.rowcount, 0)
 
+    add = insert_batch  # the CloudStore interface
+
     def history(self, farm: str, greenhouse: str | None = None, kind: str | None = None,
                 t_from: float | None = None, t_to: float | None = None,
-                limit: int = 1000) -> list[CloudMessage]:
+                limit: int = 1000, match: Callable[[str], bool] | None = None) -> list[Received]:
         """Messages of `farm` (a greenhouse and kind, or every one when None; a kind ending in
         ``/**`` takes every kind below it) observed in [t_from, t_to], oldest first, at most
-        `limit` (1..100000)."""
+        `limit` (1..100000). `match(key)`, when given, must also accept the message's key (a
+        history query's wildcards; rows are then read through a server-side cursor)."""
         if not 1 <= limit <= MAX_LIMIT:
             raise ValueError(f"limit {limit}: expected 1..{MAX_LIMIT}")
         where = [sql.SQL("farm = %s")]
@@ -224,13 +225,9 @@ class PgStore:
             where.append(sql.SQL("greenhouse = %s"))
             args.append(greenhouse)
         if kind is not None and kind != "**":
-            if kind.endswith("/**"):
-                where.append(sql.SQL("(kind = %s OR kind LIKE %s)"))
-                stem = kind[:-3]
-                args += [stem, stem.replace("\\", "\\\\").replace("%", "\\%").replace("_", "\\_") + "/%"]
-            else:
-                where.append(sql.SQL("kind = %s"))
-                args.append(kind)
+            clause, more = kind_clause(kind)
+            where.append(sql.SQL(clause))
+            args += more
         if t_from is not None:
             where.append(sql.SQL("observed >= to_timestamp(%s)"))
             args.append(t_from)
@@ -238,13 +235,61 @@ class PgStore:
             where.append(sql.SQL("observed <= to_timestamp(%s)"))
             args.append(t_to)
         query = sql.SQL(
-            "SELECT key, idem, farm, greenhouse, kind, extract(epoch FROM observed)::float8, "
-            "payload::text, extract(epoch FROM received)::float8 FROM {}.message WHERE {} "
-            "ORDER BY observed, id LIMIT %s").format(sql.Identifier(self.schema),
-                                                      sql.SQL(" AND ").join(where))
-        rows = self.conn.execute(query, [*args, limit]).fetchall()
-        self.conn.commit()  # end the read transaction: no idle-in-transaction connection
-        return [CloudMessage(*row) for row in rows]
+            "SELECT key, payload::text, idem, farm, greenhouse, kind, "
+            "extract(epoch FROM observed)::float8, extract(epoch FROM received)::float8 "
+            "FROM {}.message WHERE {} ORDER BY observed, id").format(
+                sql.Identifier(self.schema), sql.SQL(" AND ").join(where))
+        if match is None:
+            rows = self.conn.execute(query + sql.SQL(" LIMIT %s"), [*args, limit]).fetchall()
+            self.conn.commit()  # end the read transaction: no idle-in-transaction connection
+            return [Received(*row) for row in rows]
+        return list(self._scan(query, args, limit, match))
+
+    def _scan(self, query: sql.Composable, args: list[Any], limit: int | None = None,
+              match: Callable[[str], bool] | None = None) -> Iterator[Received]:
+        """Rows through a server-side cursor (never all in memory), filtered by `match`."""
+        n = 0
+        with self.conn.transaction(), self.conn.cursor(name=f"serra_{uuid.uuid4().hex}") as cur:
+            cur.itersize = 1000
+            cur.execute(query, args)
+            for row in cur:
+                if match is None or match(row[0]):
+                    yield Received(*row)
+                    n += 1
+                    if limit is not None and n >= limit:
+                        return
+
+    def messages(self, farm: str | None = None, greenhouse: str | None = None,
+                 kind: str | None = None) -> Iterator[Received]:
+        """Stored messages in arrival order (first receipt)."""
+        where, args = [], []
+        for col, value in (("farm", farm), ("greenhouse", greenhouse), ("kind", kind)):
+            if value is not None:
+                where.append(sql.SQL("{} = %s").format(sql.Identifier(col)))
+                args.append(value)
+        query = sql.SQL(
+            "SELECT key, payload::text, idem, farm, greenhouse, kind, "
+            "extract(epoch FROM observed)::float8, extract(epoch FROM received)::float8 "
+            "FROM {}.message{} ORDER BY id").format(
+                sql.Identifier(self.schema),
+                sql.SQL(" WHERE ") + sql.SQL(" AND ").join(where) if where else sql.SQL(""))
+        return iter(list(self._scan(query, args)))
+
+    def greenhouses(self) -> list[tuple[str, str]]:
+        rows = self.conn.execute(sql.SQL(
+            "SELECT DISTINCT farm, greenhouse FROM {}.message WHERE kind LIKE 'measurement/%%' "
+            "ORDER BY farm, greenhouse").format(sql.Identifier(self.schema))).fetchall()
+        self.conn.commit()
+        return [(str(f), str(g)) for f, g in rows]
+
+    def reader(self) -> PgStore:
+        """A second connection (one connection serves one thread at a time)."""
+        return PgStore.connect(self.dsn, self.schema, create=False)
+
+    @property
+    def path(self) -> str:
+        """Where the store is, for messages (the DSN without its password)."""
+        return redact(self.dsn)
 
     def count(self, farm: str | None = None) -> int:
         query = sql.SQL("SELECT count(*) FROM {}.message").format(sql.Identifier(self.schema))

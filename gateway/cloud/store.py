@@ -1,8 +1,9 @@
 """The cloud side's store: every message received, once, by idempotency key.
 
-:class:`CloudStore` is the interface the subscriber writes through; :class:`SqliteCloudStore` is
-the embedded default. A PostgreSQL store (its own issue) implements the same four methods with
-``INSERT ... ON CONFLICT (idem) DO NOTHING`` and the same columns.
+:class:`CloudStore` is the interface the subscriber writes through and answers history queries
+from; :class:`SqliteCloudStore` is the embedded default and ``gateway.cloud.postgres.PgStore``
+(``subscribe --dsn``) the fleet's, with ``INSERT ... ON CONFLICT DO NOTHING`` on the same
+idempotency key. :func:`open_store` picks one.
 
 Table ``messages``: ``seq`` (arrival order of first receipt), ``idem`` (unique), ``key``,
 ``farm``, ``greenhouse``, ``kind``, ``t`` (observation time from the payload [unix s]),
@@ -14,7 +15,7 @@ from __future__ import annotations
 import json
 import sqlite3
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
@@ -23,6 +24,7 @@ from typing import Protocol
 from gateway.publish import keyspace as K
 
 TIME_ATTRS = ("dateObserved", "dateIssued", "dateModified")
+MAX_LIMIT = 100_000  # history replies per query
 
 
 @dataclass(frozen=True)
@@ -63,18 +65,57 @@ def parse(key: str, payload: str | bytes, received: float | None = None) -> Rece
 
 
 class CloudStore(Protocol):
+    """What the subscriber needs from a store (SQLite here, PostgreSQL in postgres.py)."""
+
     def add(self, messages: Sequence[Received]) -> int:
-        """Store the messages not seen before (by idempotency key); returns how many were new."""
+        """Store the messages not seen before (by idempotency key) in one transaction; returns
+        how many were new. Raises when nothing could be stored (the caller keeps the batch)."""
         ...
 
-    def count(self) -> int: ...
+    def count(self, farm: str | None = None) -> int: ...
 
     def messages(self, farm: str | None = None, greenhouse: str | None = None,
                  kind: str | None = None) -> Iterator[Received]:
         """Stored messages in arrival order (first receipt)."""
         ...
 
+    def greenhouses(self) -> list[tuple[str, str]]:
+        """(farm, greenhouse) pairs that have measurements."""
+        ...
+
+    def history(self, farm: str, greenhouse: str | None = None, kind: str | None = None,
+                t_from: float | None = None, t_to: float | None = None, limit: int = 1000,
+                match: Callable[[str], bool] | None = None) -> list[Received]:
+        """Messages of `farm` (a greenhouse and kind, or any when None; a kind ending in
+        ``/**`` takes every kind below it) observed in [t_from, t_to], oldest first, at most
+        `limit`; `match(key)`, when given, must also accept the message key."""
+        ...
+
+    def reader(self) -> CloudStore:
+        """Another connection to the same store, for queries from another thread."""
+        ...
+
     def close(self) -> None: ...
+
+
+def open_store(db: str | Path | None = None, dsn: str | None = None, schema: str = "serra") -> CloudStore:
+    """PostgreSQL when a DSN is given (needs ``serra[cloud]``), else SQLite at `db`."""
+    if dsn:
+        from gateway.cloud.postgres import PgStore
+
+        return PgStore.connect(dsn, schema=schema)
+    if db is None:
+        raise ValueError("a cloud store needs an SQLite file or a PostgreSQL DSN")
+    return SqliteCloudStore(db)
+
+
+def kind_clause(kind: str) -> tuple[str, list[str]]:
+    """SQL for a kind filter: exact, or ``stem/**`` = stem and every kind below it."""
+    if kind.endswith("/**"):
+        stem = kind[:-3]
+        escaped = stem.replace("\\", "\\\\").replace("%", "\\%").replace("_", "\\_")
+        return "(kind = %s OR kind LIKE %s ESCAPE '\\')", [stem, escaped + "/%"]
+    return "kind = %s", [kind]
 
 
 class SqliteCloudStore:
@@ -120,8 +161,10 @@ class SqliteCloudStore:
         c.execute("COMMIT")
         return new
 
-    def count(self) -> int:
-        return self.conn.execute("SELECT count(*) FROM messages").fetchone()[0]
+    def count(self, farm: str | None = None) -> int:
+        if farm is None:
+            return self.conn.execute("SELECT count(*) FROM messages").fetchone()[0]
+        return self.conn.execute("SELECT count(*) FROM messages WHERE farm=?", (farm,)).fetchone()[0]
 
     def messages(self, farm: str | None = None, greenhouse: str | None = None,
                  kind: str | None = None) -> Iterator[Received]:
@@ -139,6 +182,36 @@ class SqliteCloudStore:
         return [tuple(r) for r in self.conn.execute(
             "SELECT DISTINCT farm, greenhouse FROM messages WHERE kind LIKE 'measurement/%' "
             "ORDER BY farm, greenhouse")]
+
+    def history(self, farm: str, greenhouse: str | None = None, kind: str | None = None,
+                t_from: float | None = None, t_to: float | None = None, limit: int = 1000,
+                match: Callable[[str], bool] | None = None) -> list[Received]:
+        if not 1 <= limit <= MAX_LIMIT:
+            raise ValueError(f"limit {limit}: expected 1..{MAX_LIMIT}")
+        where, args = ["farm = ?", "t IS NOT NULL"], [farm]
+        if greenhouse is not None:
+            where.append("greenhouse = ?")
+            args.append(greenhouse)
+        if kind is not None and kind != "**":
+            clause, more = kind_clause(kind)
+            where.append(clause.replace("%s", "?"))
+            args += more
+        for op, t in ((">=", t_from), ("<=", t_to)):
+            if t is not None:
+                where.append(f"t {op} ?")
+                args.append(t)
+        out: list[Received] = []
+        for r in self.conn.execute(
+                "SELECT key, payload, idem, farm, greenhouse, kind, t, received FROM messages "
+                f"WHERE {' AND '.join(where)} ORDER BY t, seq", args):
+            if match is None or match(r[0]):
+                out.append(Received(*r))
+                if len(out) >= limit:
+                    break
+        return out
+
+    def reader(self) -> SqliteCloudStore:
+        return SqliteCloudStore(self.path)
 
     def close(self) -> None:
         self.conn.close()

@@ -1,11 +1,16 @@
 """The cloud side: a Zenoh subscriber storing every Serra message once (``python -m gateway
 subscribe``), and the kit CSV per greenhouse rebuilt from the measurements it received.
 
-It declares a zenoh-ext advanced subscriber: on joining it asks each publisher for its cache
-(``HistoryConfig``), and with heartbeat recovery it detects and fetches samples it missed
-(``RecoveryConfig``); repeats from either path, and from a gateway re-sending after a restart,
-are dropped by idempotency key in the store. Samples arrive on Zenoh's threads; one writer
-thread stores them in batches.
+It declares a zenoh-ext advanced subscriber per key expression (one per farm behind the routers'
+access control: gateway.net.acl.AccessSpec.subscriptions): on joining it asks each publisher for
+its cache (``HistoryConfig``), and with heartbeat recovery it detects and fetches samples it
+missed (``RecoveryConfig``); repeats from either path, and from a gateway re-sending after a
+restart, are dropped by idempotency key in the store. Samples arrive on Zenoh's threads, are
+stamped with their arrival time, and one writer thread stores them in batches; a batch the
+store refuses (the database is down) is kept and retried, never dropped. With ``history_farms``
+it also answers history queries for those farms from the store (gateway/cloud/history.py).
+
+In client mode the session opens when a router answers (gateway.net.session.SessionOpener).
 """
 
 from __future__ import annotations
@@ -15,16 +20,20 @@ import logging
 import math
 import queue
 import threading
-from collections.abc import Sequence
+import time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from gateway.cloud.store import CloudStore, NotAMessage, Received, SqliteCloudStore, parse
+from gateway.cloud.store import CloudStore, NotAMessage, Received, parse
 from gateway.kitcsv import write_kit_csv
 
 log = logging.getLogger("serra.cloud")
+BATCH = 1000  # messages per store transaction at most
+RETRY_MAX_S = 30.0  # longest wait between attempts to store a refused batch
 
 
 @dataclass
@@ -34,42 +43,83 @@ class SubscribeStats:
     repeats: int = 0
     not_messages: int = 0
     missed: int = 0  # samples Zenoh reported missed (then recovered from the publisher's cache, or not)
+    store_retries: int = 0  # batches the store refused at first (kept and retried)
+    store_s: float = 0.0  # wall seconds spent storing (rows / store_s: what the store sustains)
 
 
 class Subscriber:
-    """Subscribe to ``key`` on a session built from ``connect``/``listen``/``mode``."""
+    """Subscribe to ``keys`` on a session built from ``connect``/``listen``/``mode`` (+ ``extra``
+    Zenoh config entries: TLS, reconnection; gateway.net.zenohcfg.session_entries)."""
 
-    def __init__(self, store: CloudStore, connect: Sequence[str] = (), key: str = "serra/**",
-                 mode: str = "peer", listen: Sequence[str] = ()) -> None:
-        self.store, self.key = store, key
+    def __init__(self, store: CloudStore, connect: Sequence[str] = (),
+                 keys: str | Sequence[str] = "serra/**", mode: str = "peer",
+                 listen: Sequence[str] = (), extra: Mapping[str, Any] | None = None,
+                 history_farms: Sequence[str] = (), retry: Any = None) -> None:
+        self.store = store
+        self.keys = [keys] if isinstance(keys, str) else list(keys)
+        self.key = ", ".join(self.keys)  # for messages
         self.connect, self.listen, self.mode = list(connect), list(listen), mode
+        self.extra, self.history_farms, self.retry = dict(extra or {}), list(history_farms), retry
         self.stats = SubscribeStats()
-        self._q: queue.Queue[tuple[str, bytes] | None] = queue.Queue()
+        self._q: queue.Queue[tuple[str, bytes, float] | None] = queue.Queue()
         self._writer = threading.Thread(target=self._write, name="serra-cloud-writer", daemon=True)
         self._idle = threading.Condition()
         self._queued = 0  # samples handed to the writer (under _idle)
         self._done = 0  # samples the writer has dealt with
-        self.session = self.sub = self.miss = None
+        self._stopping = threading.Event()
+        self.session: Any = None
+        self.subs: list[Any] = []
+        self.history: Any = None
+        self.opener: Any = None
         self.error: BaseException | None = None
 
-    def start(self) -> None:
-        import zenoh
-        from zenoh.ext import HistoryConfig, RecoveryConfig, declare_advanced_subscriber
-
+    def start(self) -> bool:
+        """Open the session and subscribe (client mode: retried in the background while no
+        router answers; :attr:`ready` is set once subscribed). True if subscribed now."""
+        from gateway.net.session import SessionOpener
         from gateway.publish import zconfig
 
-        self.session = zenoh.open(zconfig.build(self.mode, self.connect, self.listen))
         self._writer.start()
-        self.sub = declare_advanced_subscriber(
-            self.session, self.key, self._on_sample,
-            history=HistoryConfig(detect_late_publishers=True),
-            recovery=RecoveryConfig(heartbeat=True))
-        self.miss = self.sub.sample_miss_listener(self._on_miss)
+        self.opener = SessionOpener(
+            lambda: zconfig.build(self.mode, self.connect, self.listen, extra=self.extra),
+            self._declare, self.retry, what=f"zenoh {self.mode} of {', '.join(self.connect) or '-'}")
+        if self.mode != "client":  # a peer opens without anyone to talk to: an error is final
+            if not self.opener.start(background=False):
+                raise RuntimeError(self.opener.state.last_error)
+        elif not self.opener.start():
+            return False
+        if self.opener.error is not None:
+            raise self.opener.error
+        return True
+
+    @property
+    def ready(self) -> threading.Event:
+        return self.opener.opened
+
+    def _declare(self, session: Any) -> None:
+        from zenoh.ext import HistoryConfig, RecoveryConfig, declare_advanced_subscriber
+
+        from gateway.cloud.history import CloudHistory
+
+        self.session = session
+        try:
+            for key in self.keys:
+                sub = declare_advanced_subscriber(
+                    session, key, self._on_sample,
+                    history=HistoryConfig(detect_late_publishers=True),
+                    recovery=RecoveryConfig(heartbeat=True))
+                self.subs.append((sub, sub.sample_miss_listener(self._on_miss)))
+            if self.history_farms:
+                self.history = CloudHistory(session, self.store, self.history_farms)
+        except BaseException:
+            self._undeclare()
+            self.session = None
+            raise
 
     def _on_sample(self, sample) -> None:
         with self._idle:
             self._queued += 1
-        self._q.put((str(sample.key_expr), sample.payload.to_bytes()))
+        self._q.put((str(sample.key_expr), sample.payload.to_bytes(), time.time()))
 
     def _on_miss(self, miss) -> None:
         self.stats.missed += int(miss.nb)
@@ -79,7 +129,7 @@ class Subscriber:
         while store_open:
             item = self._q.get()
             batch = [item]
-            while len(batch) < 1000:
+            while len(batch) < BATCH:
                 try:
                     batch.append(self._q.get_nowait())
                 except queue.Empty:
@@ -96,11 +146,8 @@ class Subscriber:
                 except NotAMessage as e:
                     self.stats.not_messages += 1
                     log.warning("not a Serra message: %s", e)
-            try:
-                new = self.store.add(msgs)
-            except Exception as e:  # the store failed: say so once, stop storing
-                self.error = e
-                log.error("cloud store failed: %s", e)
+            new = self._store(msgs)
+            if new is None:
                 return
             self.stats.stored += new
             self.stats.repeats += len(msgs) - new
@@ -108,25 +155,62 @@ class Subscriber:
                 self._done += sum(it is not None for it in batch)
                 self._idle.notify_all()
 
+    def _store(self, msgs: list[Received]) -> int | None:
+        """Store a batch, retrying while the store refuses it; None if stopped before that
+        (:attr:`error` then says how many messages were not stored)."""
+        wait, failing = 0.5, ""
+        while True:
+            t0 = time.perf_counter()
+            try:
+                new = self.store.add(msgs)
+            except Exception as e:
+                text = str(e).splitlines()[0] if str(e) else type(e).__name__
+                if text != failing:
+                    log.error("cloud store refused %d messages (%s); kept, retrying", len(msgs), text)
+                    failing = text
+                self.stats.store_retries += 1
+                if self._stopping.wait(wait):
+                    self.error = RuntimeError(f"stopped with {len(msgs) + self._q.qsize()} "
+                                              f"messages not stored: {text}")
+                    return None
+                wait = min(wait * 2, RETRY_MAX_S)
+                continue
+            self.stats.store_s = round(self.stats.store_s + time.perf_counter() - t0, 6)
+            if failing:
+                log.info("cloud store back: stored the kept batch")
+            return new
+
     def wait_idle(self, timeout: float) -> bool:
         """Wait until every sample received so far is stored (tests, shutdown)."""
         with self._idle:
             return self._idle.wait_for(lambda: self._done >= self._queued, timeout)
 
-    def stop(self) -> None:
-        """Undeclare (a declared callback blocks interpreter exit), close, store what came."""
-        for ent in (self.miss, self.sub):
-            if ent is not None:
+    def _undeclare(self) -> None:
+        if self.history is not None:
+            self.history.close()
+            self.history = None
+        for sub, miss in self.subs:
+            for ent in (miss, sub):
                 try:
                     ent.undeclare()
                 except Exception:
                     pass
+        self.subs = []
+
+    def stop(self) -> None:
+        """Undeclare (a declared callback blocks interpreter exit), close, store what came."""
+        if self.opener is not None:
+            self.opener.stop()
+        self._undeclare()
         if self.session is not None:
             self.session.close()
-        self.session = self.sub = self.miss = None
+        self.session = None
         if self._writer.is_alive():
             self._q.put(None)
             self._writer.join(timeout=30)
+            if self._writer.is_alive():  # the store still refuses: give up, say what is lost
+                self._stopping.set()
+                self._writer.join(timeout=30)
 
 
 # -- kit CSV from the cloud's copy ----------------------------------------------------------------
@@ -138,7 +222,7 @@ SIDE_COLUMNS = {
 }
 
 
-def export_kit_csv(store: SqliteCloudStore, farm: str, greenhouse: str, path: Path) -> int:
+def export_kit_csv(store: CloudStore, farm: str, greenhouse: str, path: Path) -> int:
     """The greenhouse's measurements as a kit CSV on the minute grid (mean of the records in each
     minute; rain 1 when any record of the minute was wet); returns the rows written."""
     acc: dict[int, dict[str, list[float]]] = {}

@@ -153,6 +153,20 @@ def client_entries(connect: Iterable[str], tls: TlsFiles | None = None,
     return out
 
 
+def session_entries(connect: Iterable[str] = (), listen: Iterable[str] = (),
+                    tls: TlsFiles | None = None, retry: Retry = Retry()) -> dict[str, Any]:
+    """TLS and reconnection entries of a gateway or subscriber session, to add to the mode and
+    endpoints its own config builder sets (``gateway.publish.zconfig.build(extra=...)``)."""
+    connect, listen = list(connect), list(listen)
+    out: dict[str, Any] = {}
+    if connect:
+        out["connect/retry"] = endpoint_entries(connect=connect, retry=retry)["connect/retry"]
+    if tls is not None:
+        out |= tls_entries(tls, listen=any(e.startswith("tls/") for e in listen),
+                           connect=bool(connect))
+    return out
+
+
 def parse_tls(table: Table, base: Path) -> TlsFiles | None:
     """The ``[tls]`` table (None when absent or empty); paths relative to the config's folder."""
     if not table.raw:

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from gateway.ingest.service import DEFAULT_PORT
+from gateway.net.zenohcfg import Retry, TlsFiles
 
 NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,62}$")
 """Farm and greenhouse names: one Zenoh key chunk (no /, *, $, ?, #, @), at most 63 characters."""
@@ -39,6 +40,8 @@ class ZenohSettings:
     cache: int = 256  # samples per key kept by the advanced publisher for late/missed recovery
     resend_on_start_s: float = 5.0  # wall seconds of sent messages put again after a restart
     extra: dict[str, Any] = field(default_factory=dict)  # raw zenoh config keys (json5 values)
+    tls: TlsFiles | None = None  # [zenoh.tls]: the farm's certificate (docs/fleet.md)
+    retry: Retry = field(default_factory=Retry)  # re-opening the session / a lost link
 
 
 @dataclass(frozen=True)
@@ -242,7 +245,7 @@ def parse_config(raw: dict[str, Any], source: str = "<config>", base: Path = Pat
     lat = loc.get("latitude", float, None, lo=-90, hi=90)
     lon = loc.get("longitude", float, None, lo=-180, hi=180)
     loc.done()
-    zen = _zenoh(top.sub("zenoh"))
+    zen = _zenoh(top.sub("zenoh"), base, farm)
     ob = top.sub("outbox")
     outbox_max = ob.get("max_messages", int, 100_000, lo=10)
     outbox_alarm = ob.get("alarm_fraction", float, 0.8, lo=0.05, hi=1.0)
@@ -271,7 +274,9 @@ def parse_config(raw: dict[str, Any], source: str = "<config>", base: Path = Pat
         log_level=log_level)
 
 
-def _zenoh(z: _Table) -> ZenohSettings:
+def _zenoh(z: _Table, base: Path, farm: str) -> ZenohSettings:
+    retry = Retry(z.get("retry_initial_ms", int, 500, lo=10, hi=3_600_000),
+                  z.get("retry_max_ms", int, 4000, lo=10, hi=3_600_000))
     s = ZenohSettings(
         enabled=z.get("enabled", bool, True),
         mode=z.get("mode", str, "peer", choices=("peer", "client")),
@@ -281,11 +286,42 @@ def _zenoh(z: _Table) -> ZenohSettings:
         cache=z.get("cache", int, 256, lo=1, hi=1_000_000),
         resend_on_start_s=z.get("resend_on_start_s", float, 5.0, lo=0.0),
         extra=z.get("config", dict, {}),
+        tls=_tls(z, base, farm),
+        retry=retry,
     )
     z.done()
+    if retry.max_ms < retry.initial_ms:
+        z.fail("retry_max_ms", f"{retry.max_ms} is below retry_initial_ms = {retry.initial_ms}")
     if s.enabled and s.mode == "client" and not s.connect:
         z.fail("connect", "client mode needs at least one router endpoint to connect to")
+    for key in ("connect", "listen"):
+        for i, e in enumerate(getattr(s, key)):
+            if e.startswith("tls/") and s.tls is None:
+                z.fail(f"{key}[{i}]", f"{e!r} needs a [zenoh.tls] table (ca, cert, key)")
+            if key == "listen" and e.startswith("tls/") and s.tls is not None and s.tls.cert is None:
+                z.fail(f"{key}[{i}]", f"listening on {e!r} needs zenoh.tls.cert and zenoh.tls.key")
     return s
+
+
+def _tls(z: _Table, base: Path, farm: str) -> TlsFiles | None:
+    """``[zenoh.tls]`` (gateway.net.zenohcfg.parse_tls): files checked, key mode 0600, and the
+    certificate's common name must be the farm (the routers' access control keys on it)."""
+    from gateway.net.certs import CertError, common_name, load_certificate
+    from gateway.net.tomlcheck import ConfigError as TableError
+    from gateway.net.tomlcheck import Table
+    from gateway.net.zenohcfg import parse_tls
+
+    raw = z.get("tls", dict, {})
+    try:
+        tls = parse_tls(Table(raw, z.source, z.where("tls")), base)
+        cn = common_name(load_certificate(tls.cert)) if tls is not None and tls.cert else None
+    except (TableError, CertError) as e:
+        raise ConfigError(str(e)) from None
+    if cn is not None and cn != farm:
+        z.fail("tls.cert", f"{tls.cert} is for {cn!r}, not this gateway's farm {farm!r}: the "
+                           "routers' access control lets a gateway speak only under "
+                           "serra/<its certificate's name>/** (python -m gateway certs --gateway FARM)")
+    return tls
 
 
 def _estimator(e: _Table) -> EstimatorSettings:

@@ -57,6 +57,7 @@ class Gateway:
         self.session: Any = None
         self.publisher: Any = None
         self.history: Any = None
+        self.opener: Any = None  # client mode: opens the session once a router answers
         self.endpoints: list[str] = []
         self.running: Running | None = None
         self.ingest_counters: dict[str, int] = {}
@@ -72,6 +73,9 @@ class Gateway:
         out: dict[str, Any] = {"ingest": dict(self.ingest_counters)}
         if self.publisher is not None:
             out["zenoh"] = {"enabled": True, "endpoints": self.endpoints, **asdict(self.publisher.state)}
+        elif self.opener is not None:  # no router answered yet: the outbox holds the messages
+            out["zenoh"] = {"enabled": True, "mode": "client", "connecting": True,
+                            "endpoints": list(self.cfg.zenoh.connect), **asdict(self.opener.state)}
         else:
             out["zenoh"] = {"enabled": False}
         if self.diagnosis is not None:
@@ -81,18 +85,36 @@ class Gateway:
     def start_zenoh(self) -> None:
         import zenoh
 
+        from gateway.net.session import SessionOpener
+        from gateway.net.zenohcfg import session_entries
         from gateway.publish import zconfig
+
+        z = self.cfg.zenoh
+        extra = session_entries(z.connect, z.listen, z.tls, z.retry) | z.extra
+
+        def config() -> zenoh.Config:
+            return zconfig.build(z.mode, z.connect, z.listen, z.multicast_scouting, extra=extra)
+
+        before = zconfig.listening_ports()
+        if z.mode == "client":  # open() fails while no router answers: retried in the background
+            self.opener = SessionOpener(config, self._attach, z.retry,
+                                        what=f"zenoh client of {', '.join(z.connect)}")
+            self.opener.start()
+            return
+        try:
+            session = zenoh.open(config())
+        except zenoh.ZError as e:  # a bad endpoint or raw key: one line, no traceback
+            raise RuntimeError(f"{self.cfg.source}: [zenoh]: cannot open the session: {e}") from None
+        self.endpoints = zconfig.resolve_listen(z.listen, before)
+        self._attach(session)
+
+    def _attach(self, session: Any) -> None:
+        """The session is open: start the publisher and the history queryable on it."""
         from gateway.publish.history import HistoryQueryable
         from gateway.publish.publisher import OutboxPublisher
 
         z = self.cfg.zenoh
-        before = zconfig.listening_ports()
-        try:
-            self.session = zenoh.open(zconfig.build(z.mode, z.connect, z.listen,
-                                                    z.multicast_scouting, extra=z.extra))
-        except zenoh.ZError as e:  # a bad endpoint or raw key: one line, no traceback
-            raise RuntimeError(f"{self.cfg.source}: [zenoh]: cannot open the session: {e}") from None
-        self.endpoints = zconfig.resolve_listen(z.listen, before)
+        self.session = session
         self.publisher = OutboxPublisher(
             self.session, self.cfg.db, cache=z.cache, resend_s=z.resend_on_start_s * self.clock.scale,
             clock=self.clock.now, mode=z.mode, max_rows=self.cfg.outbox_max,
@@ -101,19 +123,23 @@ class Gateway:
         self.history = HistoryQueryable(self.session, self.cfg.db, self.cfg.farm)
 
     def stop_zenoh(self) -> None:
+        if self.opener is not None:
+            self.opener.stop()  # no session opens after this
         if self.publisher is not None:
             self.publisher.stop()
         if self.history is not None:
             self.history.close()
         if self.session is not None:
             self.session.close()
-        self.publisher = self.history = self.session = None
+        self.publisher = self.history = self.session = self.opener = None
 
     def failure(self) -> BaseException | None:
         if self.worker.error is not None:
             return self.worker.error
         if self.publisher is not None and self.publisher.error is not None:
             return self.publisher.error
+        if self.opener is not None and self.opener.error is not None:
+            return self.opener.error
         return None
 
 

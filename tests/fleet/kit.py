@@ -271,3 +271,89 @@ class Inbox:
 
     def has(self, payload: str) -> bool:
         return payload in self.payloads()
+
+
+class LineProc:
+    """A command in a subprocess whose output is kept (and written to `log`); :meth:`start`
+    waits for a line starting with `ready`. Stopped with SIGTERM (a hang is a failure)."""
+
+    def __init__(self, argv: list[str], ready: str, log: Path, env: dict[str, str] | None = None) -> None:
+        self.argv, self.ready, self.log = argv, ready, log
+        self.env = dict(os.environ, PYTHONUNBUFFERED="1", NO_COLOR="1", **(env or {}))
+        self.proc: subprocess.Popen[str] | None = None
+        self.lines: list[str] = []
+        self._reader: threading.Thread | None = None
+
+    def start(self, timeout: float = DEADLINE) -> LineProc:
+        self.proc = subprocess.Popen(self.argv, cwd=ROOT, env=self.env, stdout=subprocess.PIPE,
+                                     stderr=subprocess.STDOUT, text=True, errors="replace")
+        self._reader = threading.Thread(target=self._read, args=(self.proc,), daemon=True)
+        self._reader.start()
+        found = wait_until(lambda: self.line(self.ready) or (self.proc is not None and self.proc.poll()
+                                                             is not None and "died"),
+                           timeout, f"{self.argv[3:5]} ready")
+        if found == "died":
+            self.stop()
+            raise AssertionError(f"{' '.join(self.argv[1:5])} exited: {self.text()[-2000:]}")
+        return self
+
+    def _read(self, proc: subprocess.Popen[str]) -> None:
+        assert proc.stdout is not None
+        with open(self.log, "a", encoding="utf-8") as log:
+            for line in proc.stdout:
+                line = ANSI.sub("", line.rstrip("\n"))
+                self.lines.append(line)
+                log.write(line + "\n")
+                log.flush()
+
+    def line(self, prefix: str) -> str:
+        return next((x for x in list(self.lines) if x.startswith(prefix)), "")
+
+    def text(self) -> str:
+        return "\n".join(self.lines)
+
+    def stop(self, timeout: float = DEADLINE, sig: int = signal.SIGTERM) -> int:
+        if self.proc is None:
+            return 0
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+                raise AssertionError(f"{' '.join(self.argv[1:5])} did not stop on SIGTERM") from None
+        rc = self.proc.returncode
+        if self._reader is not None:
+            self._reader.join(10)
+        if self.proc.stdout is not None:
+            self.proc.stdout.close()
+        self.proc = None
+        return rc
+
+    def __enter__(self) -> LineProc:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        if self.proc is not None and exc[0] is not None:
+            self.proc.kill()
+        self.stop()
+
+
+def subscriber_argv(pki: Pki, name: str, endpoints: Iterable[str], *more: str) -> list[str]:
+    """``python -m gateway subscribe`` in client mode with `name`'s certificate."""
+    tls = pki.tls(name)
+    argv = [sys.executable, "-m", "gateway", "subscribe", "--mode", "client",
+            "--tls-ca", str(tls.ca), "--tls-cert", str(tls.cert), "--tls-key", str(tls.key)]
+    for e in endpoints:
+        argv += ["--connect", e]
+    return argv + list(more)
+
+
+def free_port() -> int:
+    """A port nothing listens on right now (for a router started later on it)."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]

@@ -149,8 +149,10 @@ def greenhouse_lines(snap: S.Snapshot, index: int) -> list[Text]:
 def _temperature_lines(t: S.Temperature) -> list[Text]:
     if t.t is None:
         return [_line("Inside T  ", ("no estimate yet (the estimator waits for final minutes)", WARN))]
-    out = [_line("Inside T  measured ", (number(t.measured), "bold"), " °C · predicted ",
-                 (number(t.predicted), "bold"), f" °C one minute ahead · at {hhmm(t.t)}")]
+    pred: list[str | tuple[str, str]] = [" · predicted ", (number(t.predicted), "bold"),
+                                         " °C a minute ahead"] if t.predicted is not None else []
+    out = [_line("Inside T  measured ", (number(t.measured), "bold"), " °C", *pred,
+                 f" · at {hhmm(t.t)}")]
     if t.forecasts:
         fc = " · ".join(f"+{h} min {v:.2f}" for h, v in sorted(t.forecasts.items()))
         h = max(t.forecasts)
@@ -274,6 +276,11 @@ def gateway_lines(snap: S.Snapshot) -> list[Text]:
     gw = snap.gateway
     if gw.running is None:
         svc = _line("Service    ", ("unknown: no status from a gateway", WARN))
+    elif not gw.running and gw.pid is None:
+        svc = _line("Service    ", ("NO ANSWER", ALARM), " to history queries")
+    elif gw.running and gw.pid is None:  # over Zenoh: it answers; uptime as of its status
+        svc = _line("Service    ", ("answering", OK), f" · up {duration(gw.uptime_s)} at its last "
+                    "status message")
     elif gw.running:
         svc = _line("Service    ", ("running", OK), f" · pid {gw.pid} · up {duration(gw.uptime_s)}"
                     f" · heartbeat {duration(gw.heartbeat_age_s)} ago")
@@ -288,7 +295,9 @@ def gateway_lines(snap: S.Snapshot) -> list[Text]:
         out.append(_line(clock))
     lk = gw.link
     style = DIM if not lk.enabled or lk.up is None else OK if lk.up else ALARM
-    out.append(_line("Zenoh      ", (lk.summary or "?", style)))
+    first, *more = (lk.summary or "?").split("; ")
+    out.append(_line("Zenoh      ", (first, style)))
+    out += [_line(("           " + m, style)) for m in more]
     detail = []
     if lk.endpoints:
         detail.append("listening on " + ", ".join(lk.endpoints))
@@ -300,8 +309,8 @@ def gateway_lines(snap: S.Snapshot) -> list[Text]:
     if ob.pending is None:
         out.append(_line("Outbox     ", ("unknown", DIM)))
     else:
-        oldest = f", oldest from {stamp(ob.oldest_t)}" if ob.pending and ob.oldest_t else ""
-        limits = f" (alarm at {ob.alarm_at}, holds {ob.max})" if ob.alarm_at is not None else ""
+        oldest = f" since {stamp(ob.oldest_t)}" if ob.pending and ob.oldest_t else ""
+        limits = f" · alarm at {ob.alarm_at} of {ob.max}" if ob.alarm_at is not None else ""
         text = f"{ob.pending} waiting{oldest}{limits}"
         out.append(_line("Outbox     ", ("ALARM: " + text, ALARM) if ob.alarm else
                          (text, WARN if ob.pending else OK)))

@@ -9,6 +9,8 @@ the app only draws it.
 
 from __future__ import annotations
 
+import asyncio
+import signal
 import threading
 import time
 from typing import Protocol
@@ -73,6 +75,12 @@ class StatusApp(App[None]):
         yield Footer()
 
     def on_mount(self) -> None:
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGTERM, signal.SIGHUP):  # a closed SSH session: restore, then exit
+            try:
+                loop.add_signal_handler(sig, self.exit)
+            except (NotImplementedError, RuntimeError, ValueError):
+                pass
         self.query_one("#body").focus()
         self.draw()
         self.load()

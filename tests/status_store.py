@@ -69,6 +69,7 @@ def gh_config(name: str = "north", inside: int = 7, vsensor: str | None = None) 
 
 def status_rows(now: float, *, heartbeat: float | None = None, peers: int = 1,
                 pending: int = 0, waiting: tuple[str, ...] = (), scale: float = 300.0,
+                alarm_at: int = 800,
                 ingest: dict[str, int] | None = None, refused: dict | None = None) -> dict[str, Any]:
     beat = time.time() if heartbeat is None else heartbeat
     rows: dict[str, Any] = {
@@ -79,8 +80,8 @@ def status_rows(now: float, *, heartbeat: float | None = None, peers: int = 1,
                   "peers": peers, "routers": 0, "matched_keys": 5 if peers else 0,
                   "waiting_keys": list(waiting), "published": 1234, "last_put": now,
                   "resent_on_start": 0},
-        "outbox": {"pending": pending, "oldest_t": None, "max": 1000, "alarm_at": 800,
-                   "alarm": pending >= 800, "full_rounds": 0, "made": {}},
+        "outbox": {"pending": pending, "oldest_t": None, "max": 1000, "alarm_at": alarm_at,
+                   "alarm": pending >= alarm_at, "full_rounds": 0, "made": {}},
         "ingest": ingest if ingest is not None else {"stored": 150, "duplicate": 2, "bad_tag": 3},
         "greenhouses": {"north": {"state": "running", "cursor": now, "counters": {}}},
         "devices": {"unassigned": []},
@@ -97,6 +98,10 @@ def fill_store(path: Path, minutes: int = 150, *, silent_kit: bool = True,
     s = Store(path)
     try:
         save_greenhouses(s.conn, [gh_config(vsensor=vsensor)], EPOCH)
+        lo, hi = MODEL.bounds(GH)
+        outbox = Outbox(s.conn, 100_000, 0.8)
+        prod = Producers(s.conn, "f1", {"north": GreenhouseInfo(
+            Place("f1", "north", 34.85, 5.73), 7, 7, MODEL, lo.tolist(), hi.tolist())}, outbox)
         s.write_batch(records(7, range(minutes)))
         if silent_kit:
             s.write_batch(records(9, range(10), broken=("rain",)))
@@ -106,16 +111,17 @@ def fill_store(path: Path, minutes: int = 150, *, silent_kit: bool = True,
         pipe = GreenhousePipeline("north", GH, MODEL, 7, 7, None, seed=1)
         pipe.resume(s.conn)
         pipe.step_pending(s.conn, now, 0.0, 600.0)
-        lo, hi = MODEL.bounds(GH)
-        outbox = Outbox(s.conn, 100_000, 0.8)
-        prod = Producers(s.conn, "f1", {"north": GreenhouseInfo(
-            Place("f1", "north", 34.85, 5.73), 7, 7, MODEL, lo.tolist(), hi.tolist())}, outbox)
-        prod.run()
         if finding:
             store_findings(s.conn, "north", [{
                 "effect": "heat_source", "start": "2009-11-01T07:00:00Z",
                 "params": {"power": 20.0, "unit": "W m-2"}, "summary": "an undeclared heater, 20 W/m²",
                 "evidence": "night residual"}], now)
+        prod.run()
+        prod.snapshots(now, 300.0, {"north": {"estimatorState": "running", "outboxPending": 0,
+                                              "outboxAlarm": False, "gatewayUptime": 3600.0,
+                                              "storeSize": 1000, "zenohPeers": 1,
+                                              "zenohRouters": 0, "ingestCounters": {"stored": 5}}})
+        s.conn.execute("UPDATE outbox SET sent = created")  # as if all were published
         if status:
             set_status(s.conn, status_rows(now), now)
     finally:

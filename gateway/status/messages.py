@@ -171,7 +171,9 @@ class Messages:
 
     def _greenhouse(self, gh: str, now: float | None) -> S.GreenhouseView:
         end = now if now is not None else 0.0
-        series = {ch: S.bin_series(pts.items(), end, self.bins)
+        span = S.span_of(min((t for (g, _), pts in self.points.items() if g == gh for t in pts
+                              if t > end - S.DAY), default=None), end)
+        series = {ch: S.bin_series(pts.items(), end, self.bins, span)
                   for (g, ch), pts in self.points.items() if g == gh}
         status = self.latest.get((gh, "status"), (0.0, {}))[1]
         inside, outside = self._reading(gh, "measurement/inside"), self._reading(gh, "measurement/outside")
@@ -181,13 +183,14 @@ class Messages:
         return S.GreenhouseView(
             name=gh, farm=self.farm, model=model, inside_device=inside.device_id,
             outside_device=outside.device_id, state=str(_value(status, "estimatorState", "")),
-            inside=inside, outside=outside, series=series, temperature=self._temperature(gh, end),
+            inside=inside, outside=outside, series=series,
+            temperature=self._temperature(gh, end, span),
             parameters=_parameters(params[1]) if params else (),
             ventilation=_ventilation(*vent) if vent else S.Ventilation(False),
             findings=tuple(sorted((_finding(d) for (g, _), d in self.finding_docs.items() if g == gh),
                                   key=lambda f: f.last_seen)))
 
-    def _temperature(self, gh: str, end: float) -> S.Temperature:
+    def _temperature(self, gh: str, end: float, span: float) -> S.Temperature:
         fcs = self.forecasts.get(gh, {})
         if not fcs:
             return S.Temperature()
@@ -203,7 +206,8 @@ class Messages:
         measured = [(ti + 30.0, f.measured) for ti, f in fcs.items()]
         ahead = [(ti + 60 * h_max + 30.0, f.horizons.get(h_max)) for ti, f in fcs.items()]
         return S.Temperature(t, last.measured, None, dict(last.horizons), last.outlook, tuple(skill),
-                             S.bin_series(measured, end, self.bins), S.bin_series(ahead, end, self.bins))
+                             S.bin_series(measured, end, self.bins, span),
+                             S.bin_series(ahead, end, self.bins, span))
 
     def _kits(self, now: float | None) -> list[S.Kit]:
         newest: dict[int, tuple[float, dict[str, Any]]] = {}

@@ -89,6 +89,18 @@ def _channel_value(ch: str, v: float | None, fmt: str) -> str:
     return fmt.format(v)
 
 
+def wrapped(text: str, indent: str, style: str = "") -> list[Text]:
+    """``text`` over as many lines as it needs (a command must not be cut)."""
+    out, line = [], indent
+    for word in text.split():
+        if len(line) + len(word) + 1 > WIDTH and line.strip():
+            out.append(_line((line.rstrip(), style)))
+            line = indent + "  "
+        line += word + " "
+    out.append(_line((line.rstrip(), style)))
+    return out
+
+
 def _line(*parts: str | tuple[str, str]) -> Text:
     t = Text(no_wrap=True, overflow="ellipsis")
     for p in parts:
@@ -124,7 +136,10 @@ def greenhouse_lines(snap: S.Snapshot, index: int) -> list[Text]:
     head = _line((g.name, "bold"), f"  {g.model} model · estimator ",
                  (state, OK if state == "running" else WARN),
                  f" · kit {g.inside_device} in, {g.outside_device} out")
-    lines = [head, _line(("            latest   last 24 h" + " " * 27 + "min..max", DIM))]
+    some = next(iter(g.series.values()), None)
+    span = duration(some.end - some.start) if some is not None else "24 h"
+    label = f"last {span}"
+    lines = [head, _line((f"            latest   {label:<36} min..max", DIM))]
     for ch, label, unit, fmt in CHANNELS:
         side = g.inside if ch in ("t_in", "rh_in") else g.outside
         v = side.values.get(ch)
@@ -170,7 +185,7 @@ def _temperature_lines(t: S.Temperature) -> list[Text]:
     skill = [s for s in t.skill if s.n]
     if skill:
         parts = "  ".join(f"{s.horizon_min}m {s.mae:.2f}|{s.persistence_mae:.2f}" for s in skill)
-        out.append(_line(f"MAE 24 h  {parts} °C", ("  ours|persistence", DIM)))
+        out.append(_line(f"MAE       {parts} °C", ("  ours|persistence", DIM)))
     elif t.forecasts:
         out.append(_line(("MAE 24 h  none yet: a forecast is scored once its time has come", DIM)))
     return out
@@ -214,7 +229,7 @@ def _ventilation_line(v: S.Ventilation) -> Text:
 def _finding_lines(g: S.GreenhouseView, diagnosis: str) -> list[Text]:
     if not g.findings:
         return [_line("Findings   ", ("none", DIM), f" ({diagnosis})" if diagnosis else
-                      " (the diagnosis runs daily on the last days of data)")]
+                      " (the diagnosis has not run yet: [diagnosis] every_hours)")]
     out = [_line(f"Findings   {len(g.findings)}" + (f" ({diagnosis})" if diagnosis else ""))]
     for f in g.findings[-3:]:
         since = f"since {stamp(f.start)}" if f.start is not None else "since before the data"
@@ -244,7 +259,7 @@ def kit_lines(snap: S.Snapshot) -> list[Text]:
                  if k.stored_boot is not None and k.boot is not None and k.stored_boot != k.boot else "")
         out.append(_line(chans, extra))
         if k.refused:
-            out.append(_line(("     refused: " + k.refused, ALARM)))
+            out += wrapped("refused: " + k.refused, "     ", ALARM)
     if not snap.kits:
         out.append(_line(("no kit has sent a record yet", WARN)))
     out.append(_line(""))

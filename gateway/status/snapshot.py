@@ -40,6 +40,14 @@ class Series:
         return max(self.finite, default=math.nan)
 
 
+def span_of(first: float | None, end: float) -> float:
+    """The sparklines' span: 24 h, or less while the data is younger (at least an hour), so a
+    new kit's first hours fill the line instead of its last few characters."""
+    if first is None:
+        return DAY
+    return min(max(end - first + 60.0, 3600.0), DAY)
+
+
 def bin_series(points: Iterable[tuple[float, float | None]], end: float, bins: int = 36,
                span: float = DAY) -> Series:
     """(t, value) points → the mean of each of ``bins`` equal bins over (end − span, end]."""

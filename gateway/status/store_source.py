@@ -125,15 +125,18 @@ class StoreSource:
         for name, farm, inside, outside, model, config in rows:
             cfg = json.loads(config)
             end = now if now is not None else time.time()
+            first = c.execute("SELECT min(minute) FROM minute WHERE device_id=? AND minute>?",
+                              (inside, end - S.DAY)).fetchone()[0]
+            span = S.span_of(first, end)
             series = {}
             for side, dev in (("inside", inside), ("outside", outside)):
-                series.update(self._minute_series(dev, SIDES[side], end))
+                series.update(self._minute_series(dev, SIDES[side], end, span))
             out.append(S.GreenhouseView(
                 name=name, farm=farm, model=model, inside_device=inside, outside_device=outside,
                 state=str(states.get(name, {}).get("state", "")),
                 inside=self._reading(inside, SIDES["inside"]),
                 outside=self._reading(outside, SIDES["outside"]),
-                series=series, temperature=self._temperature(name, end),
+                series=series, temperature=self._temperature(name, end, span),
                 parameters=self._parameters(name, model, cfg),
                 ventilation=self._ventilation(name, cfg),
                 findings=tuple(_finding(f) for f in sorted(findings(c, name), key=lambda f: f.last_seen))))
@@ -149,17 +152,18 @@ class StoreSource:
         st = {ch: STATUS_NAMES.get(r[2 + 2 * i], str(r[2 + 2 * i])) for i, ch in enumerate(channels)}
         return S.Reading(r[0], device, vals, st)
 
-    def _minute_series(self, device: int, channels: tuple[str, ...], end: float) -> dict[str, S.Series]:
+    def _minute_series(self, device: int, channels: tuple[str, ...], end: float,
+                       span: float) -> dict[str, S.Series]:
         cols = ", ".join(f"{ch}, {ch}_qc" for ch in channels)
         rows = self.conn.execute(f"SELECT minute, {cols} FROM minute WHERE device_id=? AND minute>? "
                                  "AND minute<=?", (device, end - S.DAY, end)).fetchall()
         out = {}
         for i, ch in enumerate(channels):
             pts = [(r[0] + 30.0, r[1 + 2 * i]) for r in rows if not r[2 + 2 * i] & DROP]
-            out[ch] = S.bin_series(pts, end, self.bins)
+            out[ch] = S.bin_series(pts, end, self.bins, span)
         return out
 
-    def _temperature(self, gh: str, end: float) -> S.Temperature:
+    def _temperature(self, gh: str, end: float, span: float) -> S.Temperature:
         c = self.conn
         t = c.execute("SELECT max(t) FROM estimates WHERE greenhouse=? AND name='t_in_next'",
                       (gh,)).fetchone()[0]
@@ -182,8 +186,8 @@ class StoreSource:
         return S.Temperature(
             t=t, measured=at.get(("measured", "t_in"), (None, ""))[0],
             predicted=pred[0] if pred else None, forecasts=fc, outlook=outlook, skill=skill,
-            measured_series=S.bin_series(measured, end, self.bins),
-            forecast_series=S.bin_series(fseries, end, self.bins))
+            measured_series=S.bin_series(measured, end, self.bins, span),
+            forecast_series=S.bin_series(fseries, end, self.bins, span))
 
     def _parameters(self, gh: str, model: str, cfg: dict[str, Any]) -> tuple[S.Parameter, ...]:
         names, lo, hi = self._model_bounds(gh, model, cfg)
@@ -245,7 +249,7 @@ class StoreSource:
         for dev in sorted(set(health) | {d for d in roles if d is not None}):
             h = health.get(dev)
             ref = self._refused.get(dev)
-            refused = (f"{ref.get('reason')} x{ref.get('count')}: recover with {ref.get('recovery')}"
+            refused = (f"{ref.get('reason')} x{ref.get('count')}; recover: {ref.get('recovery')}"
                        if isinstance(ref, dict) else "")
             last = h.last_sample_t if h else None
             out.append(S.Kit(dev, tuple(roles.get(dev, [])), last, h.records if h else 0,

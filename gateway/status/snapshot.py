@@ -243,7 +243,8 @@ def attention(snap: Snapshot) -> list[str]:
     out = []
     gw = snap.gateway
     if gw.running is False:
-        out.append("the gateway is not running")
+        out.append("the gateway is not running" if gw.pid is not None or gw.heartbeat_age_s
+                   is not None else "no gateway answers over Zenoh")
     if gw.link.enabled and gw.link.up is False:
         out.append("the Zenoh link is down")
     if gw.outbox.alarm:

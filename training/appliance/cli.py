@@ -274,8 +274,9 @@ class Demo:
         s.write_json(self.out / "summary.json")
         for line in s.lines():
             self.say(line)
-        self.say(f"  files     {self.out}/: serra.db (the gateway's store: python -m gateway "
-                 f"status --db {self.out}/serra.db), cloud.db, gateway.log, summary.json")
+        self.say(f"  files     {self.out}/: serra.db (the gateway's store), cloud.db (the "
+                 "subscriber's), gateway.log, summary.json")
+        self.say(f"  look again: python -m gateway status --db {self.out}/serra.db")
 
 
 CONFIG = """# Written by python -m training run (make run): the shipped defaults

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import sqlite3
+import textwrap
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -33,7 +34,16 @@ class Summary:
     def minutes(self) -> float:
         return (self.end - self.start) / 60.0
 
-    def lines(self) -> list[str]:
+    def lines(self, width: int = 80) -> list[str]:
+        """The summary, wrapped to ``width`` columns."""
+        out = []
+        for line in self._lines():
+            head = len(line) - len(line.lstrip()) + (10 if line.startswith("  ") else 2)
+            out += textwrap.wrap(line, width, subsequent_indent=" " * head,
+                                 break_on_hyphens=False) or [""]
+        return out
+
+    def _lines(self) -> list[str]:
         def hm(t: float) -> str:
             return time.strftime("%Y-%m-%d %H:%MZ", time.gmtime(t))
 

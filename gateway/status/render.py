@@ -77,6 +77,11 @@ def size(n: int | None) -> str:
     return "?"
 
 
+def tail(text: str, width: int) -> str:
+    """A path cut on the left (its file name is what matters)."""
+    return text if len(text) <= width else "…" + text[-(width - 1):]
+
+
 def number(v: float | None, fmt: str = "{:.2f}") -> str:
     return "—" if v is None or not math.isfinite(v) else fmt.format(v)
 
@@ -336,12 +341,12 @@ def gateway_lines(snap: S.Snapshot) -> list[Text]:
                 if d.free_bytes is not None and d.total_bytes else "")
         out.append(_line(f"Store      {size(d.store_bytes)}{used}"))
         if d.path:
-            out.append(_line((f"           {d.path}", DIM)))
+            out.append(_line((f"           {tail(d.path, WIDTH - 11)}", DIM)))
     for name, words in sorted(gw.diagnosis.items()):
         out.append(_line(f"Diagnosis  {name}: {words}"))
     for n in snap.notes:
         out.append(_line(("Note       " + n, WARN)))
-    out.append(_line((f"Source     {snap.source}", DIM)))
+    out.append(_line((f"Source     {tail(snap.source, WIDTH - 11)}", DIM)))
     return out
 
 

@@ -17,6 +17,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import textwrap
 import threading
 import time
 from pathlib import Path
@@ -274,8 +275,9 @@ class Demo:
         s.write_json(self.out / "summary.json")
         for line in s.lines():
             self.say(line)
-        self.say(f"  files     {self.out}/: serra.db (the gateway's store), cloud.db (the "
+        files = (f"  files     {self.out}/: serra.db (the gateway's store), cloud.db (the "
                  "subscriber's), gateway.log, summary.json")
+        self.say("\n".join(textwrap.wrap(files, 80, subsequent_indent=" " * 12)))
         self.say(f"  look again: python -m gateway status --db {self.out}/serra.db")
 
 

@@ -73,7 +73,7 @@ def test_on_a_terminal_the_status_screen_shows_and_ctrl_c_stops_everything(tmp_p
                               text=True, timeout=60).stdout
 
     try:
-        shot = wait_for(lambda: s if "MAE " in (s := screen()) else "", 180,
+        shot = wait_for(lambda: s if "ours|persistence" in (s := screen()) else "", 180,
                         "the status screen with a scored forecast")
         lines = shot.splitlines()
         assert "farm demo-farm · greenhouse north (1/1)" in lines[0] and "×300" in lines[0]

@@ -192,7 +192,7 @@ def _temperature_lines(t: S.Temperature) -> list[Text]:
         parts = "  ".join(f"{s.horizon_min}m {s.mae:.2f}|{s.persistence_mae:.2f}" for s in skill)
         out.append(_line(f"MAE       {parts} °C", ("  ours|persistence", DIM)))
     elif t.forecasts:
-        out.append(_line(("MAE 24 h  none yet: a forecast is scored once its time has come", DIM)))
+        out.append(_line(("MAE       none yet: a forecast is scored once its time has come", DIM)))
     return out
 
 

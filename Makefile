@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: run demo test bench images lint clean venv stubs
+.PHONY: run demo test bench bench-generality images lint clean venv stubs
 
 # The wheel carries gateway/ only (pyproject.toml); training/ and the other repository tools
 # are importable in the dev venvs, from any folder and in subprocesses, through this .pth.
@@ -51,13 +51,19 @@ BENCH_STAMP := $(BENCH_VENV)/.installed
 $(BENCH_STAMP): pyproject.toml
 	$(PYTHON) -m venv $(BENCH_VENV)
 	$(BENCH_VENV)/bin/python -m pip install --quiet --upgrade pip
-	$(BENCH_VENV)/bin/python -m pip install --quiet -e '.[dev,bench]'
+	$(BENCH_VENV)/bin/python -m pip install --quiet -e '.[dev,bench,training,cloud]'
 	$(BENCH_VENV)/bin/python $(CHECKOUT_PTH)
 	touch $(BENCH_STAMP)
 
 ## bench: speed and memory, side by side with peers; JSON in bench/results/
 bench: $(BENCH_STAMP)
 	$(BENCH_VENV)/bin/python tests/bench/run.py
+
+## bench-generality: diagnosis and forecasts on three independent generators (one held out),
+## 3 weather windows, every change kind, 11 effect-free windows each; parallel processes.
+## JSON in bench/results/generality.json, Markdown into docs/effects.md ("Generality suite").
+bench-generality: $(STAMP)
+	$(PY) tests/generality/suite.py --jobs 2
 
 ## images: MCU firmware bundle and gateway bundle in images/build/
 images: $(STAMP)

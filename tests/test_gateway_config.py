@@ -183,9 +183,9 @@ def test_a_port_in_use_is_one_line_naming_it(tmp_path: Path) -> None:
                            capture_output=True, text=True, timeout=120, cwd=tmp_path)
     finally:
         busy.close()
-    assert r.returncode == 1
+    assert r.returncode == 2
     last = r.stderr.strip().splitlines()[-1]
-    assert f"ERROR serra.gateway: ingest cannot start on udp 127.0.0.1:{port}: Address already in use" in last
+    assert f"ERROR serra.gateway: cannot listen on 127.0.0.1:{port}: address already in use" in last
     assert "Traceback" not in r.stderr
 
 

@@ -240,3 +240,29 @@ def test_a_ventilation_sensor_feeds_the_ventilation_messages(tmp_path: Path) -> 
     assert vent[-1]["outOfTrainingRange"]["value"] is True
     for doc in vent:
         assert validate.errors(doc) == []
+
+
+def test_the_shipped_virtual_sensor_plugs_into_the_service() -> None:
+    """resources.load_ventilation wraps the real ONNX sensor: finite, non-negative flows with
+    their heat loss each minute, flagged steps published as out of range, and a model trained
+    for another model kind refused with the mismatch named."""
+    import pytest
+
+    from gateway.service.resources import load_ventilation
+    from gateway.vsensor.features import feature_names
+    from gateway.vsensor.models import shipped_model
+
+    gh = load_greenhouse("almeria-palmerillas")
+    model = build_model("almeria", gh)
+    step = load_ventilation(shipped_model("almeria"), model, gh)
+    fluxes = dict.fromkeys(feature_names("almeria")[3:], 20.0)
+    drivers = {"t_in": 24.0, "t_out": 18.0, "rh_in": 70.0, "rh_out": 55.0, "wind": 2.0}
+    out = [step(EPOCH + 60.0 * k, drivers, fluxes) for k in range(10)]
+    out.append(step(EPOCH + 3600.0, drivers, fluxes))  # after a gap: the history restarts
+    for est in out:
+        assert math.isfinite(est.flow) and est.flow >= 0.0 and math.isfinite(est.heat_loss)
+    assert out[-1].heat_loss >= 0.0  # warmer inside: the house loses heat through its vents
+    missing = step(EPOCH + 3660.0, {**drivers, "t_in": math.nan}, fluxes)
+    assert missing.out_of_range and math.isfinite(missing.flow)
+    with pytest.raises(ValueError, match="prototype|almeria"):
+        load_ventilation(shipped_model("almeria"), MODEL, GH)

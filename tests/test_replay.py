@@ -41,7 +41,7 @@ def result(drifting):
 def test_report_has_the_promised_shape_and_adaptation_pays(result):
     rep = report(result, warmup=60)
     assert rep["model"] == "almeria" and rep["samples"] == 1440 and rep["skipped"] == 0
-    assert set(rep["metrics"]) == {"adaptive", "constant", "persistence"}
+    assert set(rep["metrics"]) == {"adaptive", "constant", "persistence", "arx"}
     for m in rep["metrics"].values():
         assert set(m) == METRIC_KEYS and m["n"] == rep["metrics"]["adaptive"]["n"]
     assert set(rep["horizons"]) == {"15", "60"}
@@ -166,3 +166,39 @@ def test_horizons_are_minutes_whatever_the_model_step(drifting):
     assert np.all(f["measured"] == res.measured[f["target"]])
     assert np.all(f["persistence"] == res.measured[f["target"] - 3])
     assert set(report(res)["horizons"]) == {"15", "60"}
+
+
+def test_report_has_the_arx_baseline_and_the_outlook_forecasts(result):
+    rep = report(result, warmup=60)
+    assert rep["outlook"] == "clear-sky-trend"  # the preset has a [site]
+    assert "arx" in rep["metrics"]
+    for block in rep["horizons"].values():
+        assert {"adaptive", "constant", "arx", "persistence", "adaptive_outlook", "arx_outlook"} == set(block)
+        assert len({m["n"] for m in block.values()}) == 1  # one set of samples per comparison
+
+
+def test_an_outlook_of_the_measured_future_gives_the_measured_weather_forecasts(result):
+    """The driver blocks (gateway/estimate/horizon.py) are laid out right: an outlook that
+    returns what was later measured reproduces the measured-weather forecasts exactly."""
+    from dataclasses import replace as copy_with
+
+    from gateway.estimate.horizon import outlook_drivers
+
+    class Measured:
+        name = "measured"
+
+        def drivers_at(self, columns, time, starts, horizon, dt):
+            n = len(time)
+            idx = np.minimum(starts[:, None] + np.arange(1, horizon + 1)[None, :], n - 1)
+            return {k: np.asarray(v, float)[idx] for k, v in columns.items()}
+
+    kit = ["t_in", "rh_in", "t_out", "rh_out", "i_glob", "wind", "i_in", "t_soil", "vent_roof",
+           "vent_side", "lai"]
+    n = len(result.measured)
+    ahead = outlook_drivers(Measured(), result.x, kit, result.time, result.dt, result.gh,
+                            np.arange(n - 1), 15)
+    f = forecasts(copy_with(result, ahead=ahead), 15)
+    ok = np.isfinite(f["adaptive"])
+    assert ok.sum() > 1000
+    np.testing.assert_allclose(f["adaptive_outlook"][ok], f["adaptive"][ok], atol=1e-9)
+    np.testing.assert_allclose(f["arx_outlook"][ok], f["arx"][ok], atol=1e-9)

@@ -24,7 +24,9 @@ Weather: the shipped Bleiswijk file (Oct-Dec 2009, read here directly); default 
 
 Effects (from --at): whitening (transmission x f), door (extra air changes), heater (constant or
 night-only, on the air), barrels (a water node coupled to the air), sunsensor (a sensor body
-heated by inside radiation, with a 4-min lag, RH read at the body temperature), drift (K/day).
+heated by inside radiation, with a 4-min lag, RH read at the body temperature), drift (K/day);
+outside the diagnosis library: misting (amp W m-2 of evaporative cooling of the air, its vapour
+added, 11-15 h UTC), controller (house vents from 13 °C, full at 16 °C, instead of 17/24 °C).
 """
 
 from __future__ import annotations
@@ -139,6 +141,7 @@ def simulate(plant, start, days, effect=None, at=None, amp=None, seed=1, weather
     dt = 10.0
     sub = int(60 / dt)
     vr = vs = 0.0
+    hour = (w["time"] - w["time"].astype("datetime64[D]")).astype("timedelta64[s]").astype(float) / 3600
     for i in range(n):
         to, u, ig = w["t_out"][i], w["wind"][i], w["i_glob"][i]
         xo = w["rh_out"][i] / 100 * xsat(to)
@@ -154,9 +157,12 @@ def simulate(plant, start, days, effect=None, at=None, amp=None, seed=1, weather
         if effect == "nightheater" and on[i] and ig < 10:
             heat = amp
         # vent controller (house), evaluated every minute on the air temperature
+        mist = amp if effect == "misting" and on[i] and 11.0 <= hour[i] < 15.0 else 0.0
         if plant == "house":
-            vr = float(np.clip((ta - p["vent_on"]) / (p["vent_full"] - p["vent_on"]), 0, 1))
-            vs = float(np.clip((ta - p["vent_on"] - 3) / (p["vent_full"] - p["vent_on"]), 0, 1))
+            other = effect == "controller" and on[i]
+            v_on, v_full = (13.0, 16.0) if other else (p["vent_on"], p["vent_full"])
+            vr = float(np.clip((ta - v_on) / (v_full - v_on), 0, 1))
+            vs = float(np.clip((ta - v_on - 3) / (v_full - v_on), 0, 1))
         for _ in range(sub):
             # cover: quasi-steady, Newton on Tc
             hci_c = 1.52 * abs(ta - to) ** (1 / 3) + 0.5
@@ -186,7 +192,7 @@ def simulate(plant, start, days, effect=None, at=None, amp=None, seed=1, weather
             hm = 1.8 * abs(tm - ta) ** (1 / 3) + 1.0
             q_mass = hm * (tm - ta)
             q_w = hw * (tw - ta)
-            dta = (q_cov + q_vent + q_mass + q_w + heat + p["a_air"] * iin) / ca
+            dta = (q_cov + q_vent + q_mass + q_w + heat - mist + p["a_air"] * iin) / ca
             # mass
             tmk, tck = tm + 273.15, tc + 273.15
             lw = (p["tau_lw"] * 0.95 * SIGMA * (tsk ** 4 - tmk ** 4)
@@ -203,7 +209,7 @@ def simulate(plant, start, days, effect=None, at=None, amp=None, seed=1, weather
             evap = max(gv * (xsat(tm) - x), 0.0)
             dtm = (p["a_mass"] * iin - q_mass + lw + q_g - LV * evap) / p["c_mass"]
             cond = max((x - xsat(tc)) * p["cover_ratio"] * hci_c / (RHO * CP) * 1.0, 0.0)
-            dx = (evap - g_flow * (x - xo) - cond) / h
+            dx = (evap + mist / LV - g_flow * (x - xo) - cond) / h
             ta += dt * dta
             tm += dt * dtm
             x = min(x + dt * dx, 1.02 * xsat(ta))

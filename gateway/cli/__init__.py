@@ -22,6 +22,7 @@ COMMANDS = {
     "subscribe": "gateway.cli.subscribe",
     "certs": "gateway.cli.certs",
     "router": "gateway.cli.router",
+    "vsensor": "gateway.cli.vsensor",
     "status": "gateway.cli.status",
 }
 

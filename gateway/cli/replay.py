@@ -8,6 +8,7 @@ import sys
 from gateway.cli import CliError
 from gateway.cli.common import add_data_arguments, dump_json, load_inputs, progress_bar, read_params_file
 from gateway.estimate.online import online_settings
+from gateway.estimate.outlook import OUTLOOKS, make_outlook
 from gateway.estimate.replay import replay, report, write_predictions
 
 _KEYS = ("window", "every", "iterations", "bats", "prior")
@@ -19,9 +20,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="run the adaptive (online) model over recorded data, sample by sample",
         description="Feed a kit CSV to the online parameter estimator exactly as the live gateway "
         "would, and score its one-step-ahead prediction of the inside temperature against the "
-        "same model with fixed parameters ('constant') and persistence, plus 15/30/60-minute "
-        "forecasts. Settings come from the model and the greenhouse's [online.<output>] tables "
-        "(docs/online-estimator.md).",
+        "same model with fixed parameters ('constant'), persistence and a recursive-least-squares "
+        "linear baseline ('arx'), plus 15/30/60-minute forecasts with the weather later measured "
+        "and with a causal weather outlook (what a live gateway can do). Settings come from the "
+        "model and the greenhouse's [online.<output>] tables (docs/online-estimator.md).",
         epilog="example: python -m gateway replay --data spring.csv --greenhouse almeria-palmerillas "
         "--model almeria --params calibrated.toml --json --plot replay.png",
     )
@@ -41,6 +43,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="leave the first MIN minutes out of every metric (e.g. 1440 to score days 2..)",
     )
     p.add_argument("--seed", type=int, default=0, help="random seed of the bats (0)")
+    p.add_argument("--outlook", choices=sorted(OUTLOOKS),
+                   help="weather outlook of the live-style forecasts (default: clear-sky-trend when "
+                   "the greenhouse has a [site], else hold-latest)")
     p.add_argument("--out", metavar="predictions.csv",
                    help="write time, measured/predicted values, parameters and heat fluxes")
     p.add_argument("--plot", metavar="replay.png", help="draw measured vs predicted, residual, parameters")
@@ -74,9 +79,15 @@ def run(args: argparse.Namespace) -> int:
     warmup = int(round(args.warmup * 60.0 / series.step))
     if warmup >= len(series) - 2:
         raise CliError(f"--warmup {args.warmup:g} min leaves no sample of {args.data} to score")
+    outlook = None
+    if args.outlook:
+        try:
+            outlook = make_outlook(args.outlook, gh)
+        except ValueError as exc:
+            raise CliError(str(exc)) from None
     with progress_bar(f"replay {model.name}", len(series), True) as bar:
         result = replay(model, series, gh, theta0, settings, seed=args.seed,
-                        progress=lambda done: bar(advance=100))
+                        progress=lambda done: bar(advance=100), outlook=outlook)
     rep = report(result, warmup)
     rep["data"] = args.data
     rep["start"] = "calibrated" if args.params else "middle of the hard box"
@@ -110,9 +121,14 @@ def _print_human(rep: dict) -> None:
     for name, m in rep["metrics"].items():
         out.write(_line(name, m))
     for h, block in rep["horizons"].items():
-        out.write(f"{h}-minute forecast:\n")
+        out.write(f"{h}-minute forecast, weather as later measured:\n")
         for name, m in block.items():
-            out.write(_line(name, m))
+            if not name.endswith("_outlook"):
+                out.write(_line(name, m))
+        out.write(f"{h}-minute forecast, weather from the {rep['outlook']} outlook:\n")
+        for name, m in block.items():
+            if name.endswith("_outlook"):
+                out.write(_line(name.removesuffix("_outlook"), m))
     if rep["radiation"]:
         out.write("inside radiation (sunlit samples):\n")
         for name, m in rep["radiation"].items():

@@ -73,6 +73,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 async def _main(cfg, resources) -> int:
+    from gateway.ingest.service import ListenError
     from gateway.service.run import run_gateway
 
     log = logging.getLogger("serra.gateway")
@@ -82,6 +83,9 @@ async def _main(cfg, resources) -> int:
         loop.add_signal_handler(sig, stop.set)
     try:
         await run_gateway(cfg, resources, stop)
+    except ListenError as e:  # the address is the config's: exit 2, as for any config error
+        log.error("%s", e)
+        return 2
     except (OSError, sqlite3.Error, RuntimeError) as e:  # expected faults: one line, no traceback
         log.error("%s", e)
         return 1

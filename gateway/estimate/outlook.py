@@ -11,10 +11,13 @@ are held at their latest finite value: they are the grower's or the crop's, not 
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Protocol
 
 import numpy as np
+
+from gateway.estimate.clear_sky_trend import ClearSkyTrend, forward_fill
+from gateway.greenhouse import Greenhouse
 
 
 class Outlook(Protocol):
@@ -55,24 +58,45 @@ class HoldLatest:
             raise ValueError(f"horizon must be >= 0, got {horizon}")
         return {k: np.full(horizon, latest_finite(v)) for k, v in history.items()}
 
+    def drivers_at(self, columns: Mapping[str, np.ndarray], time: np.ndarray, starts: np.ndarray,
+                   horizon: int, dt: float) -> dict[str, np.ndarray]:
+        """``drivers`` for many starts at once: (N, horizon) arrays (see ``forecast_drivers``)."""
+        starts = np.asarray(starts, dtype=int)
+        return {k: np.repeat(forward_fill(np.asarray(v, float))[starts][:, None], horizon, axis=1)
+                for k, v in columns.items()}
 
-OUTLOOKS: dict[str, str] = {
-    "hold-latest": "gateway.estimate.outlook:HoldLatest",
+
+OUTLOOKS: dict[str, Callable[[Greenhouse], Outlook]] = {
+    "hold-latest": lambda gh: HoldLatest(),
+    ClearSkyTrend.name: ClearSkyTrend.for_greenhouse,
 }
-"""Outlooks the gateway config can name (``outlook = "..."``): name → ``module:class``. A new
-outlook adds one line here (imported only when chosen, so no import cycle). The class is built
-without arguments and its ``name`` must be the key."""
+"""Outlooks by name (what a live gateway's configuration selects), each built for a greenhouse
+(``clear-sky-trend`` needs its ``[site]``)."""
 
 
-def make_outlook(name: str) -> Outlook:
-    """The outlook registered as ``name`` (ValueError naming the known ones otherwise)."""
-    import importlib
+def make_outlook(name: str, gh: Greenhouse) -> Outlook:
+    """The outlook called ``name`` for greenhouse ``gh``; a clear error for an unknown name."""
+    if name not in OUTLOOKS:
+        raise ValueError(f"unknown weather outlook {name!r} (known: {', '.join(OUTLOOKS)})")
+    return OUTLOOKS[name](gh)
 
-    target = OUTLOOKS.get(name)
-    if target is None:
-        raise ValueError(f"unknown weather outlook {name!r} (known: {', '.join(sorted(OUTLOOKS))})")
-    module, _, attr = target.partition(":")
-    outlook = getattr(importlib.import_module(module), attr)()
-    if outlook.name != name:
-        raise ValueError(f"outlook {target} calls itself {outlook.name!r}, registered as {name!r}")
-    return outlook
+
+def forecast_drivers(outlook: Outlook, columns: Mapping[str, np.ndarray], time: np.ndarray,
+                     starts: np.ndarray, horizon: int, dt: float) -> dict[str, np.ndarray]:
+    """What ``outlook`` gives for the steps start + 1 … start + horizon of every start: arrays
+    (N, horizon) per column, from ``columns`` (a whole series on ``time``) read up to each start.
+
+    Outlooks with a ``drivers_at`` method serve all starts in one call; any other
+    :class:`Outlook` is called once per start on the history up to it.
+    """
+    batch = getattr(outlook, "drivers_at", None)
+    if batch is not None:
+        return batch(columns, time, starts, horizon, dt)
+    starts = np.asarray(starts, dtype=int)
+    out = {k: np.full((len(starts), horizon), np.nan) for k in columns}
+    for row, s in enumerate(starts):
+        got = outlook.drivers({k: np.asarray(v)[: s + 1] for k, v in columns.items()},
+                              time[: s + 1], horizon, dt)
+        for k in out:
+            out[k][row] = got.get(k, np.nan)
+    return out

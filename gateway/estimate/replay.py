@@ -6,9 +6,14 @@ gateway does, records what it predicted, then computes, after the loop and vecto
 - the "constant" baseline: the same model with the starting parameters held fixed (the
   thesis's offline-calibrated model), one step ahead from the measured state;
 - persistence: T_in[t + 1] = T_in[t];
-- forecasts h = 15, 30, 60 min ahead from every start t with the parameters in force at t and
-  the measured weather of the coming minutes (``Model.forecast``), against persistence
-  T_in[t + h] = T_in[t].
+- the plain adaptive linear baseline (``arx``, gateway/estimate/arx.py): recursive least
+  squares on a linear model of dT_in with the same kit inputs, one step and h steps ahead;
+- forecasts h = 15, 30, 60 min ahead from every start t with the parameters in force at t
+  (``Model.forecast``), against persistence T_in[t + h] = T_in[t] and the ARX baseline, twice:
+  with the weather that was later measured (model skill: ``adaptive``, ``constant``, ``arx``)
+  and with a causal weather outlook (what the live gateway can do: ``adaptive_outlook``,
+  ``arx_outlook``; gateway/estimate/outlook.py, default ``clear-sky-trend`` when the greenhouse
+  has a ``[site]``).
 
 All figures of one comparison use the same samples (every prediction finite).
 """
@@ -22,7 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
+from gateway.estimate import arx as arx_baseline
+from gateway.estimate.horizon import HorizonDrivers, outlook_drivers
 from gateway.estimate.online import Counters, GroupSettings, OnlineEstimator
+from gateway.estimate.outlook import Outlook, make_outlook
 from gateway.greenhouse import Greenhouse
 from gateway.metrics import metrics
 from gateway.model.model import Model
@@ -31,6 +39,8 @@ from gateway.series import Series
 
 HORIZONS = (15, 30, 60)
 """Forecast horizons [min] of the report (reached in whole model steps)."""
+FORECASTS = ("adaptive", "constant", "arx", "persistence", "adaptive_outlook", "arx_outlook")
+"""Forecasts of the report, in order: measured weather (model skill), then with the outlook."""
 
 
 @dataclass
@@ -52,6 +62,8 @@ class ReplayResult:
     horizons: dict[int, dict[str, np.ndarray]] = field(default_factory=dict)
     rad_adaptive: np.ndarray | None = None
     rad_constant: np.ndarray | None = None
+    arx: arx_baseline.ArxResult | None = None
+    ahead: HorizonDrivers | None = None  # the outlook's driver blocks, one per start
 
     @property
     def measured(self) -> np.ndarray:
@@ -73,8 +85,12 @@ def replay(
     seed: int | None = 0,
     horizons: Sequence[int] = HORIZONS,
     progress: Callable[[int], None] | None = None,
+    outlook: Outlook | None = None,
 ) -> ReplayResult:
-    """Run the estimator over ``series`` row by row; ``progress(rows_done)`` every 100 rows."""
+    """Run the estimator over ``series`` row by row; ``progress(rows_done)`` every 100 rows.
+
+    ``outlook``: the weather outlook of the live-style forecasts (default: ``clear-sky-trend``
+    for a greenhouse with a ``[site]``, else ``hold-latest``)."""
     est = OnlineEstimator(model, gh, theta0, settings, dt=series.step, seed=seed)
     n, k = len(series), len(model.names)
     adaptive = np.full(n, np.nan)
@@ -105,10 +121,16 @@ def replay(
         constant=constant, theta=theta, theta0=theta0_used, step_ms=step_ms,
         counters=est.counters, settings=est.settings,
     )
-    for minutes in horizons:
-        steps = minutes * 60.0 / series.step
-        if steps >= 1 and float(steps).is_integer():  # a horizon the model step cannot reach is left out
-            result.horizons[int(minutes)] = forecasts(result, int(steps))
+    result.arx = arx_baseline.fit(x)
+    reach = {int(m): int(m * 60.0 / series.step) for m in horizons
+             if m * 60.0 / series.step >= 1 and float(m * 60.0 / series.step).is_integer()}
+    if reach:  # a horizon the model step cannot reach is left out
+        if outlook is None:
+            outlook = make_outlook("clear-sky-trend" if gh.site is not None else "hold-latest", gh)
+        result.ahead = outlook_drivers(outlook, x, list(series.columns), series.time, series.step,
+                                       gh, np.arange(max(n - 1, 0)), max(reach.values()))
+    for minutes, steps in reach.items():
+        result.horizons[minutes] = forecasts(result, steps)
     if model.radiation is not None and "i_in" in x and np.isfinite(x["i_in"]).any():
         j = model.index(model.radiation.parameter.name)
         # i_in at t simulated from i_glob at t with c_tsw as estimated up to t - 1 (III.35)
@@ -122,24 +144,34 @@ def forecasts(result: ReplayResult, horizon: int) -> dict[str, np.ndarray]:
     """Forecasts of T_in[t + h] from every start t, h = ``horizon`` model steps (vectorised over
     the starts).
 
-    Returns ``target`` (index t + h), ``measured``, ``adaptive`` (parameters in force at t),
-    ``constant`` (theta0) and ``persistence`` (T_in[t]) arrays over the starts.
+    Returns ``target`` (index t + h), ``measured``, ``persistence`` (T_in[t]) and forecasts
+    over the starts: with the measured weather ``adaptive`` (parameters in force at t),
+    ``constant`` (theta0), ``arx``; with the outlook (when ``result.ahead`` is set)
+    ``adaptive_outlook`` and ``arx_outlook``.
     """
     n = len(result.measured)
     starts = np.arange(0, max(n - horizon, 0))
     ok = np.isfinite(result.measured[starts]) & np.all(np.isfinite(result.theta[starts]), axis=1)
     starts = starts[ok]
     model, x, gh, dt = result.model, result.x, result.gh, result.dt
-    adaptive = model.forecast(result.theta[starts], x, gh, dt, starts, horizon)
-    theta0 = np.repeat(result.theta0[None, :], len(starts), axis=0)
-    constant = model.forecast(theta0, x, gh, dt, starts, horizon)
-    return {
+    theta = result.theta[starts]
+    out = {
         "target": starts + horizon,
         "measured": result.measured[starts + horizon],
-        "adaptive": adaptive,
-        "constant": constant,
+        "adaptive": model.forecast(theta, x, gh, dt, starts, horizon),
+        "constant": model.forecast(np.repeat(result.theta0[None, :], len(starts), axis=0),
+                                   x, gh, dt, starts, horizon),
         "persistence": result.measured[starts],
     }
+    if result.arx is not None:
+        out["arx"] = result.arx.forecast(x, starts, horizon)
+    ahead = result.ahead
+    if ahead is not None and horizon <= ahead.horizon:
+        rows = ahead.rows[np.searchsorted(ahead.starts, starts)]
+        out["adaptive_outlook"] = model.forecast(theta, ahead.x, gh, dt, rows, horizon)
+        if result.arx is not None:
+            out["arx_outlook"] = result.arx.forecast(ahead.x, starts, horizon, rows)
+    return out
 
 
 def _common(measured: np.ndarray, preds: Mapping[str, np.ndarray], keep: np.ndarray) -> dict:
@@ -153,20 +185,17 @@ def report(result: ReplayResult, warmup: int = 0) -> dict:
     """The JSON report of the replay; the first ``warmup`` samples are left out of every metric."""
     n = len(result.measured)
     keep = np.arange(n) >= warmup
-    one = _common(
-        result.measured,
-        {"adaptive": result.adaptive, "constant": result.constant, "persistence": result.persistence},
-        keep,
-    )
+    one_step = {"adaptive": result.adaptive, "constant": result.constant,
+                "persistence": result.persistence}
+    if result.arx is not None:
+        one_step["arx"] = result.arx.one_step
+    one = _common(result.measured, one_step, keep)
     horizons = {}
     for h, f in result.horizons.items():
         steps = int(round(h * 60.0 / result.dt))
         keep_h = f["target"] >= warmup + steps  # the start, not only the target, is after warm-up
-        horizons[str(h)] = _common(
-            f["measured"],
-            {"adaptive": f["adaptive"], "persistence": f["persistence"], "constant": f["constant"]},
-            keep_h,
-        )
+        names = [k for k in FORECASTS if k in f]
+        horizons[str(h)] = _common(f["measured"], {k: f[k] for k in names}, keep_h)
     radiation = None
     if result.rad_adaptive is not None:
         sunlit = keep & (result.x["i_glob"] > SUN_THRESHOLD)
@@ -181,6 +210,7 @@ def report(result: ReplayResult, warmup: int = 0) -> dict:
         "skipped": c.faulty_samples,
         "metrics": one,
         "horizons": horizons,
+        "outlook": result.ahead.outlook if result.ahead is not None else None,
         "radiation": radiation,
         "step_ms": {
             "median": float(np.median(ms)) if ms.size else None,

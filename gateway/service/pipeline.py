@@ -71,7 +71,7 @@ class GreenhousePipeline:
         self.inside, self.outside = inside, outside
         self.devices = {inside, outside}
         self.horizons = horizons
-        self.outlook: Outlook = make_outlook(outlook)
+        self.outlook: Outlook = make_outlook(outlook, gh)
         self.gap_s = gap_s
         self.ventilation = ventilation
         self.est = OnlineEstimator(model, gh, theta0, online_settings(model, gh), dt=DT, seed=seed)

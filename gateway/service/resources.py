@@ -4,18 +4,19 @@ sensor. Every problem is a :class:`ConfigError` naming the config key."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from gateway.greenhouse import Greenhouse, GreenhouseError, load_greenhouse
+from gateway.greenhouse import Greenhouse, GreenhouseError, Site, load_greenhouse
 from gateway.model import build_model, check_parameters
 from gateway.model.model import Model
 from gateway.model.params_file import ParamsFileError, read_params
 from gateway.service.config import ConfigError, GatewayConfig, GreenhouseSettings
 from gateway.service.minutes import KIT_COLUMNS
-from gateway.service.pipeline import Ventilation
+from gateway.service.pipeline import Ventilation, VentilationEstimate
 from gateway.store.keys import KeyFileError, load_keys
 
 
@@ -28,23 +29,35 @@ class GreenhouseResources:
     ventilation: Ventilation | None
 
 
+VENT_GAP_S = 90.0
+"""A longer step between two calls restarts the sensor's history (its filters, input delays and
+fed-back outputs), as the estimator restarts its window after a gap."""
+
+
 def load_ventilation(path: Path, model: Model, gh: Greenhouse) -> Ventilation:
-    """The virtual ventilation sensor for ``model`` (gateway/vsensor.py, its own issue).
+    """The virtual ventilation sensor (gateway/vsensor, docs/vsensor.md) for ``model``.
 
     The pipeline calls the returned function once per minute with (t, the minute's drivers, the
-    model's heat fluxes [W m-2]) and publishes what it returns under ``ventilation``. The sensor
-    module provides ``live_sensor(model_path, model, gh)`` returning that function."""
-    try:
-        from gateway import vsensor  # type: ignore[attr-defined]
-    except ImportError:
-        raise ValueError("the virtual ventilation sensor (gateway/vsensor.py) is not in this "
-                         "build: remove the vsensor key") from None
-    factory = getattr(vsensor, "live_sensor", None)
-    if factory is None:
-        raise ValueError("gateway.vsensor has no live_sensor(model_path, model, gh) to call")
+    adaptive model's heat fluxes [W m-2]) and publishes what it returns under ``ventilation``.
+    The ONNX model must have been trained for this model kind (its metadata is checked: a
+    mismatch is a ValueError naming it); a step with flagged inputs (missing, outside the
+    training ranges, another greenhouse's vents) is published with ``out_of_range`` set."""
+    from gateway.vsensor import VentSensor
+
     if not path.exists():
         raise ValueError(f"{path}: no such ONNX model")
-    return factory(path, model, gh)
+    sensor = VentSensor(path, gh, model.name, threads=1)
+    last: list[float] = []
+
+    def step(t: float, drivers: Mapping[str, float],
+             fluxes: Mapping[str, float]) -> VentilationEstimate:
+        if last and t - last[0] > VENT_GAP_S:
+            sensor.reset()
+        last[:] = [t]
+        est = sensor.step(drivers, fluxes)
+        return VentilationEstimate(est.flow, est.q_vent, out_of_range=not est.valid)
+
+    return step
 
 
 def prepare(cfg: GatewayConfig) -> list[GreenhouseResources]:
@@ -66,6 +79,8 @@ def prepare(cfg: GatewayConfig) -> list[GreenhouseResources]:
                                   f"(devices there: {', '.join(map(str, sorted(keys))) or 'none'})")
         try:
             gh = load_greenhouse(g.greenhouse)
+            if gh.site is None and g.latitude is not None and g.longitude is not None:
+                gh = replace(gh, site=Site(g.latitude, g.longitude))  # the config's [location]
             model = build_model(g.model, gh)
             check_parameters(model, gh)
         except GreenhouseError as e:

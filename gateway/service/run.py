@@ -16,7 +16,7 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from gateway.ingest.service import IngestConfig, Running, serve
+from gateway.ingest.service import IngestConfig, ListenError, Running, serve
 from gateway.service.clock import Clock, make_clock
 from gateway.service.config import GatewayConfig
 from gateway.service.diagnosis import DiagnosisScheduler
@@ -169,6 +169,8 @@ def _ingest_failed(ingest: asyncio.Task, cfg: GatewayConfig) -> None:
     """Raise why ingest could not start, naming what it was to listen on."""
     try:
         ingest.result()
+    except ListenError:
+        raise  # already one line naming the address and the reason
     except OSError as e:
         where = [f"udp {cfg.listen[0]}:{cfg.listen[1]}"] if cfg.listen else []
         where += [f"serial {cfg.serial}"] if cfg.serial else []

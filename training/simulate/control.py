@@ -12,6 +12,7 @@ side vents stay), strong wind limits both.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -63,11 +64,12 @@ class VentController:
         return out
 
     def step(self, t_air: float, storm: bool, rain: float, roof: float, side: float,
-             dt: float) -> tuple[float, float]:
+             dt: float, now: float = 0.0) -> tuple[float, float]:
         """New (roof, side) positions [%] after ``dt`` [s] from ``roof``, ``side`` [%].
 
         ``t_air`` [°C] is the controller's air temperature, ``storm`` the wind alarm
-        (:meth:`storm`), ``rain`` [0/1].
+        (:meth:`storm`), ``rain`` [0/1]; ``now`` [s since the epoch, UTC] is not used (a
+        climate computer does not look at the clock).
         """
         roof_target = backlash(roof, t_air, self.roof_setpoint, self.band, self.hysteresis)
         side_target = backlash(side, t_air, self.side_setpoint, self.band, self.hysteresis)
@@ -80,3 +82,77 @@ class VentController:
         roof += min(max(roof_target - roof, -move), move)
         side += min(max(side_target - side, -move), move)
         return roof, side
+
+
+@dataclass(frozen=True)
+class GrowerVents:
+    """Vents moved by hand, as on most small farms: no climate computer, no vent signal.
+
+    The grower comes by a few times a day (``visits``, local solar hours, each drawn
+    ``± jitter`` [h] and skipped with probability ``skip``), looks at the inside air and sets
+    each vent to one of a few notches: roof and sides wide open above ``hot`` [°C], the roof
+    half open and the sides a crack above ``warm``, everything closed below ``cool``, else
+    left as found. Rain or a storm at a visit closes the roof, wind caps both at ``wind_cap``.
+    The last visit of the day closes everything, unless the grower forgets (probability
+    ``forget``): then the vents stay open overnight. Between visits nothing moves, whatever
+    the weather does; the crank is turned within the visit's step. Stateless and seeded per day
+    (``seed``), so a run is reproducible; ``utc_offset`` [h] turns UTC into local solar time.
+    """
+
+    visits: tuple[float, ...] = (8.5, 11.0, 13.5, 16.0, 18.5)
+    jitter: float = 0.75
+    skip: float = 0.25
+    forget: float = 0.2
+    cool: float = 17.0
+    warm: float = 22.0
+    hot: float = 26.0
+    wind_cap: float = 20.0
+    wind_limit: float = 10.0
+    utc_offset: float = 0.0
+    seed: int = 0
+
+    def storm(self, wind: np.ndarray) -> np.ndarray:
+        """Strong wind [bool] per sample (the grower notices it only at a visit)."""
+        return np.asarray(wind, dtype=float) > self.wind_limit
+
+    def targets(self, t_air: float, storm: bool, rain: float, roof: float, side: float,
+                closing: bool) -> tuple[float, float]:
+        """Positions [%] the grower chooses at a visit (``closing``: the evening round)."""
+        if closing:
+            return 0.0, 0.0
+        if t_air > self.hot:
+            roof, side = 100.0, 50.0 if t_air < self.hot + 3.0 else 100.0
+        elif t_air > self.warm:
+            roof, side = 50.0, 25.0 if t_air > 0.5 * (self.warm + self.hot) else 0.0
+        elif t_air < self.cool:
+            roof, side = 0.0, 0.0
+        if rain > 0.5 or storm:
+            roof = 0.0 if rain > 0.5 else min(roof, self.wind_cap)
+            side = min(side, self.wind_cap) if storm else side
+        return roof, side
+
+    def step(self, t_air: float, storm: bool, rain: float, roof: float, side: float,
+             dt: float, now: float = 0.0) -> tuple[float, float]:
+        """Positions [%] after ``dt`` [s] ending at ``now`` [s since the epoch, UTC]."""
+        hours = now / 3600.0 + self.utc_offset
+        day = int(hours // 24.0)
+        plan = _visit_plan(self.seed, day, self.visits, self.jitter, self.skip, self.forget)
+        local = hours - 24.0 * day
+        for when, closing in plan:
+            if local - dt / 3600.0 < when <= local:
+                roof, side = self.targets(t_air, storm, rain, roof, side, closing)
+        return roof, side
+
+
+@lru_cache(maxsize=64)
+def _visit_plan(seed: int, day: int, visits: tuple[float, ...], jitter: float, skip: float,
+                forget: float) -> tuple[tuple[float, bool], ...]:
+    """The day's visits as (local hour, is the closing round), drawn from (seed, day)."""
+    rng = np.random.default_rng([seed, day + 100_000])
+    times = np.asarray(visits) + rng.uniform(-jitter, jitter, len(visits))
+    keep = rng.random(len(visits)) >= skip
+    forgot = rng.random() < forget
+    plan = [(float(t), False) for t in times[:-1][keep[:-1]]]
+    if not forgot:
+        plan.append((float(times[-1]), True))
+    return tuple(plan)

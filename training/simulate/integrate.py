@@ -107,6 +107,7 @@ class SubstepInputs:
     t_ground: float  # [°C]
     storm_out: np.ndarray  # wind alarm of the vent controller at output times [bool]
     rain_out: np.ndarray  # at output times [0/1]
+    time_out: np.ndarray | None = None  # output times [s since the epoch, UTC] (hand-moved vents)
 
 
 @dataclass
@@ -187,8 +188,9 @@ def run(plant: Plant, inputs: SubstepInputs, drivers: PhysicsDrivers, state: Sta
 
     for k in range(1, n_out):
         if ctrl is not None:
+            now = 0.0 if inputs.time_out is None else float(inputs.time_out[k - 1])
             roof, side = ctrl.step(ta, inputs.storm_out[k - 1], inputs.rain_out[k - 1],
-                                   roof, side, step)
+                                   roof, side, step, now)
         vent[k - 1] = (roof, side)
         a_r = p.fixed_roof_area
         a_s = p.fixed_side_area
@@ -308,7 +310,9 @@ def run(plant: Plant, inputs: SubstepInputs, drivers: PhysicsDrivers, state: Sta
             ta, tc, tf, td, ca = ta_n, tc_n, tf_n, td_n, c_new
         out[k] = (ta, tc, tf, td, ca)
     if ctrl is not None:
-        roof, side = ctrl.step(ta, inputs.storm_out[-1], inputs.rain_out[-1], roof, side, step)
+        now = 0.0 if inputs.time_out is None else float(inputs.time_out[-1])
+        roof, side = ctrl.step(ta, inputs.storm_out[-1], inputs.rain_out[-1], roof, side, step,
+                               now)
     vent[n_out - 1] = (roof, side)
     return Trajectory(out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4],
                       vent[:, 0], vent[:, 1], i_in_rec, rec)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, replace
 
-from training.simulate.control import VentController
+from training.simulate.control import GrowerVents, VentController
 
 
 @dataclass(frozen=True)
@@ -80,7 +80,7 @@ class Plant:
     fixed_side_area: float  # permanent gap low on the walls [m2]
     leak_ach: float  # leakage at no wind [h-1]
     leak_ach_wind: float  # extra leakage per m s-1 of wind [h-1 (m s-1)-1]
-    controller: VentController | None = None
+    controller: VentController | GrowerVents | None = None
     measured: tuple[str, ...] = ()
 
     @property

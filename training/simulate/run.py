@@ -139,7 +139,7 @@ def _substep_inputs(plant: Plant, weather: Weather, substeps: int, t_ground: flo
         t_out=at(weather.t_out), c_out=at(c_out), i_glob=at(weather.i_glob),
         wind=at(weather.wind), t_sky=at(weather.t_sky),
         lai=crop.logistic_lai(days, plant.lai_start, plant.lai_max, plant.lai_rate),
-        t_ground=t_ground, storm_out=storm, rain_out=weather.rain,
+        t_ground=t_ground, storm_out=storm, rain_out=weather.rain, time_out=sec,
     )
 
 

@@ -1,0 +1,64 @@
+"""Drivers over a forecast horizon from a weather outlook, for many start times at once.
+
+A forecast of T_in[t + h] from t steps the model with the drivers at t, t + 1, …, t + h - 1 (and
+a step may read the next row too). With the weather that was later measured (model skill) these
+are the series' own rows. With an outlook every start has its own future: the rows are laid out
+in blocks ``[now, now + 1, …, now + H]``, one block per start, so that ``Model.forecast`` and the
+ARX baseline run on them unchanged (block b starts at row b (H + 1)).
+
+Derived drivers (sky temperature, outside convection, vapour pressures, vent areas) are made by
+the model layer's ``prepare_drivers`` from the outlook's columns, once per lead time k: the
+k-step-ahead outlooks of consecutive starts form a regular time series (times t + k dt), so
+whatever the model layer derives from a series, including what it carries through time, is
+derived the same way as for measured data, from values known at each start.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from gateway.estimate.outlook import Outlook, forecast_drivers
+from gateway.greenhouse import Greenhouse
+from gateway.model.drivers import prepare_drivers
+from gateway.series import Series
+
+
+@dataclass
+class HorizonDrivers:
+    """Driver blocks: ``x`` flat arrays of ``len(starts) * (horizon + 1)`` rows; ``rows`` the
+    row of each block's "now"; ``starts`` the series index of each block's "now"."""
+
+    x: dict[str, np.ndarray]
+    rows: np.ndarray
+    starts: np.ndarray
+    horizon: int
+    outlook: str
+
+
+def outlook_drivers(outlook: Outlook, x: Mapping[str, np.ndarray], kit_columns: Sequence[str],
+                    time: np.ndarray, dt: float, gh: Greenhouse, starts: np.ndarray,
+                    horizon: int) -> HorizonDrivers:
+    """Blocks for ``starts`` over ``horizon`` steps: row 0 of each block is ``x`` at the start
+    (what was measured and derived), rows 1 … horizon the outlook made from the kit columns
+    ``kit_columns`` of ``x`` up to the start."""
+    n = len(time)
+    starts = np.asarray(starts, dtype=int)
+    history = {c: np.asarray(x[c], dtype=float) for c in kit_columns if c in x}
+    every = np.arange(n)
+    ahead = forecast_drivers(outlook, history, time, every, horizon, dt)  # (n, H) per column
+    blocks = {name: np.full((len(starts), horizon + 1), np.nan) for name in x}
+    for name in x:
+        blocks[name][:, 0] = np.asarray(x[name], dtype=float)[starts]
+    step = np.timedelta64(int(round(dt)), "s")
+    for k in range(1, horizon + 1):
+        cols = {c: v[:, k - 1] for c, v in ahead.items()}
+        xk = prepare_drivers(Series(time + k * step, dt, cols), gh)
+        for name in x:
+            if name in xk:
+                blocks[name][:, k] = np.asarray(xk[name], dtype=float)[starts]
+    rows = np.arange(len(starts)) * (horizon + 1)
+    flat = {name: b.ravel() for name, b in blocks.items()}
+    return HorizonDrivers(flat, rows, starts, horizon, getattr(outlook, "name", type(outlook).__name__))

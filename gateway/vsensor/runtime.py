@@ -1,0 +1,278 @@
+"""The virtual ventilation sensor at run time: an ONNX model, one step a minute, closed loop.
+
+    sensor = VentSensor("almeria.onnx", greenhouse, "almeria")   # once per greenhouse
+    est = sensor.step(measurements, fluxes)                       # every minute
+    est.flow [m3 s-1], est.q_vent [W m-2], est.valid, est.out_of_range, sensor.counts
+
+``measurements``: kit column → value (t_in, t_out, rh_in, rh_out, wind); ``fluxes``: term name →
+flux of the adaptive model run without the vent signal (``fluxes_now``). The sensor refuses a
+model whose metadata does not match the features this code computes for the running model kind
+(:class:`ModelMismatch` names the difference). It feeds back its own past outputs, clamps every
+output to [0, the physical maximum of this house now], flags inputs that are missing or outside
+the training ranges and counts them. No NaN and no negative flow ever leaves it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gateway.greenhouse import Greenhouse
+from gateway.vsensor.features import (
+    INPUT_DELAYS,
+    OUTPUT_DELAYS,
+    STEP_S,
+    check_names,
+    features,
+    filter_gains,
+    flow_limits,
+    greenhouse_signature,
+    rho_cp_per_area,
+    signature_mismatch,
+)
+
+FORMAT = "serra-vsensor/1"
+RANGE_MARGIN = 0.02
+"""An input counts as outside the training range beyond min − 2 % or max + 2 % of its span."""
+
+
+class ModelMismatch(ValueError):
+    """The ONNX model does not fit the code that would feed it; the message says how."""
+
+
+@dataclass(frozen=True)
+class VentEstimate:
+    """One step's output. ``flow`` [m3 s-1] ≥ 0 and ``q_vent`` [W m-2] (III.32, positive when
+    the house loses heat) are always finite. ``valid`` is False when anything is flagged:
+    ``missing`` (inputs absent or non-finite, the filter held), ``out_of_range`` (inputs
+    outside the training ranges), ``other_greenhouse`` (the model was trained on another house),
+    ``clamped`` (the network asked for a flow outside [0, physical maximum])."""
+
+    flow: float
+    q_vent: float
+    valid: bool
+    out_of_range: tuple[str, ...] = ()
+    missing: tuple[str, ...] = ()
+    clamped: bool = False
+    other_greenhouse: bool = False
+
+
+@dataclass
+class SensorCounts:
+    """Running counts since the sensor was built (for the health page and the CLI report)."""
+
+    steps: int = 0
+    flagged: int = 0  # steps with valid False
+    out_of_range_steps: int = 0
+    missing_steps: int = 0
+    clamped: int = 0
+    non_finite_output: int = 0
+    out_of_range: dict[str, int] = field(default_factory=dict)
+    missing: dict[str, int] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class ModelInfo:
+    """What the model's metadata says (read once at load)."""
+
+    path: str
+    kind: str  # model kind the fluxes come from
+    network: str  # pca_narx | narx_no_pca | linear_arx
+    names: tuple[str, ...]
+    ranges: np.ndarray  # (F, 2) training min, max of each filtered input
+    mean: np.ndarray  # (F,) training mean (stands in for an input never seen)
+    y0: float  # past outputs before the first step [m3 s-1]
+    greenhouse: dict
+    meta: dict
+
+
+def read_info(path: str | Path, session) -> ModelInfo:
+    raw = dict(session.get_modelmeta().custom_metadata_map)
+    if raw.get("format") != FORMAT:
+        raise ModelMismatch(f"{path}: not a Serra ventilation sensor model (format "
+                            f"{raw.get('format')!r}, expected {FORMAT!r})")
+    meta = {k: (v if k == "format" else _json(v)) for k, v in raw.items()}
+    missing = [k for k in ("features", "model_kind", "training_ranges", "input_mean", "y0") if k not in meta]
+    if missing:
+        raise ModelMismatch(f"{path}: metadata lacks {', '.join(missing)}")
+    feats = meta["features"]
+    names = tuple(f.get("name", "?") for f in feats)
+    nan2 = [math.nan, math.nan]
+    return ModelInfo(
+        path=str(path), kind=meta["model_kind"], network=meta.get("network", "?"), names=names,
+        ranges=np.array([meta["training_ranges"].get(n, nan2) for n in names], dtype=float),
+        mean=np.array([meta["input_mean"].get(n, math.nan) for n in names], dtype=float),
+        y0=float(meta["y0"]), greenhouse=meta.get("greenhouse", {}), meta=meta,
+    )
+
+
+def _json(text: str):
+    try:
+        return json.loads(text)
+    except ValueError:
+        return text
+
+
+def check_model(info: ModelInfo, kind: str, n_graph_features: int | None = None) -> None:
+    """Raise :class:`ModelMismatch` unless the model reads what this code computes for ``kind``."""
+    where = info.path
+    if info.kind != kind:
+        raise ModelMismatch(f"{where}: trained on fluxes of the '{info.kind}' model, but the "
+                            f"gateway runs the '{kind}' model")
+    code = features(kind)
+    diff = check_names([f.name for f in code], info.names)
+    if diff:
+        raise ModelMismatch(f"{where}: {diff} (model kind '{kind}')")
+    meta_feats = info.meta["features"]
+    for f, m in zip(code, meta_feats, strict=True):
+        if f.unit != m.get("unit"):
+            raise ModelMismatch(
+                f"{where}: feature {f.name} in {m.get('unit')!r}, the code gives {f.unit!r}")
+        if not math.isclose(f.tau, float(m.get("tau_s", -1)), abs_tol=1e-9):
+            raise ModelMismatch(f"{where}: feature {f.name} filtered with tau {m.get('tau_s')} s, "
+                                f"the code uses {f.tau:g} s")
+    for key, value in (("input_delays", INPUT_DELAYS), ("output_delays", OUTPUT_DELAYS)):
+        if list(info.meta.get(key, [])) != list(value):
+            raise ModelMismatch(
+                f"{where}: {key} {info.meta.get(key)} but the code feeds {list(value)}")
+    if float(info.meta.get("step_s", -1)) != STEP_S:
+        raise ModelMismatch(
+            f"{where}: trained at a {info.meta.get('step_s')} s step, the code runs {STEP_S:g} s")
+    bad = [n for n, r, m in zip(info.names, info.ranges, info.mean, strict=True)
+           if not (np.all(np.isfinite(r)) and np.isfinite(m))]
+    if bad:
+        raise ModelMismatch(f"{where}: no training range or mean for {', '.join(bad)}")
+    if n_graph_features is not None and n_graph_features != len(code):
+        raise ModelMismatch(
+            f"{where}: the graph takes {n_graph_features} inputs, the metadata names {len(code)}")
+
+
+class VentSensor:
+    """The deployed sensor for one greenhouse (see the module docstring)."""
+
+    def __init__(self, model_path: str | Path, gh: Greenhouse, model_kind: str,
+                 threads: int = 1) -> None:
+        import onnxruntime as ort
+
+        opts = ort.SessionOptions()
+        opts.intra_op_num_threads = threads
+        opts.inter_op_num_threads = 1
+        opts.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+        opts.log_severity_level = 3
+        try:
+            self.session = ort.InferenceSession(str(model_path), opts, providers=["CPUExecutionProvider"])
+        except Exception as exc:  # onnxruntime raises its own exception types
+            raise ModelMismatch(f"{model_path}: cannot load as an ONNX model: {exc}") from None
+        self.info = read_info(model_path, self.session)
+        shape = self.session.get_inputs()[0].shape
+        check_model(self.info, model_kind, shape[-1] if isinstance(shape[-1], int) else None)
+        self.gh, self.kind = gh, model_kind
+        trained = self.info.greenhouse.get("signature", {})
+        self.mismatch = signature_mismatch(trained, greenhouse_signature(gh))
+        self.limits = flow_limits(gh, model_kind)
+        self.rho_cp_a = rho_cp_per_area(gh)
+        self._gains = [float(a) for a in filter_gains(model_kind)]
+        lo, hi = self.info.ranges[:, 0], self.info.ranges[:, 1]
+        pad = RANGE_MARGIN * np.maximum(hi - lo, 1e-9)
+        self._lo, self._hi = [float(v) for v in lo - pad], [float(v) for v in hi + pad]
+        self._flux_names = self.info.names[3:]
+        self._out = [self.session.get_outputs()[0].name]
+        self._feeds: dict[str, np.ndarray] = {}
+        self.counts = SensorCounts()
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the history (filter states, delays, past outputs), as after a restart."""
+        n_f = len(self.info.names)
+        self._state: list[float] = [math.nan] * n_f
+        self._u = np.zeros((1, len(INPUT_DELAYS), n_f), dtype=np.float32)
+        self._y = np.full((1, len(OUTPUT_DELAYS)), self.info.y0, dtype=np.float32)
+        self._started = False
+        self._last_dt = 0.0
+
+    def step(self, measurements: Mapping[str, float], fluxes: Mapping[str, float]) -> VentEstimate:
+        """One minute: measurements (kit columns) and the no-vent adaptive model's fluxes."""
+        m = measurements
+        dt = _num(m.get("t_in")) - _num(m.get("t_out"))
+        raw = [_num(m.get("wind")), dt, _num(m.get("rh_in")) - _num(m.get("rh_out"))]
+        raw += [_num(fluxes.get(n)) for n in self._flux_names]
+        row, missing, outside = self._filter(raw)
+        if not self._started:
+            self._u[0, :] = row
+            self._started = True
+        else:
+            self._u[0, 1:] = self._u[0, :-1].copy()
+            self._u[0, 0] = row
+        self._feeds["u"], self._feeds["y_past"] = self._u, self._y
+        y = float(self.session.run(self._out, self._feeds)[0][0, 0])
+        c = self.counts
+        if not math.isfinite(y):
+            c.non_finite_output += 1
+            y = float(self._y[0, 0])
+        upper = self.limits.upper_now(dt, _num(m.get("t_out")), raw[0])
+        clamped = not 0.0 <= y <= upper
+        y = min(max(y, 0.0), upper)
+        self._y[0, 1:] = self._y[0, :-1].copy()
+        self._y[0, 0] = y
+        if math.isfinite(dt):
+            self._last_dt = dt
+        q = self.rho_cp_a * y * self._last_dt + 0.0  # + 0.0: no "-0" for a closed house
+        est = VentEstimate(y, q, not (missing or outside or self.mismatch), outside, missing,
+                           clamped, bool(self.mismatch))
+        self._count(est)
+        return est
+
+    def _filter(self, raw: list[float]) -> tuple[list[float], tuple[str, ...], tuple[str, ...]]:
+        """Low-pass each input (features.low_pass, one row); NaN holds the filter."""
+        names, state, gains = self.info.names, self._state, self._gains
+        row, missing, outside = [], [], []
+        for i, v in enumerate(raw):
+            if math.isfinite(v):
+                state[i] = v if math.isnan(state[i]) else state[i] + gains[i] * (v - state[i])
+            else:
+                missing.append(names[i])
+            s = state[i]
+            if math.isnan(s):
+                s = float(self.info.mean[i])  # never seen yet: the training mean
+            elif not self._lo[i] <= s <= self._hi[i]:
+                outside.append(names[i])
+            row.append(s)
+        return row, tuple(missing), tuple(outside)
+
+    def _count(self, est: VentEstimate) -> None:
+        c = self.counts
+        c.steps += 1
+        c.flagged += not est.valid
+        c.clamped += est.clamped
+        c.out_of_range_steps += bool(est.out_of_range)
+        c.missing_steps += bool(est.missing)
+        for n in est.out_of_range:
+            c.out_of_range[n] = c.out_of_range.get(n, 0) + 1
+        for n in est.missing:
+            c.missing[n] = c.missing.get(n, 0) + 1
+
+
+def _num(v) -> float:
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def fluxes_now(estimator) -> dict[str, float]:
+    """The fluxes [W m-2] of an ``OnlineEstimator`` after its ``update`` for this minute: each
+    term evaluated on the sample just checked (``last_row``) with the parameters just estimated
+    (``theta``), along the measured inside temperature (NaN where it was missing)."""
+    row = estimator.last_row
+    x = {k: np.array([v], dtype=float) for k, v in row.items()}
+    t_in = x.get("t_in", np.array([np.nan]))
+    try:
+        out = estimator.model.fluxes(estimator.theta, x, t_in)
+    except KeyError:  # a driver the model needs never arrived: nothing to say
+        return {}
+    return {k: float(np.asarray(v).reshape(-1)[0]) for k, v in out.items()}

@@ -1,0 +1,178 @@
+"""Virtual ventilation sensor bench: time per step, memory with the model loaded, training time.
+
+(a) onnxruntime, one thread: ``session.run`` of the shipped PCA-NARX on one step (u 1×6×F,
+    y_past 1×5), and the whole ``VentSensor.step`` (filters, delays, flags, clamp) around it;
+    goal ≤ 50 µs median. Peer, same weights: scikit-learn's own ``MLPRegressor.predict`` on the
+    one row (after the same standardisation and PCA in numpy), timed interleaved with (a).
+(b) Resident memory of a gateway process that imports numpy and the gateway, before and after
+    loading the sensor (onnxruntime's import dominates).
+(c) Training time of ``training.vsensor.train`` on two 2-day simulator files with the small
+    estimator budget of the tests (replays and fitting reported apart); the full training on
+    the corpus is timed by ``python -m training.vsensor train`` itself (docs/vsensor.md).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import one_core, write_result  # noqa: E402
+
+one_core()
+
+import numpy as np  # noqa: E402
+
+from gateway.greenhouse import load_greenhouse  # noqa: E402
+from gateway.vsensor.models import shipped_model  # noqa: E402
+
+ROUNDS = 5
+CALLS = 2000
+
+_RSS = """
+import resource, sys
+def rss():
+    return int(open('/proc/self/statm').read().split()[1]) * 4096 / 2**20
+import numpy, gateway.vsensor.features
+from gateway.greenhouse import load_greenhouse
+before = rss()
+from gateway.vsensor import VentSensor
+from gateway.vsensor.models import shipped_model
+s = VentSensor(shipped_model('almeria'), load_greenhouse('almeria-palmerillas'), 'almeria')
+for _ in range(10):
+    s.step({'t_in': 22, 't_out': 18, 'rh_in': 70, 'rh_out': 60, 'wind': 3}, {})
+after = rss()
+print(before, after, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
+"""
+
+
+def _per_call_us(fn, calls: int = CALLS) -> tuple[float, float]:
+    """(wall, CPU) µs per call: on a shared machine the wall time includes waiting for the core."""
+    t0, c0 = time.perf_counter_ns(), time.process_time_ns()
+    for _ in range(calls):
+        fn()
+    return (time.perf_counter_ns() - t0) / calls / 1e3, (time.process_time_ns() - c0) / calls / 1e3
+
+
+def _sklearn_peer(meta: dict, sess) -> tuple:
+    """An MLPRegressor holding the shipped network's weights, read back from the graph."""
+    from onnx import load, numpy_helper
+    from sklearn.neural_network import MLPRegressor
+
+    model = load(str(shipped_model("almeria")))
+    w = {t.name: numpy_helper.to_array(t).astype(np.float64) for t in model.graph.initializer}
+    layers = sorted(k for k in w if k.startswith("w"))
+    hidden = tuple(w[k].shape[1] for k in layers[:-1])
+    mlp = MLPRegressor(hidden_layer_sizes=hidden, activation="tanh", max_iter=1)
+    n_in = w["w0"].shape[0]
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        mlp.fit(np.zeros((4, n_in)), np.zeros(4))
+    mlp.coefs_ = [w[k] for k in layers]
+    mlp.intercepts_ = [w[k.replace("w", "b")] for k in layers]
+    return mlp, w
+
+
+def timing() -> dict:
+    import onnxruntime as ort
+
+    gh = load_greenhouse("almeria-palmerillas")
+    from gateway.vsensor import VentSensor
+
+    sensor = VentSensor(shipped_model("almeria"), gh, "almeria")
+    sess = sensor.session
+    n_f = len(sensor.info.names)
+    rng = np.random.default_rng(0)
+    u = rng.normal(size=(1, 6, n_f)).astype(np.float32) * 0.1 + sensor.info.mean.astype(np.float32)
+    yp = np.full((1, 5), sensor.info.y0, dtype=np.float32)
+    mlp, w = _sklearn_peer(sensor.info.meta, sess)
+    mean, std, pca = w["mean"], w["std"], w.get("pca")
+    y_mean, y_std = float(w["y_mean"][0]), float(w["y_std"][0])
+
+    def sk_step():
+        z = (u[0].astype(np.float64) - mean) / std
+        if pca is not None:
+            z = z @ pca
+        h = np.concatenate([z.reshape(-1), (yp[0] - y_mean) / y_std])[None, :]
+        return mlp.predict(h)[0] * y_std + y_mean
+
+    onnx_out = sess.run(None, {"u": u, "y_past": yp})[0][0, 0]
+    assert abs(onnx_out - sk_step()) < 1e-3 * max(1.0, abs(onnx_out)), "peer differs from the graph"
+    meas = {"t_in": 22.0, "t_out": 18.0, "rh_in": 70.0, "rh_out": 60.0, "wind": 3.0}
+    fluxes = {n: 0.0 for n in sensor.info.names[3:]}
+    rows = {"onnx_run": [], "vsensor_step": [], "sklearn_predict": []}
+    for _ in range(ROUNDS):  # interleaved: a busy neighbour hits all three alike
+        rows["onnx_run"].append(_per_call_us(lambda: sess.run(None, {"u": u, "y_past": yp})))
+        rows["vsensor_step"].append(_per_call_us(lambda: sensor.step(meas, fluxes)))
+        rows["sklearn_predict"].append(_per_call_us(sk_step, CALLS // 4))
+    med = {k: float(np.median([w for w, _ in v])) for k, v in rows.items()}
+    cpu = {k: float(np.median([c for _, c in v])) for k, v in rows.items()}
+    return {"per_call_us_median_of_rounds": med, "cpu_us_median_of_rounds": cpu, "rounds": rows,
+            "sklearn_over_onnx_run_cpu": cpu["sklearn_predict"] / cpu["onnx_run"],
+            "sklearn_over_onnx_run": med["sklearn_predict"] / med["onnx_run"],
+            "sklearn_over_vsensor_step": med["sklearn_predict"] / med["vsensor_step"],
+            "goal_us": 50.0, "onnxruntime": ort.__version__}
+
+
+def memory() -> dict:
+    out = subprocess.run([sys.executable, "-c", _RSS], capture_output=True, text=True, check=True)
+    before, after, peak = (float(v) for v in out.stdout.split())
+    return {"rss_gateway_mb": before, "rss_with_sensor_mb": after, "sensor_adds_mb": after - before,
+            "peak_rss_mb": peak}
+
+
+def training_time() -> dict:
+    from threadpoolctl import threadpool_limits
+
+    from training.simulate import PRESETS, simulate
+    from training.simulate.control import GrowerVents
+    from training.vsensor.train import train
+
+    tiny = {"t_in": {"iterations": 2, "bats": 4}, "i_in": {"iterations": 2, "bats": 4}}
+    with tempfile.TemporaryDirectory() as tmp:
+        paths = []
+        for i, (start, grower) in enumerate((("2020-05-02", True), ("2020-07-20", False))):
+            plant = PRESETS["almeria"]
+            if grower:
+                plant = plant.with_(controller=GrowerVents(seed=i))
+            p = Path(tmp) / f"d{i}.csv"
+            simulate(plant, "almeria", start, 2.0, seed=i).write(p)
+            paths.append(str(p))
+        gh = load_greenhouse("almeria-palmerillas")
+        with threadpool_limits(1):
+            r = train(paths, gh, "almeria", Path(tmp) / "m.onnx", Path(tmp) / "cache", tiny,
+                      epochs=60, rounds=2)
+    return {"data": "2 files x 2 days, estimator 4 bats x 2 iterations, 30-50-20, 60 epochs, 2 rounds",
+            "seconds": {k: round(v, 2) for k, v in r.seconds.items()}}
+
+
+def run() -> dict:
+    t = timing()
+    m = memory()
+    tr = training_time()
+    summary = {
+        "onnx_run_us": t["per_call_us_median_of_rounds"]["onnx_run"],
+        "vsensor_step_us": t["per_call_us_median_of_rounds"]["vsensor_step"],
+        "sklearn_predict_us": t["per_call_us_median_of_rounds"]["sklearn_predict"],
+        "sklearn_over_onnx_run": t["sklearn_over_onnx_run"],
+        "sklearn_over_vsensor_step": t["sklearn_over_vsensor_step"],
+        "cpu_us": t["cpu_us_median_of_rounds"],
+        "sklearn_over_onnx_run_cpu": t["sklearn_over_onnx_run_cpu"],
+        "goal_us": 50.0,
+        **m,
+        "training_seconds": tr["seconds"],
+    }
+    return {"summary": summary, "timing": t, "memory": m, "training": tr}
+
+
+if __name__ == "__main__":
+    result = run()
+    path = write_result("vsensor", result)
+    print(json.dumps(result["summary"], indent=2))
+    print(f"wrote {path}")

@@ -1,0 +1,160 @@
+"""``make bench-generality``: the generality suite, every case in parallel processes.
+
+Three generators (tests/generality/generators.py; ``vanthoor`` held out) × the autumn, winter
+and summer windows × every change kind (7 in the diagnosis library, 2 outside it), plus 10
+effect-free windows per generator, each diagnosed with the kit's prototype model; and the
+forecast replay (measured weather and the causal outlook, beside persistence and the RLS ARX)
+on each generator's three main windows. Writes ``bench/results/generality.json`` and the
+Markdown section of docs/effects.md (between its markers).
+
+    python tests/generality/suite.py [--jobs 2] [--generators refsim,twonode,vanthoor]
+        [--only diagnose|forecast] [--windows autumn,winter] [--no-docs]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from tests.generality.cases import EXTRA_WINDOWS, MODEL, Case, run  # noqa: E402
+from tests.generality.generators import GENERATORS, KINDS, OUTSIDE  # noqa: E402
+from tests.generality.report import MAIN_WINDOWS, markdown, update_docs  # noqa: E402
+
+RESULTS = ROOT / "bench" / "results" / "generality.json"
+DOCS = ROOT / "docs" / "effects.md"
+
+
+ALL_KINDS = ("none", *KINDS, *OUTSIDE)
+
+
+def all_cases(generators=GENERATORS, windows=MAIN_WINDOWS, only: str | None = None,
+              kinds=ALL_KINDS) -> list[Case]:
+    """Slowest first (forecast replays), so the processes finish together."""
+    cases = []
+    if only in (None, "forecast"):
+        cases += [Case("forecast", g, w) for g in generators for w in windows]
+    if only in (None, "diagnose"):
+        for g in generators:
+            cases += [Case("diagnose", g, w, k) for w in windows for k in kinds]
+            if tuple(windows) == MAIN_WINDOWS and "none" in kinds:
+                cases += [Case("diagnose", g, w) for w in EXTRA_WINDOWS]
+    return cases
+
+
+def _init_worker() -> None:
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[var] = "1"
+
+
+def _line(r: dict) -> str:
+    if "error" in r:
+        return f"ERROR {r['error']}"
+    if r["case"]["task"] == "forecast":
+        h = r["horizons"].get("60", {})
+        return "60 min MAE " + ", ".join(f"{k} {v['mae']:.3f}" for k, v in h.items() if v)
+    first = r["findings"][0]["effect"] if r["findings"] else "none"
+    return f"first {first}, MAE {r['before']:.3f} → {r['after']:.3f}, ok {r['verdict']['ok']}"
+
+
+def _commit() -> str:
+    try:
+        return subprocess.check_output(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
+                                       text=True).strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--jobs", type=int, default=2, help="parallel processes (2)")
+    ap.add_argument("--generators", default=",".join(GENERATORS))
+    ap.add_argument("--windows", default=",".join(MAIN_WINDOWS),
+                    help="main windows (the 8 extra effect-free ones run only with all three)")
+    ap.add_argument("--only", choices=["diagnose", "forecast"])
+    ap.add_argument("--kinds", default=",".join(ALL_KINDS), help="changes to diagnose (all)")
+    ap.add_argument("--json", default=str(RESULTS), help=f"results file ({RESULTS.relative_to(ROOT)})")
+    ap.add_argument("--no-docs", action="store_true", help="do not rewrite docs/effects.md")
+    ap.add_argument("--merge", action="store_true",
+                    help="keep the other cases of an existing results file (rerun a part only)")
+    ap.add_argument("--combine", nargs="+", metavar="RESULTS.json",
+                    help="run nothing: join these results files (later ones win) into --json and docs")
+    a = ap.parse_args(argv)
+    gens = tuple(g for g in a.generators.split(",") if g)
+    bad = [g for g in gens if g not in GENERATORS]
+    if bad:
+        ap.error(f"unknown generator(s) {bad}; known: {', '.join(GENERATORS)}")
+    if a.combine:
+        return _combine([Path(f) for f in a.combine], Path(a.json), not a.no_docs)
+    kinds = tuple(k for k in a.kinds.split(",") if k)
+    unknown = [k for k in kinds if k not in ALL_KINDS]
+    if unknown:
+        ap.error(f"unknown change(s) {unknown}; known: {', '.join(ALL_KINDS)}")
+    cases = all_cases(gens, tuple(a.windows.split(",")), a.only, kinds)
+    print(f"generality suite: {len(cases)} cases on {a.jobs} processes", flush=True)
+    t0 = time.perf_counter()
+    results = []
+    ctx = mp.get_context("spawn")  # a clean interpreter per worker: no state shared with the parent
+    with ctx.Pool(a.jobs, initializer=_init_worker, maxtasksperchild=4) as pool:
+        for i, r in enumerate(pool.imap_unordered(run, cases), 1):
+            results.append(r)
+            spent = time.perf_counter() - t0
+            eta = spent / i * (len(cases) - i)
+            label = Case(**r["case"]).label
+            print(f"[{i:3d}/{len(cases)}] {label}: {_line(r)} ({r['seconds']:.0f} s; "
+                  f"elapsed {spent / 60:.1f} min, ~{eta / 60:.0f} min left)", flush=True)
+    minutes = (time.perf_counter() - t0) / 60.0
+    out = Path(a.json)
+    if a.merge and out.exists():
+        done = {Case(**r["case"]) for r in results}
+        old = json.loads(out.read_text(encoding="utf-8"))
+        kept = [r for r in old["results"] if Case(**r["case"]) not in done]
+        results = kept + results
+        minutes += old["meta"].get("minutes", 0.0)
+    meta = {"command": "make bench-generality", "cases": len(results), "jobs": a.jobs,
+            "minutes": minutes, "runs": [{"minutes": minutes, "jobs": a.jobs}],
+            "when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": _commit(),
+            "model": MODEL, "generators": list(gens)}
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"meta": meta, "results": results}, indent=1) + "\n", encoding="utf-8")
+    print(f"wrote {out} in {minutes:.1f} min", flush=True)
+    if not a.no_docs:
+        update_docs(DOCS, markdown(results, meta))
+        print(f"updated {DOCS.relative_to(ROOT)}", flush=True)
+    return 0
+
+
+def _combine(files: list[Path], out: Path, docs: bool) -> int:
+    by_case: dict[Case, dict] = {}
+    minutes = 0.0
+    runs: list[dict] = []
+    for f in files:
+        data = json.loads(f.read_text(encoding="utf-8"))
+        minutes += data["meta"].get("minutes", 0.0)
+        runs += data["meta"].get("runs") or [{"minutes": data["meta"].get("minutes", 0.0),
+                                               "jobs": data["meta"].get("jobs", 1)}]
+        for r in data["results"]:
+            by_case[Case(**r["case"])] = r
+    results = list(by_case.values())
+    meta = {**data["meta"], "cases": len(results), "minutes": minutes, "runs": runs,
+            "combined": [str(f) for f in files]}
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"meta": meta, "results": results}, indent=1) + "\n", encoding="utf-8")
+    print(f"wrote {out} ({len(results)} cases)", flush=True)
+    if docs:
+        update_docs(DOCS, markdown(results, meta))
+        print(f"updated {DOCS.relative_to(ROOT)}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

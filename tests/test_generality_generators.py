@@ -1,0 +1,54 @@
+"""The generality suite's front-end: every generator gives kit columns at 5-minute rows with the
+change where it says; the reference simulator's misting and vent cap (written for the suite) act."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.generality.cases import verdict
+from tests.generality.generators import KIT, generate
+from tests.generality.windows import bleiswijk_window
+
+
+@pytest.fixture(scope="module")
+def window():
+    return bleiswijk_window("2009-10-20T00:00", 2.0, "two days")  # the change at day 1.4
+
+
+@pytest.mark.parametrize("generator", ["refsim"])  # twonode: the same wrapper, 3x slower
+def test_kit_columns_at_five_minutes(window, generator):
+    d = generate(generator, window, "heater", change_day=1.4)
+    assert set(d.columns) == set(KIT)
+    assert np.all(np.diff(d.time).astype(int) == 300)
+    assert d.start == window.at_day(1.4)
+    after = d.time >= d.start
+    base = generate(generator, window, "none", change_day=1.4)
+    warmer = np.nanmean(d.columns["t_in"][after] - base.columns["t_in"][after])
+    assert warmer > 1.0  # a 25 W m-2 heater in an 877 m2 house
+    np.testing.assert_array_equal(d.columns["t_in"][~after], base.columns["t_in"][~after])
+    gh = d.greenhouse()
+    assert (gh.site.latitude, gh.site.longitude) == (window.latitude, window.longitude)
+
+
+def test_reference_simulator_misting_cools_at_midday(window):
+    mist = generate("refsim", window, "misting", change_day=1.0)
+    base = generate("refsim", window, "none", change_day=1.0)
+    hours = (mist.time - mist.time.astype("datetime64[D]")).astype("timedelta64[m]").astype(float) / 60
+    noon = (mist.time >= mist.start) & (hours >= 11.5) & (hours < 14.5)
+    night = (mist.time >= mist.start) & (hours < 6)
+    assert np.nanmean(mist.columns["t_in"][noon] - base.columns["t_in"][noon]) < -0.5
+    assert abs(np.nanmean(mist.columns["t_in"][night] - base.columns["t_in"][night])) < 0.2
+
+
+def test_verdicts():
+    found = {"findings": [{"effect": "heat_source"}], "start_error_h": 3.0, "cut": 0.4,
+             "p_value": 0.01, "unexplained": False}
+    assert verdict("night_heater", found)["ok"]
+    assert not verdict("night_heater", {**found, "start_error_h": -13.0})["ok"]
+    assert not verdict("night_heater", {**found, "p_value": 0.2})["ok"]
+    assert not verdict("drift", found)["ok"]
+    assert verdict("none", found)["false_alarm"]
+    assert verdict("none", {**found, "findings": []})["ok"]
+    assert verdict("misting", {**found, "unexplained": True})["ok"]
+    assert verdict("drift", {**found, "findings": [{"effect": "sensor_drift"}], "p_value": None})["ok"]

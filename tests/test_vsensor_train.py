@@ -1,0 +1,151 @@
+"""Training side of the virtual ventilation sensor: data, PCA, export, reproducibility."""
+
+from __future__ import annotations
+
+import numpy as np
+import onnx
+import onnxruntime as ort
+import pytest
+
+from gateway.greenhouse import load_greenhouse
+from gateway.vsensor.features import (
+    feature_names,
+    filter_gains,
+    flow_from_heat_loss,
+    heat_loss,
+    low_pass,
+)
+from tests import vsensor_data as vd
+from training.simulate import PRESETS, simulate
+from training.simulate.control import GrowerVents
+from training.vsensor.dataset import build_segment
+
+
+def test_grower_moves_vents_a_few_times_a_day_and_sometimes_forgets_them_at_night():
+    plant = PRESETS["almeria"].with_(controller=GrowerVents(seed=7))
+    r = simulate(plant, "almeria", "2020-06-01", 10, seed=1)
+    roof, side = r.series["vent_roof"], r.series["vent_side"]
+    moves = np.flatnonzero((np.diff(roof) != 0) | (np.diff(side) != 0))
+    days = r.time[moves + 1].astype("datetime64[D]")
+    per_day = np.unique(days, return_counts=True)[1]
+    assert per_day.max() <= len(GrowerVents().visits)  # one move per visit at most
+    hour = (r.time - r.time.astype("datetime64[D]")).astype(int) / 3600.0
+    night_open = (hour > 1) & (hour < 5) & ((roof > 0) | (side > 0))
+    nights = np.unique(r.time[night_open].astype("datetime64[D]"))
+    assert 1 <= len(nights) < 10  # forgotten open some nights, not all
+    again = simulate(plant, "almeria", "2020-06-01", 10, seed=1)
+    assert np.array_equal(again.series["vent_roof"], roof)  # seeded
+
+
+def test_iii32_round_trip_and_dead_band():
+    gh = load_greenhouse(vd.GREENHOUSE)
+    g = np.array([0.5, 3.0, 12.0, 2.0])
+    dt = np.array([4.0, -3.0, 8.0, 0.1])
+    back = flow_from_heat_loss(heat_loss(g, dt, gh), dt, gh)
+    assert np.allclose(back[:3], g[:3])
+    assert np.isnan(back[3])  # |ΔT| < 0.5 K: the heat loss says nothing about the flow
+    # rho c_p G ΔT / A by hand
+    assert heat_loss(3.0, 2.0, gh) == pytest.approx(1.2 * 1005.0 * 3.0 * 2.0 / 877.0)
+
+
+def test_low_pass_holds_on_nan():
+    raw = np.array([[1.0, np.nan], [np.nan, 2.0], [3.0, 4.0]])
+    out = low_pass(raw, np.array([0.5, 1.0]))
+    assert out[1, 0] == 1.0 and np.isnan(out[0, 1]) and out[2, 0] == 2.0 and out[2, 1] == 4.0
+
+
+def test_dataset_inputs_and_target():
+    gh = load_greenhouse(vd.GREENHOUSE)
+    seg = build_segment(vd.train_files()[0], gh, "almeria", vd.workdir() / "cache", vd.TINY)
+    assert seg.inputs.shape == (len(seg.time), len(feature_names("almeria")))
+    assert np.all(np.isnan(seg.flow[:60]))  # warm-up hour left out
+    flow = seg.flow[60:]
+    assert np.all(np.isfinite(flow)) and flow.min() >= 0.1 - 1e-9  # leakage c_loss >= 0.1
+    truth_open = simulate(PRESETS["almeria"].with_(controller=GrowerVents(seed=3)), "almeria",
+                          "2020-05-02", 1.5, seed=3).series["vent_roof"] > 0
+    # the target is larger with the vents open than shut
+    assert np.nanmean(seg.flow[truth_open]) > 2 * np.nanmean(seg.flow[~truth_open])
+    assert np.allclose(seg.inputs, low_pass(seg.raw, filter_gains("almeria")), equal_nan=True)
+
+
+def test_dataset_refuses_a_file_without_vents(tmp_path):
+    gh = load_greenhouse(vd.GREENHOUSE)
+    path = tmp_path / "novents.csv"
+    lines = vd.test_file().read_text().splitlines()
+    header = lines[0].split(",")
+    keep = [i for i, h in enumerate(header) if h not in ("vent_roof", "vent_side")]
+    path.write_text("\n".join(",".join(row.split(",")[i] for i in keep) for row in lines) + "\n")
+    with pytest.raises(ValueError, match="vent_roof or vent_side"):
+        build_segment(path, gh, "almeria", None, vd.TINY)
+
+
+def test_training_is_seeded_and_byte_reproducible():
+    a, b = vd.tiny_model("a"), vd.tiny_model("b")
+    assert a.read_bytes() == b.read_bytes()
+    for base in ("narx_no_pca", "linear_arx"):
+        assert a.with_name(f"tiny.{base}.onnx").read_bytes() == b.with_name(f"tiny.{base}.onnx").read_bytes()
+
+
+def test_exported_graph_has_pca_and_metadata():
+    path = vd.tiny_model()
+    model = onnx.load(str(path))
+    meta = {p.key: p.value for p in model.metadata_props}
+    for key in ("features", "input_delays", "output_delays", "model_kind", "training_ranges",
+                "metrics", "data_fingerprint", "version", "pca", "greenhouse", "online_overrides"):
+        assert key in meta, key
+    ops = [n.op_type for n in model.graph.node]
+    assert "MatMul" in ops and ops.count("Gemm") == 3  # PCA, then 8-8-1
+    import json
+
+    pca = json.loads(meta["pca"])
+    assert pca["variance_total"] >= 0.90 and pca["components"] < len(feature_names("almeria"))
+    card = path.with_suffix(".md").read_text()
+    assert "correlation_circle.png" in card and "| Q_vent [W m-2] | calm |" in card
+    report = path.with_name("tiny.report")
+    assert (report / "correlation_circle.png").stat().st_size > 10_000
+
+
+def test_onnx_matches_the_numpy_network():
+    from training.vsensor import fit
+    from training.vsensor.narx import Layer, Narx
+
+    rng = np.random.default_rng(0)
+    f = 8
+    net = Narx("pca_narx", rng.normal(size=f), rng.uniform(0.5, 2, f), rng.normal(size=(f, 3)), 2.0, 1.5,
+               [Layer(rng.normal(size=(23, 8)), rng.normal(size=8), "tanh"),
+                Layer(rng.normal(size=(8, 1)), rng.normal(size=1), "identity")])
+    from training.vsensor.export import write_model
+
+    path = vd.workdir() / "random.onnx"
+    write_model(net, f, {"model_kind": "almeria"}, path)
+    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    u = rng.normal(size=(50, 6, f))
+    yp = rng.uniform(0, 5, size=(50, 5))
+    got = sess.run(None, {"u": u.astype(np.float32), "y_past": yp.astype(np.float32)})[0][:, 0]
+    assert np.allclose(got, net.predict(u, yp), rtol=1e-4, atol=1e-4)
+    del fit
+
+
+def test_prototype_kind_trains_and_runs(tmp_path):
+    """The kit's own model: fluxes of the prototype model, the Kittas vent term added in its
+    units for the explicit estimate, the prototype's q_loss as the leakage."""
+    from threadpoolctl import threadpool_limits
+
+    from gateway.series import load_series
+    from gateway.vsensor import VentSensor
+    from gateway.vsensor.adaptive import run_adaptive
+    from gateway.vsensor.batch import run_sensor
+    from training.vsensor.train import train
+
+    gh = load_greenhouse(vd.GREENHOUSE)
+    seg = build_segment(vd.train_files()[0], gh, "prototype", vd.workdir() / "cache", vd.TINY)
+    assert seg.inputs.shape[1] == len(feature_names("prototype")) == 7
+    flow = seg.flow[60:]
+    assert np.all(np.isfinite(flow)) and flow.min() > 0
+    out = tmp_path / "proto.onnx"
+    with threadpool_limits(1):
+        train([str(vd.train_files()[0])], gh, "prototype", out, vd.workdir() / "cache", vd.TINY,
+              hidden=(6,), epochs=3, rounds=0)
+    novent = run_adaptive("prototype", load_series(str(vd.test_file())), gh, False, vd.TINY)
+    run = run_sensor(VentSensor(out, gh, "prototype"), novent)
+    assert np.all(np.isfinite(run.flow)) and run.flow.min() >= 0

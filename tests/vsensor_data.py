@@ -1,0 +1,58 @@
+"""Small data and a tiny trained sensor shared by the virtual-sensor tests (built once per session).
+
+The online estimator runs with a small budget (TINY) so that both replays of 1.5 simulated days
+take seconds; the network is small (8-8) and trained for a few epochs. Real training runs from
+``python -m training.vsensor train`` (docs/vsensor.md), never in CI.
+"""
+
+from __future__ import annotations
+
+import functools
+import tempfile
+from pathlib import Path
+
+from training.simulate import PRESETS, simulate
+from training.simulate.control import GrowerVents
+
+TINY = {"t_in": {"iterations": 2, "bats": 4}, "i_in": {"iterations": 2, "bats": 4}}
+GREENHOUSE = "almeria-palmerillas"
+
+
+@functools.lru_cache(maxsize=1)
+def workdir() -> Path:
+    return Path(tempfile.mkdtemp(prefix="serra-vsensor-"))
+
+
+@functools.cache
+def kit_csv(name: str, start: str, days: float, grower: bool, seed: int) -> Path:
+    """A simulated Almería-type house with vent openings, as a kit CSV."""
+    plant = PRESETS["almeria"]
+    if grower:
+        plant = plant.with_(controller=GrowerVents(seed=seed))
+    path = workdir() / f"{name}.csv"
+    simulate(plant, "almeria", start, days, seed=seed).write(path)
+    return path
+
+
+def train_files() -> list[Path]:
+    return [kit_csv("train-grower", "2020-05-02", 1.5, True, 3),
+            kit_csv("train-controller", "2020-07-20", 1.5, False, 4)]
+
+
+def test_file() -> Path:
+    return kit_csv("test-grower", "2020-06-01", 1.0, True, 5)
+
+
+@functools.cache
+def tiny_model(tag: str = "a") -> Path:
+    """Train the tiny sensor (cache shared between tags, so a second tag only re-fits)."""
+    from threadpoolctl import threadpool_limits
+
+    from gateway.greenhouse import load_greenhouse
+    from training.vsensor.train import train
+
+    out = workdir() / tag / "tiny.onnx"
+    with threadpool_limits(1):
+        train([str(p) for p in train_files()], load_greenhouse(GREENHOUSE), "almeria", out,
+              workdir() / "cache", TINY, seed=0, hidden=(8, 8), epochs=8, rounds=1)
+    return out

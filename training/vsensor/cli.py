@@ -1,0 +1,100 @@
+"""``python -m training.vsensor corpus|dataset|train``: the virtual ventilation sensor, offline.
+
+- ``corpus --out DIR``: generate the training and test kit CSVs (training/vsensor/corpus.py).
+- ``dataset --data FILE... --greenhouse G --model KIND --cache DIR``: run the two replays of
+  each file and cache their products (what ``train`` does first; run several in parallel).
+- ``train --data FILE... --greenhouse G --model KIND --out MODEL.onnx``: train and export.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from gateway.greenhouse import GreenhouseError, list_presets, load_greenhouse
+from gateway.kitcsv import KitCsvError
+from gateway.vsensor.features import MODEL_KINDS
+
+DEFAULT_CACHE = Path("out") / "vsensor-cache"
+
+
+def _data_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--data", nargs="+", required=True, metavar="FILE",
+                   help="kit CSVs with vent_roof/vent_side (docs/data-format.md)")
+    p.add_argument("--greenhouse", required=True, metavar="PRESET|FILE.toml",
+                   help=f"greenhouse description ({', '.join(list_presets())} or a TOML file)")
+    p.add_argument("--model", required=True, choices=MODEL_KINDS,
+                   help="the adaptive model whose fluxes the sensor reads")
+    p.add_argument("--cache", default=str(DEFAULT_CACHE), metavar="DIR",
+                   help=f"where the replays' products are kept (default {DEFAULT_CACHE})")
+    p.add_argument("--set", action="append", default=[], metavar="OUTPUT.KEY=VALUE",
+                   help="online estimator setting, e.g. --set t_in.bats=6 (default: the "
+                   "greenhouse's and the model's; recorded in the model)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the estimator and the network (0)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m training.vsensor",
+                                     description="The PCA-NARX virtual ventilation sensor, offline "
+                                     "(thesis §IV.3). See docs/vsensor.md.")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    c = sub.add_parser("corpus", help="generate the training and test kit CSVs")
+    c.add_argument("--out", required=True, metavar="DIR")
+    c.add_argument("--only", nargs="*", default=None, metavar="NAME", help="only these runs")
+    c.set_defaults(func=_corpus)
+    d = sub.add_parser("dataset", help="run the adaptive model with and without vents, cache")
+    _data_args(d)
+    d.set_defaults(func=_dataset)
+    from training.vsensor.train_cli import add_train_parser
+
+    add_train_parser(sub, _data_args)
+    return parser
+
+
+def overrides(items: list[str]) -> dict[str, dict[str, float]]:
+    out: dict[str, dict[str, float]] = {}
+    for item in items:
+        try:
+            key, value = item.split("=", 1)
+            output, name = key.split(".", 1)
+            out.setdefault(output, {})[name] = float(value)
+        except ValueError:
+            raise SystemExit(f"error: --set {item!r}: expected OUTPUT.KEY=NUMBER") from None
+    return out
+
+
+def _corpus(args: argparse.Namespace) -> int:
+    from training.vsensor.corpus import OTHER, TEST, TRAIN, write_corpus
+
+    runs = tuple(r for r in TRAIN + TEST + OTHER if args.only is None or r.name in args.only)
+    t0 = time.perf_counter()
+    for path in write_corpus(Path(args.out), runs):
+        print(f"wrote {path}")
+    print(f"{len(runs)} runs in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def _dataset(args: argparse.Namespace) -> int:
+    from training.vsensor.dataset import build_segment
+
+    gh = load_greenhouse(args.greenhouse)
+    for path in args.data:
+        t0 = time.perf_counter()
+        seg = build_segment(path, gh, args.model, args.cache, overrides(args.set), args.seed)
+        print(f"{path}: {len(seg.time)} rows in {time.perf_counter() - t0:.0f} s", flush=True)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except (GreenhouseError, KitCsvError, ValueError, FileNotFoundError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2

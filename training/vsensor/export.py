@@ -1,0 +1,103 @@
+"""One ONNX graph per network: standardisation, projection (PCA), layers, output scaling.
+
+Built with ``onnx.helper`` from the numpy weights (standard operators only; opset 17, IR 8, so
+onnxruntime ≥ 1.17 loads it). Inputs ``u`` float32 (N, 6, F): the filtered inputs at k - d,
+d = 0..5; ``y_past`` float32 (N, 5): the sensor's outputs at k - 1 … k - 5. Output ``flow``
+float32 (N, 1) [m3 s-1], unclamped (the runtime clamps to the physical range).
+
+``metadata_props`` carry everything the runtime checks and a reader needs: the feature names,
+order, units and filter time constants, the delays, the model kind the fluxes come from, the
+training range of every input, the metrics, a fingerprint of the data, the version. No time
+stamp is written: the same data and seed give the same bytes.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gateway.vsensor.features import INPUT_DELAYS, OUTPUT_DELAYS
+from training.vsensor.narx import Narx
+
+OPSET = 17
+IR_VERSION = 8
+FORMAT = "serra-vsensor/1"
+
+
+def _const(name: str, value: np.ndarray):
+    from onnx import numpy_helper
+
+    return numpy_helper.from_array(np.ascontiguousarray(value, dtype=np.float32), name)
+
+
+def build_graph(net: Narx, n_features: int):
+    """The ONNX ModelProto of ``net`` (no metadata yet)."""
+    from onnx import TensorProto, helper
+
+    d_in, d_out = len(INPUT_DELAYS), len(OUTPUT_DELAYS)
+    inits = [
+        _const("mean", net.mean), _const("std", net.std),
+        _const("y_mean", np.array([net.y_mean])), _const("y_std", np.array([net.y_std])),
+        helper.make_tensor("flat_shape", TensorProto.INT64, [2], [-1, d_in * net.width]),
+    ]
+    nodes = [
+        helper.make_node("Sub", ["u", "mean"], ["u_c"], name="centre"),
+        helper.make_node("Div", ["u_c", "std"], ["z"], name="reduce"),
+    ]
+    z = "z"
+    if net.projection is not None:
+        inits.append(_const("pca", net.projection))
+        nodes.append(helper.make_node("MatMul", ["z", "pca"], ["pcs"], name="pca"))
+        z = "pcs"
+    nodes += [
+        helper.make_node("Reshape", [z, "flat_shape"], ["z_flat"], name="delays"),
+        helper.make_node("Sub", ["y_past", "y_mean"], ["y_c"], name="y_centre"),
+        helper.make_node("Div", ["y_c", "y_std"], ["y_s"], name="y_reduce"),
+        helper.make_node("Concat", ["z_flat", "y_s"], ["h0"], axis=1, name="narx_input"),
+    ]
+    h = "h0"
+    for i, layer in enumerate(net.layers):
+        inits += [_const(f"w{i}", layer.weight), _const(f"b{i}", layer.bias)]
+        out = f"a{i}" if layer.activation == "tanh" else f"h{i + 1}"
+        nodes.append(helper.make_node("Gemm", [h, f"w{i}", f"b{i}"], [out], name=f"layer{i}"))
+        if layer.activation == "tanh":
+            nodes.append(helper.make_node("Tanh", [out], [f"h{i + 1}"], name=f"tanh{i}"))
+        h = f"h{i + 1}"
+    nodes += [
+        helper.make_node("Mul", [h, "y_std"], ["y_scaled"], name="y_unscale"),
+        helper.make_node("Add", ["y_scaled", "y_mean"], ["flow"], name="y_uncentre"),
+    ]
+    graph = helper.make_graph(
+        nodes, f"serra_vsensor_{net.name}",
+        [helper.make_tensor_value_info("u", TensorProto.FLOAT, ["N", d_in, n_features]),
+         helper.make_tensor_value_info("y_past", TensorProto.FLOAT, ["N", d_out])],
+        [helper.make_tensor_value_info("flow", TensorProto.FLOAT, ["N", 1])],
+        initializer=inits,
+    )
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)],
+                              producer_name="serra training.vsensor", producer_version="1")
+    model.ir_version = IR_VERSION
+    return model
+
+
+def write_model(net: Narx, n_features: int, meta: Mapping[str, Any], path: str | Path) -> bytes:
+    """Build, check and write the model with ``meta`` as metadata_props (values JSON-encoded
+    unless already strings). Returns the bytes written."""
+    import onnx
+    from onnx import helper
+
+    model = build_graph(net, n_features)
+    props = {k: v if isinstance(v, str) else json.dumps(v, sort_keys=True) for k, v in meta.items()}
+    props["format"] = FORMAT
+    helper.set_model_props(model, dict(sorted(props.items())))
+    model.doc_string = ("Serra virtual ventilation sensor (thesis §IV.3): filtered inputs u (N, 6, F) "
+                        "and past flows y_past (N, 5) → flow (N, 1) [m3 s-1]. See docs/vsensor.md.")
+    onnx.checker.check_model(model)
+    data = model.SerializeToString(deterministic=True)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    Path(path).write_bytes(data)
+    return data

@@ -1,0 +1,170 @@
+"""Fitting: standardisation, PCA, the NARX networks (scikit-learn) and the linear ARX.
+
+Training follows §IV.3.2.2: 75 % of the data to train, 25 % to validate (the last quarter of
+every file, so validation is later in time than what was fitted), input delays 0–5 and output
+delays 1–5, tanh hidden layers 30-50-20. The network is fitted series-parallel (past outputs =
+the target's), then refined in a few rounds on its own closed-loop feedback (the rows' past
+outputs are what the network itself produced, the targets stay the explicit flow), because the
+deployed sensor only ever sees its own past; the round with the best closed-loop validation
+error is kept. Everything is seeded and single-threaded, so the same data give the same bytes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from gateway.vsensor.loop import closed_loop, fill_missing
+from training.vsensor.dataset import Segment
+from training.vsensor.narx import Layer, Narx, lag_rows
+
+TRAIN_SHARE = 0.75
+MIN_VARIANCE = 0.90
+HIDDEN = (30, 50, 20)
+Progress = Callable[..., None]
+
+
+@dataclass
+class Split:
+    """Segments with their upper flow limits, and the index where validation starts."""
+
+    segments: list[Segment]
+    upper: list[np.ndarray]  # (T,) per segment
+    cut: list[int]
+
+    def part(self, name: str) -> list[tuple[np.ndarray, np.ndarray]]:
+        """(inputs, flow) per segment for ``train`` or ``validation``."""
+        out = []
+        for s, c in zip(self.segments, self.cut, strict=True):
+            sl = slice(0, c) if name == "train" else slice(c, None)
+            out.append((s.inputs[sl], s.flow[sl]))
+        return out
+
+
+def make_split(segments: list[Segment], upper: list[np.ndarray]) -> Split:
+    return Split(segments, upper, [int(round(TRAIN_SHARE * len(s.flow))) for s in segments])
+
+
+def scaler(split: Split) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and standard deviation of every input over the training rows (centring, reduction)."""
+    u = np.concatenate([i for i, _ in split.part("train")])
+    u = u[np.all(np.isfinite(u), axis=1)]
+    std = u.std(axis=0)
+    return u.mean(axis=0), np.where(std > 1e-12, std, 1.0)
+
+
+def pca(z: np.ndarray, seed: int, min_share: float = MIN_VARIANCE) -> tuple[np.ndarray, np.ndarray]:
+    """Loadings (F, m) of the fewest components keeping ``min_share`` of the variance of the
+    standardised inputs ``z`` (IV.56–IV.60), and every component's share (F,)."""
+    from sklearn.decomposition import PCA
+
+    p = PCA(svd_solver="full", random_state=seed).fit(z[np.all(np.isfinite(z), axis=1)])
+    share = p.explained_variance_ratio_
+    m = int(np.searchsorted(np.cumsum(share), min_share - 1e-12) + 1)
+    return p.components_[:m].T.copy(), share
+
+
+def rows(net: Narx, data: list[tuple[np.ndarray, np.ndarray]], lags: list[np.ndarray] | None = None):
+    """Stacked series-parallel rows (H, target) of ``data`` for ``net``'s pre-processing."""
+    hs, ts = [], []
+    for i, (u, y) in enumerate(data):
+        z, yp, t = lag_rows(net.reduce(u), y, None if lags is None else lags[i])
+        hs.append(net.head(z, yp))
+        ts.append((t - net.y_mean) / net.y_std)
+    return np.concatenate(hs), np.concatenate(ts)
+
+
+def simulate(net: Narx, split: Split) -> list[np.ndarray]:
+    """Closed-loop flows of every whole segment (all at once, padded to the longest)."""
+    n_max = max(len(s.flow) for s in split.segments)
+    n_f = split.segments[0].inputs.shape[1]
+    u = np.empty((len(split.segments), n_max, n_f))
+    up = np.zeros((len(split.segments), n_max))
+    for i, s in enumerate(split.segments):
+        filled, _ = fill_missing(s.inputs, net.mean)
+        u[i, : len(filled)] = filled
+        u[i, len(filled):] = filled[-1]
+        up[i, : len(filled)] = split.upper[i]
+    y = closed_loop(net.predict, u, up, net.y_mean)
+    return [y[i, : len(s.flow)] for i, s in enumerate(split.segments)]
+
+
+def validation_mae(net: Narx, split: Split) -> float:
+    sims = simulate(net, split)
+    err = [np.abs(y[c:] - s.flow[c:]) for y, s, c in zip(sims, split.segments, split.cut, strict=True)]
+    e = np.concatenate(err)
+    return float(np.nanmean(e))
+
+
+def _layers(mlp) -> list[Layer]:
+    n = len(mlp.coefs_)
+    return [Layer(w.copy(), b.copy(), "tanh" if i < n - 1 else "identity")
+            for i, (w, b) in enumerate(zip(mlp.coefs_, mlp.intercepts_, strict=True))]
+
+
+def _epochs(mlp, h, t, hv, tv, epochs: int, patience: int, progress: Progress, label: str):
+    """partial_fit one pass at a time, keep the weights of the best validation loss."""
+    best, best_w, stale = np.inf, None, 0
+    for e in range(epochs):
+        mlp.partial_fit(h, t)
+        loss = float(np.mean((mlp.predict(hv) - tv) ** 2))
+        if loss < best - 1e-7:
+            best, stale = loss, 0
+            best_w = ([w.copy() for w in mlp.coefs_], [b.copy() for b in mlp.intercepts_])
+        else:
+            stale += 1
+        progress(advance=1, info=f"{label} epoch {e + 1} val {loss:.4f}")
+        if stale >= patience:
+            progress(advance=epochs - e - 1)
+            break
+    if best_w is not None:
+        mlp.coefs_, mlp.intercepts_ = best_w
+
+
+def fit_narx(name: str, split: Split, mean, std, projection, seed: int, hidden=HIDDEN,
+             epochs: int = 150, rounds: int = 3, round_epochs: int = 30,
+             progress: Progress | None = None) -> tuple[Narx, dict]:
+    """Train one network (series-parallel, then closed-loop rounds). Returns it and a log."""
+    from sklearn.neural_network import MLPRegressor
+
+    progress = progress or (lambda **k: None)
+    y_train = np.concatenate([y for _, y in split.part("train")])
+    net = Narx(name, mean, std, projection, float(np.nanmedian(y_train)),
+               float(np.nanstd(y_train)) or 1.0)
+    h, t = rows(net, split.part("train"))
+    hv, tv = rows(net, split.part("validation"))
+    mlp = MLPRegressor(hidden_layer_sizes=hidden, activation="tanh", solver="adam", alpha=1e-4,
+                       batch_size=256, learning_rate_init=1e-3, random_state=seed, shuffle=True)
+    _epochs(mlp, h, t, hv, tv, epochs, 20, progress, name)
+    net.layers = _layers(mlp)
+    log = {"series_parallel_val_mse": float(np.mean((mlp.predict(hv) - tv) ** 2)),
+           "closed_loop_val_mae": [validation_mae(net, split)]}
+    best = (log["closed_loop_val_mae"][0], net.layers)
+    for r in range(rounds):
+        sims = simulate(net, split)
+        train_sims = [y[:c] for y, c in zip(sims, split.cut, strict=True)]
+        hc, tc = rows(net, split.part("train"), train_sims)
+        _epochs(mlp, np.concatenate([h, hc]), np.concatenate([t, tc]), hv, tv, round_epochs,
+                round_epochs, progress, f"{name} closed-loop round {r + 1}")
+        net.layers = _layers(mlp)
+        mae = validation_mae(net, split)
+        log["closed_loop_val_mae"].append(mae)
+        if mae < best[0]:
+            best = (mae, net.layers)
+    net.layers = best[1]
+    log["kept_round"] = int(np.argmin(log["closed_loop_val_mae"]))
+    return net, log
+
+
+def fit_arx(split: Split, mean, std, ridge: float = 1e-3) -> Narx:
+    """Linear ARX on the same inputs and delays, least squares (series-parallel), no PCA."""
+    y_train = np.concatenate([y for _, y in split.part("train")])
+    net = Narx("linear_arx", mean, std, None, float(np.nanmedian(y_train)),
+               float(np.nanstd(y_train)) or 1.0)
+    h, t = rows(net, split.part("train"))
+    a = np.column_stack([h, np.ones(len(h))])
+    coef = np.linalg.solve(a.T @ a + ridge * np.eye(a.shape[1]), a.T @ t)
+    net.layers = [Layer(coef[:-1, None].copy(), coef[-1:].copy(), "identity")]
+    return net

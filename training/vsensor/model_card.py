@@ -1,0 +1,110 @@
+"""The model card (Markdown) written beside every trained sensor: what it reads, what it was
+trained on, how well it did, where it must not be trusted, and the training report."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from training.vsensor.report import table18_markdown
+
+
+def _m(m: dict) -> str:
+    pct = "" if m.get("mae_pct_range") is None else f"{m['mae_pct_range']:.2f}"
+    return f"{m['mae']:.3f} | {m['rmse']:.3f} | {m['maxae']:.2f} | {m['r2']:.3f} | {pct}"
+
+
+def model_card(out: Path, meta: dict, metrics: dict, t18: dict, circle: dict, names: list[str],
+               nets: dict, rep_dir: Path, _pkg: str) -> str:
+    """The Markdown text of the card."""
+    pca = meta["pca"]
+    gh = meta["greenhouse"]
+    rel = rep_dir.as_posix() if not rep_dir.is_absolute() else rep_dir.name
+    lines = [
+        f"# Virtual ventilation sensor `{out.name}` (PCA-NARX, thesis §IV.3)",
+        "",
+        f"Estimates the natural-ventilation flow G [m3 s-1] of the greenhouse **{gh['name']}** (and its "
+        "heat loss, III.32) without a vent signal, from the fluxes of the adaptive "
+        f"**{meta['model_kind']}** model run without the vents, the wind and the inside–outside "
+        "temperature and humidity differences. Runs with onnxruntime in `gateway/vsensor` "
+        "(`VentSensor`, `python -m gateway vsensor`); see docs/vsensor.md.",
+        "",
+        "## Inputs (in this order; the runtime refuses a model whose list differs)",
+        "",
+        "| # | name | unit | low-pass τ [s] | training range | meaning |",
+        "| --- | --- | --- | --- | --- | --- |",
+    ]
+    for i, f in enumerate(meta["features"]):
+        lo, hi = meta["training_ranges"][f["name"]]
+        lines.append(f"| {i} | `{f['name']}` | {f['unit']} | {f['tau_s']:g} | {lo:.3g} … {hi:.3g} "
+                     f"| {f['meaning']} |")
+    lines += [
+        "",
+        f"Delays: inputs {meta['input_delays']}, outputs {meta['output_delays']} (closed loop: the "
+        f"sensor's own past outputs), one step = {meta['step_s']:g} s. Target: {meta['target']}. "
+        f"Flow range in training: {meta['flow_range'][0]:.3f} … {meta['flow_range'][1]:.3f} m3 s-1.",
+        "",
+        "## Structure",
+        "",
+        f"- Standardisation (centring, reduction) of the {len(names)} filtered inputs, then PCA: "
+        f"**{pca['components']} components keep {100 * pca['variance_total']:.1f} %** of the variance "
+        f"(shares {', '.join(f'{100 * v:.1f} %' for v in pca['variance_share'])}; thesis: 4 "
+        "components, 93.8 %).",
+        f"- NARX: {pca['components']} × {len(meta['input_delays'])} delayed components + "
+        f"{len(meta['output_delays'])} past outputs → tanh layers "
+        f"{'-'.join(map(str, nets['pca_narx'].hidden))} → flow (thesis: 30-50-20).",
+        "- One ONNX graph: standardisation, PCA and network; baselines beside it with the same "
+        f"interface: `{out.stem}.narx_no_pca.onnx` (same network on the standardised inputs, no "
+        f"PCA) and `{out.stem}.linear_arx.onnx` (linear ARX on the same inputs and delays).",
+        "",
+        "## Validation (closed loop, the last quarter of every training file)",
+        "",
+        "| network | MAE [m3 s-1] | RMSE | MaxAE | R² | MAE % of range |",
+        "| --- | --- | --- | --- | --- | --- |",
+    ]
+    for name, m in metrics.items():
+        lines.append(f"| {name} | {_m(m)} |")
+    lines += [
+        "",
+        "Figures on a site and season training never saw are in the README and docs/vsensor.md.",
+        "",
+        "## Training data",
+        "",
+        f"Greenhouse signature (another house is flagged, not trusted): {gh['signature']}.",
+        f"Online estimator overrides: {meta['online_overrides'] or 'none (model and greenhouse defaults)'}; "
+        f"seed {meta['seed']}; data fingerprint `{meta['data_fingerprint'][:16]}…`; serra {meta['version']}.",
+        "",
+        "| file | rows | sha256 |",
+        "| --- | --- | --- |",
+    ]
+    for s in meta["sources"]:
+        lines.append(f"| {s['file']} | {s['rows']} | `{s['sha256'][:16]}…` |")
+    lines += [
+        "",
+        "## Data analysis (thesis §IV.3.2.1)",
+        "",
+        f"Correlation circle (PC1–PC2 of the inputs and the target): `{rel}/correlation_circle.png`; "
+        f"variance per component: `{rel}/pca_variance.png`; closed-loop validation: `{rel}/validation.png`.",
+        "",
+        "Coordinates on PC1, PC2:",
+        "",
+        "| variable | PC1 | PC2 |",
+        "| --- | --- | --- |",
+    ]
+    for name, (a, b) in circle.items():
+        lines.append(f"| {name} | {a:.3f} | {b:.3f} |")
+    lines += [
+        "",
+        "Pearson correlation of each input with the target (table 18's layout; day classes in "
+        "training/vsensor/report.py):",
+        "",
+        table18_markdown(t18, names),
+        "## Limits",
+        "",
+        "- Trained on simulated houses (the reference simulator and the two-node generator); a real "
+        "house needs its own training data with vent openings (docs/vsensor.md, \"Retraining\").",
+        "- Inputs outside the training ranges, missing inputs and another greenhouse are flagged "
+        "(`VentEstimate.valid` False) and counted; the output is clamped to [0, the physical "
+        "maximum of the house at that moment].",
+        "",
+    ]
+    return "\n".join(lines)

@@ -1,0 +1,95 @@
+"""The NARX networks as plain arrays: standardisation, optional projection, layers.
+
+One structure for the three models trained side by side (the PCA-NARX and its two baselines),
+so that one forward pass (numpy here, ONNX at run time: training/vsensor/export.py) serves all:
+
+    z_d = ((u(k-d) - mean) / std) @ P          d = 0..5   (P: PCA loadings, or identity)
+    h   = [z_0, z_1, …, z_5, (y(k-1..k-5) - y_mean) / y_std]
+    y   = layers(h) * y_std + y_mean            (tanh hidden layers, linear output)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gateway.vsensor.features import INPUT_DELAYS, OUTPUT_DELAYS
+
+ACTIVATIONS = ("tanh", "identity")
+
+
+@dataclass
+class Layer:
+    weight: np.ndarray  # (n_in, n_out)
+    bias: np.ndarray  # (n_out,)
+    activation: str  # "tanh" or "identity"
+
+
+@dataclass
+class Narx:
+    """A trained network with its pre-processing (all float64 here, float32 in ONNX)."""
+
+    name: str  # "pca_narx", "narx_no_pca", "linear_arx"
+    mean: np.ndarray  # (F,) standardisation
+    std: np.ndarray  # (F,)
+    projection: np.ndarray | None  # (F, m) PCA loadings, None: the standardised inputs
+    y_mean: float
+    y_std: float
+    layers: list[Layer] = field(default_factory=list)
+    explained: np.ndarray | None = None  # (m,) variance share of each kept component
+
+    @property
+    def width(self) -> int:
+        """Values per delay after the projection."""
+        return len(self.mean) if self.projection is None else self.projection.shape[1]
+
+    @property
+    def hidden(self) -> tuple[int, ...]:
+        return tuple(layer.weight.shape[1] for layer in self.layers[:-1])
+
+    def reduce(self, inputs: np.ndarray) -> np.ndarray:
+        """Standardised (and projected) inputs: (..., F) → (..., m)."""
+        z = (inputs - self.mean) / self.std
+        return z if self.projection is None else z @ self.projection
+
+    def head(self, z_lags: np.ndarray, y_past: np.ndarray) -> np.ndarray:
+        """The network's input row: (N, D, m) reduced inputs and (N, 5) past flows → (N, D m + 5)."""
+        ys = (y_past - self.y_mean) / self.y_std
+        return np.concatenate([z_lags.reshape(len(z_lags), -1), ys], axis=1)
+
+    def forward(self, h: np.ndarray) -> np.ndarray:
+        """Scaled output of the layers for rows ``h`` (N, D m + 5) → (N,)."""
+        for layer in self.layers:
+            h = h @ layer.weight + layer.bias
+            if layer.activation == "tanh":
+                h = np.tanh(h)
+        return h[:, 0]
+
+    def predict(self, u: np.ndarray, y_past: np.ndarray) -> np.ndarray:
+        """Flows (N,) [m3 s-1] from raw inputs u (N, D, F) and past flows (N, 5)."""
+        return self.forward(self.head(self.reduce(u), y_past)) * self.y_std + self.y_mean
+
+
+def lag_rows(z: np.ndarray, y: np.ndarray, y_lags: np.ndarray | None = None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Series-parallel rows of one series: z (T, m) reduced inputs, y (T,) target.
+
+    Returns (Z (N, D, m), Y_past (N, 5), target (N,)) for every k whose delayed inputs and
+    outputs are all finite. ``y_lags`` (T,) supplies the past outputs instead of ``y`` (closed-
+    loop outputs, for training on the network's own feedback); targets are always ``y``.
+    """
+    d_in = max(INPUT_DELAYS) + 1
+    d_out = max(OUTPUT_DELAYS)
+    lags = y if y_lags is None else y_lags
+    start = max(d_in - 1, d_out)
+    ks = np.arange(start, len(y))
+    if ks.size == 0:
+        return np.empty((0, d_in, z.shape[1])), np.empty((0, d_out)), np.empty(0)
+    zi = ks[:, None] - np.asarray(INPUT_DELAYS)[None, :]
+    yi = ks[:, None] - np.asarray(OUTPUT_DELAYS)[None, :]
+    zz, yp, tg = z[zi], lags[yi], y[ks]
+    ok = np.all(np.isfinite(zz), axis=(1, 2)) & np.all(np.isfinite(yp), axis=1) & np.isfinite(tg)
+    # the target's own past must be real too, or a row would learn from a gap
+    ok &= np.all(np.isfinite(y[yi]), axis=1)
+    return zz[ok], yp[ok], tg[ok]

@@ -1,0 +1,152 @@
+"""``train``: kit CSVs → the PCA-NARX sensor and its baselines as ONNX, a model card, a report.
+
+Writes, for ``--out DIR/NAME.onnx``: ``NAME.onnx`` (the PCA-NARX), ``NAME.narx_no_pca.onnx`` and
+``NAME.linear_arx.onnx`` (the baselines, same interface), ``NAME.md`` (model card and training
+report) and ``NAME.report/`` (correlation circle, variance, validation PNGs).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+import gateway
+from gateway.greenhouse import Greenhouse
+from gateway.vsensor.features import (
+    INPUT_DELAYS,
+    OUTPUT_DELAYS,
+    STEP_S,
+    features,
+    flow_limits,
+    greenhouse_signature,
+)
+from training.vsensor import fit, report
+from training.vsensor.dataset import Segment, build_segment, fingerprint
+from training.vsensor.export import write_model
+from training.vsensor.model_card import model_card
+from training.vsensor.narx import Narx
+
+NETWORKS = ("pca_narx", "narx_no_pca", "linear_arx")
+
+
+@dataclass
+class TrainResult:
+    paths: dict[str, Path]
+    card: Path
+    metrics: dict[str, dict]
+    pca: dict
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("serra")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+def validation_metrics(net: Narx, split: fit.Split) -> tuple[dict, list[np.ndarray]]:
+    """Closed-loop flow error on the validation quarter of every file (and the sims)."""
+    sims = fit.simulate(net, split)
+    ref = np.concatenate([s.flow[c:] for s, c in zip(split.segments, split.cut, strict=True)])
+    est = np.concatenate([y[c:] for y, c in zip(sims, split.cut, strict=True)])
+    ok = np.isfinite(ref)
+    e = est[ok] - ref[ok]
+    span = float(ref[ok].max() - ref[ok].min())
+    r = np.corrcoef(est[ok], ref[ok])[0, 1] if ref[ok].std() > 0 and est[ok].std() > 0 else np.nan
+    m = {"mae": float(np.mean(np.abs(e))), "rmse": float(np.sqrt(np.mean(e * e))),
+         "maxae": float(np.max(np.abs(e))), "r2": float(r * r), "n": int(ok.sum()),
+         "range": [float(ref[ok].min()), float(ref[ok].max())],
+         "mae_pct_range": 100.0 * float(np.mean(np.abs(e))) / span if span > 0 else None}
+    return m, sims
+
+
+def _ranges(split: fit.Split, names: list[str]) -> tuple[dict, dict]:
+    u = np.concatenate([i for i, _ in split.part("train")])
+    u = u[np.all(np.isfinite(u), axis=1)]
+    lo, hi, mean = u.min(axis=0), u.max(axis=0), u.mean(axis=0)
+    return ({n: [float(a), float(b)] for n, a, b in zip(names, lo, hi, strict=True)},
+            {n: float(v) for n, v in zip(names, mean, strict=True)})
+
+
+def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: str | Path | None,
+          overrides=None, seed: int = 0, hidden=fit.HIDDEN, epochs: int = 100, rounds: int = 6,
+          progress: Callable[..., None] | None = None, report_dir: str | Path | None = None
+          ) -> TrainResult:
+    """Build the datasets, fit the three networks, write the models, card and report (PNGs in
+    ``report_dir``, default ``<out stem>.report/`` beside the model)."""
+    progress = progress or (lambda **k: None)
+    out = Path(out)
+    t0 = time.perf_counter()
+    segments: list[Segment] = []
+    for p in paths:
+        progress(description=f"replays {Path(p).name}")
+        segments.append(build_segment(p, gh, kind, cache, overrides, seed,
+                                      progress=lambda done: progress(advance=0, info=f"row {done}")))
+        progress(advance=1)
+    seconds = {"datasets": time.perf_counter() - t0}
+    t1 = time.perf_counter()
+    limits = flow_limits(gh, kind)
+    upper = [limits.upper(s.x["t_in"] - s.x["t_out"], s.x["t_out"], s.x["wind"]) for s in segments]
+    split = fit.make_split(segments, upper)
+    names = [f.name for f in features(kind)]
+    mean, std = fit.scaler(split)
+    z = (np.concatenate([i for i, _ in split.part("train")]) - mean) / std
+    loadings, share = fit.pca(z, seed)
+    kept = loadings.shape[1]
+    nets, logs = {}, {}
+    progress(description="fitting")
+    for name, proj in (("pca_narx", loadings), ("narx_no_pca", None)):
+        nets[name], logs[name] = fit.fit_narx(name, split, mean, std, proj, seed, hidden, epochs,
+                                              rounds, min(30, epochs), progress=progress)
+    nets["linear_arx"] = fit.fit_arx(split, mean, std)
+    nets["pca_narx"].explained = share[:kept]
+    seconds["fit"] = time.perf_counter() - t1
+    metrics, sims = {}, {}
+    for name, net in nets.items():
+        metrics[name], sims[name] = validation_metrics(net, split)
+    ranges, input_mean = _ranges(split, names)
+    pca_info = {"components": kept, "variance_share": [float(v) for v in share[:kept]],
+                "variance_total": float(np.sum(share[:kept])), "all_shares": [float(v) for v in share]}
+    base_meta = {
+        "model_kind": kind,
+        "features": [{"name": f.name, "unit": f.unit, "meaning": f.meaning, "tau_s": f.tau}
+                     for f in features(kind)],
+        "input_delays": list(INPUT_DELAYS), "output_delays": list(OUTPUT_DELAYS), "step_s": STEP_S,
+        "training_ranges": ranges, "input_mean": input_mean,
+        "target": "explicit ventilation flow G [m3 s-1] of the adaptive model with the vent signal "
+                  "(III.31; III.32 inverted)",
+        "flow_range": [float(np.nanmin(np.concatenate([s.flow for s in segments]))),
+                       float(np.nanmax(np.concatenate([s.flow for s in segments])))],
+        "y0": float(nets["pca_narx"].y_mean),
+        "greenhouse": {"name": gh.name, "signature": greenhouse_signature(gh)},
+        "data_fingerprint": fingerprint(segments, kind),
+        "sources": [{"file": Path(s.source).name, "sha256": s.sha256, "rows": len(s.flow)} for s in segments],
+        "online_overrides": overrides or {}, "seed": seed,
+        "version": _version(), "pca": pca_info,
+        "metrics": {"validation_closed_loop": metrics,
+                    "training_log": {k: v for k, v in logs.items()}},
+    }
+    written = {}
+    for name, net in nets.items():
+        path = out if name == "pca_narx" else out.with_name(f"{out.stem}.{name}.onnx")
+        meta = {**base_meta, "network": name, "hidden_layers": list(net.hidden), "y0": float(net.y_mean)}
+        write_model(net, len(names), meta, path)
+        written[name] = path
+    rep_dir = Path(report_dir) if report_dir else out.with_name(f"{out.stem}.report")
+    rep_dir.mkdir(parents=True, exist_ok=True)
+    circle = report.correlation_circle(segments, names, rep_dir / "correlation_circle.png")
+    report.variance_plot(share, kept, rep_dir / "pca_variance.png")
+    report.validation_plot(segments, sims, split.cut, rep_dir / "validation.png")
+    t18 = report.table18(segments, names)
+    seconds["total"] = time.perf_counter() - t0
+    card = out.with_suffix(".md")
+    card.write_text(model_card(out, base_meta, metrics, t18, circle, names, nets, rep_dir, gateway.__name__),
+                    encoding="utf-8")
+    return TrainResult(written, card, metrics, pca_info, seconds)

@@ -126,6 +126,27 @@ def test_a_rotated_key_shows_the_boards_own_boot_counter(store: Filled) -> None:
     assert "stored as boot 2" in "\n".join(t.plain for t in render.kit_lines(snap_of(store)))
 
 
+def test_the_ventilation_estimate_when_a_virtual_sensor_is_set(store: Filled) -> None:
+    text = "\n".join(t.plain for t in render.greenhouse_lines(snap_of(store), 0))
+    assert "Ventilation no virtual sensor" in text
+    with sqlite3.connect(store.path) as c:  # the config names a sensor; its rows as the pipeline writes them
+        cfg = json.loads(c.execute("SELECT config FROM greenhouses").fetchone()[0])
+        c.execute("UPDATE greenhouses SET config=?", (json.dumps(dict(cfg, vsensor="v.onnx")),))
+    text = "\n".join(t.plain for t in render.greenhouse_lines(snap_of(store), 0))
+    assert "Ventilation virtual sensor set, no estimate yet" in text
+    with sqlite3.connect(store.path) as c:
+        c.executemany("INSERT INTO estimates (greenhouse, t, source, name, value, unit, info) "
+                      "VALUES ('north', ?, 'vsensor', ?, ?, ?, ?)",
+                      [(store.now - 91, "ventilation_flow", 0.5, "m3 s-1", ""),
+                       (store.now - 91, "ventilation_heat_loss", 30.0, "W m-2", ""),
+                       (store.now - 31, "ventilation_flow", 0.412, "m3 s-1", "out_of_range"),
+                       (store.now - 31, "ventilation_heat_loss", 41.6, "W m-2", "out_of_range")])
+    v = snap_of(store).greenhouses[0].ventilation
+    assert (v.configured, v.flow, v.heat_loss, v.out_of_range) == (True, 0.412, 41.6, True)
+    text = "\n".join(t.plain for t in render.greenhouse_lines(snap_of(store), 0))
+    assert "Ventilation 0.412 m³/s · heat loss 42 W/m² at 08:10Z · inputs out of its range" in text
+
+
 def test_gateway_down_link_down_and_outbox_alarm_are_said(store: Filled) -> None:
     beat = fresh_status(store, peers=0, waiting=("serra/f1/north/forecast",), alarm_at=500)
     with sqlite3.connect(store.path) as c:  # nobody listened: every message still waits

@@ -226,7 +226,7 @@ def _ventilation_line(v: S.Ventilation) -> Text:
     if v.flow is None:
         return _line("Ventilation ", ("no virtual sensor" if not v.configured else
                                       "virtual sensor set, no estimate yet", DIM))
-    flag = ("  (inputs outside its training range)", WARN) if v.out_of_range else ""
+    flag = (" · inputs out of its range", WARN) if v.out_of_range else ""
     return _line(f"Ventilation {number(v.flow, '{:.3f}')} m³/s · heat loss "
                  f"{number(v.heat_loss, '{:.0f}')} W/m² at {hhmm(v.t)}", flag)
 

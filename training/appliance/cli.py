@@ -1,9 +1,10 @@
 """``python -m training run`` (``make run``): the whole kit on this machine, on embedded defaults.
 
 A device key (``gateway keys add``), the model calibrated on two earlier simulated days
-(``gateway calibrate``), the live gateway (SQLite under ``--out``, a Zenoh peer on loopback), a local subscriber (the cloud side, its own SQLite), the simulated kit (the real
-firmware under MicroPython, its sensors fed by the reference simulator, ``--scale`` times faster
-than the wall clock, the gateway's clock scaled alike), and the status screen. On a terminal it
+(``gateway calibrate``), the live gateway (SQLite under ``--out``, a Zenoh peer on loopback),
+a local subscriber (the cloud side, its own SQLite), the simulated kit (the real firmware under
+MicroPython, its sensors fed by the reference simulator, ``--scale`` times faster than the wall
+clock, the gateway's clock scaled alike), and the status screen. On a terminal it
 runs until you quit the screen (q or Ctrl-C); without one (CI, a pipe) for ``--minutes`` simulated
 minutes, printing progress. Either way it then stops everything in order, leaves no process
 behind, and prints a summary (also written to ``summary.json``).

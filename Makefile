@@ -30,9 +30,10 @@ $(STUBS): $(STAMP)
 
 stubs: $(STUBS)
 
-## run: the main end-to-end job on embedded defaults (the offline demo until the live service lands)
+## run: the whole kit live on this machine: key, gateway, simulated kit (real firmware under
+## MicroPython), subscriber, status screen; q or Ctrl-C stops it all (python -m training run)
 run: $(STAMP)
-	$(PY) -m training demo
+	$(PY) -m training run
 
 ## demo: the offline loop on shipped data: simulate → calibrate → replay → diagnose (out/demo/)
 demo: $(STAMP)

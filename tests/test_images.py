@@ -24,6 +24,7 @@ import sqlite3
 import subprocess
 import sys
 import sysconfig
+import time
 import zipfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -165,7 +166,8 @@ def test_installed_wheel_runs_without_the_checkout(installed: Installed) -> None
     r = installed.run("-m", "gateway", "--help")
     assert r.returncode == 0, r.stderr
     assert r.stdout.startswith("usage: python -m gateway")
-    for command in ("calibrate", "replay", "diagnose", "ingest", "export"):
+    for command in ("calibrate", "replay", "diagnose", "ingest", "export", "run", "subscribe",
+                    "status"):
         assert command in r.stdout
     assert "demo" not in r.stdout
     r = installed.run("-m", "gateway", "calibrate", "--help")  # presets come from package data
@@ -188,15 +190,20 @@ def _map_paths(text: str, installed: Installed, root: Path) -> str:
     """The install's paths and the kit's public port → a temp folder and a loopback port."""
     return (text.replace("/opt/serra/venv/bin/python", str(installed.python))
             .replace("/var/lib/serra/", f"{root}/").replace("/etc/serra/", f"{root}/")
-            .replace("0.0.0.0:5683", "127.0.0.1:0"))
+            .replace("0.0.0.0:5683", "127.0.0.1:0").replace("tcp/0.0.0.0:7447", "tcp/127.0.0.1:0"))
+
+
+def install_configs(installed: Installed, bundles: Path, root: Path) -> None:
+    """The bundle's default configs into ``root``, their paths and ports mapped."""
+    for config in (bundles / "gateway").glob("*.toml"):
+        (root / config.name).write_text(_map_paths(config.read_text(), installed, root))
 
 
 @contextmanager
 def run_unit(name: str, installed: Installed, bundles: Path, root: Path) -> Iterator[Popen[str]]:
     """Start a shipped unit's ExecStart from the fresh venv, with the bundle's default configs
     (paths mapped into ``root``); stopped with SIGTERM, as systemd does, and must exit 0."""
-    for config in (bundles / "gateway").glob("*.toml"):
-        (root / config.name).write_text(_map_paths(config.read_text(), installed, root))
+    install_configs(installed, bundles, root)
     (cmd,) = _unit(bundles / "gateway" / name)["ExecStart"]
     log = root / f"{name}.stderr"
     with log.open("w") as err:
@@ -221,6 +228,24 @@ def _first_line(proc: Popen[str], deadline: float = 120) -> str:
     return proc.stdout.readline() if ready else ""
 
 
+def _line_starting(proc: Popen[str], prefix: str, timeout: float = 120) -> str:
+    """The first stdout line starting with ``prefix`` ("" at the end of output or the deadline).
+    Reads the pipe's descriptor itself: a buffered readline would hide the next lines from
+    select."""
+    assert proc.stdout is not None
+    fd, buf, end = proc.stdout.fileno(), b"", time.monotonic() + timeout
+    while (left := end - time.monotonic()) > 0 and select.select([fd], [], [], left)[0]:
+        chunk = os.read(fd, 4096)
+        if not chunk:
+            break
+        buf += chunk
+        while b"\n" in buf:
+            line, buf = buf.split(b"\n", 1)
+            if line.decode().startswith(prefix):
+                return line.decode()
+    return ""
+
+
 def test_installed_wheel_stores_a_record_through_the_shipped_ingest_unit(
         installed: Installed, bundles: Path, tmp_path: Path) -> None:
     key = secrets.token_bytes(32)
@@ -236,6 +261,38 @@ def test_installed_wheel_stores_a_record_through_the_shipped_ingest_unit(
         sock.sendto(protocol.encode_record(rec, key), (host, int(port)))
         ack = protocol.decode_ack(sock.recv(64), key)
         assert (ack.device_id, ack.seq, ack.status) == (7, 0, protocol.ACK_STORED)
+    with sqlite3.connect(tmp_path / "serra.db") as db:
+        assert db.execute("SELECT count(*) FROM samples").fetchone()[0] == 1
+
+
+def test_installed_wheel_runs_the_shipped_gateway_unit_from_its_default_config(
+        installed: Installed, bundles: Path, tmp_path: Path) -> None:
+    """The live gateway from the wheel alone, with the bundle's gateway.toml (paths and ports
+    mapped to a temp folder and loopback): its check, its ready line, a signed record stored and
+    acknowledged, the status screen reading the store it wrote, SIGTERM → exit 0."""
+    key = secrets.token_bytes(32)
+    write_keys(tmp_path / "keys.txt", {7: key})
+    install_configs(installed, bundles, tmp_path)
+    (pre,) = _unit(bundles / "gateway" / "serra-gateway.service")["ExecStartPre"]
+    check = subprocess.run(shlex.split(_map_paths(pre, installed, tmp_path)), cwd=installed.cwd,
+                           env=installed.env, capture_output=True, text=True, timeout=120)
+    assert check.returncode == 0 and "ok: farm demo-farm" in check.stdout, check.stderr
+    with run_unit("serra-gateway.service", installed, bundles, tmp_path) as proc, \
+            socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        line = _line_starting(proc, "serra-gateway ready")
+        assert line.startswith("serra-gateway ready udp 127.0.0.1:"), line
+        words = line.split()
+        host, port = words[words.index("udp") + 1].rsplit(":", 1)
+        assert words[words.index("zenoh") + 1].startswith("tcp/127.0.0.1:")
+        rec = protocol.Record(7, 0, 0, 60_000, 0, 60.0, (21.5, 60.0, 15.0, 70.0, 300.0, 2.0, 0),
+                              (0,) * 7)
+        sock.settimeout(60)
+        sock.sendto(protocol.encode_record(rec, key), (host, int(port)))
+        ack = protocol.decode_ack(sock.recv(64), key)
+        assert (ack.device_id, ack.seq, ack.status) == (7, 0, protocol.ACK_STORED)
+        r = installed.run("-m", "gateway", "status", "--db", str(tmp_path / "serra.db"), "--once")
+        assert "farm demo-farm · greenhouse north (1/1)" in r.stdout, r.stdout + r.stderr
+        assert "   7  north in+out" in r.stdout and "\x1b" not in r.stdout
     with sqlite3.connect(tmp_path / "serra.db") as db:
         assert db.execute("SELECT count(*) FROM samples").fetchone()[0] == 1
 

@@ -101,6 +101,10 @@ def test_outbox_holds_until_a_subscriber_matches_then_drains_in_order(gateway_si
         few = list(session.get("serra/f1/north/history/forecast?limit=3",
                                consolidation=zenoh.ConsolidationMode.NONE))
         assert [json.loads(r.ok.payload.to_string())["n"] for r in few] == [0, 2, 4]
+        # last=N: the newest N of each key (the latest of everything in one query), oldest first
+        latest = list(session.get("serra/f1/*/history/**?last=2;to=2009-11-01T06:50:00Z",
+                                  consolidation=zenoh.ConsolidationMode.NONE))
+        assert [json.loads(r.ok.payload.to_string())["n"] for r in latest] == [47, 48, 49, 50]
         (bad,) = list(session.get("serra/f1/north/history/forecast?from=yesterday",
                                   consolidation=zenoh.ConsolidationMode.NONE))
         assert bad.err is not None and "from='yesterday'" in bad.err.payload.to_string()

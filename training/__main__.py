@@ -12,6 +12,7 @@ import importlib
 COMMANDS = (
     "training.simulate.cli",
     "training.demo",
+    "training.appliance.cli",
 )
 
 

@@ -23,6 +23,7 @@ COMMANDS = {
     "certs": "gateway.cli.certs",
     "router": "gateway.cli.router",
     "vsensor": "gateway.cli.vsensor",
+    "status": "gateway.cli.status",
 }
 
 
@@ -35,8 +36,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="python -m gateway",
         description="Serra gateway tools: calibrate, replay and diagnose greenhouse climate models "
         "on kit CSV data (docs/data-format.md); ingest kit packets, manage device keys and export what "
-        "was stored; run the live gateway and subscribe to it over Zenoh; certificates and routers "
-        "for a fleet.",
+        "was stored; run the live gateway, watch it on the status screen and subscribe to it over "
+        "Zenoh; certificates and routers for a fleet.",
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log details to stderr")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")

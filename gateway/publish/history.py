@@ -1,4 +1,5 @@
-"""The history queryable: ``serra/<farm>/<greenhouse>/history/<kind>?from=ISO;to=ISO;limit=N``.
+"""The history queryable: ``serra/<farm>/<greenhouse>/history/<kind>?from=ISO;to=ISO;limit=N``
+(or ``?last=N``: the newest N messages of each key matched, e.g. the latest of everything).
 
 Answered from the gateway's own store (the outbox is also the log of every message made, sent or
 not, kept ``history_days``): each reply is the stored payload, unchanged (same idempotency key,
@@ -79,6 +80,13 @@ class HistoryQueryable:
         marks = ", ".join("?" * len(keys))
         start = rng.start if rng.start > -1e300 else -1e300
         end = rng.end if rng.end < 1e300 else 1e300
+        if rng.last is not None:  # one index range per key (outbox_key_t), newest first
+            rows = []
+            for k in keys:
+                rows += self.conn.execute(
+                    "SELECT t, id, key, payload FROM outbox WHERE key=? AND t >= ? AND t <= ? "
+                    "ORDER BY t DESC, id DESC LIMIT ?", (k, start, end, rng.last)).fetchall()
+            return [(r[2], r[3]) for r in sorted(rows)[-rng.limit:]]
         return self.conn.execute(
             f"SELECT key, payload FROM outbox WHERE key IN ({marks}) AND t >= ? AND t <= ? "
             "ORDER BY t, id LIMIT ?", (*keys, start, end, rng.limit)).fetchall()

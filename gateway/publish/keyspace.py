@@ -2,6 +2,7 @@
 
     serra/<farm>/<greenhouse>/<kind>
     serra/<farm>/<greenhouse>/history/<kind>?from=ISO;to=ISO;limit=N
+    serra/<farm>/<greenhouse>/history/<kind>?last=N          (the newest N of each key)
 
 ``kind`` is one of :data:`KINDS` or ``device/<id>``. Devices that no greenhouse of the config
 uses are reported under the greenhouse name ``unassigned``.
@@ -53,6 +54,8 @@ class HistoryRange:
     start: float  # [unix s], -inf when absent
     end: float  # [unix s] included, +inf when absent
     limit: int
+    last: int | None = None  # the newest ``last`` messages of each key in the range (still
+    # replied oldest first, at most ``limit`` in all), e.g. ``last=1``: the latest of every key
 
 
 def parse_time(text: str, name: str) -> float:
@@ -81,4 +84,9 @@ def parse_range(get) -> HistoryRange:
         limit = DEFAULT_LIMIT
     if start > end:
         raise SelectorError("from is after to")
-    return HistoryRange(start, end, limit)
+    last = None
+    if text := get("last"):
+        if not text.strip().isdigit() or not 1 <= int(text) <= MAX_LIMIT:
+            raise SelectorError(f"last={text!r}: expected a whole number in 1..{MAX_LIMIT}")
+        last = int(text)
+    return HistoryRange(start, end, limit, last)

@@ -189,8 +189,11 @@ detector is reported as precipitation)."""
 
 def device(farm: str, device_id: int, t: float, idem: str, *, state: str, boot: int | None,
            records: int, last_seen: float | None, channels: Mapping[str, str],
-           greenhouses: Sequence[Place]) -> dict:
-    """``device/<id>``: a kit's health (``deviceState`` ok | silent | unassigned)."""
+           greenhouses: Sequence[Place], board_boot: int | None = None) -> dict:
+    """``device/<id>``: a kit's health (``deviceState`` ok | silent | unassigned).
+
+    ``bootCounter`` is the boot as stored (unique per device, as in ``kitRecord``);
+    ``boardBootCounter`` the board's own counter (they differ after a key rotation)."""
     attrs: dict[str, Any] = {
         "category": prop(["sensor"]),
         "controlledProperty": prop(list(CONTROLLED)),
@@ -202,6 +205,8 @@ def device(farm: str, device_id: int, t: float, idem: str, *, state: str, boot: 
     }
     if boot is not None:
         attrs["bootCounter"] = prop(boot, None, t)
+    if board_boot is not None:
+        attrs["boardBootCounter"] = prop(board_boot, None, t)
     if last_seen is not None:
         attrs["dateLastValueReported"] = date_time(last_seen)
     if greenhouses:

@@ -259,7 +259,8 @@ class Producers:
                     self.farm, dev, now, idem, state=run, boot=h.boot if h else None,
                     records=h.records if h else 0, last_seen=h.last_sample_t if h else None,
                     channels=h.channels if h else {},
-                    greenhouses=[self.gh[g].place for g in ghs])))
+                    greenhouses=[self.gh[g].place for g in ghs],
+                    board_boot=h.board_boot if h else None)))
         if len(msgs) > self.outbox.room():
             return 0  # state, not events: skipped while the backlog drains
         self.last_snapshot = now

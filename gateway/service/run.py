@@ -71,6 +71,8 @@ class Gateway:
 
     def _status_extra(self) -> dict[str, Any]:
         out: dict[str, Any] = {"ingest": dict(self.ingest_counters)}
+        if self.running is not None:  # kits refused as a whole (a reflashed board), for the screen
+            out["refused"] = {str(d): asdict(r) for d, r in self.running.core.refused.items()}
         if self.publisher is not None:
             out["zenoh"] = {"enabled": True, "endpoints": self.endpoints, **asdict(self.publisher.state)}
         elif self.opener is not None:  # no router answered yet: the outbox holds the messages

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import logging
 import os
+import shutil
 import threading
 import time
 from collections.abc import Callable
@@ -132,14 +133,32 @@ class Worker:
     def _gh_state(self) -> dict[str, dict[str, Any]]:
         assert self.outbox is not None
         pending = self.outbox.pending()
+        service = self._service_state()
         out = {}
         for p in self.pipelines:
             s: dict[str, Any] = {"estimatorState": p.state, "outboxPending": pending,
-                                 "outboxAlarm": self.outbox.alarm}
+                                 "outboxAlarm": self.outbox.alarm, **service}
             if p.cursor is not None:
                 s["estimatedUpTo"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(p.cursor))
             out[p.name] = s
         return out
+
+    def _service_state(self) -> dict[str, Any]:
+        """What the status screen shows of the gateway itself, for one that reads it over Zenoh
+        (docs/cloud.md, ``status``): uptime [s], store and disk [bytes], Zenoh peers, ingest
+        counters."""
+        db = self.cfg.db
+        size = sum(os.path.getsize(f) for f in (db, f"{db}-wal") if os.path.exists(f))
+        try:
+            du = shutil.disk_usage(os.path.dirname(os.path.abspath(db)))
+            disk = {"diskFree": du.free, "diskTotal": du.total}
+        except OSError:
+            disk = {}
+        extra = self.status_extra()
+        z = extra.get("zenoh", {})
+        return {"gatewayUptime": round(time.time() - self.started, 1), "storeSize": size, **disk,
+                "zenohPeers": z.get("peers", 0), "zenohRouters": z.get("routers", 0),
+                "ingestCounters": extra.get("ingest", {})}
 
     def _report_unassigned(self, conn) -> None:
         known = self.cfg.devices()

@@ -130,7 +130,11 @@ def findings(conn: sqlite3.Connection, greenhouse: str | None = None) -> list[Fi
 
 @dataclass(frozen=True)
 class DeviceHealth:
-    """What the store knows about a kit: boot counter, records, last sample and its channels."""
+    """What the store knows about a kit: boot counter, records, last sample and its channels.
+
+    ``boot`` is the boot as stored (the board's counter plus its key's boot base);
+    ``board_boot`` is the board's own counter (docs/wire-format.md, "A reflashed or replaced
+    board")."""
 
     device_id: int
     boot: int
@@ -139,17 +143,37 @@ class DeviceHealth:
     last_seen: float
     last_sample_t: float | None
     channels: dict[str, str] = field(default_factory=dict)  # channel → status name
+    board_boot: int | None = None
+
+
+def boot_bases(conn: sqlite3.Connection) -> dict[int, list[int]]:
+    """device → the boot bases of its keys (``meta`` rows ``boot_base/<device>/<key id>``)."""
+    out: dict[int, list[int]] = {}
+    for name, value in conn.execute("SELECT name, value FROM meta WHERE name LIKE 'boot_base/%'"):
+        parts = name.split("/")
+        if len(parts) == 3 and parts[1].isdigit():
+            out.setdefault(int(parts[1]), []).append(int(value))
+    return out
+
+
+def board_boot(stored_boot: int, bases: list[int]) -> int:
+    """The board's own boot counter of a stored boot: minus the highest key base not above it
+    (a newer key's base is above every boot stored before it; an older key's packets are
+    refused once a newer key has stored, so the stored boot is always of the highest base)."""
+    return stored_boot - max((b for b in bases if b <= stored_boot), default=0)
 
 
 def device_health(conn: sqlite3.Connection) -> list[DeviceHealth]:
     out = []
     cols = ", ".join(f"{c}_st" for c in CHANNELS)
+    bases = boot_bases(conn)
     for dev, boot, n, first, last in conn.execute(
             "SELECT device_id, boot, n_samples, first_seen, last_seen FROM devices ORDER BY device_id"):
         r = conn.execute(f"SELECT t, {cols} FROM samples WHERE device_id=? "
                          "ORDER BY boot DESC, seq DESC LIMIT 1", (dev,)).fetchone()
         chans = {c: STATUS_NAMES.get(s, str(s)) for c, s in zip(CHANNELS, r[1:], strict=True)} if r else {}
-        out.append(DeviceHealth(dev, boot, n, first, last, r[0] if r else None, chans))
+        out.append(DeviceHealth(dev, boot, n, first, last, r[0] if r else None, chans,
+                                board_boot(boot, bases.get(dev, []))))
     return out
 
 

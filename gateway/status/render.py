@@ -1,0 +1,373 @@
+"""A :class:`Snapshot` → lines of text, one list per panel (greenhouse, kits, gateway).
+
+Lines are rich ``Text`` (styles mark alarms and silences); ``plain()`` joins them without any
+style for ``--once``. Every line fits 78 columns, so a panel fits an 80-column terminal.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+from rich.text import Text
+
+from gateway.status import snapshot as S
+
+WIDTH = 78
+BARS = "▁▂▃▄▅▆▇█"
+ALARM = "bold red"
+WARN = "yellow"
+OK = "green"
+DIM = "dim"
+CHANNELS = (  # channel, label, unit, format
+    ("t_in", "T in", "°C", "{:.1f}"), ("rh_in", "RH in", "%", "{:.0f}"),
+    ("t_out", "T out", "°C", "{:.1f}"), ("rh_out", "RH out", "%", "{:.0f}"),
+    ("i_glob", "I glob", "W/m²", "{:.0f}"), ("wind", "wind", "m/s", "{:.1f}"),
+    ("rain", "rain", "", "{:.0f}"))
+
+
+# -- small formats -------------------------------------------------------------------------------
+def sparkline(series: S.Series | None, lo: float | None = None, hi: float | None = None) -> str:
+    """Block characters, one per bin, scaled to [lo, hi] (the series' own range by default);
+    a space where a bin has no data."""
+    if series is None:
+        return ""
+    lo = series.lo if lo is None else lo
+    hi = series.hi if hi is None else hi
+    out = []
+    for v in series.values:
+        if not math.isfinite(v) or not math.isfinite(lo):
+            out.append(" ")
+            continue
+        f = 0.5 if hi <= lo else min(max((v - lo) / (hi - lo), 0.0), 1.0)
+        out.append(BARS[min(int(f * len(BARS)), len(BARS) - 1)])
+    return "".join(out)
+
+
+def stamp(t: float | None, seconds: bool = False) -> str:
+    if t is None:
+        return "—"
+    return time.strftime("%Y-%m-%d %H:%M:%SZ" if seconds else "%Y-%m-%d %H:%MZ", time.gmtime(t))
+
+
+def hhmm(t: float | None) -> str:
+    return "—" if t is None else time.strftime("%H:%MZ", time.gmtime(t))
+
+
+def duration(s: float | None) -> str:
+    if s is None or not math.isfinite(s):
+        return "?"
+    s = max(s, 0.0)
+    if s < 120:
+        return f"{s:.0f} s"
+    if s < 7200:
+        return f"{s / 60:.0f} min"
+    if s < 3 * 86400:
+        return f"{int(s // 3600)} h {int(s % 3600 // 60)} min"
+    return f"{s / 86400:.1f} days"
+
+
+def size(n: int | None) -> str:
+    if n is None:
+        return "?"
+    for unit in ("B", "kB", "MB", "GB", "TB"):
+        if n < 1000 or unit == "TB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1000  # type: ignore[assignment]
+    return "?"
+
+
+def tail(text: str, width: int) -> str:
+    """A path cut on the left (its file name is what matters)."""
+    return text if len(text) <= width else "…" + text[-(width - 1):]
+
+
+def number(v: float | None, fmt: str = "{:.2f}") -> str:
+    return "—" if v is None or not math.isfinite(v) else fmt.format(v)
+
+
+def _channel_value(ch: str, v: float | None, fmt: str) -> str:
+    if v is None:
+        return "—"
+    if ch == "rain":
+        return "wet" if v > 0 else "dry"
+    return fmt.format(v)
+
+
+def wrapped(text: str, indent: str, style: str = "") -> list[Text]:
+    """``text`` over as many lines as it needs (a command must not be cut)."""
+    out, line = [], indent
+    for word in text.split():
+        if len(line) + len(word) + 1 > WIDTH and line.strip():
+            out.append(_line((line.rstrip(), style)))
+            line = indent + "  "
+        line += word + " "
+    out.append(_line((line.rstrip(), style)))
+    return out
+
+
+def _line(*parts: str | tuple[str, str]) -> Text:
+    t = Text(no_wrap=True, overflow="ellipsis")
+    for p in parts:
+        if isinstance(p, tuple):
+            t.append(*p)
+        else:
+            t.append(p)
+    t.truncate(WIDTH, overflow="ellipsis")
+    return t
+
+
+# -- panels --------------------------------------------------------------------------------------
+def title(snap: S.Snapshot, panel: str, gh: int = 0) -> Text:
+    """One line: farm, what is shown, the gateway clock."""
+    where = f"farm {snap.farm}" if snap.farm else "Serra"
+    if panel == "greenhouse" and snap.greenhouses:
+        g = snap.greenhouses[gh % len(snap.greenhouses)]
+        what = f"greenhouse {g.name} ({gh % len(snap.greenhouses) + 1}/{len(snap.greenhouses)})"
+    else:
+        what = panel
+    clock = stamp(snap.now)
+    if snap.gateway.clock_scale != 1.0:
+        clock += f" ×{snap.gateway.clock_scale:g}"
+    return _line(f"{where} · {what}", " " * max(1, WIDTH - len(where) - len(what) - 3 - len(clock)),
+                 (clock, DIM))
+
+
+def greenhouse_lines(snap: S.Snapshot, index: int) -> list[Text]:
+    if not snap.greenhouses:
+        return [_line(("No greenhouse in this store yet.", WARN))] + [_line(n) for n in snap.notes]
+    g = snap.greenhouses[index % len(snap.greenhouses)]
+    state = g.state or "?"
+    head = _line((g.name, "bold"), f"  {g.model} model · estimator ",
+                 (state, OK if state == "running" else WARN),
+                 f" · kit {g.inside_device} in, {g.outside_device} out")
+    some = next(iter(g.series.values()), None)
+    span = duration(some.end - some.start) if some is not None else "24 h"
+    label = f"last {span}"
+    lines = [head, _line((f"            latest   {label:<36} min..max", DIM))]
+    for ch, label, unit, fmt in CHANNELS:
+        side = g.inside if ch in ("t_in", "rh_in") else g.outside
+        v = side.values.get(ch)
+        st = side.status.get(ch, "")
+        cell = _channel_value(ch, v, fmt) + (f" {unit}" if v is not None and unit else "")
+        s = g.series.get(ch)
+        rng = (f"{number(s.lo, fmt)}..{number(s.hi, fmt)}" if s is not None and s.finite else "no data")
+        style = WARN if st and st != "ok" else ""
+        note = f" {st}" if st and st != "ok" else ""
+        lines.append(_line(f"{label:<7} ", (f"{cell + note:>10}", style), "  ",
+                           (f"{sparkline(s):<36}", "cyan"), f" {rng}"))
+    lines += _temperature_lines(g.temperature)
+    lines += _parameter_lines(g)
+    lines.append(_ventilation_line(g.ventilation))
+    lines += _finding_lines(g, snap.gateway.diagnosis.get(g.name, ""))
+    if g.inside.t is not None and S.silent(g.inside.t, snap.now):
+        lines.insert(1, _line((f"inside kit {g.inside_device} silent for "
+                               f"{duration((snap.now or 0) - g.inside.t)}", ALARM)))
+    return lines
+
+
+def _temperature_lines(t: S.Temperature) -> list[Text]:
+    if t.t is None:
+        return [_line("Inside T  ", ("no estimate yet (the estimator waits for final minutes)", WARN))]
+    pred: list[str | tuple[str, str]] = [" · predicted ", (number(t.predicted), "bold"),
+                                         " °C a minute ahead"] if t.predicted is not None else []
+    out = [_line("Inside T  measured ", (number(t.measured), "bold"), " °C", *pred,
+                 f" · at {hhmm(t.t)}")]
+    if t.forecasts:
+        fc = " · ".join(f"+{h} min {v:.2f}" for h, v in sorted(t.forecasts.items()))
+        h = max(t.forecasts)
+        out.append(_line(f"forecast  {fc} °C", (f" ({t.outlook})", DIM)))
+        lo = min(x for x in (t.measured_series.lo if t.measured_series else math.nan,
+                             t.forecast_series.lo if t.forecast_series else math.nan)
+                 if math.isfinite(x)) if _any_finite(t) else None
+        hi = max(x for x in (t.measured_series.hi if t.measured_series else math.nan,
+                             t.forecast_series.hi if t.forecast_series else math.nan)
+                 if math.isfinite(x)) if _any_finite(t) else None
+        out.append(_line(f"{'measured':<9}  ", (f"{sparkline(t.measured_series, lo, hi):<36}", "cyan"),
+                         f" {number(lo, '{:.1f}')}..{number(hi, '{:.1f}')} °C"))
+        out.append(_line(f"{f'+{h} min':<9}  ", (f"{sparkline(t.forecast_series, lo, hi):<36}", "magenta"),
+                         f" at validity; next {hhmm(t.t + 60 * h)}"))
+    skill = [s for s in t.skill if s.n]
+    if skill:
+        parts = "  ".join(f"{s.horizon_min}m {s.mae:.2f}|{s.persistence_mae:.2f}" for s in skill)
+        out.append(_line(f"MAE       {parts} °C", ("  ours|persistence", DIM)))
+    elif t.forecasts:
+        out.append(_line(("MAE       none yet: a forecast is scored once its time has come", DIM)))
+    return out
+
+
+def _any_finite(t: S.Temperature) -> bool:
+    return any(s is not None and s.finite for s in (t.measured_series, t.forecast_series))
+
+
+def _parameter_lines(g: S.GreenhouseView) -> list[Text]:
+    if not g.parameters:
+        return [_line("Parameters ", ("none estimated yet", DIM))]
+    out = [_line(f"Parameters ({g.model}, online; ● inside its hard bounds)")]
+    cells = []
+    for p in g.parameters:
+        pos = p.position
+        if pos is None:
+            bar = "  (no bounds)"
+        else:
+            k = min(max(int(round(pos * 9)), 0), 9)
+            bar = "[" + "─" * k + "●" + "─" * (9 - k) + "]"
+        edge = pos is not None and (pos <= 0.01 or pos >= 0.99)
+        cells.append((f"{p.name:<10} {p.value:9.3g} ", (bar, WARN if edge else "")))
+    for i in range(0, len(cells), 2):
+        parts: list[str | tuple[str, str]] = []
+        for a, b in cells[i:i + 2]:
+            parts += [" " + a, b, "  "]
+        out.append(_line(*parts))
+    return out
+
+
+def _ventilation_line(v: S.Ventilation) -> Text:
+    if v.flow is None:
+        return _line("Ventilation ", ("no virtual sensor" if not v.configured else
+                                      "virtual sensor set, no estimate yet", DIM))
+    flag = (" · inputs out of its range", WARN) if v.out_of_range else ""
+    return _line(f"Ventilation {number(v.flow, '{:.3f}')} m³/s · heat loss "
+                 f"{number(v.heat_loss, '{:.0f}')} W/m² at {hhmm(v.t)}", flag)
+
+
+def _finding_lines(g: S.GreenhouseView, diagnosis: str) -> list[Text]:
+    if not g.findings:
+        return [_line("Findings   ", ("none", DIM), f" ({diagnosis})" if diagnosis else
+                      " (the diagnosis has not run yet: [diagnosis] every_hours)")]
+    out = [_line(f"Findings   {len(g.findings)}" + (f" ({diagnosis})" if diagnosis else ""))]
+    for f in g.findings[-3:]:
+        since = f"since {stamp(f.start)}" if f.start is not None else "since before the data"
+        out.append(_line(" ", (f.effect, WARN), f" {since}, rev {f.revision}: {f.summary}"))
+    return out
+
+
+def kit_lines(snap: S.Snapshot) -> list[Text]:
+    out = [_line(("kit   greenhouse        last record               records  boot  state", DIM))]
+    for k in snap.kits:
+        where = ", ".join(k.greenhouses) if k.greenhouses else "(unassigned)"
+        age = (snap.now - k.last_seen) if snap.now is not None and k.last_seen is not None else None
+        seen = f"{hhmm(k.last_seen)} ({duration(age)} ago)" if k.last_seen is not None else "never"
+        boot = "—" if k.boot is None else str(k.boot)
+        state = ("REFUSED", ALARM) if k.refused else ("SILENT", ALARM) if k.silent else ("ok", OK)
+        out.append(_line(f"{k.device_id:>4}  {where[:16]:<16}  {seen:<24} {k.records:>8}  "
+                         f"{boot:>4}  ", state))
+        bad = {c: s for c, s in k.channels.items() if s != "ok"}
+        if not k.channels:
+            chans = ("     no record yet", DIM)
+        elif not bad:
+            chans = (f"     all {len(k.channels)} channels ok", DIM)
+        else:
+            chans = ("     " + " · ".join(f"{c} {s}" for c, s in bad.items())
+                     + " (others ok)" * (len(bad) < len(k.channels)), WARN)
+        extra = (f"; stored as boot {k.stored_boot} (key rotated)"
+                 if k.stored_boot is not None and k.boot is not None and k.stored_boot != k.boot else "")
+        out.append(_line(chans, extra))
+        if k.refused:
+            out += wrapped("refused: " + k.refused, "     ", ALARM)
+    if not snap.kits:
+        out.append(_line(("no kit has sent a record yet", WARN)))
+    out.append(_line(""))
+    out += _ingest_lines(snap.gateway)
+    return out
+
+
+def _ingest_lines(gw: S.Gateway) -> list[Text]:
+    if not gw.ingest:
+        return [_line("Packets    ", ("no counters (the gateway writes them while it runs)", DIM))]
+    rej = gw.rejects
+    head = _line(f"Packets    {gw.ingest.get('stored', 0)} stored · {gw.ingest.get('duplicate', 0)} "
+                 "duplicates · ", (f"{sum(rej.values())} rejected", WARN if rej else OK),
+                 " (since the gateway started)")
+    out = [head]
+    items = [f"{k} {v}" for k, v in sorted(rej.items(), key=lambda kv: -kv[1])]
+    line = "  by reason:"
+    for it in items:
+        if len(line) + len(it) + 3 > WIDTH:
+            out.append(_line((line, WARN)))
+            line = "            "
+        line += f" {it} ·"
+    if items:
+        out.append(_line((line.rstrip(" ·"), WARN)))
+    return out
+
+
+def gateway_lines(snap: S.Snapshot) -> list[Text]:
+    gw = snap.gateway
+    if gw.running is None:
+        svc = _line("Service    ", ("unknown: no status from a gateway", WARN))
+    elif not gw.running and gw.pid is None:
+        svc = _line("Service    ", ("NO ANSWER", ALARM), " to history queries")
+    elif gw.running and gw.pid is None:  # over Zenoh: it answers; uptime as of its status
+        svc = _line("Service    ", ("answering", OK), f" · up {duration(gw.uptime_s)} at its last "
+                    "status message")
+    elif gw.running:
+        svc = _line("Service    ", ("running", OK), f" · pid {gw.pid} · up {duration(gw.uptime_s)}"
+                    f" · heartbeat {duration(gw.heartbeat_age_s)} ago")
+    else:
+        svc = _line("Service    ", ("NOT RUNNING", ALARM),
+                    f" · last heartbeat {duration(gw.heartbeat_age_s)} ago")
+    out = [svc]
+    clock = f"Clock      {stamp(snap.now, seconds=True)}"
+    if gw.clock_scale != 1.0:
+        out.append(_line(clock, (f" · TEST/DEMO clock {gw.clock_scale:g}× the wall clock", WARN)))
+    else:
+        out.append(_line(clock))
+    lk = gw.link
+    style = DIM if not lk.enabled or lk.up is None else OK if lk.up else ALARM
+    first, *more = (lk.summary or "?").split("; ")
+    out.append(_line("Zenoh      ", (first, style)))
+    out += [_line(("           " + m, style)) for m in more]
+    detail = []
+    if lk.endpoints:
+        detail.append("listening on " + ", ".join(lk.endpoints))
+    if lk.published is not None:
+        detail.append(f"{lk.published} messages put")
+    if detail:
+        out.append(_line("           " + " · ".join(detail)))
+    ob = gw.outbox
+    if ob.pending is None:
+        out.append(_line("Outbox     ", ("unknown", DIM)))
+    else:
+        oldest = f" since {stamp(ob.oldest_t)}" if ob.pending and ob.oldest_t else ""
+        limits = f" · alarm at {ob.alarm_at} of {ob.max}" if ob.alarm_at is not None else ""
+        text = f"{ob.pending} waiting{oldest}{limits}"
+        out.append(_line("Outbox     ", ("ALARM: " + text, ALARM) if ob.alarm else
+                         (text, WARN if ob.pending else OK)))
+    d = gw.disk
+    if d.store_bytes is not None or d.free_bytes is not None:
+        used = (f" · disk {size(d.free_bytes)} free of {size(d.total_bytes)} "
+                f"({100 * (1 - d.free_bytes / d.total_bytes):.0f} % used)"
+                if d.free_bytes is not None and d.total_bytes else "")
+        out.append(_line(f"Store      {size(d.store_bytes)}{used}"))
+        if d.path:
+            out.append(_line((f"           {tail(d.path, WIDTH - 11)}", DIM)))
+    for name, words in sorted(gw.diagnosis.items()):
+        out.append(_line(f"Diagnosis  {name}: {words}"))
+    for n in snap.notes:
+        out.append(_line(("Note       " + n, WARN)))
+    out.append(_line((f"Source     {tail(snap.source, WIDTH - 11)}", DIM)))
+    return out
+
+
+PANELS = ("greenhouse", "kits", "gateway")
+
+
+def panel_lines(snap: S.Snapshot, panel: str, gh: int = 0) -> list[Text]:
+    if panel == "greenhouse":
+        return greenhouse_lines(snap, gh)
+    if panel == "kits":
+        return kit_lines(snap)
+    return gateway_lines(snap)
+
+
+def plain(snap: S.Snapshot) -> str:
+    """Every panel, every greenhouse, as plain text (``--once``): no style, no escape code."""
+    out: list[str] = []
+    for i in range(max(len(snap.greenhouses), 1)):
+        out += [title(snap, "greenhouse", i).plain, ""]
+        out += [t.plain.rstrip() for t in greenhouse_lines(snap, i)] + [""]
+    for panel in ("kits", "gateway"):
+        out += [title(snap, panel).plain, ""] + [t.plain.rstrip() for t in panel_lines(snap, panel)]
+        out.append("")
+    return "\n".join(out).rstrip() + "\n"

@@ -1,0 +1,257 @@
+"""What the status screen shows, as plain data: one :class:`Snapshot` of the farm at an instant.
+
+A snapshot is built from the store (``store_source.py``) or from the gateway's messages over
+Zenoh (``zenoh_source.py``); the renderers (``render.py``) and the widgets (``app.py``) only read
+it. All times are unix seconds on the gateway clock (a scaled clock in tests and demos).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+
+SILENT_S = 300.0
+"""A kit whose last record is older than this [s, gateway clock] is silent (as the gateway's
+``device/<id>`` messages say, gateway/service/producers.py)."""
+HEARTBEAT_STALE_S = 20.0
+"""[wall s] A gateway status older than this (the service writes it every 5 s): not running."""
+DAY = 86400.0
+
+
+@dataclass(frozen=True)
+class Series:
+    """24 h of one quantity in equal bins (oldest first, NaN where no data)."""
+
+    values: tuple[float, ...]
+    start: float  # [unix s] start of the first bin
+    end: float  # [unix s] end of the last bin
+
+    @property
+    def finite(self) -> list[float]:
+        return [v for v in self.values if math.isfinite(v)]
+
+    @property
+    def lo(self) -> float:
+        return min(self.finite, default=math.nan)
+
+    @property
+    def hi(self) -> float:
+        return max(self.finite, default=math.nan)
+
+
+def span_of(first: float | None, end: float) -> float:
+    """The sparklines' span: 24 h, or less while the data is younger (at least an hour), so a
+    new kit's first hours fill the line instead of its last few characters."""
+    if first is None:
+        return DAY
+    return min(max(end - first + 60.0, 3600.0), DAY)
+
+
+def bin_series(points: Iterable[tuple[float, float | None]], end: float, bins: int = 36,
+               span: float = DAY) -> Series:
+    """(t, value) points → the mean of each of ``bins`` equal bins over (end − span, end]."""
+    start = end - span
+    width = span / bins
+    sums, counts = [0.0] * bins, [0] * bins
+    for t, v in points:
+        if v is None or not math.isfinite(v) or not start < t <= end:
+            continue
+        i = min(int((t - start) / width), bins - 1)
+        sums[i] += v
+        counts[i] += 1
+    return Series(tuple(s / n if n else math.nan for s, n in zip(sums, counts, strict=True)),
+                  start, end)
+
+
+@dataclass(frozen=True)
+class Reading:
+    """The latest kit record of one side: channel → value (None: the sensor failed) and status."""
+
+    t: float | None = None
+    device_id: int | None = None
+    values: dict[str, float | None] = field(default_factory=dict)
+    status: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Skill:
+    """Forecast error so far at one horizon, beside persistence on the same minutes."""
+
+    horizon_min: int
+    n: int
+    mae: float  # [°C] mean |forecast − measured|
+    persistence_mae: float  # [°C] mean |measured at issue − measured at validity|
+
+
+@dataclass(frozen=True)
+class Temperature:
+    """Measured vs predicted inside temperature at the estimator's latest minute."""
+
+    t: float | None = None  # the latest minute stepped
+    measured: float | None = None
+    predicted: float | None = None  # the one-step prediction made a minute before, for t
+    forecasts: dict[int, float] = field(default_factory=dict)  # horizon [min] → T_in at t + h
+    outlook: str = ""
+    skill: tuple[Skill, ...] = ()
+    measured_series: Series | None = None
+    forecast_series: Series | None = None  # the 60-min forecasts placed at their validity time
+
+
+@dataclass(frozen=True)
+class Parameter:
+    name: str
+    value: float
+    unit: str = ""
+    lower: float | None = None
+    upper: float | None = None
+
+    @property
+    def position(self) -> float | None:
+        """0..1 inside the bounds (None when they are unknown)."""
+        if self.lower is None or self.upper is None or not self.upper > self.lower:
+            return None
+        return (self.value - self.lower) / (self.upper - self.lower)
+
+
+@dataclass(frozen=True)
+class Ventilation:
+    configured: bool  # a virtual sensor is set for the greenhouse (store: its config says)
+    t: float | None = None
+    flow: float | None = None  # [m3 s-1]
+    heat_loss: float | None = None  # [W m-2]
+    out_of_range: bool = False
+
+
+@dataclass(frozen=True)
+class Finding:
+    id: str
+    effect: str
+    summary: str
+    start: float | None
+    first_seen: float
+    last_seen: float
+    revision: int
+
+
+@dataclass(frozen=True)
+class GreenhouseView:
+    name: str
+    farm: str = ""
+    model: str = ""
+    inside_device: int | None = None
+    outside_device: int | None = None
+    state: str = ""  # the estimator's state ("running", "waiting for data", …)
+    inside: Reading = field(default_factory=Reading)
+    outside: Reading = field(default_factory=Reading)
+    series: dict[str, Series] = field(default_factory=dict)  # channel → 24 h
+    temperature: Temperature = field(default_factory=Temperature)
+    parameters: tuple[Parameter, ...] = ()
+    ventilation: Ventilation = field(default_factory=lambda: Ventilation(False))
+    findings: tuple[Finding, ...] = ()  # newest last
+
+
+@dataclass(frozen=True)
+class Kit:
+    device_id: int
+    greenhouses: tuple[str, ...]  # "north in", "north out", … (empty: unassigned)
+    last_seen: float | None  # time of its latest record [gateway clock]
+    records: int
+    boot: int | None  # the board's own boot counter
+    stored_boot: int | None  # as stored: board counter + its key's boot base
+    channels: dict[str, str] = field(default_factory=dict)  # channel → status name
+    silent: bool = False
+    refused: str = ""  # why its packets are refused as a whole, and the recovery
+
+
+@dataclass(frozen=True)
+class Link:
+    """The gateway's Zenoh link as the gateway sees it (store) or as this screen sees it."""
+
+    enabled: bool = True
+    up: bool | None = None  # None: unknown
+    summary: str = ""
+    endpoints: tuple[str, ...] = ()
+    waiting_keys: tuple[str, ...] = ()
+    published: int | None = None
+
+
+@dataclass(frozen=True)
+class Outbox:
+    pending: int | None = None
+    max: int | None = None
+    alarm_at: int | None = None
+    alarm: bool = False
+    oldest_t: float | None = None
+
+
+@dataclass(frozen=True)
+class Disk:
+    store_bytes: int | None = None  # the SQLite file and its WAL
+    free_bytes: int | None = None
+    total_bytes: int | None = None
+    path: str = ""
+
+
+@dataclass(frozen=True)
+class Gateway:
+    running: bool | None = None  # None: unknown (never seen)
+    pid: int | None = None
+    uptime_s: float | None = None
+    heartbeat_age_s: float | None = None  # [wall s]
+    clock_scale: float = 1.0
+    link: Link = field(default_factory=Link)
+    outbox: Outbox = field(default_factory=Outbox)
+    disk: Disk = field(default_factory=Disk)
+    ingest: dict[str, int] = field(default_factory=dict)  # packet counters by outcome
+    diagnosis: dict[str, str] = field(default_factory=dict)  # greenhouse → last run, in words
+
+    @property
+    def rejects(self) -> dict[str, int]:
+        """Rejected packets by reason (every counter but stored and duplicate)."""
+        return {k: v for k, v in self.ingest.items() if k not in ("stored", "duplicate") and v}
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    source: str  # "store PATH" or "zenoh ENDPOINT"
+    now: float | None  # gateway clock [unix s]; None when nothing is known yet
+    wall: float  # wall time the snapshot was taken [unix s]
+    farm: str = ""
+    greenhouses: tuple[GreenhouseView, ...] = ()
+    kits: tuple[Kit, ...] = ()
+    gateway: Gateway = field(default_factory=Gateway)
+    notes: tuple[str, ...] = ()  # what the source could not tell (said on the screen)
+
+
+def skill_from_pairs(horizon_min: int, rows: Sequence[tuple[float, float, float]]) -> Skill:
+    """(forecast, measured at issue, measured at validity) triples → :class:`Skill`."""
+    n = len(rows)
+    if not n:
+        return Skill(horizon_min, 0, math.nan, math.nan)
+    mae = sum(abs(f - m1) for f, _, m1 in rows) / n
+    pers = sum(abs(m0 - m1) for _, m0, m1 in rows) / n
+    return Skill(horizon_min, n, mae, pers)
+
+
+def silent(last_seen: float | None, now: float | None) -> bool:
+    return last_seen is None or (now is not None and now - last_seen > SILENT_S)
+
+
+def attention(snap: Snapshot) -> list[str]:
+    """What needs a person, one line each (``--once`` exits 1 when this is not empty)."""
+    out = []
+    gw = snap.gateway
+    if gw.running is False:
+        out.append("the gateway is not running" if gw.pid is not None or gw.heartbeat_age_s
+                   is not None else "no gateway answers over Zenoh")
+    if gw.link.enabled and gw.link.up is False:
+        out.append("the Zenoh link is down")
+    if gw.outbox.alarm:
+        out.append(f"outbox alarm: {gw.outbox.pending} messages waiting")
+    for k in snap.kits:
+        if k.refused:
+            out.append(f"kit {k.device_id} refused: {k.refused}")
+        elif k.silent and k.greenhouses:
+            out.append(f"kit {k.device_id} silent")
+    return out

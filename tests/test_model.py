@@ -179,3 +179,22 @@ def test_free_run_is_stable_for_15_days_at_every_corner_of_the_box(weather_minut
     assert series["t_out"].min() - 5 < typical.min() and typical.max() < series["t_out"].max() + 25
     # The explicit Euler step is unstable at the stiff corner: the reason for the exact step.
     assert model.capacity(almeria_gh) / hi[model.index("c_cnd_cnv")] < 60.0
+
+
+@pytest.mark.parametrize("which", ["almeria", "prototype"])
+def test_each_terms_slope_is_minus_the_derivative_of_its_flux(which, request):
+    """FluxTerm.linearised: k = -dQ/dT_in (central differences), for a population over a day."""
+    model, x, gh = request.getfixturevalue(which)
+    p = model.columns(random_population(model, gh, 5, seed=4))
+    t = slice(0, 1440)
+    state = x["t_in"][None, t] + np.linspace(-4.0, 4.0, 5)[:, None]
+    h = 1e-4
+    for term in model.terms:
+        g, s, k = (np.broadcast_to(v, state.shape) for v in term.linearised(p, x, state, t))
+        num = -(term.flux(p, x, state + h, t) - term.flux(p, x, state - h, t)) / (2 * h)
+        num = np.broadcast_to(num, state.shape)
+        smooth = np.abs(state - x["t_out"][None, t]) > 0.05  # |ΔT|^0.33 and |ΔT| kink at 0
+        np.testing.assert_allclose(k[smooth], num[smooth], rtol=1e-5, atol=1e-9, err_msg=term.name)
+        g0, s0 = term.coefficients(p, x, state, t)
+        np.testing.assert_allclose(g, np.broadcast_to(g0, state.shape), rtol=1e-12)
+        np.testing.assert_allclose(s, np.broadcast_to(s0, state.shape), rtol=1e-12)

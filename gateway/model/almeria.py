@@ -152,22 +152,20 @@ class NaturalVentilation(FluxTerm):
         self.height = gh.vents.height_difference
         self.rho_cp_a = gh.air_density * psy.CP_AIR / gh.floor_area
 
-    def _pressures(self, p, x, t_in, t: Index) -> tuple[np.ndarray, np.ndarray]:
-        """The buoyancy and wind terms under the square root of III.31 [m6 s-2]."""
+    def _drivers(self, x, t: Index) -> tuple[np.ndarray, np.ndarray]:
+        """The buoyancy coefficient B = A_eff² 2 g h / T_out [m6 s-2 K-1] and the wind term
+        W = ((A_r + A_s)/2)² u² [m6 s-2] of III.31: drivers only, so computed before any
+        array of candidates."""
         a_r, a_s = x["a_roof"][t], x["a_side"][t]
-        t_out = x["t_out"][t]
         norm = np.sqrt(a_r * a_r + a_s * a_s)
         a_eff = np.where(norm > 0, a_r * a_s / np.where(norm > 0, norm, 1.0), 0.0)
-        buoyancy = a_eff**2 * 2.0 * psy.GRAVITY * self.height * np.abs(t_in - t_out) / (
-            t_out + psy.KELVIN
-        )
-        wind = ((a_r + a_s) / 2.0) ** 2 * p["c_ven_w"] * x["wind"][t] ** 2
-        return buoyancy, wind
+        b = a_eff**2 * (2.0 * psy.GRAVITY * self.height) / (x["t_out"][t] + psy.KELVIN)
+        return b, ((a_r + a_s) / 2.0) ** 2 * x["wind"][t] ** 2
 
     def flow(self, p, x, t_in, t: Index) -> np.ndarray:
         """Ventilation flow G [m3 s-1] (III.31)."""
-        buoyancy, wind = self._pressures(p, x, t_in, t)
-        return p["c_ven_d"] * np.sqrt(buoyancy + wind) + p["c_loss"]
+        b, w = self._drivers(x, t)
+        return p["c_ven_d"] * np.sqrt(b * np.abs(t_in - x["t_out"][t]) + p["c_ven_w"] * w) + p["c_loss"]
 
     def coefficients(self, p, x, t_in, t: Index):
         s = self.rho_cp_a * self.flow(p, x, t_in, t)
@@ -175,13 +173,15 @@ class NaturalVentilation(FluxTerm):
 
     def linearised(self, p, x, t_in, t: Index):
         """Also the slope k = rho c_p (G + dG/dT (T_in - T_out)) / A: the buoyancy flow grows
-        with |T_in - T_out| (III.31), dG/dT (T_in - T_out) = C_d B / (2 sqrt(B + W)) with B, W
-        the buoyancy and wind terms."""
-        buoyancy, wind = self._pressures(p, x, t_in, t)
-        root = np.sqrt(buoyancy + wind)
+        with |T_in - T_out| (III.31), dG/dT (T_in - T_out) = C_d B |ΔT| / (2 sqrt(B |ΔT| + W))."""
+        b, w = self._drivers(x, t)
+        t_out = x["t_out"][t]
+        buoyancy = b * np.abs(t_in - t_out)
+        root = np.sqrt(buoyancy + p["c_ven_w"] * w)
         s = self.rho_cp_a * (p["c_ven_d"] * root + p["c_loss"])
-        extra = p["c_ven_d"] * buoyancy / (2.0 * np.where(root > 0, root, 1.0))
-        return s * x["t_out"][t], s, s + self.rho_cp_a * extra
+        # root = 0 only where buoyancy = 0 (closed vents): the extra slope is 0 there
+        extra = (0.5 * self.rho_cp_a) * p["c_ven_d"] * buoyancy / np.maximum(root, 1e-300)
+        return s * t_out, s, s + extra
 
 
 def almeria_capacity(gh: Greenhouse) -> float:

@@ -11,6 +11,9 @@ from gateway.kitcsv import KitCsvError, KitData, read_kit_csv
 
 MAX_GAP_S = 300.0
 """No value is interpolated across a hole longer than this [s] (docs/data-format.md)."""
+SAMPLINGS = ("instant", "mean")
+"""What a row holds: the value at its time, or the mean over its step (the kit's minute
+aggregates); the model reads the two differently (gateway/model/drivers.py, docs/model.md)."""
 
 
 @dataclass
@@ -22,6 +25,13 @@ class Series:
     columns: dict[str, np.ndarray]
     source: str = "<memory>"
     notices: list[str] = field(default_factory=list)
+    sampling: str = "instant"
+    """``instant``: each value is the one at its time; ``mean``: each value is the mean over the
+    step it starts (per-minute aggregates), see SAMPLINGS."""
+
+    def __post_init__(self) -> None:
+        if self.sampling not in SAMPLINGS:
+            raise ValueError(f"sampling must be one of {SAMPLINGS}, got {self.sampling!r}")
 
     def __len__(self) -> int:
         return len(self.time)
@@ -40,6 +50,7 @@ class Series:
             {k: v[start:stop].copy() for k, v in self.columns.items()},
             self.source,
             list(self.notices),
+            self.sampling,
         )
 
     def index_of(self, stamp: np.datetime64) -> int:
@@ -113,7 +124,11 @@ def _interp_with_gaps(grid: np.ndarray, t: np.ndarray, v: np.ndarray, max_gap: f
 
 
 def load_series(
-    path: str, step: float = 60.0, required: Iterable[str] = ()
+    path: str, step: float = 60.0, required: Iterable[str] = (), sampling: str = "instant"
 ) -> Series:
-    """Read a kit CSV and resample it to ``step`` seconds."""
-    return resample(read_kit_csv(path, required=required), step)
+    """Read a kit CSV and resample it to ``step`` seconds; ``sampling`` says whether its rows
+    are instantaneous values or means over the step (SAMPLINGS)."""
+    series = resample(read_kit_csv(path, required=required), step)
+    series.sampling = sampling
+    series.__post_init__()
+    return series

@@ -83,7 +83,7 @@ def _run_with_stderr(stderr_is_terminal: bool) -> tuple[int, str, str]:
 
     cmd = [sys.executable, "-m", "gateway", "calibrate", "--data", str(DATASET), "--greenhouse",
            "biskra-prototype", "--model", "prototype", "--algorithm", "rsba",
-           "--iterations", "600", "--json"]
+           "--iterations", "200", "--json"]
     env = {**os.environ, "COLUMNS": "120", "TERM": "xterm"}
     if not stderr_is_terminal:
         p = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=300)
@@ -111,10 +111,10 @@ def _run_with_stderr(stderr_is_terminal: bool) -> tuple[int, str, str]:
 def test_progress_bar_on_a_terminal_and_none_when_piped():
     code, out, screen = _run_with_stderr(True)
     assert code == 0 and json.loads(out)["algorithm"] == "rsba"
-    assert "/600" in screen and "MSE" in screen, screen[-500:]  # the bar was drawn
+    assert "/200" in screen and "MSE" in screen, screen[-500:]  # the bar was drawn
     code, out, err = _run_with_stderr(False)
     assert code == 0 and json.loads(out)["algorithm"] == "rsba"
-    assert "/600" not in err and "\x1b[" not in err  # no bar, no escape codes in a pipe
+    assert "/200" not in err and "\x1b[" not in err  # no bar, no escape codes in a pipe
 
 
 @pytest.mark.parametrize("rows", [1, 3])

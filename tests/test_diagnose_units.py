@@ -36,13 +36,17 @@ def _series(n=2880, step=60):
 
 
 def _proto(store=False):
+    """The prototype base, and its structured form; the base integrated as the structured form
+    is (the zero-order hold its coarsened inputs are built for, structure.Structured.advance)."""
     gh = load_greenhouse("biskra-prototype")
-    base = build_model("prototype", gh)
-    return gh, base, structure(base, gh, store)
+    m = structure(build_model("prototype", gh), gh, store)
+    base = replace(build_model("prototype", gh), integration=m.integration)
+    return gh, base, m
 
 
 def test_structured_base_at_neutral_values_is_the_thesis_model():
-    """m_cap = 1, no store: the diagnosis's base runs exactly like gateway.model's."""
+    """m_cap = 1, no store: the diagnosis's base runs exactly like gateway.model's (with the
+    same integration)."""
     gh, base, m = _proto()
     s = _series()
     x = drivers(s, gh)

@@ -1,7 +1,10 @@
 """Thesis §III.4.2.1.2 (table 4): recover assumed prototype parameters from simulated data.
 
 The dataset (training/data/identifiability_prototype_2days.csv) is two days of real Bleiswijk
-weather scaled towards a Biskra winter, driving the prototype model with the assumed values.
+weather scaled towards a Biskra winter, driving the prototype equations with the assumed values:
+since issue 10 integrated by the independent fine RK4 reference (training/step_reference.py,
+drivers moving within the minute) and stored as the kit's per-minute means, so the swarms must
+find the parameters through the model's own integration, not the one that made the data.
 """
 
 from dataclasses import replace
@@ -10,15 +13,16 @@ import numpy as np
 import pytest
 
 from gateway.estimate.calibrate import calibrate
+from gateway.estimate.objective import Objective
 from gateway.estimate.swarm import make_algorithm
 from gateway.model import build_model
-from gateway.series import load_series
-from training.identifiability import ASSUMED, DATASET, build
+from gateway.model.drivers import prepare_drivers
+from training.identifiability import ASSUMED, build, load
 
 
 @pytest.fixture(scope="module")
 def data(prototype_gh):
-    return load_series(DATASET), build_model("prototype", prototype_gh)
+    return load(), build_model("prototype", prototype_gh)
 
 
 def relative_errors(params):
@@ -28,16 +32,25 @@ def relative_errors(params):
 def test_shipped_dataset_is_the_documented_simulation(data):
     series, _ = data
     rebuilt = build()
-    assert len(series) == 2880
-    np.testing.assert_allclose(series["t_in"], rebuilt["t_in"], atol=1e-9)
+    assert len(series) == 2880 and series.sampling == "mean"
+    for name in ("t_in", "t_out", "i_glob", "wind"):
+        np.testing.assert_allclose(series[name], rebuilt[name], atol=1e-9)
+
+
+def floor_cost(series, model, gh) -> float:
+    """The one-step cost at the assumed values: the data are not the model's own, so the cost
+    has a floor (~9.4e-8 °C², the step's own bias, docs/model.md)."""
+    assumed = np.array([[ASSUMED[n] for n in model.names]])
+    return float(Objective(model, prepare_drivers(series, gh), gh, 60.0, np.arange(4), assumed[0],
+                           [(0, len(series))])(assumed)[0])
 
 
 def test_riwpso_recovers_every_parameter_within_half_a_percent(data, prototype_gh):
     series, model = data
     # Thesis settings (100 particles, c1 = 2, c2 = 1.5, w in [0, 1]); the thesis stops on a
-    # tolerance: ours is 1e-13 °C² MSE, reached in 250–460 iterations over seeds 0–3.
+    # tolerance: ours is the cost at the assumed values, reached in < 300 iterations.
     algo = make_algorithm("riwpso")
-    algo.settings = replace(algo.settings, iterations=1000, tol=1e-13)
+    algo.settings = replace(algo.settings, iterations=1000, tol=floor_cost(series, model, prototype_gh))
     result = calibrate(model, series, prototype_gh, algo, seed=0)
     errors = relative_errors(result.params)
     assert max(errors.values()) < 0.005, errors

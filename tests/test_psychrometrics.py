@@ -56,3 +56,12 @@ def test_swinbank_sky_temperature_matches_published_emission(t_air_k):
 def test_latent_heat_at_20c_matches_steam_tables():
     # 2453.5 kJ kg-1 at 20 °C (IAPWS steam tables, as in ASHRAE table 3).
     assert psy.latent_heat_vaporisation(20.0) == pytest.approx(2453.5e3, rel=2e-3)
+
+
+def test_saturation_vapour_pressure_slope_is_the_derivative():
+    t = np.linspace(-10.0, 45.0, 12)
+    h = 1e-5
+    num = (psy.saturation_vapour_pressure(t + h) - psy.saturation_vapour_pressure(t - h)) / (2 * h)
+    np.testing.assert_allclose(psy.saturation_vapour_pressure_slope(t), num, rtol=1e-8)
+    # 0.1448 kPa/K at 20 °C (FAO-56 eq. 13 gives 0.1447 with its rounder constants)
+    assert float(psy.saturation_vapour_pressure_slope(20.0)) == pytest.approx(0.1448, abs=2e-4)

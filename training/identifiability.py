@@ -1,10 +1,13 @@
 """The identifiability dataset of thesis §III.4.2.1.2 (table 4), rebuilt on real weather.
 
-Two days (2880 one-minute samples) of the shipped Bleiswijk weather, scaled towards a Biskra
-winter (radiation × 1.4, temperature + 3 °C), drive the ``prototype`` model with the assumed
-parameters of table 4; the simulated inside temperature is the target a calibrator must
-recover the parameters from. ``python -m training identifiability --out FILE`` rebuilds
-``training/data/identifiability_prototype_2days.csv``.
+Two days (2880 one-minute rows) of the shipped Bleiswijk weather, scaled towards a Biskra
+winter (radiation × 1.4, temperature + 3 °C), drive the prototype equations with the assumed
+parameters of table 4. Since issue 10 the inside temperature comes from the independent fine
+RK4 reference (training/step_reference.py: drivers varying continuously within the minute) and
+every column holds the kit's per-minute mean, so a calibrator that recovers the parameters
+also shows that the model's integration is right; before, the data were made by the model's own
+step and could only show that the search converges. ``python -m training.identifiability``
+rebuilds ``training/data/identifiability_prototype_2days.csv``.
 """
 
 from __future__ import annotations
@@ -13,44 +16,36 @@ from pathlib import Path
 
 import numpy as np
 
-from gateway.greenhouse import load_greenhouse
 from gateway.kitcsv import write_kit_csv
-from gateway.model import build_model
 from gateway.model import psychrometrics as psy
-from gateway.model.drivers import prepare_drivers
-from gateway.series import Series
-from training.weather import load_bleiswijk, to_minutes
+from gateway.series import Series, load_series
+from training import step_reference as ref
 
-ASSUMED = {"c_solar": 5.8e-5, "c_cnv_cnd": 5.3e-4, "c_loss": 1.7e-4, "c_thermal": 2.2e-5}
+ASSUMED = ref.ASSUMED
 """Assumed parameter values of table 4."""
 DATASET = Path(__file__).parent / "data" / "identifiability_prototype_2days.csv"
-FIRST_DAY = 0  # 2009-10-20 (sunny, 8.8 MJ m-2) and 2009-10-21 (mixed, 6.4 MJ m-2)
+STEP_S = 60.0
+H_S = 1.0
+"""RK4 step of the reference [s]."""
 
 
-def build(first_day: int = FIRST_DAY, days: int = 2) -> Series:
-    """Weather slice plus the prototype's simulated inside temperature and humidity."""
-    w = to_minutes(load_bleiswijk())
-    a = first_day * 1440 + 60  # the file starts at 23:00 UTC; begin at midnight UTC
-    b = a + days * 1440
-    cols = {
-        "t_out": w["t_out"][a:b] + 3.0,
-        "rh_out": w["rh_out"][a:b],
-        "i_glob": w["i_glob"][a:b] * 1.4,
-        "wind": w["wind"][a:b],
-    }
-    n = b - a
-    cols["t_in"] = np.full(n, cols["t_out"][0])
-    cols["rh_in"] = np.full(n, 60.0)
-    gh = load_greenhouse("biskra-prototype")
-    model = build_model("prototype", gh)
-    series = Series(w["time"][a:b], 60.0, cols, source="identifiability")
-    theta = np.array([ASSUMED[n] for n in model.names])
-    t_in = model.free_run(theta[None, :], prepare_drivers(series, gh), gh, 60.0)[0]
-    cols["t_in"] = t_in
-    # Inside air holds the outside vapour: RH follows from the simulated temperature.
+def build(days: float = 2.0, step: float = STEP_S, sampling: str = "mean", h: float = H_S) -> Series:
+    """Per-minute kit rows of the reference run with the assumed parameters."""
+    weather = ref.biskra_weather(days)
+    trajectory = ref.integrate(weather, ASSUMED, h=h)
+    cols = ref.kit_rows(weather, trajectory, h, step, sampling)
+    # Inside air holds the outside vapour: RH follows from the inside temperature.
     p_w = psy.vapour_pressure(cols["t_out"], cols["rh_out"])
-    cols["rh_in"] = np.clip(psy.relative_humidity(t_in, p_w), 0.0, 100.0)
-    return series
+    cols["rh_in"] = np.clip(psy.relative_humidity(cols["t_in"], p_w), 0.0, 100.0)
+    order = ("t_in", "rh_in", "t_out", "rh_out", "i_glob", "wind")
+    n = len(cols["t_in"])
+    return Series(ref.time_axis(n, step), step, {k: cols[k] for k in order},
+                  source="identifiability", sampling=sampling)
+
+
+def load(path: Path = DATASET) -> Series:
+    """The shipped dataset: per-minute means (``Series.sampling = "mean"``)."""
+    return load_series(str(path), sampling="mean")
 
 
 def write(path: Path = DATASET) -> Path:

@@ -8,6 +8,7 @@ import sys
 from gateway.cli import CliError
 from gateway.cli.common import (
     add_data_arguments,
+    add_sampling_argument,
     dump_json,
     load_inputs,
     parse_span,
@@ -28,6 +29,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "error on the calibration span and on the rest of the data (validation).",
     )
     add_data_arguments(p)
+    add_sampling_argument(p)
     p.add_argument("--algorithm", choices=ALGORITHMS, default="rsba", help="search algorithm (rsba)")
     p.add_argument("--seed", type=int, default=0, help="random seed (0)")
     p.add_argument(
@@ -49,8 +51,8 @@ def run(args: argparse.Namespace) -> int:
     series, gh, model = load_inputs(args)
     span = parse_span(args.calibrate_on, series) or (0, len(series))
     algorithm = make_algorithm(args.algorithm, model.name, args.iterations, args.population)
-    stages = 2 if model.radiation is not None and "i_in" in series else 1
-    with progress_bar(f"{args.algorithm} {model.name}", stages * algorithm.iterations, True) as bar:
+    radiation = 1 if model.radiation is not None and "i_in" in series else 0  # one closed-form fit
+    with progress_bar(f"{args.algorithm} {model.name}", algorithm.iterations + radiation, True) as bar:
         try:
             result = calibrate(
                 model, series, gh, algorithm, span=span, mode=args.cost, seed=args.seed,

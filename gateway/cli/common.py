@@ -20,7 +20,17 @@ from gateway.kitcsv import KitCsvError, parse_time
 from gateway.model import MODEL_NAMES, build_model, check_parameters
 from gateway.model.model import Model, check_columns
 from gateway.model.sky import DEFAULT_CLOUD
-from gateway.series import Series, load_series
+from gateway.series import SAMPLINGS, Series, load_series
+
+
+def add_sampling_argument(p: argparse.ArgumentParser) -> None:
+    """``--sampling``: for the commands that read whole series (calibrate)."""
+    p.add_argument(
+        "--sampling", choices=SAMPLINGS, default="instant",
+        help="what a row holds: the value at its time (instant, default) or the mean over its "
+             "step (mean: the kit's minute aggregates, read through the mean hold of "
+             "docs/model.md)",
+    )
 
 
 def add_data_arguments(p: argparse.ArgumentParser) -> None:
@@ -89,7 +99,8 @@ def load_inputs(args: argparse.Namespace) -> tuple[Series, Greenhouse, Model]:
     except GreenhouseError as exc:
         raise CliError(str(exc)) from None
     try:
-        series = load_series(args.data, step=args.step, required=model.requires)
+        series = load_series(args.data, step=args.step, required=model.requires,
+                             sampling=getattr(args, "sampling", "instant"))
     except KitCsvError as exc:
         raise CliError(str(exc)) from None
     if len(series) < 2:

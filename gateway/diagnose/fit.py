@@ -188,18 +188,15 @@ def fit_lm(shoot: Shooting, theta0: np.ndarray, free: list[int], lower: np.ndarr
 
 def radiation_fit(model: Model, x: dict[str, np.ndarray], theta: np.ndarray,
                   span: tuple[int, int]) -> np.ndarray:
-    """c_tsw by least squares of measured i_in on i_glob (III.35) over ``span``, when measured."""
-    if model.radiation is None or "i_in" not in x:
+    """c_tsw by least squares of measured i_in on i_glob (III.35) over ``span``, when measured
+    (``RadiationSubmodel.fit``, the model layer's one fit)."""
+    if model.radiation is None:
         return theta
-    a, b = span
-    i_out, i_in = x["i_glob"][a:b], x["i_in"][a:b]
-    ok = np.isfinite(i_out) & np.isfinite(i_in) & (i_out > 5.0)
-    if ok.sum() < 10:
+    fit = model.radiation.fit(x, span)
+    if fit is None:
         return theta
-    j = model.index(model.radiation.parameter.name)
-    p = model.radiation.parameter
     theta = theta.copy()
-    theta[j] = float(np.clip(np.sum(i_in[ok] * i_out[ok]) / np.sum(i_out[ok] ** 2), p.lower, p.upper))
+    theta[model.index(model.radiation.parameter.name)] = fit.value
     return theta
 
 

@@ -38,6 +38,7 @@ import numpy as np
 
 from gateway.greenhouse import Greenhouse
 from gateway.model import psychrometrics as psy
+from gateway.model import step as stepping
 from gateway.model.model import Model
 from gateway.model.terms import ALWAYS, FluxTerm, Index, Parameter, SensorTerm
 
@@ -117,12 +118,6 @@ class Modulation:
 
     def factor(self, p, x, t: Index) -> np.ndarray:
         return 1.0 + (p[self.amp.name] - self.neutral) * on(p, x, t, self.tau.name)
-
-
-def _phi(z: np.ndarray) -> np.ndarray:
-    """(1 - e^-z)/z, finite at z → 0 (docs/model-notes.md §4)."""
-    z = np.maximum(z, 1e-12)
-    return -np.expm1(-z) / z
 
 
 def _filled(v: np.ndarray) -> np.ndarray:
@@ -206,7 +201,9 @@ class Structured(Model):
                                                                   x["rh_in"][t]))})
 
     def advance(self, q, x, ta, ts, t: Index, c0: float, unit: float, dt: float):
-        """Air (exact exponential step, store frozen), then store (exact step, new air)."""
+        """Air (exponential step, store frozen), then store (exponential step, new air): the
+        model layer's step (gateway/model/step.py) with the zero-order hold that the coarsened
+        inputs are built for (fit.coarsen: block means of the inputs over each step)."""
         x = self._inputs(q, x, t)
         g_sum, s_sum = 0.0, 0.0
         for term in self.terms:
@@ -216,13 +213,13 @@ class Structured(Model):
             h = unit * q["h_store"]
             g_sum, s_sum = g_sum + h * ts, s_sum + h
         c = c0 * q["m_cap"]
-        ta_new = ta + (g_sum - s_sum * ta) * (dt / c) * _phi(s_sum * dt / c)
+        ta_new = stepping.advance(ta, g_sum - s_sum * ta, s_sum, dt / c)
         if not self.store:
             return ta_new, ts
         s_st = q["h_store"] + q["k_store"]
         g_st = q["a_store"] * x["i_glob"][t] + q["h_store"] * ta_new + q["k_store"] * x["t_out"][t]
         cs = q["c_store"]
-        ts_new = ts + (g_st - s_st * ts) * (dt / cs) * _phi(s_st * dt / cs)
+        ts_new = stepping.advance(ts, g_st - s_st * ts, s_st, dt / cs)
         return ta_new, ts_new
 
     # -- the store observer -------------------------------------------------------------------
@@ -235,7 +232,7 @@ class Structured(Model):
         n_p = next(iter(p.values())).shape[0]
         idx = slice(0, n)
         q = self._at(p, x, idx)
-        ta = _filled(x["t_in"])[None, :] - self.sensor_offset(p, x, idx)
+        ta = self.true_state(p, x, _filled(x["t_in"])[None, :], idx)
         ta = np.broadcast_to(ta, (n_p, n))
         # the store's step from t to t+1 sees the air at t+1 (as in ``advance``)
         ta = np.concatenate([ta[:, 1:], ta[:, -1:]], axis=1)
@@ -279,7 +276,7 @@ class Structured(Model):
         starts = np.asarray(starts, dtype=int)
         rows = {k: np.repeat(v, n, axis=0) for k, v in p.items()}
         t0 = np.tile(starts, n_p)[:, None]
-        ta = x["t_in"][t0] - (self.sensor_offset(rows, x, t0) if self.sensors else 0.0)
+        ta = self.true_state(rows, x, x["t_in"][t0], t0)
         ts = None
         if self.store:
             ts = self.observer(p, x, dt)[:, starts].reshape(-1, 1)
@@ -287,8 +284,7 @@ class Structured(Model):
         for k in range(horizon):
             q = self._at(rows, x, t0 + k)
             ta, ts = self.advance(q, x, ta, ts, t0 + k, c0, unit, dt)
-            obs = ta + self.sensor_offset(rows, x, t0 + k + 1) if self.sensors else ta
-            out[:, k] = obs[:, 0]
+            out[:, k] = self.reading(rows, x, ta, t0 + k + 1)[:, 0]
         return out.reshape(n_p, n, horizon)
 
     def one_step(self, theta, x, gh, dt):
@@ -304,12 +300,10 @@ class Structured(Model):
         for a in range(0, n - 1, block):
             b = min(a + block, n - 1)
             t = slice(a, b)
-            ta = x["t_in"][None, a:b] - (self.sensor_offset(p, x, t) if self.sensors else 0.0)
+            ta = self.true_state(p, x, x["t_in"][None, a:b], t)
             ts = obs_ts[:, a:b] if self.store else None
             new, _ = self.advance(self._at(p, x, t), x, ta, ts, t, c0, unit, dt)
-            if self.sensors:
-                new = new + self.sensor_offset(p, x, slice(a + 1, b + 1))
-            out[:, a + 1 : b + 1] = new
+            out[:, a + 1 : b + 1] = self.reading(p, x, new, slice(a + 1, b + 1))
         return out
 
     def free_run(self, theta, x, gh, dt, start=0, stop=None, restart_after_gaps=True):
@@ -325,16 +319,14 @@ class Structured(Model):
         out = np.full((n_p, stop - start), np.nan)
 
         def restart(t: int):
-            ta = np.full((n_p, 1), meas[t])
-            if self.sensors:
-                ta = ta - self.sensor_offset(p, x, t)
+            ta = self.true_state(p, x, np.full((n_p, 1), meas[t]), t)
             return ta, (obs_ts[:, t : t + 1] if self.store else None)
 
         ta, ts = restart(start)
         out[:, 0] = meas[start]
         for k, t in enumerate(range(start, stop - 1), start=1):
             ta, ts = self.advance(self._at(p, x, t), x, ta, ts, t, c0, unit, dt)
-            out[:, k] = (ta + self.sensor_offset(p, x, t + 1))[:, 0] if self.sensors else ta[:, 0]
+            out[:, k] = self.reading(p, x, ta, t + 1)[:, 0]
             if restart_after_gaps and np.isnan(ta[0, 0]):
                 ta, ts = restart(t + 1)
         return out
@@ -357,7 +349,8 @@ def structure(base: Model, gh: Greenhouse, store: bool) -> Structured:
     extra = tuple(base.extra) + (CAPACITY,) + (STORE if store else ())
     fields = {f: getattr(base, f) for f in ("name", "capacity", "radiation", "description",
                                              "capacity_equation", "online", "sensors")}
-    return Structured(terms=terms, extra=extra, store=store, **fields)
+    # ``advance`` holds the inputs over each step, as fit.coarsen builds them
+    return Structured(terms=terms, extra=extra, store=store, integration=stepping.FROZEN, **fields)
 
 
 class SensorBias(SensorTerm):

@@ -1,8 +1,9 @@
 """Offline calibration of a model on measured data (thesis §III.4 and §IV.2.2.1.A).
 
 Two stages when the model has a radiation sub-model and the data measures i_in: c_tsw is fitted
-on the inside radiation first (III.35), then the air-temperature parameters with c_tsw fixed,
-because the temperature alone only sees the product C_asw C_tsw.
+on the inside radiation first (III.35, by least squares: ``RadiationSubmodel.fit``, the one fit
+the online estimator and the diagnosis use too), then the air-temperature parameters with c_tsw
+fixed, because the temperature alone only sees the product C_asw C_tsw.
 """
 
 from __future__ import annotations
@@ -69,11 +70,14 @@ def calibrate(
     rad = model.radiation.parameter.name if model.radiation is not None else None
     if rad in names and "i_in" in series:
         j = model.index(rad)
-        obj = Objective(model, x, gh, series.step, np.array([j]), theta, [span], output="i_in")
-        res = algorithm(obj, lo[[j]], hi[[j]], rng=rng,
-                        progress=_stage(progress, "radiation"))
-        theta[j] = res.best[0]
-        stages["radiation"] = res
+        assert model.radiation is not None
+        fit = model.radiation.fit(x, span, bounds=(lo[j], hi[j]), min_pairs=1)
+        if fit is not None:
+            theta[j] = fit.value
+            stages["radiation"] = SearchResult(np.array([fit.value]), fit.cost,
+                                               np.array([fit.cost]), 1, 0)
+            if progress is not None:
+                progress("radiation", 0, fit.cost)
     # Without measured i_in, c_tsw is not separable from c_asw: it keeps its base value.
     temp = [model.index(n) for n in names if n != rad]
     obj = Objective(model, x, gh, series.step, np.array(temp), theta, [span], mode=mode)

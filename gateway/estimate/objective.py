@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gateway.greenhouse import Greenhouse
+from gateway.model import step as stepping
 from gateway.model.model import Model
 from gateway.model.terms import SUNLIT
 
@@ -93,73 +94,101 @@ class Objective:
 class _LinearOneStep:
     """The one-step-ahead squared error of a population, fast.
 
-    In one-step mode the state is the measurement, so for a term that is linear in its own
-    parameters (``FluxTerm.linear_in_parameters``) the coefficients are
-    ``(g, s) = sum_j theta_j (g_j, s_j)`` with (g_j, s_j) fixed by the data: they are computed
+    In one-step mode the state at the start of every step is the measurement, so for a term
+    that is linear in its own parameters (``FluxTerm.linear_in_parameters``) the flux and slope
+    at the start, ``(F, k) = sum_j theta_j (F_j, k_j)``, are fixed by the data: they are computed
     once here by evaluating the term with unit parameters, and a whole population then costs
-    two matrix products plus the exponential step. Terms that are not linear (or whose
-    ``uses`` parameters are being fitted) are evaluated as usual. The result equals
-    ``Model.one_step`` (tests/test_objective.py).
+    matrix products plus the exponential step. The same holds at the step's end for terms whose
+    coefficients do not depend on the state (``FluxTerm.state_dependent``); the others are
+    evaluated there at the population's midpoint states, as are terms that are not linear (or
+    whose ``uses`` parameters are being fitted) at both ends. The step is
+    ``gateway.model.step``'s, so the result equals ``Model.one_step`` (tests/test_objective.py).
     """
 
     def __init__(self, model, x, gh, dt, free, base) -> None:
         self.model, self.x, self.dt = model, x, dt
         self.c = model.capacity(gh)
+        self.scheme = model.integration
         meas = x["t_in"]
+        self.size = len(meas)
         self.state = meas[None, :-1]
         self.target = meas[1:]
-        self.valid = np.isfinite(self.target)  # refined below with the inputs' gaps
         n = len(meas) - 1
         t = slice(0, n)
-        names = model.names
-        free_names = {names[j] for j in free}
-        base_p = {k: np.full((1, 1), v) for k, v in zip(names, base, strict=True)}
-        self.g0 = np.zeros(n)
-        self.s0 = np.zeros(n)
-        cols, rows_g, rows_s = [], [], []
-        self.other = []
+        t1 = stepping.next_index(t, self.size)
+        free_names = {model.names[j] for j in free}
+        self.base_p = {k: np.full((1, 1), v) for k, v in zip(model.names, base, strict=True)}
+        # F = g - s T and slope k at the measured state, at the start and (for the terms that
+        # do not read the state, or all of them when not re-linearised) at the end
+        start = _Sums(model, free, n)
+        end = _Sums(model, free, n)
+        self.other, self.end_other = [], []
+        relin = self.scheme.relinearise
         for term in model.terms:
             if not term.linear_in_parameters or free_names & set(term.uses):
                 self.other.append(term)
+                self.end_other.append(term)
                 continue
-            own = [q.name for q in term.parameters]
-            for name in own:
-                p = dict(base_p)
-                for o in own:
-                    p[o] = np.full((1, 1), 1.0 if o == name else 0.0)
-                g, s = term.coefficients(p, x, self.state, t)
-                g = np.broadcast_to(np.asarray(g, dtype=float), (1, n))[0]
-                s = np.broadcast_to(np.asarray(s, dtype=float), (1, n))[0]
-                if name in free_names:
-                    cols.append(names.index(name))
-                    rows_g.append(g)
-                    rows_s.append(s)
-                else:
-                    self.g0 = self.g0 + base_p[name][0, 0] * g
-                    self.s0 = self.s0 + base_p[name][0, 0] * s
-        self.cols = np.array(cols, dtype=int)
-        self.a_g = np.array(rows_g).reshape(len(cols), n)
-        self.a_s = np.array(rows_s).reshape(len(cols), n)
+            start.add(term, self.base_p, free_names, self._unit(term, x, self.state, t, relin))
+            if term.state_dependent and relin:
+                self.end_other.append(term)  # evaluated at the midpoint state
+            else:
+                end.add(term, self.base_p, free_names, self._unit(term, x, self.state, t1, relin))
+        self.start, self.end = start.close(1.0 / self.c), end.close(1.0 / self.c)
+        # where the drivers at t + 1 are missing the step holds those at t (step.end_rates);
+        # known from the data alone, so blocks without such a sample skip the check
+        r1, k1 = model.rates(self.base_p, x, self.state, t1, self.c)
+        self.end_missing = ~np.isfinite(np.broadcast_to(r1 + k1, (1, n))[0])
         # Gaps in the inputs or the previous state give NaN for every candidate alike: the
         # comparable samples are those where the base parameters give a finite error.
         self.valid = np.isfinite(self._errors(np.asarray(base, float)[None, :], 0, n))[0]
         self.count = int(self.valid.sum())
 
+    @staticmethod
+    def _unit(term, x, state, t, relin):
+        """A function of the parameter dict giving the term's flux F = g - s T and slope k at
+        the (measured) start state and time ``t``."""
+
+        def rows(p):
+            if relin:
+                g, s, k = term.linearised(p, x, state, t)
+            else:
+                g, s = term.coefficients(p, x, state, t)
+                k = s
+            return g - s * state, k
+
+        return rows
+
     def _errors(self, theta: np.ndarray, a: int, b: int) -> np.ndarray:
         """Prediction minus measurement (P, b - a) for rows a..b of the one-step targets."""
-        lin = theta[:, self.cols]
-        g = self.g0[a:b] + lin @ self.a_g[:, a:b]
-        s = self.s0[a:b] + lin @ self.a_s[:, a:b]
+        r0, lam0 = self.start.at(theta, a, b)  # rates [K s-1] and slopes [s-1]
         state = self.state[:, a:b]
-        if self.other:
-            p = self.model.columns(theta)
-            for term in self.other:
-                dg, ds = term.coefficients(p, self.x, state, slice(a, b))
-                g = g + dg
-                s = s + ds
-        k = self.dt / self.c
-        z = np.maximum(s * k, 1e-12)
-        return state + (g - s * state) * k * (-np.expm1(-z) / z) - self.target[a:b]
+        t = slice(a, b)
+        p = self.model.columns(theta) if self.end_other else None
+        relin = self.scheme.relinearise
+        for term in self.other:
+            f, k = self._unit(term, self.x, state, t, relin)(p)
+            r0, lam0 = r0 + f / self.c, lam0 + k / self.c
+        if self.scheme.hold == "zero_order":
+            return stepping.advance(state, r0, lam0, self.dt) - self.target[a:b]
+
+        def rates(st, tt):  # the terms that read the state, at the midpoint state
+            f, k = 0.0, 0.0
+            for term in self.end_other:
+                if relin:
+                    g, s, kk = term.linearised(p, self.x, st, tt)
+                else:
+                    g, s = term.coefficients(p, self.x, st, tt)
+                    kk = s
+                f, k = f + (g - s * st), k + kk
+            return f / self.c, k / self.c
+
+        fixed = self.end.at(theta, a, b)  # the others' rate at the start state, and slope
+        t1 = stepping.next_index(t, self.size)
+        r1, lam1 = stepping.end_rates(rates, state, r0, lam0, t1, self.dt, relin, fixed=fixed,
+                                      check=bool(self.end_missing[a:b].any()))
+        pred = stepping.advance(state, r0, 0.5 * (lam0 + lam1), self.dt, r1)
+        return pred - self.target[a:b]
 
     def sse(self, theta: np.ndarray) -> np.ndarray:
         """Sum of squared one-step errors (P,) over the comparable samples."""
@@ -171,3 +200,44 @@ class _LinearOneStep:
             err = np.where(self.valid[a:b], self._errors(theta, a, b), 0.0)
             total += np.einsum("ij,ij->i", err, err)
         return total
+
+
+class _Sums:
+    """Two rows (u, v) of a sum of terms linear in their parameters, precomputed: a fixed part
+    (the parameters not being fitted, at their base values) plus one row per free parameter,
+    so that a population costs ``fixed + theta_free @ rows``."""
+
+    def __init__(self, model: Model, free: np.ndarray, n: int) -> None:
+        self.names = model.names
+        self.u0, self.v0 = np.zeros(n), np.zeros(n)
+        self.cols: list[int] = []
+        self.u: list[np.ndarray] = []
+        self.v: list[np.ndarray] = []
+        self.n = n
+
+    def add(self, term, base_p, free_names, rows) -> None:
+        own = [q.name for q in term.parameters]
+        for name in own:
+            p = dict(base_p)
+            for o in own:
+                p[o] = np.full((1, 1), 1.0 if o == name else 0.0)
+            u, v = (np.broadcast_to(np.asarray(r, dtype=float), (1, self.n))[0] for r in rows(p))
+            if name in free_names:
+                self.cols.append(self.names.index(name))
+                self.u.append(u)
+                self.v.append(v)
+            else:
+                self.u0 = self.u0 + base_p[name][0, 0] * u
+                self.v0 = self.v0 + base_p[name][0, 0] * v
+
+    def close(self, scale: float = 1.0) -> _Sums:
+        """Freeze the rows, multiplied by ``scale`` (1/C: fluxes to rates)."""
+        self.idx = np.array(self.cols, dtype=int)
+        self.a_u = scale * np.array(self.u).reshape(len(self.cols), self.n)
+        self.a_v = scale * np.array(self.v).reshape(len(self.cols), self.n)
+        self.u0, self.v0 = scale * self.u0, scale * self.v0
+        return self
+
+    def at(self, theta: np.ndarray, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+        lin = theta[:, self.idx]
+        return self.u0[a:b] + lin @ self.a_u[:, a:b], self.v0[a:b] + lin @ self.a_v[:, a:b]

@@ -351,20 +351,17 @@ class OnlineEstimator:
         target = measured[1:]
         names = self._names
 
-        sensors = bool(model.sensors)
-
         def cost(cand: np.ndarray) -> np.ndarray:
             theta = np.repeat(base[None, :], cand.shape[0], axis=0)
             theta[:, free] = cand
             p = {name: theta[:, j : j + 1] for j, name in names}  # Model.columns without checks
-            state = np.full((cand.shape[0], 1), measured[0])
-            if sensors:  # observation terms: simulate the true state behind the reading
-                state = state - model.sensor_offset(p, x, 0)
+            # observation terms: simulate the true state behind the reading, compare readings
+            state = model.true_state(p, x, np.full((cand.shape[0], 1), measured[0]), 0)
             sq = np.zeros(cand.shape[0])
+            step = model.stepper(p, x, c, dt)
             for s in range(n):  # III.23 integrated step by step from the measured T_in[t - n]
-                state = model.step(p, x, state, s, c, dt)
-                seen = state + model.sensor_offset(p, x, s + 1) if sensors else state
-                sq += (seen[:, 0] - target[s]) ** 2
+                state = step(state, s)
+                sq += (model.reading(p, x, state, s + 1)[:, 0] - target[s]) ** 2
             return sq / n + self._penalty(g, free, cand)
 
         lo, hi = self._box(free)
@@ -387,25 +384,18 @@ class OnlineEstimator:
         free = self._free(g, now)
         if free.size == 0:
             return None
-        i_glob, i_in = x["i_glob"], x["i_in"]
-        ok = np.isfinite(i_glob) & np.isfinite(i_in) & (i_glob > 5.0)
-        if ok.sum() < MIN_RADIATION_PAIRS:
-            return False
-        xs = {"i_glob": i_glob[ok]}
-        meas = i_in[ok]
         j = self.model.index(radiation.parameter.name)
-        others = free[free != j]
-
-        def cost(cand: np.ndarray) -> np.ndarray:
-            pred = radiation.predict(cand[:, :1], xs)  # (P, n_ok)
-            return np.mean((pred - meas[None, :]) ** 2, axis=1) + self._penalty(g, free, cand)
-
-        if others.size:  # the radiation sub-model has a single parameter
+        if free.size != 1 or free[0] != j:  # the radiation sub-model has a single parameter
             raise ValueError(f"online.i_in: only {radiation.parameter.name} can be fitted on i_in")
         lo, hi = self._box(free)
-        res = self.search(cost, lo, hi, self._bat[g.output], "rsba", self.rng, x0=self.theta[free])
-        if np.all(np.isfinite(res.best)):
-            self.theta[free] = np.clip(res.best, self.lower[free], self.upper[free])
+        prior = None
+        if g.prior > 0:
+            prior = (g.prior, float(self.theta0[j]), float(self.upper[j] - self.lower[j]))
+        fit = radiation.fit(x, bounds=(float(lo[0]), float(hi[0])), min_pairs=MIN_RADIATION_PAIRS,
+                            prior=prior)
+        if fit is None:
+            return False
+        self.theta[j] = float(np.clip(fit.value, self.lower[j], self.upper[j]))
         return True
 
     # -- prediction ---------------------------------------------------------------------------
@@ -423,9 +413,11 @@ class OnlineEstimator:
         assert x is not None
         p = self.model.columns(self.theta[None, :])
         # Observation terms: step the true state behind the reading; the offset at t stands for
-        # the one at t + 1 (its drivers are not known yet; sensor errors move slowly).
-        offset = self.model.sensor_offset(p, x, 0) if self.model.sensors else 0.0
-        t_next = self.model.step(p, x, np.array([[state]]) - offset, 0, self.capacity_c, self.dt) + offset
+        # the one at t + 1 (its drivers are not known yet; sensor errors move slowly). The
+        # drivers at t + 1 are not known either: the step holds those at t (step.py).
+        model = self.model
+        true = model.true_state(p, x, np.array([[state]]), 0)
+        t_next = model.reading(p, x, model.step(p, x, true, 0, self.capacity_c, self.dt), 0)
         value = float(np.asarray(t_next).reshape(-1)[0])
         if not np.isfinite(value):
             return None, dead

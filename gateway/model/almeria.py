@@ -33,6 +33,7 @@ C_TSW = Parameter("c_tsw", "-", 0.1, 1.0, 0.56, None, SUNLIT, "cover solar trans
 
 class AirSolarAbsorption(FluxTerm):
     linear_in_parameters = True
+    state_dependent = False
     name = "q_sol"
     equation = "III.25, III.35"
     description = "short-wave radiation absorbed by the air: C_asw C_tsw I_out"
@@ -48,6 +49,7 @@ class AirSolarAbsorption(FluxTerm):
 
 class SoilConvection(FluxTerm):
     linear_in_parameters = True
+    state_dependent = False
     name = "q_cnv_ss"
     equation = "III.26"
     description = "convection from the soil surface: C_cnv_ss (T_ss - T_in)"
@@ -64,6 +66,7 @@ class SoilConvection(FluxTerm):
 
 class CoverExchange(FluxTerm):
     linear_in_parameters = True
+    state_dependent = False
     name = "q_cnd_cnv"
     equation = "III.27"
     description = "convection and conduction through the cover: -C_cnd_cnv (T_in - T_out)"
@@ -104,14 +107,27 @@ class Transpiration(FluxTerm):
     def __init__(self, extinction: float = 0.64) -> None:
         self.extinction = extinction
 
-    def coefficients(self, p, x, t_in, t: Index):
+    def _parts(self, p, x, t_in, t: Index):
+        """The latent flux q [W m-2], C_B LAI [W m-2 kPa-1] and p_ws(T_in) [kPa]."""
         lai = x["lai"][t]
         i_out = x["i_glob"][t]
         i_in = p["c_tsw"] * i_out
-        vpd = np.maximum(psy.saturation_vapour_pressure(t_in) - x["p_w_in"][t], 0.0)
+        p_ws = psy.saturation_vapour_pressure(t_in)
+        vpd = np.maximum(p_ws - x["p_w_in"][t], 0.0)
         c_b = np.where(i_out > 5.0, p["c_bd"], p["c_bn"])
         q = p["c_a"] * (1.0 - np.exp(-self.extinction * lai)) * i_in + c_b * lai * vpd
-        return -q, 0.0
+        return q, c_b * lai, p_ws
+
+    def coefficients(self, p, x, t_in, t: Index):
+        return -self._parts(p, x, t_in, t)[0], 0.0
+
+    def linearised(self, p, x, t_in, t: Index):
+        """Also the slope k = C_B LAI dp_ws/dT where the air is not saturated: a warmer
+        air transpires more (the VPD grows with T_in)."""
+        q, b_lai, p_ws = self._parts(p, x, t_in, t)
+        dry = p_ws > x["p_w_in"][t]
+        slope = psy.saturation_vapour_pressure_slope(t_in, p_ws)
+        return -q, 0.0, np.where(dry, b_lai * slope, 0.0)
 
 
 class NaturalVentilation(FluxTerm):
@@ -136,21 +152,36 @@ class NaturalVentilation(FluxTerm):
         self.height = gh.vents.height_difference
         self.rho_cp_a = gh.air_density * psy.CP_AIR / gh.floor_area
 
-    def flow(self, p, x, t_in, t: Index) -> np.ndarray:
-        """Ventilation flow G [m3 s-1] (III.31)."""
+    def _drivers(self, x, t: Index) -> tuple[np.ndarray, np.ndarray]:
+        """The buoyancy coefficient B = A_eff² 2 g h / T_out [m6 s-2 K-1] and the wind term
+        W = ((A_r + A_s)/2)² u² [m6 s-2] of III.31: drivers only, so computed before any
+        array of candidates."""
         a_r, a_s = x["a_roof"][t], x["a_side"][t]
-        t_out = x["t_out"][t]
         norm = np.sqrt(a_r * a_r + a_s * a_s)
         a_eff = np.where(norm > 0, a_r * a_s / np.where(norm > 0, norm, 1.0), 0.0)
-        buoyancy = a_eff**2 * 2.0 * psy.GRAVITY * self.height * np.abs(t_in - t_out) / (
-            t_out + psy.KELVIN
-        )
-        wind = ((a_r + a_s) / 2.0) ** 2 * p["c_ven_w"] * x["wind"][t] ** 2
-        return p["c_ven_d"] * np.sqrt(buoyancy + wind) + p["c_loss"]
+        b = a_eff**2 * (2.0 * psy.GRAVITY * self.height) / (x["t_out"][t] + psy.KELVIN)
+        return b, ((a_r + a_s) / 2.0) ** 2 * x["wind"][t] ** 2
+
+    def flow(self, p, x, t_in, t: Index) -> np.ndarray:
+        """Ventilation flow G [m3 s-1] (III.31)."""
+        b, w = self._drivers(x, t)
+        return p["c_ven_d"] * np.sqrt(b * np.abs(t_in - x["t_out"][t]) + p["c_ven_w"] * w) + p["c_loss"]
 
     def coefficients(self, p, x, t_in, t: Index):
         s = self.rho_cp_a * self.flow(p, x, t_in, t)
         return s * x["t_out"][t], s
+
+    def linearised(self, p, x, t_in, t: Index):
+        """Also the slope k = rho c_p (G + dG/dT (T_in - T_out)) / A: the buoyancy flow grows
+        with |T_in - T_out| (III.31), dG/dT (T_in - T_out) = C_d B |ΔT| / (2 sqrt(B |ΔT| + W))."""
+        b, w = self._drivers(x, t)
+        t_out = x["t_out"][t]
+        buoyancy = b * np.abs(t_in - t_out)
+        root = np.sqrt(buoyancy + p["c_ven_w"] * w)
+        s = self.rho_cp_a * (p["c_ven_d"] * root + p["c_loss"])
+        # root = 0 only where buoyancy = 0 (closed vents): the extra slope is 0 there
+        extra = (0.5 * self.rho_cp_a) * p["c_ven_d"] * buoyancy / np.maximum(root, 1e-300)
+        return s * t_out, s, s + extra
 
 
 def almeria_capacity(gh: Greenhouse) -> float:

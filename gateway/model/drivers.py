@@ -66,4 +66,36 @@ def prepare_drivers(series: Series, gh: Greenhouse, cloud: np.ndarray | None = N
     side = x.get("vent_side", np.zeros(n))
     x["a_roof"] = roof_vent_area(gh.vents, np.nan_to_num(roof))
     x["a_side"] = side_vent_area(gh.vents, np.nan_to_num(side))
-    return x
+    return hold_means(x) if series.sampling == "mean" else x
+
+
+NOT_HELD = ("t_in", "i_in", "time")
+"""Columns ``hold_means`` leaves alone: the state and the measured outputs are compared as
+they were measured; only the drivers are read through the hold."""
+NON_NEGATIVE = ("a_roof", "a_side", "wind", "h_o")
+
+
+def hold_means(x: dict[str, np.ndarray], keep: tuple[str, ...] = NOT_HELD) -> dict[str, np.ndarray]:
+    """Drivers given as means over each step → the values the first-order hold of the step
+    (gateway/model/step.py) must read, ``u_k - (u_k-1 - 2 u_k + u_k+1) / 12``.
+
+    Over one step from a measured mean state, the balance sees the drivers weighted by a
+    triangle over the two means it spans (the box of the averaging convolved with the step),
+    not the straight line between the two means that the hold draws: for a smooth driver the
+    two differ by the second difference / 12, and this correction makes them agree to third
+    order (exact for cubic drivers at small λΔ). Without it, rough drivers (radiation under
+    passing clouds) bias the identified parameters (docs/model.md). Where a neighbour is
+    missing (the ends, a gap) the value is left as it is.
+    """
+    out = dict(x)
+    for name, v in x.items():
+        if name in keep or name.startswith("_"):
+            continue
+        v = np.asarray(v, dtype=float)
+        if v.ndim != 1 or len(v) < 3:
+            continue
+        d2 = np.zeros_like(v)
+        d2[1:-1] = v[:-2] - 2.0 * v[1:-1] + v[2:]
+        held = np.where(np.isfinite(d2), v - d2 / 12.0, v)
+        out[name] = np.maximum(held, 0.0) if name in NON_NEGATIVE else held
+    return out

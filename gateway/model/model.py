@@ -1,4 +1,4 @@
-"""A climate model as a list of flux terms, integrated with the exact exponential step.
+"""A climate model as a list of flux terms, integrated with the exponential step.
 
 ``C dT_in/dt = sum_k (g_k - s_k T_in)``; with the coefficients frozen over one step of length
 dt the solution is exact (docs/model-notes.md §4):
@@ -7,7 +7,10 @@ dt the solution is exact (docs/model-notes.md §4):
 
 which equals ``T_eq + (T - T_eq) exp(-S dt/C)`` with ``T_eq = G/S`` and stays finite as S → 0.
 It is unconditionally stable, so the stiff coefficients of table 13 (C_cnd_cnv up to
-300 W m-2 K-1) are safe at a 60 s step where explicit Euler diverges.
+300 W m-2 K-1) are safe at a 60 s step where explicit Euler diverges. Since issue 10 the
+drivers move linearly between samples and the exponent is the flux's true slope
+(gateway/model/step.py, ``Model.integration``; docs/model.md): freezing them biased the
+identified parameters by ~6 % at 1 min.
 
 Both evaluation modes take parameters of shape (P, k) and return predictions of shape (P, T)
 with no Python loop over P.
@@ -21,19 +24,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from gateway.greenhouse import Greenhouse
+from gateway.model import step as stepping
+from gateway.model.radiation import RadiationSubmodel
+from gateway.model.step import Integration
 from gateway.model.terms import FluxTerm, Index, Parameter, SensorTerm
 
-
-@dataclass(frozen=True)
-class RadiationSubmodel:
-    """Inside short-wave radiation ``i_in = c_tsw * i_glob`` (III.35), fitted on measured i_in."""
-
-    parameter: Parameter
-    equation: str = "III.35"
-
-    def predict(self, c_tsw: np.ndarray, x: Mapping[str, np.ndarray]) -> np.ndarray:
-        """i_in [W m-2] for c_tsw of shape (P, 1) → (P, T)."""
-        return c_tsw * x["i_glob"]
+__all__ = ["Model", "OnlineGroup", "RadiationSubmodel", "check_columns"]
 
 
 @dataclass(frozen=True)
@@ -69,6 +65,9 @@ class Model:
     sensors: tuple[SensorTerm, ...] = ()
     """Observation terms: measured T_in = true T_in + sum of offsets (default none: the sensor
     reads the true state). Added by the diagnosis (gateway/diagnose) for sensor errors."""
+    integration: Integration = Integration()
+    """How one step is integrated (gateway/model/step.py): first-order hold of the drivers and
+    the re-linearised slope by default; ``step.FROZEN`` is the step before issue 10."""
 
     # -- the parameter vector -------------------------------------------------------------
     @property
@@ -152,6 +151,18 @@ class Model:
             total = total + sensor.offset(p, x, t)
         return total
 
+    def true_state(self, p: Mapping[str, np.ndarray], x: Mapping[str, np.ndarray],
+                   reading: np.ndarray, t: Index) -> np.ndarray:
+        """The true T_in behind a ``reading`` at time ``t`` (the reading itself without sensor
+        terms): where every run that starts from a measurement starts."""
+        return reading - self.sensor_offset(p, x, t) if self.sensors else reading
+
+    def reading(self, p: Mapping[str, np.ndarray], x: Mapping[str, np.ndarray],
+                state: np.ndarray, t: Index) -> np.ndarray:
+        """What the sensor reads at time ``t`` for the true ``state`` (what is compared with the
+        measurement)."""
+        return state + self.sensor_offset(p, x, t) if self.sensors else state
+
     def columns(self, theta: np.ndarray) -> dict[str, np.ndarray]:
         """Parameter matrix (P, k) → {name: column of shape (P, 1)}."""
         theta = np.atleast_2d(np.asarray(theta, dtype=float))
@@ -163,6 +174,42 @@ class Model:
         return {n: theta[:, j : j + 1] for j, n in enumerate(self.names)}
 
     # -- integration ------------------------------------------------------------------------
+    def _sums(self, p: Mapping[str, np.ndarray], x: Mapping[str, np.ndarray],
+              terms: Sequence[FluxTerm]) -> stepping.Sums:
+        """``sums(state, t) -> (g, s, k)`` over ``terms``: coefficients and slopes
+        (``FluxTerm.linearised``; the coefficient s as slope when not re-linearised)."""
+        relinearise = self.integration.relinearise
+
+        def sums(t_in: np.ndarray, t: Index) -> tuple:
+            g_sum = s_sum = k_sum = 0.0
+            for term in terms:
+                if relinearise:
+                    g, s, k = term.linearised(p, x, t_in, t)
+                else:
+                    g, s = term.coefficients(p, x, t_in, t)
+                    k = s
+                g_sum, s_sum, k_sum = g_sum + g, s_sum + s, k_sum + k
+            return g_sum, s_sum, k_sum
+
+        return sums
+
+    def stepper(self, p: Mapping[str, np.ndarray], x: Mapping[str, np.ndarray], c: float,
+                dt: float) -> stepping.Stepper:
+        """Steps of length ``dt`` [s] over the drivers ``x`` for the parameter columns ``p``:
+        ``stepper(state, t)`` is :meth:`step`, and consecutive calls share the work of the
+        terms that do not read the state (gateway/model/step.py)."""
+        fixed = [term for term in self.terms if not term.state_dependent]
+        moving = [term for term in self.terms if term.state_dependent]
+        return stepping.Stepper(self._sums(p, x, fixed), self._sums(p, x, moving), c, dt,
+                                len(x["t_out"]), self.integration)
+
+    def rates(
+        self, p: Mapping[str, np.ndarray], x: Mapping[str, np.ndarray], t_in: np.ndarray,
+        t: Index, c: float,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(dT_in/dt [K s-1], its slope λ = -∂/∂T_in [s-1]) at state ``t_in`` and time ``t``."""
+        return self.stepper(p, x, c, 1.0).rates(t_in, t)
+
     def step(
         self,
         p: Mapping[str, np.ndarray],
@@ -172,17 +219,10 @@ class Model:
         c: float,
         dt: float,
     ) -> np.ndarray:
-        """One exact exponential step of length ``dt`` [s] from state ``t_in`` at time ``t``."""
-        g_sum = 0.0
-        s_sum = 0.0
-        for term in self.terms:
-            g, s = term.coefficients(p, x, t_in, t)
-            g_sum = g_sum + g
-            s_sum = s_sum + s
-        # z >= 0; below 1e-12 phi = 1 - z/2 + ... is 1 to double precision, so clamping is exact
-        z = np.maximum(s_sum * (dt / c), 1e-12)
-        phi = -np.expm1(-z) / z
-        return t_in + (g_sum - s_sum * t_in) * (dt / c) * phi
+        """One exponential step of length ``dt`` [s] from state ``t_in`` at time ``t``
+        (gateway/model/step.py): the drivers at t + 1 are read when they exist, otherwise (the
+        end of ``x``, a gap) the drivers at t are held."""
+        return self.stepper(p, x, c, dt)(t_in, t)
 
     def one_step(
         self, theta: np.ndarray, x: Mapping[str, np.ndarray], gh: Greenhouse, dt: float
@@ -196,14 +236,13 @@ class Model:
         # Time blocks of ~16k elements keep the (P, T) temporaries in cache: ~5x faster than
         # one pass over the whole series at P = 100, T = 2880.
         block = max(16, 16384 // out.shape[0])
+        step = self.stepper(p, x, c, dt)
         for a in range(0, len(measured) - 1, block):
             b = min(a + block, len(measured) - 1)
-            if self.sensors:  # restart from the true state behind the reading, report a reading
-                prev = measured[None, a:b] - self.sensor_offset(p, x, slice(a, b))
-                new = self.step(p, x, prev, slice(a, b), c, dt)
-                out[:, a + 1 : b + 1] = new + self.sensor_offset(p, x, slice(a + 1, b + 1))
-            else:
-                out[:, a + 1 : b + 1] = self.step(p, x, measured[None, a:b], slice(a, b), c, dt)
+            # restart from the true state behind the reading, report a reading
+            prev = self.true_state(p, x, measured[None, a:b], slice(a, b))
+            new = step(prev, slice(a, b))
+            out[:, a + 1 : b + 1] = self.reading(p, x, new, slice(a + 1, b + 1))
         return out
 
     def free_run(
@@ -227,20 +266,17 @@ class Model:
         c = self.capacity(gh)
         n_p = next(iter(p.values())).shape[0]
         out = np.full((n_p, stop - start), np.nan)
-        obs = bool(self.sensors)  # sensor terms: integrate the true state, report a reading
-        state = np.full((n_p, 1), measured[start])
-        out[:, 0] = state[:, 0]
-        if obs:
-            state = state - self.sensor_offset(p, x, start)
+        # sensor terms: integrate the true state, report a reading
+        out[:, 0] = measured[start]
+        state = self.true_state(p, x, np.full((n_p, 1), measured[start]), start)
+        step = self.stepper(p, x, c, dt)
         for k, t in enumerate(range(start, stop - 1), start=1):
-            state = self.step(p, x, state, t, c, dt)
-            out[:, k] = (state + self.sensor_offset(p, x, t + 1))[:, 0] if obs else state[:, 0]
+            state = step(state, t)
+            out[:, k] = self.reading(p, x, state, t + 1)[:, 0]
             if restart_after_gaps and np.isnan(state[0, 0]):
                 # The output stays NaN: a measurement copied into it would score as a perfect
                 # prediction. The state restarts from the measurement when there is one.
-                state = np.full((n_p, 1), measured[t + 1])
-                if obs:
-                    state = state - self.sensor_offset(p, x, t + 1)
+                state = self.true_state(p, x, np.full((n_p, 1), measured[t + 1]), t + 1)
         return out
 
     def forecast(
@@ -261,14 +297,11 @@ class Model:
         p = self.columns(theta_rows)
         c = self.capacity(gh)
         t = np.asarray(starts)[:, None]
-        state = x["t_in"][t]
-        if self.sensors:
-            state = state - self.sensor_offset(p, x, t)
+        state = self.true_state(p, x, x["t_in"][t], t)
+        step = self.stepper(p, x, c, dt)
         for k in range(horizon):
-            state = self.step(p, x, state, t + k, c, dt)
-        if self.sensors:
-            state = state + self.sensor_offset(p, x, t + horizon)
-        return state[:, 0]
+            state = step(state, t + k)
+        return self.reading(p, x, state, t + horizon)[:, 0]
 
     def fluxes(
         self, theta: np.ndarray, x: Mapping[str, np.ndarray], t_in: np.ndarray

@@ -23,6 +23,7 @@ _R_FAST = 0.10
 
 class SolarGain(FluxTerm):
     linear_in_parameters = True
+    state_dependent = False
     name = "q_solar"
     equation = "III.15"
     description = "short-wave radiation absorbed inside: C_solar I"
@@ -47,16 +48,29 @@ class CoverConvection(FluxTerm):
                   "cover convection-conduction coefficient 1/C_a"),
     )
 
-    def coefficients(self, p, x, t_in, t: Index):
+    @staticmethod
+    def _h(x, t_in, t: Index):
         h_o = x["h_o"][t]  # III.9
         h_i = 5.2 * np.abs(t_in - x["t_out"][t]) ** 0.33  # III.10
-        u = h_o * h_i / (h_o + h_i)  # U = (1/h_o + 1/h_i)^-1, safe when h_i = 0
-        s = p["c_cnv_cnd"] * u
+        return h_o, h_i, h_o * h_i / (h_o + h_i)  # U = (1/h_o + 1/h_i)^-1, safe when h_i = 0
+
+    def coefficients(self, p, x, t_in, t: Index):
+        s = p["c_cnv_cnd"] * self._h(x, t_in, t)[2]
         return s * x["t_out"][t], s
+
+    def linearised(self, p, x, t_in, t: Index):
+        """Also the slope k = -∂Q/∂T_in = C U (1 + 0.33 h_o / (h_o + h_i)): h_i grows with
+        |T_in - T_out| (III.10), so the loss grows faster than C U; finite at h_i = 0."""
+        h_o, t_out = x["h_o"][t], x["t_out"][t]
+        h_i = 5.2 * np.abs(t_in - t_out) ** 0.33  # III.10
+        share = h_o / (h_o + h_i)
+        s = p["c_cnv_cnd"] * (h_i * share)  # U = h_o h_i / (h_o + h_i)
+        return s * t_out, s, s + 0.33 * (s * share)
 
 
 class AirLeakage(FluxTerm):
     linear_in_parameters = True
+    state_dependent = False
     name = "q_loss"
     equation = "III.19"
     description = "air exchange losses: -C_loss rho_a (T_in - T_out)"
@@ -77,6 +91,7 @@ class AirLeakage(FluxTerm):
 
 class SkyRadiation(FluxTerm):
     linear_in_parameters = True
+    state_dependent = False
     name = "q_thermal"
     equation = "III.21"
     description = "long-wave loss to the sky: -C_thermal h_o (T_in - T_sky)"

@@ -40,6 +40,13 @@ def saturation_vapour_pressure(t: ArrayLike) -> np.ndarray:
     return 0.61078 * np.exp(17.2694 * t / (t + 237.3))
 
 
+def saturation_vapour_pressure_slope(t: ArrayLike, p_ws: ArrayLike | None = None) -> np.ndarray:
+    """d p_ws / dT [kPa K-1] of the Tetens form at ``t`` [°C]; ``p_ws`` when already known."""
+    t = np.asarray(t, dtype=float)
+    p_ws = saturation_vapour_pressure(t) if p_ws is None else np.asarray(p_ws, dtype=float)
+    return p_ws * 17.2694 * 237.3 / (t + 237.3) ** 2
+
+
 def vapour_pressure(t: ArrayLike, rh: ArrayLike) -> np.ndarray:
     """Actual vapour pressure p_w [kPa] from temperature [°C] and relative humidity [%] (III.4)."""
     return saturation_vapour_pressure(t) * np.asarray(rh, dtype=float) / 100.0

@@ -105,12 +105,24 @@ class FluxTerm:
     """True when (g, s) = sum_j theta_j (g_j, s_j) over the term's own parameters for a given
     state (the ``uses`` parameters held fixed): a one-step cost can then precompute the
     (g_j, s_j) once and evaluate a whole population with one matrix product."""
+    state_dependent: bool = True
+    """False when (g, s) do not depend on ``t_in``: the flux is then affine in the state and its
+    slope is s (``linearised`` need not be overridden)."""
 
     def coefficients(
         self, p: Params, x: Drivers, t_in: np.ndarray, t: Index
     ) -> tuple[np.ndarray, np.ndarray]:
         """(g [W m-2], s [W m-2 K-1]) with Q = g - s T_in, for state ``t_in`` at time ``t``."""
         raise NotImplementedError
+
+    def linearised(
+        self, p: Params, x: Drivers, t_in: np.ndarray, t: Index
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(g, s, k): the coefficients plus the slope k = -∂Q/∂T_in [W m-2 K-1] at ``t_in``,
+        the rate the exponential step relaxes with (gateway/model/step.py). k = s unless the
+        coefficients depend on the state; such terms override this with the exact slope."""
+        g, s = self.coefficients(p, x, t_in, t)
+        return g, s, s
 
     def flux(self, p: Params, x: Drivers, t_in: np.ndarray, t: Index) -> np.ndarray:
         """The flux Q [W m-2] at state ``t_in`` (°C)."""

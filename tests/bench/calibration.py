@@ -29,8 +29,7 @@ from gateway.estimate.swarm import make_algorithm  # noqa: E402
 from gateway.greenhouse import load_greenhouse  # noqa: E402
 from gateway.model import build_model  # noqa: E402
 from gateway.model.drivers import prepare_drivers  # noqa: E402
-from gateway.series import load_series  # noqa: E402
-from training.identifiability import ASSUMED, DATASET  # noqa: E402
+from training.identifiability import ASSUMED, load  # noqa: E402
 
 PARTICLES, ITERATIONS = 100, 220
 ROUNDS = 3
@@ -39,7 +38,7 @@ ROUNDS = 3
 def _problem():
     gh = load_greenhouse("biskra-prototype")
     model = build_model("prototype", gh)
-    series = load_series(DATASET)
+    series = load()  # per-minute means of the RK4 reference (docs/model.md)
     x = prepare_drivers(series, gh)
     idx = np.arange(len(model.names))
     obj = Objective(model, x, gh, 60.0, idx, model.defaults(gh), [(0, len(series))])

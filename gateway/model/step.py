@@ -1,0 +1,190 @@
+"""The exponential step every model evaluation uses (MODEL_NOTES §4, issue 10).
+
+The air balance is ``dT/dt = r(T, t)`` with the rate ``r = F / C`` [K s-1], F the net flux
+[W m-2] and C the heat capacity [J m-2 K-1]. Over one step of length Δ from t_k to t_k+1:
+
+- **zero-order hold** (the thesis-era step): drivers and coefficients frozen at t_k,
+
+      T+ = T + Δ r0 φ1(z),                       z = λ0 Δ
+
+- **first-order hold with re-linearisation** (the default since issue 10): the drivers move
+  linearly from the sample at t_k to the one at t_k+1, and the exponent is the true slope
+  λ = -∂r/∂T (h_i ∝ |T_in − T_out|^0.33 makes it steeper than the coefficient s alone). This is
+  the exponential Rosenbrock–Euler step of the system with time as a second state
+  (Hochbruck, Ostermann & Schweitzer 2009, SIAM J. Numer. Anal. 47):
+
+      T+ = T + Δ [r0 φ1(z) + (r1 − r0) φ2(z)],   z = (λ0 + λ1)/2 Δ
+
+  with r0 = r(T, t_k), and r1 the rate at t_k+1 evaluated at the midpoint state
+  T_m = T + Δ/2 r0 φ1(λ0 Δ) and carried back to T: r1 = r(T_m, t_k+1) + λ1 (T_m − T). It is
+  second order; both evaluations are of the same cost as the old one.
+
+``φ1(z) = (1 − e^-z)/z`` and ``φ2(z) = (z − 1 + e^-z)/z²`` are finite at z → 0 (1 and 1/2)
+and bounded for any z ≥ 0, so the step stays unconditionally stable for the stiff corners of
+table 13. Where the sample at t_k+1 is missing (a gap, or the end of the data: the live
+estimator predicting the next minute) the step falls back to the zero-order hold.
+
+Why: identified from fine RK4 data of the same prototype equations with drivers that vary
+within the minute, the zero-order hold biases the four prototype parameters by ~6 % at 1 min and
+~40 % at 5 min (a half-step lag of every driver); docs/model.md has the table.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from gateway.model.terms import Index
+
+HOLDS = ("first_order", "zero_order")
+
+Rates = Callable[[np.ndarray, Index], tuple[np.ndarray, np.ndarray]]
+"""``rates(state, t) -> (r, λ)``: rate dT/dt [K s-1] at ``state`` and time index ``t``, and the
+slope λ = -∂r/∂T [s-1] the exponential relaxes with."""
+
+
+@dataclass(frozen=True)
+class Integration:
+    """How a model integrates one step.
+
+    ``hold``: ``first_order`` (drivers linear between samples) or ``zero_order`` (frozen at the
+    step's start, the step before issue 10); ``relinearise``: the exponent is the true slope
+    -∂r/∂T and the end of the step is evaluated at the midpoint state (False: the coefficient
+    s frozen at the start state, as before issue 10).
+    """
+
+    hold: str = "first_order"
+    relinearise: bool = True
+
+    def __post_init__(self) -> None:
+        if self.hold not in HOLDS:
+            raise ValueError(f"hold must be one of {HOLDS}, got {self.hold!r}")
+
+
+FROZEN = Integration("zero_order", relinearise=False)
+"""The step before issue 10: everything frozen at the start of the step."""
+
+
+def phi(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(φ1(z), φ2(z)) for z ≥ 0. φ2 = (1 - φ1)/z: below z = 1e-6 (a step that barely relaxes)
+    z is taken as 1e-6, which moves φ1 by < 5e-7 and keeps φ2 = 1/2 - z/6 to 4e-10."""
+    z = np.maximum(z, 1e-6)
+    p1 = -np.expm1(-z) / z
+    return p1, (1.0 - p1) / z
+
+
+def phi1(z: np.ndarray) -> np.ndarray:
+    """φ1(z) = (1 - e^-z)/z for z ≥ 0, 1 at z → 0."""
+    z = np.maximum(z, 1e-12)
+    return -np.expm1(-z) / z
+
+
+def advance(state: np.ndarray, r0: np.ndarray, lam: np.ndarray, dt: float,
+            r1: np.ndarray | None = None) -> np.ndarray:
+    """T + Δ [r0 φ1(z) + (r1 − r0) φ2(z)], z = λΔ: exact for a rate linear in T with slope -λ
+    and a forcing linear in time from r0 to r1 (``r1`` None: constant forcing, φ1 only)."""
+    if r1 is None:
+        return state + r0 * dt * phi1(lam * dt)
+    p1, p2 = phi(lam * dt)
+    return state + dt * (r0 * (p1 - p2) + r1 * p2)
+
+
+def midpoint(state: np.ndarray, r0: np.ndarray, lam0: np.ndarray, dt: float) -> np.ndarray:
+    """Halfway to where the frozen step would end (the predictor the end of the step is
+    evaluated at), with φ1(z) ≈ 1/(1 + z/2): exact to z²/12, bounded, and no exponential."""
+    return state + (0.5 * dt) * r0 / (1.0 + (0.5 * dt) * lam0)
+
+
+def next_index(t: Index, n: int) -> Index:
+    """The time index one step on, clipped to the last sample ``n - 1`` (there the step holds)."""
+    if isinstance(t, slice):
+        a, b = t.start or 0, n if t.stop is None else t.stop
+        if b < n:
+            return slice(a + 1, b + 1)
+        return np.minimum(np.arange(a, b) + 1, n - 1)
+    if isinstance(t, np.ndarray):
+        return np.minimum(t + 1, n - 1)
+    return min(int(t) + 1, n - 1)
+
+
+def end_rates(rates: Rates, state: np.ndarray, r0: np.ndarray, lam0: np.ndarray, t1: Index,
+              dt: float, relinearise: bool, fixed: tuple[np.ndarray, np.ndarray] | None = None,
+              check: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """(r1, λ1) at t_k+1 referred to the start state (see the module docstring); where the
+    sample at t_k+1 is missing, the start's (r0, λ0): the zero-order hold. ``fixed``: a part of
+    (r1, λ1) already known at the start state (terms that do not read the state), added as is;
+    ``rates`` then gives the rest. ``check=False``: the caller knows nothing is missing."""
+    if relinearise:
+        tm = midpoint(state, r0, lam0, dt)
+        r1, lam1 = rates(tm, t1)
+        r1 = r1 + lam1 * (tm - state)
+    else:
+        r1, lam1 = rates(state, t1)
+    if fixed is not None:
+        r1, lam1 = r1 + fixed[0], lam1 + fixed[1]
+    if not check:
+        return r1, lam1
+    bad = ~np.isfinite(r1 + lam1)
+    if bad.any():
+        r1, lam1 = np.where(bad, r0, r1), np.where(bad, lam0, lam1)
+    return r1, lam1
+
+
+Sums = Callable[[np.ndarray, Index], tuple]
+"""``sums(state, t) -> (g, s, k)``: a group of terms' summed coefficients (Q = g - s T) and
+slope k = -∂Q/∂T at ``state`` and time index ``t`` [W m-2, W m-2 K-1, W m-2 K-1]."""
+
+
+def _same(a: Index, b: Index) -> bool:
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return (isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and a.shape == b.shape
+                and bool(np.array_equal(a, b)))
+    return a == b
+
+
+class Stepper:
+    """The one exponential step of every model evaluation, bound to one set of drivers (of
+    length ``n``) and parameters: ``stepper(state, t)`` steps from time index ``t``.
+
+    ``fixed`` sums the terms whose coefficients do not read the state, ``moving`` the others.
+    Consecutive calls (free runs, forecasts, the online estimator's virtual model) reuse the
+    fixed terms' sums at t + 1 as the next step's start, so the first-order hold costs them one
+    evaluation per step, not two.
+    """
+
+    def __init__(self, fixed: Sums, moving: Sums, c: float, dt: float, n: int,
+                 integration: Integration = Integration()) -> None:
+        self.fixed, self.moving = fixed, moving
+        self.c, self.dt, self.n, self.integration = c, dt, n, integration
+        self._key: Index | None = None
+        self._cached: tuple = ()
+
+    def _fixed_at(self, state: np.ndarray, t: Index) -> tuple:
+        if self._key is not None and _same(self._key, t):
+            return self._cached
+        return self.fixed(state, t)
+
+    def rates(self, state: np.ndarray, t: Index) -> tuple[np.ndarray, np.ndarray]:
+        """(r [K s-1], λ [s-1]) of all terms at ``state`` and ``t``."""
+        gi, si, ki = self._fixed_at(state, t)
+        gd, sd, kd = self.moving(state, t)
+        return ((gi + gd) - (si + sd) * state) / self.c, (ki + kd) / self.c
+
+    def __call__(self, state: np.ndarray, t: Index) -> np.ndarray:
+        c, dt = self.c, self.dt
+        r0, lam0 = self.rates(state, t)
+        if self.integration.hold == "zero_order":
+            return advance(state, r0, lam0, dt)
+        t1 = next_index(t, self.n)
+        g1, s1, k1 = self.fixed(state, t1)
+        self._key, self._cached = t1, (g1, s1, k1)
+
+        def moving(st: np.ndarray, tt: Index) -> tuple[np.ndarray, np.ndarray]:
+            g, s, k = self.moving(st, tt)
+            return (g - s * st) / c, k / c
+
+        r1, lam1 = end_rates(moving, state, r0, lam0, t1, dt, self.integration.relinearise,
+                             fixed=((g1 - s1 * state) / c, k1 / c))
+        return advance(state, r0, 0.5 * (lam0 + lam1), dt, r1)

@@ -39,7 +39,7 @@ def test_shipped_dataset_is_the_documented_simulation(data):
 
 def floor_cost(series, model, gh) -> float:
     """The one-step cost at the assumed values: the data are not the model's own, so the cost
-    has a floor (~9.4e-8 °C², the step's own bias, docs/model.md)."""
+    has a floor (~9.8e-8 °C², the step's own bias, docs/model.md)."""
     assumed = np.array([[ASSUMED[n] for n in model.names]])
     return float(Objective(model, prepare_drivers(series, gh), gh, 60.0, np.arange(4), assumed[0],
                            [(0, len(series))])(assumed)[0])

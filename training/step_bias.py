@@ -136,7 +136,8 @@ def diagnosis_grid(weather: ref.Weather, h: float, model: Model, gh: Greenhouse
     traj = ref.integrate(weather, ref.ASSUMED, h=h)
     minutes = rows(weather, traj, h, 60.0, "mean")
     grid = coarsen(replace(minutes, sampling="instant"), 5)
-    means = rows(weather, traj, h, 300.0, "mean")
+    # the cloudiness read from the 5-minute rows, as the model reads it (step_reference)
+    means = rows(weather, ref.integrate(weather, ref.ASSUMED, h=h, row_step=300.0), h, 300.0, "mean")
     cases = [
         ("diagnosis grid, zero-order hold, frozen (the diagnosis today)", FROZEN, grid),
         ("diagnosis grid, zero-order hold, re-linearised", Integration("zero_order", True), grid),

@@ -96,6 +96,22 @@ def store_findings(conn: sqlite3.Connection, greenhouse: str, found: list[dict[s
     return notes
 
 
+async def _settled(fn: Callable[..., Any], *args: Any) -> Any:
+    """``fn(*args)`` in a worker thread; when the caller is cancelled meanwhile, the thread is
+    let finish before the cancellation goes on: the connection it uses is closed right after,
+    and closing a SQLite connection under a running statement crashes the process."""
+    fut = asyncio.ensure_future(asyncio.to_thread(fn, *args))
+    try:
+        return await asyncio.shield(fut)
+    except asyncio.CancelledError:
+        while not fut.done():
+            try:
+                await asyncio.wait([fut])
+            except asyncio.CancelledError:
+                continue
+        raise
+
+
 def _save_last(conn: sqlite3.Connection, t: float) -> None:
     conn.execute("INSERT OR REPLACE INTO meta (name, value) VALUES ('diagnosis_last', ?)", (repr(t),))
 
@@ -125,21 +141,21 @@ class DiagnosisScheduler:
 
     async def run_forever(self, tick: float = 5.0) -> None:
         d = self.cfg.diagnosis
-        conn = await asyncio.to_thread(open_db, self.cfg.db)
+        conn = await _settled(open_db, self.cfg.db)
         try:
-            row = await asyncio.to_thread(
+            row = await _settled(
                 lambda: conn.execute("SELECT value FROM meta WHERE name='diagnosis_last'").fetchone())
             last = float(row[0]) if row else None
             if last is None:  # first start: the first run comes one period from now
                 last = self.clock()
-                await asyncio.to_thread(_save_last, conn, last)
+                await _settled(_save_last, conn, last)
             while True:
                 now = self.clock()
                 if now - last >= d.every_hours * 3600:
                     for r in self.resources:
                         self.last[r.settings.name] = await self.run_one(conn, r, now)
                     last = now
-                    await asyncio.to_thread(_save_last, conn, last)
+                    await _settled(_save_last, conn, last)
                 await asyncio.sleep(tick)
         finally:
             conn.close()
@@ -147,7 +163,7 @@ class DiagnosisScheduler:
     async def run_one(self, conn: sqlite3.Connection, r: GreenhouseResources, now: float) -> DiagnosisRun:
         d, name = self.cfg.diagnosis, r.settings.name
         path = self.workdir / f"diagnosis-{name}.csv"
-        rows = await asyncio.to_thread(export_window, conn, r, now - d.days * 86400, now, path)
+        rows = await _settled(export_window, conn, r, now - d.days * 86400, now, path)
         if rows < d.min_days * 1440:
             note = (f"greenhouse {name}: diagnosis skipped, {rows / 1440:.1f} days of data "
                     f"(needs {d.min_days:g})")
@@ -178,7 +194,7 @@ class DiagnosisScheduler:
             log.warning(note)
             return DiagnosisRun(name, now, False, note)
         result = json.loads(out)
-        notes = await asyncio.to_thread(store_findings, conn, name, result["findings"], now)
+        notes = await _settled(store_findings, conn, name, result["findings"], now)
         for n in notes:
             log.info(n)
         if notes:

@@ -185,3 +185,77 @@ def forecast(model: Model, theta_rows: np.ndarray, x: Mapping[str, np.ndarray], 
     for k in range(horizon):
         state = step(state, t + k) + dt * b * rho**k
     return model.reading(p, x, state, t + horizon)[:, 0]
+
+
+class LiveFilter:
+    """The same filter one sample at a time, for the live gateway (gateway/service/pipeline.py):
+    ``update`` after the estimator's update at t, ``estimate`` for the forecasts made at t.
+    Fed a replay's rows and parameters it gives ``filter_series``'s figures."""
+
+    def __init__(self, model: Model, gh: Greenhouse, dt: float,
+                 settings: DisturbanceSettings | None = None) -> None:
+        self.model, self.gh, self.dt = model, gh, dt
+        self.settings = settings or DisturbanceSettings()
+        self.state: FilterState | None = None
+        self._prev: tuple[dict[str, float], np.ndarray, float] | None = None  # row, θ, lin
+
+    def update(self, row: Mapping[str, float], theta: np.ndarray) -> None:
+        """The drivers at t (the estimator's ``last_row``, ``t_in`` the reading) and the
+        parameters in force after its update at t."""
+        theta = np.asarray(theta, dtype=float)
+        y = float(row.get("t_in", math.nan))
+        if self.model.sensors and math.isfinite(y) and np.all(np.isfinite(theta)):
+            x1 = {k: np.array([v]) for k, v in row.items()}
+            p = self.model.columns(theta[None, :])
+            y -= float(np.asarray(self.model.sensor_offset(p, x1, 0)).reshape(-1)[0])
+        s = self.settings
+        if self.state is not None and self._prev is not None:
+            f0, a = self._step(*self._prev, row)
+            if math.isfinite(f0) and math.isfinite(a):
+                self.state.predict(f0, a, self._prev[2], self.dt, s)
+            elif math.isfinite(y):  # cannot step: restart at the reading, keep b
+                self.state = FilterState(y, self.state.b, s.sigma_v**2, 0.0, self.state.p_bb)
+        if math.isfinite(y):
+            if self.state is None:
+                self.state = FilterState.start(y, s)
+            else:
+                self.state.correct(y, s)
+        if self.state is not None and not math.isfinite(self.state.t):
+            self.state = None
+        lin = y if math.isfinite(y) else (self._prev[2] if self._prev is not None else 0.0)
+        self._prev = (dict(row), theta, lin)
+
+    def _step(self, row0: dict[str, float], theta: np.ndarray, lin: float,
+              row1: Mapping[str, float]) -> tuple[float, float]:
+        if not np.all(np.isfinite(theta)):
+            return math.nan, math.nan
+        x = {k: np.array([row0.get(k, math.nan), row1.get(k, math.nan)]) for k in row0}
+        f0, a = linearised_steps(self.model, np.repeat(theta[None, :], 2, axis=0), x, self.gh,
+                                 self.dt, np.array([lin, lin]))
+        return float(f0[0]), float(a[0])
+
+    def estimate(self) -> tuple[float, float] | None:
+        """(T̂ [°C], b̂ [K s-1]) now, or None before the first reading."""
+        return None if self.state is None else (self.state.t, self.state.b)
+
+    def reset(self) -> None:
+        """Forget everything (after a long gap in the data)."""
+        self.state, self._prev = None, None
+
+    def snapshot(self) -> dict:
+        """JSON-ready state for an exact resume (``restore``)."""
+        st = self.state
+        prev = self._prev
+        return {"state": None if st is None else [st.t, st.b, st.p_tt, st.p_tb, st.p_bb],
+                "prev": None if prev is None else [prev[0], prev[1].tolist(), prev[2]]}
+
+    def restore(self, snap: Mapping | None) -> None:
+        """Continue from a ``snapshot`` (None: start afresh)."""
+        self.reset()
+        if not snap:
+            return
+        if snap.get("state") is not None:
+            self.state = FilterState(*map(float, snap["state"]))
+        if snap.get("prev") is not None:
+            row, theta, lin = snap["prev"]
+            self._prev = ({k: float(v) for k, v in row.items()}, np.asarray(theta, float), float(lin))

@@ -8,7 +8,7 @@ causal outlook. Writes ``bench/results/forecasts.json`` and prints the Markdown 
 docs/online-estimator.md ("Forecasts on greenhouses we did not build").
 
     nice -n 5 .venv/bin/python tests/generality/forecasts.py [--jobs 2]
-        [--generators refsim,twonode,vanthoor] [--windows autumn,winter,summer]
+        [--generators refsim,twonode,vanthoor] [--windows autumn,winter,summer] [--keep DIR]
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ import json
 import multiprocessing as mp
 import sys
 import time
+from functools import partial
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -74,6 +75,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--generators", default=",".join(GENERATORS))
     ap.add_argument("--windows", default=",".join(MAIN_WINDOWS))
     ap.add_argument("--json", default=str(RESULTS), help=f"results file ({RESULTS.relative_to(ROOT)})")
+    ap.add_argument("--keep", metavar="DIR", help="also pickle each replay into DIR (to study the "
+                    "forecasts without replaying again)")
     a = ap.parse_args(argv)
     gens = [g for g in a.generators.split(",") if g]
     if bad := [g for g in gens if g not in GENERATORS]:
@@ -86,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     results = []
     with mp.get_context("spawn").Pool(a.jobs, initializer=_init_worker) as pool:
-        for i, r in enumerate(pool.imap_unordered(run, cases), 1):
+        for i, r in enumerate(pool.imap_unordered(partial(run, keep=a.keep), cases), 1):
             results.append(r)
             print(f"[{i}/{len(cases)}] {Case(**r['case']).label} ({r['seconds']:.0f} s)", flush=True)
     meta = {"command": "tests/generality/forecasts.py", "cases": len(results), "jobs": a.jobs,

@@ -113,6 +113,7 @@ def test_cli_human_output_without_calibration(files, capsys):
     text = capsys.readouterr().out
     assert "middle of the hard box" in text and "60-minute forecast" in text and "persistence" in text
     assert text.count("adaptive_kf") == 6  # with the measured weather and the outlook, 3 horizons
+    assert text.count("combined") == 6
 
 
 @pytest.mark.parametrize(
@@ -174,8 +175,8 @@ def test_report_has_the_arx_baseline_and_the_outlook_forecasts(result):
     assert rep["outlook"] == "clear-sky-trend"  # the preset has a [site]
     assert "arx" in rep["metrics"]
     for block in rep["horizons"].values():
-        assert {"adaptive", "adaptive_kf", "constant", "arx", "persistence", "adaptive_outlook",
-                "adaptive_kf_outlook", "arx_outlook"} == set(block)
+        assert {"adaptive", "adaptive_kf", "combined", "constant", "arx", "persistence",
+                "adaptive_outlook", "adaptive_kf_outlook", "combined_outlook", "arx_outlook"} == set(block)
         assert len({m["n"] for m in block.values()}) == 1  # one set of samples per comparison
 
 
@@ -205,3 +206,4 @@ def test_an_outlook_of_the_measured_future_gives_the_measured_weather_forecasts(
     np.testing.assert_allclose(f["adaptive_outlook"][ok], f["adaptive"][ok], atol=1e-9)
     np.testing.assert_allclose(f["arx_outlook"][ok], f["arx"][ok], atol=1e-9)
     np.testing.assert_allclose(f["adaptive_kf_outlook"][ok], f["adaptive_kf"][ok], atol=1e-9)
+    np.testing.assert_allclose(f["combined_outlook"][ok], f["combined"][ok], atol=1e-9)

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from gateway.estimate import arx as arx_baseline
-from gateway.estimate import disturbance
+from gateway.estimate import combination, disturbance
 from gateway.estimate.horizon import HorizonDrivers, outlook_drivers
 from gateway.estimate.online import Counters, GroupSettings, OnlineEstimator
 from gateway.estimate.outlook import Outlook, make_outlook
@@ -43,8 +43,8 @@ from gateway.series import Series
 
 HORIZONS = (15, 30, 60)
 """Forecast horizons [min] of the report (reached in whole model steps)."""
-FORECASTS = ("adaptive", "adaptive_kf", "constant", "arx", "persistence", "adaptive_outlook",
-             "adaptive_kf_outlook", "arx_outlook")
+FORECASTS = ("adaptive", "adaptive_kf", "combined", "constant", "arx", "persistence",
+             "adaptive_outlook", "adaptive_kf_outlook", "combined_outlook", "arx_outlook")
 """Forecasts of the report, in order: measured weather (model skill), then with the outlook."""
 
 
@@ -127,17 +127,13 @@ def replay(
         constant=constant, theta=theta, theta0=theta0_used, step_ms=step_ms,
         counters=est.counters, settings=est.settings,
     )
-    result.arx = arx_baseline.fit(x)
-    result.filtered = disturbance.filter_series(model, theta, x, gh, series.step)
-    reach = {int(m): int(m * 60.0 / series.step) for m in horizons
-             if m * 60.0 / series.step >= 1 and float(m * 60.0 / series.step).is_integer()}
-    if reach:  # a horizon the model step cannot reach is left out
+    reach = steps_of(horizons, series.step)
+    if reach:
         if outlook is None:
             outlook = make_outlook("clear-sky-trend" if gh.site is not None else "hold-latest", gh)
         result.ahead = outlook_drivers(outlook, x, list(series.columns), series.time, series.step,
                                        gh, np.arange(max(n - 1, 0)), max(reach.values()))
-    for minutes, steps in reach.items():
-        result.horizons[minutes] = forecasts(result, steps)
+    score_forecasts(result, reach)
     if model.radiation is not None and "i_in" in x and np.isfinite(x["i_in"]).any():
         j = model.index(model.radiation.parameter.name)
         # i_in at t simulated from i_glob at t with c_tsw as estimated up to t - 1 (III.35)
@@ -145,6 +141,22 @@ def replay(
         result.rad_adaptive = model.radiation.predict(c_prev[None, :], x)[0]
         result.rad_constant = model.radiation.predict(np.array([[theta0_used[j]]]), x)[0]
     return result
+
+
+def steps_of(horizons: Sequence[int], dt: float) -> dict[int, int]:
+    """Horizon [min] → model steps of ``dt`` [s]; a horizon the step cannot reach is left out."""
+    return {int(m): int(m * 60.0 / dt) for m in horizons
+            if m * 60.0 / dt >= 1 and float(m * 60.0 / dt).is_integer()}
+
+
+def score_forecasts(result: ReplayResult, reach: Mapping[int, int]) -> None:
+    """After the estimator's loop: the ARX baseline, the disturbance filter and the forecasts
+    (``reach``: horizon [min] → model steps) of ``result``, all from what the loop recorded (and
+    ``result.ahead``, the outlook's blocks). A saved replay can be scored again with new code."""
+    result.arx = arx_baseline.fit(result.x)
+    result.filtered = disturbance.filter_series(result.model, result.theta, result.x, result.gh,
+                                                result.dt)
+    result.horizons = {minutes: forecasts(result, steps) for minutes, steps in reach.items()}
 
 
 def forecasts(result: ReplayResult, horizon: int) -> dict[str, np.ndarray]:
@@ -186,7 +198,26 @@ def forecasts(result: ReplayResult, horizon: int) -> dict[str, np.ndarray]:
                                                               horizon, *kf_start)
         if result.arx is not None:
             out["arx_outlook"] = result.arx.forecast(ahead.x, starts, horizon, rows)
+    for suffix in ("", "_outlook"):
+        parts = (f"adaptive_kf{suffix}", f"arx{suffix}")
+        if all(p in out for p in parts):
+            out[f"combined{suffix}"] = _combined(result, starts, horizon, [out[p] for p in parts])
     return out
+
+
+def _combined(result: ReplayResult, starts: np.ndarray, horizon: int,
+              parts: Sequence[np.ndarray]) -> np.ndarray:
+    """gateway/estimate/combination.py over the starts (mapped onto the series' time grid, where
+    its causal window lives)."""
+    n = len(result.measured)
+    full = []
+    for f in parts:
+        a = np.full(n, np.nan)
+        a[starts] = f
+        full.append(a)
+    window = max(int(round(combination.WINDOW_S / result.dt)), 1)
+    named = {str(k): a for k, a in enumerate(full)}
+    return combination.combine(named, result.measured, horizon, window)[starts]
 
 
 def _common(measured: np.ndarray, preds: Mapping[str, np.ndarray], keep: np.ndarray) -> dict:

@@ -184,7 +184,7 @@ def _own_significance(d) -> float | None:
 
 
 def _forecast(gh, model, series, keep: Path | None = None) -> dict:
-    from gateway.estimate.replay import replay, report
+    from gateway.estimate.replay import replay
 
     res = replay(model, series, gh)
     if keep is not None:
@@ -192,6 +192,13 @@ def _forecast(gh, model, series, keep: Path | None = None) -> dict:
 
         keep.parent.mkdir(parents=True, exist_ok=True)
         keep.write_bytes(pickle.dumps(res))
-    rep = report(res, warmup=int(round(86400.0 / series.step)))  # day 1 is the estimator's warm-up
+    return forecast_report(res)
+
+
+def forecast_report(res) -> dict:
+    """The forecast case's figures from a ``ReplayResult``: day 1 is the estimator's warm-up."""
+    from gateway.estimate.replay import report
+
+    rep = report(res, warmup=int(round(86400.0 / res.dt)))
     return {"outlook": rep["outlook"], "horizons": rep["horizons"], "one_step": rep["metrics"],
             "step_ms_median": rep["step_ms"]["median"]}

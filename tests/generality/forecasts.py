@@ -9,6 +9,7 @@ docs/online-estimator.md ("Forecasts on greenhouses we did not build").
 
     nice -n 5 .venv/bin/python tests/generality/forecasts.py [--jobs 2]
         [--generators refsim,twonode,vanthoor] [--windows autumn,winter,summer] [--keep DIR]
+    .venv/bin/python tests/generality/forecasts.py --rescore DIR   # the forecasts again, no replay
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import json
 import multiprocessing as mp
 import sys
 import time
+from dataclasses import asdict
 from functools import partial
 from pathlib import Path
 
@@ -32,15 +34,20 @@ from tests.generality.suite import _commit, _init_worker  # noqa: E402
 
 RESULTS = ROOT / "bench" / "results" / "forecasts.json"
 COLUMNS = (("persistence", "persistence"), ("arx", "ARX"), ("adaptive", "adaptive"),
-           ("adaptive_kf", "adaptive + KF"), ("arx_outlook", "ARX, outlook"),
-           ("adaptive_outlook", "adaptive, outlook"), ("adaptive_kf_outlook", "adaptive + KF, outlook"))
+           ("adaptive_kf", "adaptive + KF"), ("combined", "combined"),
+           ("arx_outlook", "ARX, outlook"), ("adaptive_outlook", "adaptive, outlook"),
+           ("adaptive_kf_outlook", "adaptive + KF, outlook"), ("combined_outlook", "combined, outlook"))
 """(report key, table heading), in the table's order."""
+
+
+NAMES = ("adaptive", "adaptive_kf", "combined")
+"""The forecasts whose goals are marked (each with its ``_outlook`` twin)."""
 
 
 def goals(h: dict[str, dict], name: str, minutes: int) -> tuple[bool, bool | None]:
     """(measured-weather goal, outlook goal or None at 15 min) of issue 10 for forecast
-    ``name`` (``adaptive`` or ``adaptive_kf``) at one horizon: ≥ 30 % better than persistence
-    and better than the ARX; with the outlook ≥ 20 % better than persistence at 30 and 60 min."""
+    ``name`` at one horizon: ≥ 30 % better than persistence and better than the ARX; with the
+    outlook ≥ 20 % better than persistence at 30 and 60 min."""
     p = h["persistence"]["mae"]
     measured = h[name]["mae"] <= 0.7 * p and h[name]["mae"] < h["arx"]["mae"]
     outlook = None if minutes < 30 else h[f"{name}_outlook"]["mae"] <= 0.8 * p
@@ -51,7 +58,7 @@ def markdown(results: list[dict]) -> str:
     mark = {True: "✓", False: "✗", None: ""}
     head = [c[1] for c in COLUMNS]
     lines = ["| generator | window | h [min] | " + " | ".join(head)
-             + " | goals adaptive / + KF (measured) | goals adaptive / + KF (outlook) |",
+             + " | goal, measured (adaptive / + KF / combined) | goal, outlook (same) |",
              "| --- " * (len(head) + 5) + "|"]
     order = {g: i for i, g in enumerate(GENERATORS)}
     for r in sorted(results, key=lambda r: (order[r["case"]["generator"]],
@@ -63,10 +70,30 @@ def markdown(results: list[dict]) -> str:
             continue
         for minutes, h in r["horizons"].items():
             cells = [f"{h[k]['mae']:.3f}" for k, _ in COLUMNS]
-            (m0, o0), (m1, o1) = goals(h, "adaptive", int(minutes)), goals(h, "adaptive_kf", int(minutes))
+            marks = [goals(h, name, int(minutes)) for name in NAMES]
             lines.append(f"| {label} | {w} | {minutes} | " + " | ".join(cells)
-                         + f" | {mark[m0]} / {mark[m1]} | {mark[o0]} / {mark[o1]} |")
+                         + " | " + " / ".join(mark[m] for m, _ in marks)
+                         + " | " + " / ".join(mark[o] for _, o in marks) + " |")
     return "\n".join(lines) + "\n"
+
+
+def rescore(folder: Path) -> list[dict]:
+    """The cases again from the replays pickled by ``--keep``: the estimator's loop is not run,
+    everything after it (ARX, filter, forecasts, report) is, with the code as it is now."""
+    import pickle
+
+    from gateway.estimate.replay import HORIZONS, score_forecasts, steps_of
+    from tests.generality.cases import forecast_report
+
+    results = []
+    for f in sorted(folder.glob("*.pkl")):
+        generator, window = f.stem.split("-", 1)
+        res = pickle.loads(f.read_bytes())
+        t0 = time.perf_counter()
+        score_forecasts(res, steps_of(HORIZONS, res.dt))
+        results.append({"case": asdict(Case("forecast", generator, window)), **forecast_report(res),
+                        "seconds": time.perf_counter() - t0})
+    return results
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -77,6 +104,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", default=str(RESULTS), help=f"results file ({RESULTS.relative_to(ROOT)})")
     ap.add_argument("--keep", metavar="DIR", help="also pickle each replay into DIR (to study the "
                     "forecasts without replaying again)")
+    ap.add_argument("--rescore", metavar="DIR", help="run no replay: score the replays pickled in "
+                    "DIR by --keep again with the current forecast code")
     a = ap.parse_args(argv)
     gens = [g for g in a.generators.split(",") if g]
     if bad := [g for g in gens if g not in GENERATORS]:
@@ -85,14 +114,20 @@ def main(argv: list[str] | None = None) -> int:
     if bad := [w for w in wins if w not in MAIN_WINDOWS]:
         ap.error(f"unknown window(s) {bad}; known: {', '.join(MAIN_WINDOWS)}")
     cases = [Case("forecast", g, w) for g in gens for w in wins]
-    print(f"forecast replays: {len(cases)} cases on {a.jobs} processes", flush=True)
     t0 = time.perf_counter()
-    results = []
-    with mp.get_context("spawn").Pool(a.jobs, initializer=_init_worker) as pool:
-        for i, r in enumerate(pool.imap_unordered(partial(run, keep=a.keep), cases), 1):
-            results.append(r)
-            print(f"[{i}/{len(cases)}] {Case(**r['case']).label} ({r['seconds']:.0f} s)", flush=True)
-    meta = {"command": "tests/generality/forecasts.py", "cases": len(results), "jobs": a.jobs,
+    if a.rescore:
+        results = [r for r in rescore(Path(a.rescore))
+                   if r["case"]["generator"] in gens and r["case"]["window"] in wins]
+    else:
+        print(f"forecast replays: {len(cases)} cases on {a.jobs} processes", flush=True)
+        results = []
+        with mp.get_context("spawn").Pool(a.jobs, initializer=_init_worker) as pool:
+            for i, r in enumerate(pool.imap_unordered(partial(run, keep=a.keep), cases), 1):
+                results.append(r)
+                print(f"[{i}/{len(cases)}] {Case(**r['case']).label} ({r['seconds']:.0f} s)",
+                      flush=True)
+    meta = {"command": "tests/generality/forecasts.py" + (" --rescore" if a.rescore else ""),
+            "cases": len(results), "jobs": a.jobs,
             "minutes": (time.perf_counter() - t0) / 60.0, "commit": _commit(),
             "when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
     out = Path(a.json)

@@ -1,0 +1,67 @@
+"""Forecast combination by recent skill: the grey box and the linear baseline, weighted.
+
+Two forecasts of the same T_in[t + h] that err differently are best combined with weights
+inversely proportional to their recent mean square errors (Bates & Granger 1969, "The
+combination of forecasts", Oper. Res. Q. 20, 451-468, their method (i); Timmermann 2006,
+*Handbook of Economic Forecasting* 1, §4: simple inverse-MSE weights usually beat estimated
+optimal ones). The weight of forecast i at start t is
+
+    w_i(t) = (1 / MSE_i(t)) / Σ_j (1 / MSE_j(t)),
+
+MSE_i(t) over the forecasts of the last ``WINDOW_S`` whose target is already measured at t (the
+starts s ≤ t − h): nothing after t is read. A day-long window holds a day and a night, so the
+weights follow which forecast is better lately, not which is better at this hour. Until a
+forecast has a matured error, the first one alone is used.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+WINDOW_S = 86400.0
+"""[s] the trailing window of matured forecast errors (one day)."""
+
+
+def trailing_mean(values: np.ndarray, window: int) -> np.ndarray:
+    """Mean of the finite values of the last ``window`` samples up to each index (NaN if none)."""
+    v = np.asarray(values, dtype=float)
+    ok = np.isfinite(v)
+    s = np.concatenate([[0.0], np.cumsum(np.where(ok, v, 0.0))])
+    c = np.concatenate([[0], np.cumsum(ok)])
+    idx = np.arange(1, len(v) + 1)
+    lo = np.maximum(idx - window, 0)
+    count = c[idx] - c[lo]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(count > 0, (s[idx] - s[lo]) / count, np.nan)
+
+
+def weights(forecasts: Mapping[str, np.ndarray], measured: np.ndarray, horizon: int,
+            window: int) -> dict[str, np.ndarray]:
+    """Inverse-MSE weights per start for ``forecasts`` {name: (T,) forecast of T_in[t + horizon]
+    made at t}, ``measured`` (T,) the readings; ``window`` in samples. Causal: the weight at t
+    uses the errors of the starts up to t − horizon."""
+    n = len(measured)
+    target = np.full(n, np.nan)
+    target[: n - horizon] = np.asarray(measured, dtype=float)[horizon:]
+    inv = {}
+    for name, f in forecasts.items():
+        mse = np.full(n, np.nan)
+        mse[horizon:] = trailing_mean((np.asarray(f, dtype=float) - target) ** 2, window)[: n - horizon]
+        inv[name] = 1.0 / np.maximum(mse, 1e-12)
+    total = sum(inv.values())
+    names = list(forecasts)
+    ready = np.isfinite(total)
+    out = {}
+    for k, name in enumerate(names):
+        first = 1.0 if k == 0 else 0.0
+        out[name] = np.where(ready, inv[name] / np.where(ready, total, 1.0), first)
+    return out
+
+
+def combine(forecasts: Mapping[str, np.ndarray], measured: np.ndarray, horizon: int,
+            window: int) -> np.ndarray:
+    """The combined forecast (T,): Σ_i w_i f_i (NaN where a forecast is NaN)."""
+    w = weights(forecasts, measured, horizon, window)
+    return sum(w[name] * np.asarray(f, dtype=float) for name, f in forecasts.items())

@@ -53,3 +53,24 @@ def test_weights_at_t_read_no_target_after_t():
     b = weights(f, later, H, WINDOW)
     np.testing.assert_array_equal(a["a"][: t + 1], b["a"][: t + 1])
     assert not np.allclose(a["a"][t + 10], b["a"][t + 10])
+
+
+def test_the_live_combiner_step_by_step_gives_the_series_weights_and_resumes():
+    import json
+
+    from gateway.estimate.combination import LiveCombiner
+
+    measured, f = _two(seed=3, n=900)
+    measured[100:104] = np.nan
+    f["b"][200:210] = np.nan  # a forecast that could not be made
+    window = 96
+    whole = weights(f, measured, H, window)
+    live = LiveCombiner(["a", "b"], [H], window)
+    for t in range(len(measured)):
+        if t == 450:  # a restarted gateway
+            snap = json.loads(json.dumps(live.snapshot()))
+            live = LiveCombiner(["a", "b"], [H], window)
+            live.restore(snap)
+        live.step(measured[t], {H: {"a": f["a"][t], "b": f["b"][t]}})
+        w = live.weights(H)
+        assert abs(w["a"] - whole["a"][t]) < 1e-12, t

@@ -16,7 +16,9 @@ forecast has a matured error, the first one alone is used.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import math
+from collections import deque
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -65,3 +67,57 @@ def combine(forecasts: Mapping[str, np.ndarray], measured: np.ndarray, horizon: 
     """The combined forecast (T,): Σ_i w_i f_i (NaN where a forecast is NaN)."""
     w = weights(forecasts, measured, horizon, window)
     return sum(w[name] * np.asarray(f, dtype=float) for name, f in forecasts.items())
+
+
+class LiveCombiner:
+    """The same weights one step at a time, for the live gateway: ``step`` once per model step
+    with the reading and the forecasts made at that step (None when none were made). Fed a
+    replay's forecasts it gives ``weights``'s figures."""
+
+    def __init__(self, names: Sequence[str], horizons: Sequence[int], window: int) -> None:
+        self.names, self.horizons, self.window = tuple(names), tuple(horizons), window
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget every pending forecast and error (after a long gap in the data)."""
+        self.pending: dict[int, deque] = {h: deque() for h in self.horizons}
+        self.errors: dict[int, dict[str, deque]] = {
+            h: {n: deque(maxlen=self.window) for n in self.names} for h in self.horizons}
+
+    def step(self, reading: float, made: Mapping[int, Mapping[str, float]] | None) -> None:
+        """The reading now (NaN when missing) scores the forecasts made ``h`` steps ago; ``made``
+        {horizon: {name: forecast}} are the forecasts made now."""
+        for h in self.horizons:
+            queue = self.pending[h]
+            if len(queue) == h:
+                old = queue.popleft()
+                for n in self.names:
+                    f = math.nan if old is None else old.get(n, math.nan)
+                    self.errors[h][n].append((f - reading) ** 2)
+            queue.append(None if made is None or h not in made else dict(made[h]))
+
+    def weights(self, horizon: int) -> dict[str, float]:
+        """Inverse-MSE weights for a forecast made now at ``horizon`` steps."""
+        inv = {}
+        for n in self.names:
+            e = np.asarray(self.errors[horizon][n], dtype=float)
+            e = e[np.isfinite(e)]
+            inv[n] = 1.0 / max(float(e.mean()), 1e-12) if e.size else math.nan
+        total = sum(inv.values())
+        if not math.isfinite(total):
+            return {n: 1.0 if k == 0 else 0.0 for k, n in enumerate(self.names)}
+        return {n: inv[n] / total for n in self.names}
+
+    def snapshot(self) -> dict:
+        return {"pending": {str(h): list(q) for h, q in self.pending.items()},
+                "errors": {str(h): {n: list(d) for n, d in e.items()} for h, e in self.errors.items()}}
+
+    def restore(self, snap: Mapping | None) -> None:
+        """Continue from a ``snapshot`` (None: start afresh)."""
+        self.reset()
+        if not snap:
+            return
+        for h in self.horizons:
+            self.pending[h].extend(snap["pending"].get(str(h), []))
+            for n in self.names:
+                self.errors[h][n].extend(float(v) for v in snap["errors"].get(str(h), {}).get(n, []))

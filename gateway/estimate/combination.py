@@ -70,9 +70,9 @@ def combine(forecasts: Mapping[str, np.ndarray], measured: np.ndarray, horizon: 
 
 
 class LiveCombiner:
-    """The same weights one step at a time, for the live gateway: ``step`` once per model step
-    with the reading and the forecasts made at that step (None when none were made). Fed a
-    replay's forecasts it gives ``weights``'s figures."""
+    """The same weights one step at a time, for the live gateway: once per model step
+    ``observe`` the reading, take ``weights`` for the forecasts made now, ``add`` them (None
+    when none were made). Fed a replay's forecasts it gives ``weights``'s figures."""
 
     def __init__(self, names: Sequence[str], horizons: Sequence[int], window: int) -> None:
         self.names, self.horizons, self.window = tuple(names), tuple(horizons), window
@@ -84,9 +84,14 @@ class LiveCombiner:
         self.errors: dict[int, dict[str, deque]] = {
             h: {n: deque(maxlen=self.window) for n in self.names} for h in self.horizons}
 
-    def step(self, reading: float, made: Mapping[int, Mapping[str, float]] | None) -> None:
-        """The reading now (NaN when missing) scores the forecasts made ``h`` steps ago; ``made``
-        {horizon: {name: forecast}} are the forecasts made now."""
+    def drop_pending(self) -> None:
+        """Forget the forecasts still waiting for their target (a gap: they will never meet
+        it), keep the errors."""
+        self.pending = {h: deque() for h in self.horizons}
+
+    def observe(self, reading: float) -> None:
+        """The reading now (NaN when missing) scores the forecasts made ``h`` steps ago. Call it
+        once per step, before the weights of the forecasts made now and ``add``."""
         for h in self.horizons:
             queue = self.pending[h]
             if len(queue) == h:
@@ -94,7 +99,16 @@ class LiveCombiner:
                 for n in self.names:
                     f = math.nan if old is None else old.get(n, math.nan)
                     self.errors[h][n].append((f - reading) ** 2)
-            queue.append(None if made is None or h not in made else dict(made[h]))
+
+    def add(self, made: Mapping[int, Mapping[str, float]] | None) -> None:
+        """The forecasts made now, {horizon: {name: forecast}} (None when none were made)."""
+        for h in self.horizons:
+            self.pending[h].append(None if made is None or h not in made else dict(made[h]))
+
+    def step(self, reading: float, made: Mapping[int, Mapping[str, float]] | None) -> None:
+        """``observe`` then ``add``."""
+        self.observe(reading)
+        self.add(made)
 
     def weights(self, horizon: int) -> dict[str, float]:
         """Inverse-MSE weights for a forecast made now at ``horizon`` steps."""

@@ -3,10 +3,10 @@ fluxes, (virtual ventilation sensor) → estimate rows, saved with the estimator
 
 Forecasts are causal: over the horizon the outside drivers come from the greenhouse's weather
 outlook (gateway/estimate/outlook.py, ``hold-latest`` unless the config names another), which
-sees only what was measured up to now; each forecast row names the outlook. The forecasts start
-from the disturbance filter's state (gateway/estimate/disturbance.py: the reading's noise taken
-out, a heating rate the model lacks carried and decaying over the horizon), the ``adaptive_kf``
-forecast of ``replay``; ``disturbance=False`` gives the plain model's. A hole in the data
+sees only what was measured up to now; each forecast row names the outlook. The forecast is
+replay's ``combined`` by default (gateway/service/forecaster.py: the model from its disturbance
+filter's state, combined with the RLS ARX by recent skill); ``forecast="adaptive_kf"`` or
+``"adaptive"`` chooses another. A hole in the data
 longer than ``gap_s`` restarts the estimator's window and keeps its parameters; shorter holes
 are stepped as missing minutes (the estimator dead-reckons through them, as in ``replay``).
 Each batch of minutes is one transaction: its rows and the estimator's snapshot after it, so a
@@ -25,13 +25,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gateway.estimate import disturbance as kf
 from gateway.estimate.online import OnlineEstimator, online_settings
 from gateway.estimate.outlook import Outlook, make_outlook
 from gateway.greenhouse import Greenhouse
 from gateway.model.drivers import prepare_drivers
 from gateway.model.model import Model
 from gateway.series import Series
+from gateway.service.forecaster import LiveForecaster
 from gateway.service.minutes import KIT_COLUMNS, Minute, final_before, first_minute, read_minutes
 from gateway.store.db import transaction
 from gateway.store.live import EstimateRow, add_estimates, load_state, save_state
@@ -71,7 +71,7 @@ class GreenhousePipeline:
                  theta0: np.ndarray | None, *, horizons: tuple[int, ...] = (15, 30, 60),
                  outlook: str = "hold-latest", seed: int = 0, gap_s: float = 300.0,
                  history_min: int = 1440, ventilation: Ventilation | None = None,
-                 disturbance: bool = True) -> None:
+                 forecast: str = "combined") -> None:
         self.name, self.gh, self.model = name, gh, model
         self.inside, self.outside = inside, outside
         self.devices = {inside, outside}
@@ -80,7 +80,7 @@ class GreenhousePipeline:
         self.gap_s = gap_s
         self.ventilation = ventilation
         self.est = OnlineEstimator(model, gh, theta0, online_settings(model, gh), dt=DT, seed=seed)
-        self.kf = kf.LiveFilter(model, gh, DT) if disturbance else None
+        self.forecaster = LiveForecaster(model, gh, DT, horizons, forecast)
         self.cursor: int | None = None  # last minute stepped
         self.history_min = history_min
         self.hist: dict[str, deque[float]] = {c: deque(maxlen=history_min) for c in KIT_COLUMNS}
@@ -94,8 +94,8 @@ class GreenhousePipeline:
         if saved is not None:
             try:
                 self.est.restore(saved.state)
-                if self.kf is not None:  # a state saved without it starts the filter afresh
-                    self.kf.restore(saved.state.get("disturbance"))
+                # a state saved before the forecaster existed starts it afresh
+                self.forecaster.restore(saved.state.get("forecaster"))
             except (ValueError, KeyError, TypeError) as e:
                 msg = f"greenhouse {self.name}: saved estimator state not used ({e}); starting anew"
                 saved = None
@@ -152,8 +152,7 @@ class GreenhousePipeline:
 
     def _snapshot(self) -> dict:
         snap = self.est.snapshot()
-        if self.kf is not None:
-            snap["disturbance"] = self.kf.snapshot()
+        snap["forecaster"] = self.forecaster.snapshot()
         return snap
 
     def _advance_to(self, m: Minute, report: StepReport) -> list[EstimateRow]:
@@ -161,8 +160,7 @@ class GreenhousePipeline:
         if self.cursor is not None and m.minute - self.cursor > self.gap_s:
             gap_h = (m.minute - self.cursor) / 3600
             self.est.restart_window()
-            if self.kf is not None:
-                self.kf.reset()
+            self.forecaster.reset()
             report.restarts += 1
             report.notes.append(f"greenhouse {self.name}: window restarted after a {gap_h:.1f} h "
                                 f"gap in the data (parameters kept)")
@@ -187,8 +185,7 @@ class GreenhousePipeline:
     def _step(self, m: Minute) -> list[EstimateRow]:
         self._remember(m)
         pred = self.est.update(m.values, time=np.datetime64(int(m.minute), "s"))
-        if self.kf is not None:
-            self.kf.update(self.est.last_row, pred.theta)
+        self.forecaster.update(self.est.last_row, pred.theta)
         self.cursor = m.minute
         self.state = "running"
         t, g = float(m.minute), self.name
@@ -232,17 +229,8 @@ class GreenhousePipeline:
         cols = {c: np.concatenate([history[c][-1:], ahead[c][: horizon - 1]]) for c in history}
         grid = time[-1] + np.arange(horizon) * np.timedelta64(60, "s")
         x = prepare_drivers(Series(grid, DT, cols), self.gh)
-        start = self.kf.estimate() if self.kf is not None else None
-        out = []
-        for h in self.horizons:
-            if start is not None:
-                v = float(kf.forecast(self.model, theta[None, :], x, self.gh, DT, np.array([0]), h,
-                                      np.array([start[0]]), np.array([start[1]]), self.kf.settings)[0])
-            else:
-                v = float(self.model.forecast(theta[None, :], x, self.gh, DT, np.array([0]), h)[0])
-            if math.isfinite(v):
-                out.append((h, v))
-        return out
+        got = self.forecaster.forecasts(theta, x, self.horizons)
+        return [(h, v) for h, v in got.items() if math.isfinite(v)]
 
 
 def _iso(t: float) -> str:

@@ -219,8 +219,9 @@ class GreenhousePipeline:
         return out if all(math.isfinite(v) for v in out.values()) else {}
 
     def _forecasts(self, theta: np.ndarray, t: float) -> list[tuple[int, float]]:
-        """T_in at t + h for each horizon, from the measured T_in at t, with the outlook's
-        drivers over (t, t + h]: nothing after t is read."""
+        """T_in at t + h for each horizon (the forecaster's kind: from the measured T_in at t
+        or the filter's state, gateway/service/forecaster.py), with the outlook's drivers over
+        (t, t + h]: nothing after t is read."""
         n_hist = len(self.hist["t_in"])
         time = np.datetime64(int(t), "s") + np.arange(-n_hist + 1, 1) * np.timedelta64(60, "s")
         history = {c: np.fromiter(v, float, n_hist) for c, v in self.hist.items()}

@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: run demo test bench bench-generality images lint clean venv stubs
+.PHONY: run demo test bench bench-generality bench-forecasts images lint clean venv stubs
 
 # The wheel carries gateway/ only (pyproject.toml); training/ and the other repository tools
 # are importable in the dev venvs, from any folder and in subprocesses, through this .pth.
@@ -64,6 +64,11 @@ bench: $(BENCH_STAMP)
 ## JSON in bench/results/generality.json, Markdown into docs/effects.md ("Generality suite").
 bench-generality: $(STAMP)
 	$(PY) tests/generality/suite.py --jobs 2
+
+## bench-forecasts: the suite's forecast part alone (9 effect-free replays; persistence, ARX, adaptive,
+## adaptive + disturbance filter, combined; measured weather and outlook). JSON in bench/results/forecasts.json.
+bench-forecasts: $(STAMP)
+	$(PY) tests/generality/forecasts.py --jobs 2
 
 ## images: MCU firmware bundle and gateway bundle in images/build/
 images: $(STAMP)

@@ -109,6 +109,35 @@ def test_forecasts_are_causal(tmp_path: Path) -> None:
     assert later != [r for r in rows(b, "forecast") if r[0] > upto + 60]
 
 
+def test_the_forecast_kind_and_its_saved_state(tmp_path: Path) -> None:
+    """The live forecasts are replay's ``combined`` by default (gateway/service/forecaster.py,
+    tested step by step against replay in test_forecaster.py), the forecaster's state is saved
+    with the estimator's, another kind gives other values on the same rows, and a state saved
+    before the forecaster existed resumes with a fresh one."""
+    made = {}
+    for kind in ("combined", "adaptive"):
+        s = Store(tmp_path / f"{kind}.db")
+        fill(s, range(80))
+        pl = GreenhousePipeline("north", GH, MODEL, 7, 7, None, seed=1, forecast=kind)
+        pl.resume(s.conn)
+        pl.step_pending(s.conn, end(79), 0.0, 600.0)
+        made[kind] = (s, rows(s, "forecast"))
+    s, combined = made["combined"]
+    plain = made["adaptive"][1]
+    assert [r[:3] for r in combined] == [r[:3] for r in plain] and len(combined) > 100
+    assert [r[3] for r in combined] != [r[3] for r in plain]
+    state = json.loads(s.conn.execute("SELECT state FROM estimator_state").fetchone()[0])
+    assert state["forecaster"]["kind"] == "combined" and state["forecaster"]["arx"]["updates"] > 50
+    del state["forecaster"]  # a gateway updated over an older saved state
+    s.conn.execute("UPDATE estimator_state SET state=?", (json.dumps(state),))
+    again = pipeline()
+    assert "resumed" in again.resume(s.conn)
+    assert again.forecaster.kf is not None and again.forecaster.kf.estimate() is None
+    fill(s, range(80, 90))
+    again.step_pending(s.conn, end(89), 0.0, 600.0)
+    assert len(rows(s, "forecast")) == len(combined) + 3 * 10
+
+
 def test_final_minutes_wait_for_the_kit_then_for_the_clock(tmp_path: Path) -> None:
     s = Store(tmp_path / "g.db")
     fill(s, range(10))

@@ -112,6 +112,8 @@ def test_cli_human_output_without_calibration(files, capsys):
     assert code == 0
     text = capsys.readouterr().out
     assert "middle of the hard box" in text and "60-minute forecast" in text and "persistence" in text
+    assert text.count("adaptive_kf") == 6  # with the measured weather and the outlook, 3 horizons
+    assert text.count("combined") == 6
 
 
 @pytest.mark.parametrize(
@@ -173,7 +175,8 @@ def test_report_has_the_arx_baseline_and_the_outlook_forecasts(result):
     assert rep["outlook"] == "clear-sky-trend"  # the preset has a [site]
     assert "arx" in rep["metrics"]
     for block in rep["horizons"].values():
-        assert {"adaptive", "constant", "arx", "persistence", "adaptive_outlook", "arx_outlook"} == set(block)
+        assert {"adaptive", "adaptive_kf", "combined", "constant", "arx", "persistence",
+                "adaptive_outlook", "adaptive_kf_outlook", "combined_outlook", "arx_outlook"} == set(block)
         assert len({m["n"] for m in block.values()}) == 1  # one set of samples per comparison
 
 
@@ -202,3 +205,5 @@ def test_an_outlook_of_the_measured_future_gives_the_measured_weather_forecasts(
     assert ok.sum() > 1000
     np.testing.assert_allclose(f["adaptive_outlook"][ok], f["adaptive"][ok], atol=1e-9)
     np.testing.assert_allclose(f["arx_outlook"][ok], f["arx"][ok], atol=1e-9)
+    np.testing.assert_allclose(f["adaptive_kf_outlook"][ok], f["adaptive_kf"][ok], atol=1e-9)
+    np.testing.assert_allclose(f["combined_outlook"][ok], f["combined"][ok], atol=1e-9)

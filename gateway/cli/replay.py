@@ -22,7 +22,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "would, and score its one-step-ahead prediction of the inside temperature against the "
         "same model with fixed parameters ('constant'), persistence and a recursive-least-squares "
         "linear baseline ('arx'), plus 15/30/60-minute forecasts with the weather later measured "
-        "and with a causal weather outlook (what a live gateway can do). Settings come from the "
+        "and with a causal weather outlook (what a live gateway can do), among them the model "
+        "from its disturbance filter's state ('adaptive_kf') and that forecast combined with the "
+        "ARX by recent skill ('combined', what the gateway publishes). Settings come from the "
         "model and the greenhouse's [online.<output>] tables (docs/online-estimator.md).",
         epilog="example: python -m gateway replay --data spring.csv --greenhouse almeria-palmerillas "
         "--model almeria --params calibrated.toml --json --plot replay.png",

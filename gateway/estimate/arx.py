@@ -73,6 +73,44 @@ class ArxResult:
         return state
 
 
+class Rls:
+    """Recursive least squares with exponential forgetting on the scaled regressors (one pair at
+    a time: ``fit`` over a series, the live gateway sample by sample)."""
+
+    def __init__(self, forgetting: float = FORGETTING) -> None:
+        k = len(REGRESSORS)
+        self.lam = float(forgetting)
+        self.w = np.zeros(k)
+        self.p = P0 * np.eye(k)
+        self.updates = 0
+
+    @property
+    def theta(self) -> np.ndarray:
+        """Parameters per unscaled regressor (NaN before the first update)."""
+        return self.w * SCALE if self.updates else np.full(len(REGRESSORS), np.nan)
+
+    def update(self, phi: np.ndarray, dy: float) -> None:
+        """One pair: unscaled regressors φ[t] (``regressors``) and T_in[t + 1] − T_in[t]."""
+        phi = np.asarray(phi, dtype=float) * SCALE
+        if not (np.all(np.isfinite(phi)) and np.isfinite(dy)):
+            return  # a pair with a missing value: the parameters are held
+        pphi = self.p @ phi
+        gain = pphi / (self.lam + phi @ pphi)
+        self.w = self.w + gain * (dy - phi @ self.w)
+        self.p = (self.p - np.outer(gain, pphi)) / self.lam
+        tr = np.trace(self.p)
+        if tr > P_MAX:
+            self.p *= P_MAX / tr
+        self.updates += 1
+
+    def snapshot(self) -> dict:
+        return {"w": self.w.tolist(), "p": self.p.tolist(), "updates": self.updates}
+
+    def restore(self, snap: Mapping) -> None:
+        self.w, self.p = np.asarray(snap["w"], float), np.asarray(snap["p"], float)
+        self.updates = int(snap["updates"])
+
+
 def fit(x: Mapping[str, np.ndarray], forgetting: float = FORGETTING) -> ArxResult:
     """Run RLS over the drivers ``x`` (``t_in``, ``t_out``, ``wind``, ``i_glob``, ``t_sky``).
 
@@ -80,34 +118,14 @@ def fit(x: Mapping[str, np.ndarray], forgetting: float = FORGETTING) -> ArxResul
     """
     t_in = np.asarray(x["t_in"], dtype=float)
     n = len(t_in)
-    phi_all = regressors(x, t_in, slice(0, n)) * SCALE  # (T, 5)
+    phi_raw = regressors(x, t_in, slice(0, n))  # (T, 5)
     dy = np.full(n, np.nan)
     dy[:-1] = t_in[1:] - t_in[:-1]
-    ok = np.all(np.isfinite(phi_all), axis=1) & np.isfinite(dy)
-    k = phi_all.shape[1]
-    w = np.zeros(k)
-    p = P0 * np.eye(k)
-    theta = np.full((n, k), np.nan)
-    started = False
-    updates = 0
-    lam = float(forgetting)
+    rls = Rls(forgetting)
+    theta = np.full((n, len(REGRESSORS)), np.nan)
     for t in range(n):
-        if started:
-            theta[t] = w
-        if ok[t]:  # the pair (phi[t], T[t+1] - T[t]) is known from t + 1 on
-            phi = phi_all[t]
-            pphi = p @ phi
-            gain = pphi / (lam + phi @ pphi)
-            w = w + gain * (dy[t] - phi @ w)
-            p = (p - np.outer(gain, pphi)) / lam
-            tr = np.trace(p)
-            if tr > P_MAX:
-                p *= P_MAX / tr
-            started = True
-            updates += 1
-    # theta[t] is in force at t: it used pairs up to t - 1 (set before the update at t).
-    theta = theta * SCALE
+        theta[t] = rls.theta  # in force at t: it used pairs up to t - 1 (set before the update)
+        rls.update(phi_raw[t], dy[t])  # the pair (phi[t], T[t+1] - T[t]) is known from t + 1 on
     one_step = np.full(n, np.nan)
-    phi_raw = regressors(x, t_in, slice(0, n))
     one_step[1:] = t_in[:-1] + np.einsum("nj,nj->n", phi_raw[:-1], theta[:-1])
-    return ArxResult(theta=theta, one_step=one_step, updates=updates)
+    return ArxResult(theta=theta, one_step=one_step, updates=rls.updates)

@@ -8,12 +8,15 @@ gateway does, records what it predicted, then computes, after the loop and vecto
 - persistence: T_in[t + 1] = T_in[t];
 - the plain adaptive linear baseline (``arx``, gateway/estimate/arx.py): recursive least
   squares on a linear model of dT_in with the same kit inputs, one step and h steps ahead;
+- ``adaptive_kf``: the adaptive model with a Kalman-filtered disturbance state
+  (gateway/estimate/disturbance.py): the start state filtered of the sensor's noise and an
+  estimated heating rate the model lacks, decaying over the horizon;
 - forecasts h = 15, 30, 60 min ahead from every start t with the parameters in force at t
   (``Model.forecast``), against persistence T_in[t + h] = T_in[t] and the ARX baseline, twice:
-  with the weather that was later measured (model skill: ``adaptive``, ``constant``, ``arx``)
-  and with a causal weather outlook (what the live gateway can do: ``adaptive_outlook``,
-  ``arx_outlook``; gateway/estimate/outlook.py, default ``clear-sky-trend`` when the greenhouse
-  has a ``[site]``).
+  with the weather that was later measured (model skill: ``adaptive``, ``adaptive_kf``,
+  ``constant``, ``arx``) and with a causal weather outlook (what the live gateway can do:
+  ``adaptive_outlook``, ``adaptive_kf_outlook``, ``arx_outlook``; gateway/estimate/outlook.py,
+  default ``clear-sky-trend`` when the greenhouse has a ``[site]``).
 
 All figures of one comparison use the same samples (every prediction finite).
 """
@@ -28,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from gateway.estimate import arx as arx_baseline
+from gateway.estimate import combination, disturbance
 from gateway.estimate.horizon import HorizonDrivers, outlook_drivers
 from gateway.estimate.online import Counters, GroupSettings, OnlineEstimator
 from gateway.estimate.outlook import Outlook, make_outlook
@@ -39,7 +43,8 @@ from gateway.series import Series
 
 HORIZONS = (15, 30, 60)
 """Forecast horizons [min] of the report (reached in whole model steps)."""
-FORECASTS = ("adaptive", "constant", "arx", "persistence", "adaptive_outlook", "arx_outlook")
+FORECASTS = ("adaptive", "adaptive_kf", "combined", "constant", "arx", "persistence",
+             "adaptive_outlook", "adaptive_kf_outlook", "combined_outlook", "arx_outlook")
 """Forecasts of the report, in order: measured weather (model skill), then with the outlook."""
 
 
@@ -63,6 +68,7 @@ class ReplayResult:
     rad_adaptive: np.ndarray | None = None
     rad_constant: np.ndarray | None = None
     arx: arx_baseline.ArxResult | None = None
+    filtered: disturbance.FilterResult | None = None  # the disturbance filter (adaptive_kf)
     ahead: HorizonDrivers | None = None  # the outlook's driver blocks, one per start
 
     @property
@@ -121,16 +127,13 @@ def replay(
         constant=constant, theta=theta, theta0=theta0_used, step_ms=step_ms,
         counters=est.counters, settings=est.settings,
     )
-    result.arx = arx_baseline.fit(x)
-    reach = {int(m): int(m * 60.0 / series.step) for m in horizons
-             if m * 60.0 / series.step >= 1 and float(m * 60.0 / series.step).is_integer()}
-    if reach:  # a horizon the model step cannot reach is left out
+    reach = steps_of(horizons, series.step)
+    if reach:
         if outlook is None:
             outlook = make_outlook("clear-sky-trend" if gh.site is not None else "hold-latest", gh)
         result.ahead = outlook_drivers(outlook, x, list(series.columns), series.time, series.step,
                                        gh, np.arange(max(n - 1, 0)), max(reach.values()))
-    for minutes, steps in reach.items():
-        result.horizons[minutes] = forecasts(result, steps)
+    score_forecasts(result, reach)
     if model.radiation is not None and "i_in" in x and np.isfinite(x["i_in"]).any():
         j = model.index(model.radiation.parameter.name)
         # i_in at t simulated from i_glob at t with c_tsw as estimated up to t - 1 (III.35)
@@ -140,14 +143,31 @@ def replay(
     return result
 
 
+def steps_of(horizons: Sequence[int], dt: float) -> dict[int, int]:
+    """Horizon [min] → model steps of ``dt`` [s]; a horizon the step cannot reach is left out."""
+    return {int(m): int(m * 60.0 / dt) for m in horizons
+            if m * 60.0 / dt >= 1 and float(m * 60.0 / dt).is_integer()}
+
+
+def score_forecasts(result: ReplayResult, reach: Mapping[int, int]) -> None:
+    """After the estimator's loop: the ARX baseline, the disturbance filter and the forecasts
+    (``reach``: horizon [min] → model steps) of ``result``, all from what the loop recorded (and
+    ``result.ahead``, the outlook's blocks). A saved replay can be scored again with new code."""
+    result.arx = arx_baseline.fit(result.x)
+    result.filtered = disturbance.filter_series(result.model, result.theta, result.x, result.gh,
+                                                result.dt)
+    result.horizons = {minutes: forecasts(result, steps) for minutes, steps in reach.items()}
+
+
 def forecasts(result: ReplayResult, horizon: int) -> dict[str, np.ndarray]:
     """Forecasts of T_in[t + h] from every start t, h = ``horizon`` model steps (vectorised over
     the starts).
 
     Returns ``target`` (index t + h), ``measured``, ``persistence`` (T_in[t]) and forecasts
     over the starts: with the measured weather ``adaptive`` (parameters in force at t),
-    ``constant`` (theta0), ``arx``; with the outlook (when ``result.ahead`` is set)
-    ``adaptive_outlook`` and ``arx_outlook``.
+    ``constant`` (theta0), ``arx``, ``adaptive_kf`` (with the disturbance filter, when
+    ``result.filtered`` is set); with the outlook (when ``result.ahead`` is set)
+    ``adaptive_outlook``, ``adaptive_kf_outlook`` and ``arx_outlook``.
     """
     n = len(result.measured)
     starts = np.arange(0, max(n - horizon, 0))
@@ -165,13 +185,39 @@ def forecasts(result: ReplayResult, horizon: int) -> dict[str, np.ndarray]:
     }
     if result.arx is not None:
         out["arx"] = result.arx.forecast(x, starts, horizon)
+    kf = result.filtered
+    if kf is not None:
+        kf_start = (kf.t_hat[starts], kf.b_hat[starts], kf.settings)
+        out["adaptive_kf"] = disturbance.forecast(model, theta, x, gh, dt, starts, horizon, *kf_start)
     ahead = result.ahead
     if ahead is not None and horizon <= ahead.horizon:
         rows = ahead.rows[np.searchsorted(ahead.starts, starts)]
         out["adaptive_outlook"] = model.forecast(theta, ahead.x, gh, dt, rows, horizon)
+        if kf is not None:
+            out["adaptive_kf_outlook"] = disturbance.forecast(model, theta, ahead.x, gh, dt, rows,
+                                                              horizon, *kf_start)
         if result.arx is not None:
             out["arx_outlook"] = result.arx.forecast(ahead.x, starts, horizon, rows)
+    for suffix in ("", "_outlook"):
+        parts = (f"adaptive_kf{suffix}", f"arx{suffix}")
+        if all(p in out for p in parts):
+            out[f"combined{suffix}"] = _combined(result, starts, horizon, [out[p] for p in parts])
     return out
+
+
+def _combined(result: ReplayResult, starts: np.ndarray, horizon: int,
+              parts: Sequence[np.ndarray]) -> np.ndarray:
+    """gateway/estimate/combination.py over the starts (mapped onto the series' time grid, where
+    its causal window lives)."""
+    n = len(result.measured)
+    full = []
+    for f in parts:
+        a = np.full(n, np.nan)
+        a[starts] = f
+        full.append(a)
+    window = max(int(round(combination.WINDOW_S / result.dt)), 1)
+    named = {str(k): a for k, a in enumerate(full)}
+    return combination.combine(named, result.measured, horizon, window)[starts]
 
 
 def _common(measured: np.ndarray, preds: Mapping[str, np.ndarray], keep: np.ndarray) -> dict:

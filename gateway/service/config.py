@@ -68,6 +68,7 @@ class EstimatorSettings:
     settle_s: float = 60.0  # a minute is final this long after the next one started
     gap_s: float = 300.0  # a longer hole restarts the estimator's window (not its parameters)
     history_min: int = 1440  # minutes of history handed to the weather outlook
+    forecast: str = "combined"  # which forecast is published (gateway/service/forecaster.py)
 
 
 @dataclass(frozen=True)
@@ -325,6 +326,8 @@ def _tls(z: _Table, base: Path, farm: str) -> TlsFiles | None:
 
 
 def _estimator(e: _Table) -> EstimatorSettings:
+    from gateway.service.forecaster import KINDS
+
     horizons = e.get("horizons_min", list, [15, 30, 60])
     if not horizons or not all(isinstance(h, int) and not isinstance(h, bool) and 1 <= h <= 1440
                                for h in horizons):
@@ -337,6 +340,7 @@ def _estimator(e: _Table) -> EstimatorSettings:
         settle_s=e.get("settle_s", float, 60.0, lo=0.0),
         gap_s=e.get("gap_s", float, 300.0, lo=60.0),
         history_min=e.get("history_min", int, 1440, lo=1, hi=100_000),
+        forecast=e.get("forecast", str, "combined", choices=KINDS),
     )
     e.done()
     return s

@@ -3,7 +3,10 @@ fluxes, (virtual ventilation sensor) → estimate rows, saved with the estimator
 
 Forecasts are causal: over the horizon the outside drivers come from the greenhouse's weather
 outlook (gateway/estimate/outlook.py, ``hold-latest`` unless the config names another), which
-sees only what was measured up to now; each forecast row names the outlook. A hole in the data
+sees only what was measured up to now; each forecast row names the outlook. The forecast is
+replay's ``combined`` by default (gateway/service/forecaster.py: the model from its disturbance
+filter's state, combined with the RLS ARX by recent skill); ``forecast="adaptive_kf"`` or
+``"adaptive"`` chooses another. A hole in the data
 longer than ``gap_s`` restarts the estimator's window and keeps its parameters; shorter holes
 are stepped as missing minutes (the estimator dead-reckons through them, as in ``replay``).
 Each batch of minutes is one transaction: its rows and the estimator's snapshot after it, so a
@@ -28,6 +31,7 @@ from gateway.greenhouse import Greenhouse
 from gateway.model.drivers import prepare_drivers
 from gateway.model.model import Model
 from gateway.series import Series
+from gateway.service.forecaster import LiveForecaster
 from gateway.service.minutes import KIT_COLUMNS, Minute, final_before, first_minute, read_minutes
 from gateway.store.db import transaction
 from gateway.store.live import EstimateRow, add_estimates, load_state, save_state
@@ -66,7 +70,8 @@ class GreenhousePipeline:
     def __init__(self, name: str, gh: Greenhouse, model: Model, inside: int, outside: int,
                  theta0: np.ndarray | None, *, horizons: tuple[int, ...] = (15, 30, 60),
                  outlook: str = "hold-latest", seed: int = 0, gap_s: float = 300.0,
-                 history_min: int = 1440, ventilation: Ventilation | None = None) -> None:
+                 history_min: int = 1440, ventilation: Ventilation | None = None,
+                 forecast: str = "combined") -> None:
         self.name, self.gh, self.model = name, gh, model
         self.inside, self.outside = inside, outside
         self.devices = {inside, outside}
@@ -75,6 +80,7 @@ class GreenhousePipeline:
         self.gap_s = gap_s
         self.ventilation = ventilation
         self.est = OnlineEstimator(model, gh, theta0, online_settings(model, gh), dt=DT, seed=seed)
+        self.forecaster = LiveForecaster(model, gh, DT, horizons, forecast)
         self.cursor: int | None = None  # last minute stepped
         self.history_min = history_min
         self.hist: dict[str, deque[float]] = {c: deque(maxlen=history_min) for c in KIT_COLUMNS}
@@ -88,6 +94,8 @@ class GreenhousePipeline:
         if saved is not None:
             try:
                 self.est.restore(saved.state)
+                # a state saved before the forecaster existed starts it afresh
+                self.forecaster.restore(saved.state.get("forecaster"))
             except (ValueError, KeyError, TypeError) as e:
                 msg = f"greenhouse {self.name}: saved estimator state not used ({e}); starting anew"
                 saved = None
@@ -135,18 +143,24 @@ class GreenhousePipeline:
             assert self.cursor is not None
             with transaction(conn):
                 add_estimates(conn, rows)
-                save_state(conn, self.name, self.model.name, self.cursor, self.est.snapshot(), now)
+                save_state(conn, self.name, self.model.name, self.cursor, self._snapshot(), now)
             report.rows += len(rows)
             report.last_minute = self.cursor
             start = self.cursor + 60
         report.more = True
         return report
 
+    def _snapshot(self) -> dict:
+        snap = self.est.snapshot()
+        snap["forecaster"] = self.forecaster.snapshot()
+        return snap
+
     def _advance_to(self, m: Minute, report: StepReport) -> list[EstimateRow]:
         rows: list[EstimateRow] = []
         if self.cursor is not None and m.minute - self.cursor > self.gap_s:
             gap_h = (m.minute - self.cursor) / 3600
             self.est.restart_window()
+            self.forecaster.reset()
             report.restarts += 1
             report.notes.append(f"greenhouse {self.name}: window restarted after a {gap_h:.1f} h "
                                 f"gap in the data (parameters kept)")
@@ -171,6 +185,7 @@ class GreenhousePipeline:
     def _step(self, m: Minute) -> list[EstimateRow]:
         self._remember(m)
         pred = self.est.update(m.values, time=np.datetime64(int(m.minute), "s"))
+        self.forecaster.update(self.est.last_row, pred.theta)
         self.cursor = m.minute
         self.state = "running"
         t, g = float(m.minute), self.name
@@ -204,8 +219,9 @@ class GreenhousePipeline:
         return out if all(math.isfinite(v) for v in out.values()) else {}
 
     def _forecasts(self, theta: np.ndarray, t: float) -> list[tuple[int, float]]:
-        """T_in at t + h for each horizon, from the measured T_in at t, with the outlook's
-        drivers over (t, t + h]: nothing after t is read."""
+        """T_in at t + h for each horizon (the forecaster's kind: from the measured T_in at t
+        or the filter's state, gateway/service/forecaster.py), with the outlook's drivers over
+        (t, t + h]: nothing after t is read."""
         n_hist = len(self.hist["t_in"])
         time = np.datetime64(int(t), "s") + np.arange(-n_hist + 1, 1) * np.timedelta64(60, "s")
         history = {c: np.fromiter(v, float, n_hist) for c, v in self.hist.items()}
@@ -214,12 +230,8 @@ class GreenhousePipeline:
         cols = {c: np.concatenate([history[c][-1:], ahead[c][: horizon - 1]]) for c in history}
         grid = time[-1] + np.arange(horizon) * np.timedelta64(60, "s")
         x = prepare_drivers(Series(grid, DT, cols), self.gh)
-        out = []
-        for h in self.horizons:
-            v = float(self.model.forecast(theta[None, :], x, self.gh, DT, np.array([0]), h)[0])
-            if math.isfinite(v):
-                out.append((h, v))
-        return out
+        got = self.forecaster.forecasts(theta, x, self.horizons)
+        return [(h, v) for h, v in got.items() if math.isfinite(v)]
 
 
 def _iso(t: float) -> str:

@@ -71,7 +71,7 @@ class Worker:
             p = GreenhousePipeline(s.name, r.gh, r.model, s.inside, s.outside, r.theta0,
                                    horizons=est.horizons_min, outlook=s.outlook, seed=est.seed,
                                    gap_s=est.gap_s, history_min=est.history_min,
-                                   ventilation=r.ventilation)
+                                   ventilation=r.ventilation, forecast=est.forecast)
             log.info(p.resume(conn))
             self.pipelines.append(p)
             lo, hi = r.model.bounds(r.gh)

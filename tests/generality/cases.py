@@ -78,8 +78,11 @@ def _series(case: Case, tmp: Path):
     return data, gh, model, load_series(str(path), step=ROW_S, required=model.requires)
 
 
-def run(case: Case) -> dict:
-    """Run one case; the result is plain JSON data (errors are reported, not raised)."""
+def run(case: Case, keep: str | None = None) -> dict:
+    """Run one case; the result is plain JSON data (errors are reported, not raised).
+
+    ``keep``: a directory where a forecast case also pickles its ``ReplayResult`` (to study the
+    forecasts without replaying again; tests/generality/forecasts.py ``--keep``)."""
     t0 = time.perf_counter()
     out: dict = {"case": asdict(case)}
     try:
@@ -90,7 +93,8 @@ def run(case: Case) -> dict:
             if case.task == "diagnose":
                 out.update(_diagnose(case, data, gh, model, series))
             else:
-                out.update(_forecast(gh, model, series))
+                pickled = Path(keep) / f"{case.generator}-{case.window}.pkl" if keep else None
+                out.update(_forecast(gh, model, series, pickled))
     except Exception as exc:  # a failing case is a row of the table, not a crashed suite
         out["error"] = f"{type(exc).__name__}: {exc}"
     out["seconds"] = time.perf_counter() - t0
@@ -179,10 +183,22 @@ def _own_significance(d) -> float | None:
     return float((1 + np.sum(null >= diffs.mean())) / (1 + len(null)))
 
 
-def _forecast(gh, model, series) -> dict:
-    from gateway.estimate.replay import replay, report
+def _forecast(gh, model, series, keep: Path | None = None) -> dict:
+    from gateway.estimate.replay import replay
 
     res = replay(model, series, gh)
-    rep = report(res, warmup=int(round(86400.0 / series.step)))  # day 1 is the estimator's warm-up
+    if keep is not None:
+        import pickle
+
+        keep.parent.mkdir(parents=True, exist_ok=True)
+        keep.write_bytes(pickle.dumps(res))
+    return forecast_report(res)
+
+
+def forecast_report(res) -> dict:
+    """The forecast case's figures from a ``ReplayResult``: day 1 is the estimator's warm-up."""
+    from gateway.estimate.replay import report
+
+    rep = report(res, warmup=int(round(86400.0 / res.dt)))
     return {"outlook": rep["outlook"], "horizons": rep["horizons"], "one_step": rep["metrics"],
             "step_ms_median": rep["step_ms"]["median"]}

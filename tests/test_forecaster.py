@@ -1,0 +1,59 @@
+"""The live forecaster (gateway/service/forecaster.py) gives replay's forecasts step by step and
+resumes exactly from its snapshot."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from test_online import ALMERIA, FAST, GH, model_data
+
+from gateway.estimate.online import online_settings
+from gateway.estimate.replay import replay
+from gateway.service.forecaster import KINDS, LiveForecaster
+
+HORIZONS = (15, 60)
+
+
+@pytest.fixture(scope="module")
+def result():
+    series = model_data(ALMERIA, GH, hours=8, seed=3)
+    return replay(ALMERIA, series, GH, settings=online_settings(ALMERIA, GH, FAST), horizons=HORIZONS)
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_step_by_step_is_the_replay_forecast(result, kind):
+    """Fed the replay's rows and parameters, with the weather later measured as its outlook, the
+    live forecaster reproduces replay's row of the same name (through a JSON round trip of its
+    state half-way)."""
+    x, theta, n = result.x, result.theta, len(result.measured)
+    live = LiveForecaster(ALMERIA, GH, result.dt, HORIZONS, kind)
+    got = {h: np.full(n, np.nan) for h in HORIZONS}
+    stop = n - max(HORIZONS) - 1
+    for t in range(stop):
+        if t == stop // 2:
+            snap = json.loads(json.dumps(live.snapshot()))
+            live = LiveForecaster(ALMERIA, GH, result.dt, HORIZONS, kind)
+            live.restore(snap)
+        live.update({k: float(v[t]) for k, v in x.items()}, theta[t])
+        if np.isfinite(result.measured[t]):
+            block = {k: v[t: t + max(HORIZONS) + 1] for k, v in x.items()}
+            for h, v in live.forecasts(theta[t], block, HORIZONS).items():
+                got[h][t] = v
+    for h in HORIZONS:
+        f = result.horizons[h]
+        starts = f["target"] - h
+        keep = starts < stop
+        ok = keep & np.isfinite(f[kind])
+        assert ok.sum() > 300
+        np.testing.assert_allclose(got[h][starts[ok]], f[kind][ok], rtol=0, atol=1e-9)
+
+
+def test_unknown_kind_and_a_foreign_state():
+    with pytest.raises(ValueError, match="unknown forecast 'best'"):
+        LiveForecaster(ALMERIA, GH, 60.0, HORIZONS, "best")
+    a = LiveForecaster(ALMERIA, GH, 60.0, HORIZONS, "adaptive_kf")
+    b = LiveForecaster(ALMERIA, GH, 60.0, HORIZONS, "combined")
+    b.restore(a.snapshot())  # another kind's state: start afresh
+    assert b.kf is not None and b.kf.estimate() is None and b.arx is not None

@@ -347,14 +347,15 @@ class OnlineEstimator:
         ):
             return False
         model, c, dt = self.model, self.capacity_c, self.dt
+        x = model.prepare(x)  # the terms' driver-only columns, once for every candidate
         base = self.theta
         target = measured[1:]
         names = self._names
 
         def cost(cand: np.ndarray) -> np.ndarray:
-            theta = np.repeat(base[None, :], cand.shape[0], axis=0)
-            theta[:, free] = cand
-            p = {name: theta[:, j : j + 1] for j, name in names}  # Model.columns without checks
+            rows = np.repeat(base[:, None], cand.shape[0], axis=1)  # (k, P): one row a parameter
+            rows[free] = cand.T
+            p = {name: rows[j, :, None] for j, name in names}  # Model.columns without checks
             # observation terms: simulate the true state behind the reading, compare readings
             state = model.true_state(p, x, np.full((cand.shape[0], 1), measured[0]), 0)
             sq = np.zeros(cand.shape[0])

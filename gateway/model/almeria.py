@@ -104,29 +104,39 @@ class Transpiration(FluxTerm):
                   "aerodynamic transpiration, night"),
     )
 
+    derives = ("_q_trp.cover",)
+
     def __init__(self, extinction: float = 0.64) -> None:
         self.extinction = extinction
 
-    def _parts(self, p, x, t_in, t: Index):
-        """The latent flux q [W m-2], C_B LAI [W m-2 kPa-1] and p_ws(T_in) [kPa]."""
+    def _cover(self, lai):
+        """1 - e^(-k LAI) [-]: the share of the inside radiation the crop intercepts (III.29)."""
+        return 1.0 - np.exp(-self.extinction * lai)
+
+    def derive(self, x) -> dict[str, np.ndarray]:
+        return {"_q_trp.cover": self._cover(x["lai"])}
+
+    def _flux(self, p, x, p_ws, t: Index):
+        """The latent flux q [W m-2] and C_B LAI [W m-2 kPa-1] for p_ws(T_in) [kPa]."""
         lai = x["lai"][t]
         i_out = x["i_glob"][t]
         i_in = p["c_tsw"] * i_out
-        p_ws = psy.saturation_vapour_pressure(t_in)
+        cover = self.derived(x, "_q_trp.cover", t)
+        if cover is None:
+            cover = self._cover(lai)
         vpd = np.maximum(p_ws - x["p_w_in"][t], 0.0)
-        c_b = np.where(i_out > 5.0, p["c_bd"], p["c_bn"])
-        q = p["c_a"] * (1.0 - np.exp(-self.extinction * lai)) * i_in + c_b * lai * vpd
-        return q, c_b * lai, p_ws
+        b_lai = np.where(i_out > 5.0, p["c_bd"], p["c_bn"]) * lai
+        return p["c_a"] * cover * i_in + b_lai * vpd, b_lai
 
     def coefficients(self, p, x, t_in, t: Index):
-        return -self._parts(p, x, t_in, t)[0], 0.0
+        return -self._flux(p, x, psy.saturation_vapour_pressure(t_in), t)[0], 0.0
 
     def linearised(self, p, x, t_in, t: Index):
         """Also the slope k = C_B LAI dp_ws/dT where the air is not saturated: a warmer
         air transpires more (the VPD grows with T_in)."""
-        q, b_lai, p_ws = self._parts(p, x, t_in, t)
+        p_ws, slope = psy.saturation_vapour_pressure_and_slope(t_in)
+        q, b_lai = self._flux(p, x, p_ws, t)
         dry = p_ws > x["p_w_in"][t]
-        slope = psy.saturation_vapour_pressure_slope(t_in, p_ws)
         return -q, 0.0, np.where(dry, b_lai * slope, 0.0)
 
 
@@ -148,11 +158,21 @@ class NaturalVentilation(FluxTerm):
         Parameter("c_loss", "m3 s-1", 0.1, 1.0, 0.2, 0.07, ALWAYS, "leakage air flow"),
     )
 
+    derives = ("_q_vent.b", "_q_vent.w")
+
     def __init__(self, gh: Greenhouse) -> None:
         self.height = gh.vents.height_difference
         self.rho_cp_a = gh.air_density * psy.CP_AIR / gh.floor_area
 
+    def derive(self, x) -> dict[str, np.ndarray]:
+        return dict(zip(self.derives, self._buoyancy_wind(x, slice(None)), strict=True))
+
     def _drivers(self, x, t: Index) -> tuple[np.ndarray, np.ndarray]:
+        """(B, W) at ``t``: from ``Model.prepare``'s columns when there, else computed."""
+        b = self.derived(x, "_q_vent.b", t)
+        return self._buoyancy_wind(x, t) if b is None else (b, x["_q_vent.w"][t])
+
+    def _buoyancy_wind(self, x, t: Index) -> tuple[np.ndarray, np.ndarray]:
         """The buoyancy coefficient B = A_eff² 2 g h / T_out [m6 s-2 K-1] and the wind term
         W = ((A_r + A_s)/2)² u² [m6 s-2] of III.31: drivers only, so computed before any
         array of candidates."""

@@ -193,7 +193,7 @@ class _LinearOneStep:
     def sse(self, theta: np.ndarray) -> np.ndarray:
         """Sum of squared one-step errors (P,) over the comparable samples."""
         total = np.zeros(theta.shape[0])
-        block = max(16, 16384 // theta.shape[0])
+        block = max(16, stepping.BLOCK_ELEMENTS // theta.shape[0])
         n = len(self.target)
         for a in range(0, n, block):
             b = min(a + block, n)

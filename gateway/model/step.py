@@ -40,6 +40,13 @@ from gateway.model.terms import Index
 
 HOLDS = ("first_order", "zero_order")
 
+BLOCK_ELEMENTS = 4096
+"""Population × time elements per block of the one-step evaluations (``Model.one_step``, the
+calibration cost's fast path): each temporary (32 kB) stays below glibc's mmap and trim
+thresholds (128 kB), so the ~40 temporaries of a block reuse heap memory instead of faulting
+fresh pages in (blocks of 16384 ran 1.6-2x slower for that alone, more than the loop over
+smaller blocks costs; measured with tests/bench/step.py's calibration cost)."""
+
 Rates = Callable[[np.ndarray, Index], tuple[np.ndarray, np.ndarray]]
 """``rates(state, t) -> (r, λ)``: rate dT/dt [K s-1] at ``state`` and time index ``t``, and the
 slope λ = -∂r/∂T [s-1] the exponential relaxes with."""

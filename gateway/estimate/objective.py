@@ -41,7 +41,8 @@ class Objective:
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}, got {self.mode!r}")
-        self._parts = [slice_drivers(self.x, a, b) for a, b in self.windows if b - a >= 2]
+        self._parts = [self.model.prepare(slice_drivers(self.x, a, b))  # FluxTerm.derive, once
+                       for a, b in self.windows if b - a >= 2]
         if not self._parts:
             raise ValueError("no calibration window with at least two samples")
         self._fast = None

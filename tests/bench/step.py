@@ -28,7 +28,11 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+# The tree under test first (this checkout, or the one --against exported): tests/bench/gateway.py
+# must not shadow the gateway package.
+sys.path.insert(0, os.environ.get("SERRA_TREE", str(HERE.parents[1])))
 from _common import one_core, write_result  # noqa: E402
 
 one_core()
@@ -119,7 +123,7 @@ def _median_ratio(rounds: list, num, den) -> dict[str, float]:
 
 def _against(ref: str) -> tuple[list, list]:
     """Interleaved rounds: one process on ``ref``'s tree, one on this tree, ROUNDS times."""
-    root = Path(__file__).resolve().parents[2]
+    root = HERE.parents[1]
     with tempfile.TemporaryDirectory(prefix="serra-bench-base-") as base:
         archive = subprocess.run(["git", "-C", str(root), "archive", ref], check=True,
                                  capture_output=True).stdout
@@ -127,7 +131,7 @@ def _against(ref: str) -> tuple[list, list]:
         trees: dict[str, list] = {"base": [], "this": []}
         for _ in range(ROUNDS):
             for label, path in (("base", base), ("this", str(root))):
-                env = {**os.environ, "PYTHONPATH": path}
+                env = {**os.environ, "PYTHONPATH": path, "SERRA_TREE": path}
                 out = subprocess.run([sys.executable, __file__, "--round"], env=env, cwd=path,
                                      check=True, capture_output=True, text=True).stdout
                 trees[label].append(json.loads(out.splitlines()[-1]))

@@ -179,20 +179,18 @@ class Model:
               terms: Sequence[FluxTerm]) -> stepping.Sums:
         """``sums(state, t) -> (g, s, k)`` over ``terms``: coefficients and slopes
         (``FluxTerm.linearised``; the coefficient s as slope when not re-linearised)."""
-        if not self.integration.relinearise:
-            def linearised(term: FluxTerm, t_in: np.ndarray, t: Index) -> tuple:
-                g, s = term.coefficients(p, x, t_in, t)
-                return g, s, s
+        if self.integration.relinearise:
+            fns = [term.linearised for term in terms]
         else:
-            def linearised(term: FluxTerm, t_in: np.ndarray, t: Index) -> tuple:
-                return term.linearised(p, x, t_in, t)
+            fns = [_frozen_slope(term) for term in terms]
+        if not fns:
+            return lambda t_in, t: (0.0, 0.0, 0.0)
+        first, rest = fns[0], fns[1:]
 
         def sums(t_in: np.ndarray, t: Index) -> tuple:
-            if not terms:
-                return 0.0, 0.0, 0.0
-            g_sum, s_sum, k_sum = linearised(terms[0], t_in, t)
-            for term in terms[1:]:
-                g, s, k = linearised(term, t_in, t)
+            g_sum, s_sum, k_sum = first(p, x, t_in, t)
+            for fn in rest:
+                g, s, k = fn(p, x, t_in, t)
                 g_sum, s_sum, k_sum = g_sum + g, s_sum + s, k_sum + k
             return g_sum, s_sum, k_sum
 
@@ -332,6 +330,16 @@ class Model:
             p = {n: theta[:, j] for j, n in enumerate(self.names)}
         t = slice(0, len(t_in))
         return {term.name: term.flux(p, x, t_in, t) for term in self.terms}
+
+
+def _frozen_slope(term: FluxTerm) -> Callable:
+    """``term.linearised`` with the coefficient s as the slope (the step before issue 10)."""
+
+    def linearised(p, x, t_in, t):
+        g, s = term.coefficients(p, x, t_in, t)
+        return g, s, s
+
+    return linearised
 
 
 def check_columns(model: Model, available: Sequence[str], source: str) -> None:

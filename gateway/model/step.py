@@ -152,6 +152,11 @@ def _same(a: Index, b: Index) -> bool:
     return a == b
 
 
+def _column(v: np.ndarray, j: int) -> np.ndarray:
+    """Column j of a block of sums (P or 1, rows); one that does not vary in time as it is."""
+    return v if v.ndim == 0 or v.shape[1] == 1 else v[:, j : j + 1]
+
+
 class Stepper:
     """The one exponential step of every model evaluation, bound to one set of drivers (of
     length ``n``) and parameters: ``stepper(state, t)`` steps from time index ``t``.
@@ -181,13 +186,13 @@ class Stepper:
             a, b = self._rows
             if not a <= t < b:
                 a, b = int(t), min(int(t) + self.BLOCK, self.n)
-                w = b - a
                 self._rows = (a, b)
-                self._table = tuple(np.broadcast_to(v, (v.shape[0] if v.ndim == 2 else 1, w))
+                # (P or 1, rows); a sum that does not vary in time stays (P, 1) or a scalar
+                self._table = tuple(v[None, :] if v.ndim == 1 else v
                                     for v in map(np.asarray, self.fixed(state, slice(a, b))))
             j = int(t) - a
             g, s, k = self._table
-            return g[:, j : j + 1], s[:, j : j + 1], k[:, j : j + 1]
+            return _column(g, j), _column(s, j), _column(k, j)
         if self._key is not None and _same(self._key, t):
             return self._cached
         return self.fixed(state, t)

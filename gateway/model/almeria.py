@@ -182,10 +182,17 @@ class NaturalVentilation(FluxTerm):
         b = a_eff**2 * (2.0 * psy.GRAVITY * self.height) / (x["t_out"][t] + psy.KELVIN)
         return b, ((a_r + a_s) / 2.0) ** 2 * x["wind"][t] ** 2
 
+    @staticmethod
+    def _still(b) -> bool:
+        """True at one time step with B = 0 (roof or side vents shut: no buoyancy-driven
+        exchange): B |T_in - T_out| is then 0 without reading the candidates' states."""
+        return np.ndim(b) == 0 and b == 0.0
+
     def flow(self, p, x, t_in, t: Index) -> np.ndarray:
         """Ventilation flow G [m3 s-1] (III.31)."""
         b, w = self._drivers(x, t)
-        return p["c_ven_d"] * np.sqrt(b * np.abs(t_in - x["t_out"][t]) + p["c_ven_w"] * w) + p["c_loss"]
+        buoyancy = 0.0 if self._still(b) else b * np.abs(t_in - x["t_out"][t])
+        return p["c_ven_d"] * np.sqrt(buoyancy + p["c_ven_w"] * w) + p["c_loss"]
 
     def coefficients(self, p, x, t_in, t: Index):
         s = self.rho_cp_a * self.flow(p, x, t_in, t)
@@ -196,9 +203,12 @@ class NaturalVentilation(FluxTerm):
         with |T_in - T_out| (III.31), dG/dT (T_in - T_out) = C_d B |ΔT| / (2 sqrt(B |ΔT| + W))."""
         b, w = self._drivers(x, t)
         t_out = x["t_out"][t]
-        buoyancy = b * np.abs(t_in - t_out)
+        still = self._still(b)
+        buoyancy = 0.0 if still else b * np.abs(t_in - t_out)
         root = np.sqrt(buoyancy + p["c_ven_w"] * w)
         s = self.rho_cp_a * (p["c_ven_d"] * root + p["c_loss"])
+        if still:
+            return s * t_out, s, s
         # root = 0 only where buoyancy = 0 (closed vents): the extra slope is 0 there
         extra = (0.5 * self.rho_cp_a) * p["c_ven_d"] * buoyancy / np.maximum(root, 1e-300)
         return s * t_out, s, s + extra

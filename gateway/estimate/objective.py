@@ -41,7 +41,8 @@ class Objective:
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}, got {self.mode!r}")
-        self._parts = [slice_drivers(self.x, a, b) for a, b in self.windows if b - a >= 2]
+        self._parts = [self.model.prepare(slice_drivers(self.x, a, b))  # FluxTerm.derive, once
+                       for a, b in self.windows if b - a >= 2]
         if not self._parts:
             raise ValueError("no calibration window with at least two samples")
         self._fast = None
@@ -193,7 +194,7 @@ class _LinearOneStep:
     def sse(self, theta: np.ndarray) -> np.ndarray:
         """Sum of squared one-step errors (P,) over the comparable samples."""
         total = np.zeros(theta.shape[0])
-        block = max(16, 16384 // theta.shape[0])
+        block = max(16, stepping.BLOCK_ELEMENTS // theta.shape[0])
         n = len(self.target)
         for a in range(0, n, block):
             b = min(a + block, n)

@@ -347,22 +347,24 @@ class OnlineEstimator:
         ):
             return False
         model, c, dt = self.model, self.capacity_c, self.dt
+        x = model.prepare(x)  # the terms' driver-only columns, once for every candidate
         base = self.theta
         target = measured[1:]
         names = self._names
 
         def cost(cand: np.ndarray) -> np.ndarray:
-            theta = np.repeat(base[None, :], cand.shape[0], axis=0)
-            theta[:, free] = cand
-            p = {name: theta[:, j : j + 1] for j, name in names}  # Model.columns without checks
+            rows = np.repeat(base[:, None], cand.shape[0], axis=1)  # (k, P): one row a parameter
+            rows[free] = cand.T
+            p = {name: rows[j, :, None] for j, name in names}  # Model.columns without checks
             # observation terms: simulate the true state behind the reading, compare readings
             state = model.true_state(p, x, np.full((cand.shape[0], 1), measured[0]), 0)
-            sq = np.zeros(cand.shape[0])
+            states = np.empty((cand.shape[0], n))
             step = model.stepper(p, x, c, dt)
             for s in range(n):  # III.23 integrated step by step from the measured T_in[t - n]
                 state = step(state, s)
-                sq += (model.reading(p, x, state, s + 1)[:, 0] - target[s]) ** 2
-            return sq / n + self._penalty(g, free, cand)
+                states[:, s] = state[:, 0]
+            err = model.reading(p, x, states, slice(1, n + 1)) - target
+            return np.add.reduce(err * err, axis=1) / n + self._penalty(g, free, cand)
 
         lo, hi = self._box(free)
         res = self.search(cost, lo, hi, self._bat[g.output], "rsba", self.rng, x0=self.theta[free])

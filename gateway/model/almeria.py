@@ -104,29 +104,39 @@ class Transpiration(FluxTerm):
                   "aerodynamic transpiration, night"),
     )
 
+    derives = ("_q_trp.cover",)
+
     def __init__(self, extinction: float = 0.64) -> None:
         self.extinction = extinction
 
-    def _parts(self, p, x, t_in, t: Index):
-        """The latent flux q [W m-2], C_B LAI [W m-2 kPa-1] and p_ws(T_in) [kPa]."""
+    def _cover(self, lai):
+        """1 - e^(-k LAI) [-]: the share of the inside radiation the crop intercepts (III.29)."""
+        return 1.0 - np.exp(-self.extinction * lai)
+
+    def derive(self, x) -> dict[str, np.ndarray]:
+        return {"_q_trp.cover": self._cover(x["lai"])}
+
+    def _flux(self, p, x, p_ws, t: Index):
+        """The latent flux q [W m-2] and C_B LAI [W m-2 kPa-1] for p_ws(T_in) [kPa]."""
         lai = x["lai"][t]
         i_out = x["i_glob"][t]
         i_in = p["c_tsw"] * i_out
-        p_ws = psy.saturation_vapour_pressure(t_in)
+        cover = self.derived(x, "_q_trp.cover", t)
+        if cover is None:
+            cover = self._cover(lai)
         vpd = np.maximum(p_ws - x["p_w_in"][t], 0.0)
-        c_b = np.where(i_out > 5.0, p["c_bd"], p["c_bn"])
-        q = p["c_a"] * (1.0 - np.exp(-self.extinction * lai)) * i_in + c_b * lai * vpd
-        return q, c_b * lai, p_ws
+        b_lai = np.where(i_out > 5.0, p["c_bd"], p["c_bn"]) * lai
+        return p["c_a"] * cover * i_in + b_lai * vpd, b_lai
 
     def coefficients(self, p, x, t_in, t: Index):
-        return -self._parts(p, x, t_in, t)[0], 0.0
+        return -self._flux(p, x, psy.saturation_vapour_pressure(t_in), t)[0], 0.0
 
     def linearised(self, p, x, t_in, t: Index):
         """Also the slope k = C_B LAI dp_ws/dT where the air is not saturated: a warmer
         air transpires more (the VPD grows with T_in)."""
-        q, b_lai, p_ws = self._parts(p, x, t_in, t)
+        p_ws, slope = psy.saturation_vapour_pressure_and_slope(t_in)
+        q, b_lai = self._flux(p, x, p_ws, t)
         dry = p_ws > x["p_w_in"][t]
-        slope = psy.saturation_vapour_pressure_slope(t_in, p_ws)
         return -q, 0.0, np.where(dry, b_lai * slope, 0.0)
 
 
@@ -148,11 +158,21 @@ class NaturalVentilation(FluxTerm):
         Parameter("c_loss", "m3 s-1", 0.1, 1.0, 0.2, 0.07, ALWAYS, "leakage air flow"),
     )
 
+    derives = ("_q_vent.b", "_q_vent.w")
+
     def __init__(self, gh: Greenhouse) -> None:
         self.height = gh.vents.height_difference
         self.rho_cp_a = gh.air_density * psy.CP_AIR / gh.floor_area
 
+    def derive(self, x) -> dict[str, np.ndarray]:
+        return dict(zip(self.derives, self._buoyancy_wind(x, slice(None)), strict=True))
+
     def _drivers(self, x, t: Index) -> tuple[np.ndarray, np.ndarray]:
+        """(B, W) at ``t``: from ``Model.prepare``'s columns when there, else computed."""
+        b = self.derived(x, "_q_vent.b", t)
+        return self._buoyancy_wind(x, t) if b is None else (b, x["_q_vent.w"][t])
+
+    def _buoyancy_wind(self, x, t: Index) -> tuple[np.ndarray, np.ndarray]:
         """The buoyancy coefficient B = A_eff² 2 g h / T_out [m6 s-2 K-1] and the wind term
         W = ((A_r + A_s)/2)² u² [m6 s-2] of III.31: drivers only, so computed before any
         array of candidates."""
@@ -162,10 +182,17 @@ class NaturalVentilation(FluxTerm):
         b = a_eff**2 * (2.0 * psy.GRAVITY * self.height) / (x["t_out"][t] + psy.KELVIN)
         return b, ((a_r + a_s) / 2.0) ** 2 * x["wind"][t] ** 2
 
+    @staticmethod
+    def _still(b) -> bool:
+        """True at one time step with B = 0 (roof or side vents shut: no buoyancy-driven
+        exchange): B |T_in - T_out| is then 0 without reading the candidates' states."""
+        return np.ndim(b) == 0 and b == 0.0
+
     def flow(self, p, x, t_in, t: Index) -> np.ndarray:
         """Ventilation flow G [m3 s-1] (III.31)."""
         b, w = self._drivers(x, t)
-        return p["c_ven_d"] * np.sqrt(b * np.abs(t_in - x["t_out"][t]) + p["c_ven_w"] * w) + p["c_loss"]
+        buoyancy = 0.0 if self._still(b) else b * np.abs(t_in - x["t_out"][t])
+        return p["c_ven_d"] * np.sqrt(buoyancy + p["c_ven_w"] * w) + p["c_loss"]
 
     def coefficients(self, p, x, t_in, t: Index):
         s = self.rho_cp_a * self.flow(p, x, t_in, t)
@@ -176,9 +203,12 @@ class NaturalVentilation(FluxTerm):
         with |T_in - T_out| (III.31), dG/dT (T_in - T_out) = C_d B |ΔT| / (2 sqrt(B |ΔT| + W))."""
         b, w = self._drivers(x, t)
         t_out = x["t_out"][t]
-        buoyancy = b * np.abs(t_in - t_out)
+        still = self._still(b)
+        buoyancy = 0.0 if still else b * np.abs(t_in - t_out)
         root = np.sqrt(buoyancy + p["c_ven_w"] * w)
         s = self.rho_cp_a * (p["c_ven_d"] * root + p["c_loss"])
+        if still:
+            return s * t_out, s, s
         # root = 0 only where buoyancy = 0 (closed vents): the extra slope is 0 there
         extra = (0.5 * self.rho_cp_a) * p["c_ven_d"] * buoyancy / np.maximum(root, 1e-300)
         return s * t_out, s, s + extra

@@ -37,14 +37,33 @@ def saturation_vapour_pressure(t: ArrayLike) -> np.ndarray:
     °C: ``p_ws = 0.61078 exp(17.2694 t / (t + 237.3))`` (docs/model-notes.md §1).
     """
     t = np.asarray(t, dtype=float)
-    return 0.61078 * np.exp(17.2694 * t / (t + 237.3))
+    return _tetens(t, t + 237.3)
+
+
+def _tetens(t: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """p_ws [kPa] at ``t`` [°C] given d = t + 237.3 (Tetens)."""
+    return 0.61078 * np.exp(17.2694 * t / d)
+
+
+def _tetens_slope(p_ws: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """d p_ws / dT [kPa K-1] given p_ws and d = t + 237.3 (the Tetens form differentiated)."""
+    return p_ws * 17.2694 * 237.3 / d**2
 
 
 def saturation_vapour_pressure_slope(t: ArrayLike, p_ws: ArrayLike | None = None) -> np.ndarray:
     """d p_ws / dT [kPa K-1] of the Tetens form at ``t`` [°C]; ``p_ws`` when already known."""
     t = np.asarray(t, dtype=float)
-    p_ws = saturation_vapour_pressure(t) if p_ws is None else np.asarray(p_ws, dtype=float)
-    return p_ws * 17.2694 * 237.3 / (t + 237.3) ** 2
+    d = t + 237.3
+    return _tetens_slope(_tetens(t, d) if p_ws is None else np.asarray(p_ws, dtype=float), d)
+
+
+def saturation_vapour_pressure_and_slope(t: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """(p_ws [kPa], d p_ws / dT [kPa K-1]) at ``t`` [°C], sharing the work (the exponential
+    step's slope of transpiration needs both at every candidate state)."""
+    t = np.asarray(t, dtype=float)
+    d = t + 237.3
+    p_ws = _tetens(t, d)
+    return p_ws, _tetens_slope(p_ws, d)
 
 
 def vapour_pressure(t: ArrayLike, rh: ArrayLike) -> np.ndarray:

@@ -40,6 +40,13 @@ from gateway.model.terms import Index
 
 HOLDS = ("first_order", "zero_order")
 
+BLOCK_ELEMENTS = 4096
+"""Population × time elements per block of the one-step evaluations (``Model.one_step``, the
+calibration cost's fast path): each temporary (32 kB) stays below glibc's mmap and trim
+thresholds (128 kB), so the ~40 temporaries of a block reuse heap memory instead of faulting
+fresh pages in (blocks of 16384 ran 1.6-2x slower for that alone, more than the loop over
+smaller blocks costs; measured with tests/bench/step.py's calibration cost)."""
+
 Rates = Callable[[np.ndarray, Index], tuple[np.ndarray, np.ndarray]]
 """``rates(state, t) -> (r, λ)``: rate dT/dt [K s-1] at ``state`` and time index ``t``, and the
 slope λ = -∂r/∂T [s-1] the exponential relaxes with."""
@@ -71,7 +78,8 @@ def phi(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(φ1(z), φ2(z)) for z ≥ 0. φ2 = (1 - φ1)/z: below z = 1e-6 (a step that barely relaxes)
     z is taken as 1e-6, which moves φ1 by < 5e-7 and keeps φ2 = 1/2 - z/6 to 4e-10."""
     z = np.maximum(z, 1e-6)
-    p1 = -np.expm1(-z) / z
+    nz = -z
+    p1 = np.expm1(nz) / nz  # (1 - e^-z)/z: the same bits as -expm1(-z)/z, one operation less
     return p1, (1.0 - p1) / z
 
 
@@ -126,8 +134,9 @@ def end_rates(rates: Rates, state: np.ndarray, r0: np.ndarray, lam0: np.ndarray,
         r1, lam1 = r1 + fixed[0], lam1 + fixed[1]
     if not check:
         return r1, lam1
-    bad = ~np.isfinite(r1 + lam1)
-    if bad.any():
+    both = r1 + lam1
+    if not np.isfinite(np.add.reduce(both, axis=None)):  # one reduction, no temporary mask
+        bad = ~np.isfinite(both)
         r1, lam1 = np.where(bad, r0, r1), np.where(bad, lam0, lam1)
     return r1, lam1
 
@@ -144,15 +153,25 @@ def _same(a: Index, b: Index) -> bool:
     return a == b
 
 
+def _column(v: np.ndarray, j: int) -> np.ndarray:
+    """Column j of a block of sums (P or 1, rows); one that does not vary in time as it is."""
+    return v if v.ndim == 0 or v.shape[1] == 1 else v[:, j : j + 1]
+
+
 class Stepper:
     """The one exponential step of every model evaluation, bound to one set of drivers (of
     length ``n``) and parameters: ``stepper(state, t)`` steps from time index ``t``.
 
     ``fixed`` sums the terms whose coefficients do not read the state, ``moving`` the others.
-    Consecutive calls (free runs, forecasts, the online estimator's virtual model) reuse the
-    fixed terms' sums at t + 1 as the next step's start, so the first-order hold costs them one
-    evaluation per step, not two.
+    The fixed terms' sums are evaluated once for a block of ``BLOCK`` rows when ``t`` is one step
+    (free runs, the online estimator's virtual model: their per-call cost dominates at small
+    populations), and consecutive calls with a slice or an array reuse the sums at t + 1 as the
+    next step's start, so the first-order hold costs the fixed terms one evaluation per step,
+    not two. The sums are the same numbers either way (element-wise operations).
     """
+
+    BLOCK = 64
+    """Rows of the fixed terms' sums evaluated at once when stepping one time index at a time."""
 
     def __init__(self, fixed: Sums, moving: Sums, c: float, dt: float, n: int,
                  integration: Integration = Integration()) -> None:
@@ -160,8 +179,21 @@ class Stepper:
         self.c, self.dt, self.n, self.integration = c, dt, n, integration
         self._key: Index | None = None
         self._cached: tuple = ()
+        self._rows = (0, 0)  # rows [a, b) held in self._table
+        self._table: tuple = ()
 
     def _fixed_at(self, state: np.ndarray, t: Index) -> tuple:
+        if isinstance(t, (int, np.integer)):
+            a, b = self._rows
+            if not a <= t < b:
+                a, b = int(t), min(int(t) + self.BLOCK, self.n)
+                self._rows = (a, b)
+                # (P or 1, rows); a sum that does not vary in time stays (P, 1) or a scalar
+                self._table = tuple(v[None, :] if v.ndim == 1 else v
+                                    for v in map(np.asarray, self.fixed(state, slice(a, b))))
+            j = int(t) - a
+            g, s, k = self._table
+            return _column(g, j), _column(s, j), _column(k, j)
         if self._key is not None and _same(self._key, t):
             return self._cached
         return self.fixed(state, t)
@@ -172,19 +204,21 @@ class Stepper:
         gd, sd, kd = self.moving(state, t)
         return ((gi + gd) - (si + sd) * state) / self.c, (ki + kd) / self.c
 
+    def _moving_rates(self, state: np.ndarray, t: Index) -> tuple[np.ndarray, np.ndarray]:
+        g, s, k = self.moving(state, t)
+        return (g - s * state) / self.c, k / self.c
+
     def __call__(self, state: np.ndarray, t: Index) -> np.ndarray:
         c, dt = self.c, self.dt
         r0, lam0 = self.rates(state, t)
         if self.integration.hold == "zero_order":
             return advance(state, r0, lam0, dt)
         t1 = next_index(t, self.n)
-        g1, s1, k1 = self.fixed(state, t1)
-        self._key, self._cached = t1, (g1, s1, k1)
-
-        def moving(st: np.ndarray, tt: Index) -> tuple[np.ndarray, np.ndarray]:
-            g, s, k = self.moving(st, tt)
-            return (g - s * st) / c, k / c
-
-        r1, lam1 = end_rates(moving, state, r0, lam0, t1, dt, self.integration.relinearise,
-                             fixed=((g1 - s1 * state) / c, k1 / c))
+        if isinstance(t, (int, np.integer)):
+            g1, s1, k1 = self._fixed_at(state, t1)
+        else:
+            g1, s1, k1 = self.fixed(state, t1)
+            self._key, self._cached = t1, (g1, s1, k1)
+        r1, lam1 = end_rates(self._moving_rates, state, r0, lam0, t1, dt,
+                             self.integration.relinearise, fixed=((g1 - s1 * state) / c, k1 / c))
         return advance(state, r0, 0.5 * (lam0 + lam1), dt, r1)

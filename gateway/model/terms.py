@@ -108,6 +108,21 @@ class FluxTerm:
     state_dependent: bool = True
     """False when (g, s) do not depend on ``t_in``: the flux is then affine in the state and its
     slope is s (``linearised`` need not be overridden)."""
+    derives: tuple[str, ...] = ()
+    """Keys of the driver-only columns ``derive`` computes (each starting with ``_``)."""
+
+    def derive(self, x: Drivers) -> dict[str, np.ndarray]:
+        """Columns the term reads that depend on the drivers only (e.g. ventilation's buoyancy
+        coefficient from the vent areas), over the whole series: ``Model.prepare`` adds them to
+        the drivers once, so a step for a population of candidates only indexes them. A term
+        must give the same values when they are absent (``derived``)."""
+        return {}
+
+    def derived(self, x: Drivers, key: str, t: Index) -> np.ndarray | None:
+        """The column ``key`` of ``derive`` at ``t`` when ``Model.prepare`` added it, else None
+        (the term then computes it from ``x`` at ``t``)."""
+        col = x.get(key)
+        return None if col is None else col[t]
 
     def coefficients(
         self, p: Params, x: Drivers, t_in: np.ndarray, t: Index

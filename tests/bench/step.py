@@ -9,16 +9,30 @@ time are steady).
 (b) a free run of 2880 steps for a population of 20 (prototype);
 (c) the online estimator (almeria, thesis settings: 20 bats, 50 iterations, n = 3) on 120
     daytime minutes of the reference simulator, median per update.
+
+``--against REF`` (a git commit or branch) also measures the code of REF, exported by
+``git archive`` to a temporary folder: each round runs one process on REF's tree and one on this
+tree, alternately, both with this bench's measurement (``--round``), and the summary adds the
+median of the rounds' ratios this tree / REF. Run it under ``nice`` on a shared machine.
 """
 
 from __future__ import annotations
 
+import argparse
+import json
+import os
+import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+# The tree under test first (this checkout, or the one --against exported): tests/bench/gateway.py
+# must not shadow the gateway package.
+sys.path.insert(0, os.environ.get("SERRA_TREE", str(HERE.parents[1])))
 from _common import one_core, write_result  # noqa: E402
 
 one_core()
@@ -87,32 +101,76 @@ def _online():
     return out
 
 
-def run() -> dict:
-    calib = _objective_and_free_run()
-    online = _online()
-    rounds: list[dict[str, dict[str, float]]] = []
-    for _ in range(ROUNDS):
-        r: dict[str, dict[str, float]] = {k: {} for k in SCHEMES}
-        for what in ("objective_ms", "free_run_ms", "online_update_ms"):
-            for label in SCHEMES:
-                cost, free = calib[label]
-                if what == "objective_ms":
-                    r[label][what] = 1e3 * _cpu(cost, 5)
-                elif what == "free_run_ms":
-                    r[label][what] = 1e3 * _cpu(free)
-                else:
-                    r[label][what] = 1e3 * online[label]()
-        rounds.append(r)
+def _round(calib, online) -> dict[str, dict[str, float]]:
+    """One round: each figure for the default step, then for FROZEN right after."""
+    r: dict[str, dict[str, float]] = {k: {} for k in SCHEMES}
+    for what in ("objective_ms", "free_run_ms", "online_update_ms"):
+        for label in SCHEMES:
+            cost, free = calib[label]
+            if what == "objective_ms":
+                r[label][what] = 1e3 * _cpu(cost, 5)
+            elif what == "free_run_ms":
+                r[label][what] = 1e3 * _cpu(free)
+            else:
+                r[label][what] = 1e3 * online[label]()
+    return r
+
+
+def _median_ratio(rounds: list, num, den) -> dict[str, float]:
+    keys = list(num(rounds[0]))
+    return {k: float(np.median([num(r)[k] / den(r)[k] for r in rounds])) for k in keys}
+
+
+def _against(ref: str) -> tuple[list, list]:
+    """Interleaved rounds: one process on ``ref``'s tree, one on this tree, ROUNDS times."""
+    root = HERE.parents[1]
+    with tempfile.TemporaryDirectory(prefix="serra-bench-base-") as base:
+        archive = subprocess.run(["git", "-C", str(root), "archive", ref], check=True,
+                                 capture_output=True).stdout
+        subprocess.run(["tar", "-x", "-C", base], input=archive, check=True)
+        trees: dict[str, list] = {"base": [], "this": []}
+        for _ in range(ROUNDS):
+            for label, path in (("base", base), ("this", str(root))):
+                env = {**os.environ, "PYTHONPATH": path, "SERRA_TREE": path}
+                out = subprocess.run([sys.executable, __file__, "--round"], env=env, cwd=path,
+                                     check=True, capture_output=True, text=True).stdout
+                trees[label].append(json.loads(out.splitlines()[-1]))
+    return trees["base"], trees["this"]
+
+
+def run(against: str | None = None) -> dict:
+    if against is None:
+        calib, online = _objective_and_free_run(), _online()
+        rounds = [_round(calib, online) for _ in range(ROUNDS)]
+        base = None
+    else:
+        base, rounds = _against(against)
     keys = list(rounds[0]["default"])
-    ratios = {k: float(np.median([r["default"][k] / r["frozen"][k] for r in rounds])) for k in keys}
     best = {label: {k: min(r[label][k] for r in rounds) for k in keys} for label in SCHEMES}
-    return {"cpu_ms_best_of_rounds": best, "rounds": rounds,
-            "summary": {"default_over_frozen_median_of_rounds": ratios}}
+    summary = {"default_over_frozen_median_of_rounds":
+               _median_ratio(rounds, lambda r: r["default"], lambda r: r["frozen"]),
+               "default_cpu_ms_median_of_rounds":
+               {k: float(np.median([r["default"][k] for r in rounds])) for k in keys}}
+    out = {"cpu_ms_best_of_rounds": best, "rounds": rounds, "summary": summary}
+    if base is not None:
+        i = list(range(len(rounds)))
+        for label in SCHEMES:
+            summary[f"{label}_this_over_{against}_median_of_rounds"] = _median_ratio(
+                i, lambda j, lab=label: rounds[j][lab], lambda j, lab=label: base[j][lab])
+        summary[f"default_cpu_ms_median_of_rounds_at_{against}"] = {
+            k: float(np.median([r["default"][k] for r in base])) for k in keys}
+        out[f"rounds_at_{against}"] = base
+    return out
 
 
 if __name__ == "__main__":
-    result = run()
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--against", metavar="REF", help="also measure this git commit's code")
+    parser.add_argument("--round", action="store_true", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.round:  # one round in this process, JSON on the last line (used by --against)
+        print(json.dumps(_round(_objective_and_free_run(), _online())))
+        raise SystemExit(0)
+    result = run(args.against)
     print(write_result("step", result))
-    import json
-
-    print(json.dumps(result, indent=2))
+    print(json.dumps(result["summary"], indent=2))

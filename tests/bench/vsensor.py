@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # not tests/bench/gateway.py
 from _common import one_core, write_result  # noqa: E402
 
 one_core()

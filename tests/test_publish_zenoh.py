@@ -76,7 +76,8 @@ def test_outbox_holds_until_a_subscriber_matches_then_drains_in_order(gateway_si
         pub.wake.set()
         wait_for(lambda: len(got) == 30, 30, "the forecast key to drain")
         assert [json.loads(x)["n"] for x in got] == list(range(0, 60, 2))
-        assert Outbox(store.conn).pending() == 30
+        # the publisher marks them sent after the put: the subscriber can see them first
+        wait_for(lambda: Outbox(store.conn).pending() == 30, 30, "the drained key to be marked sent")
         s1.undeclare()
         only.close()
         only = None

@@ -255,6 +255,7 @@ class Demo:
         g = self.group
         if self.kit is not None:
             self.kit.stop()
+        self.settle()
         gw = g.stop("gateway", 60)
         if gw not in (None, 0):
             self.say(f"gateway exit status {gw}: {g.tail('gateway')}")
@@ -267,6 +268,18 @@ class Demo:
             time.sleep(0.2)  # the subscriber's writer commits in batches
         g.stop("subscriber", 30)
         return not g.sweep()
+
+    def settle(self, lag: int = 2, timeout: float = 90.0) -> None:
+        """Let the gateway's estimator catch up with what was stored before it is stopped (on a
+        busy machine it can trail the accelerated kit by minutes); the last minute or two stay
+        open until a later record closes them."""
+        db = self.out / "serra.db"
+        deadline = time.monotonic() + timeout
+        while ("gateway" in self.group.procs and self.group.procs["gateway"].poll() is None
+               and time.monotonic() < deadline
+               and count(db, "SELECT count(*) FROM estimates WHERE name=?", ("t_in_next",))
+               < count(db, "SELECT count(*) FROM samples") - lag):
+            time.sleep(0.2)
 
     def report(self) -> None:
         assert self.start_t is not None

@@ -72,7 +72,7 @@ def biskra_weather(days: float = 2.0, first_day: int = 0) -> Weather:
 
 def _moist_density(t_in: float, rh_out: float, t_out: float) -> float:
     """Moist-air density [kg m-3] of inside air at t_in [°C] holding the outside vapour
-    (p_atm 101 kPa, table 2): the ideal-gas mixture of MODEL_NOTES §1."""
+    (p_atm 101 kPa, table 2): the ideal-gas mixture of docs/model-notes.md §1."""
     p_w = 0.61078 * math.exp(17.2694 * t_out / (t_out + 237.3)) * rh_out / 100.0
     return 101.0e3 / (287.055 * (t_in + 273.15)) * (1.0 - 0.378 * p_w / 101.0)
 

@@ -1,4 +1,4 @@
-"""The exponential step every model evaluation uses (MODEL_NOTES §4, issue 10).
+"""The exponential step every model evaluation uses (docs/model-notes.md §4, issue 10).
 
 The air balance is ``dT/dt = r(T, t)`` with the rate ``r = F / C`` [K s-1], F the net flux
 [W m-2] and C the heat capacity [J m-2 K-1]. Over one step of length Δ from t_k to t_k+1:

@@ -199,6 +199,7 @@ def test_shipped_model_matches_the_code_that_feeds_it(kind):
     from gateway.vsensor.batch import BASELINES
     from gateway.vsensor.features import INPUT_DELAYS, OUTPUT_DELAYS, features
     from gateway.vsensor.models import shipped_model
+    from gateway.vsensor.probe import probe_differences
 
     path = shipped_model(kind)
     assert path.stat().st_size <= 1_000_000
@@ -212,6 +213,9 @@ def test_shipped_model_matches_the_code_that_feeds_it(kind):
     assert meta["pca"]["variance_total"] >= 0.90
     assert 2 <= len(meta["hidden_layers"]) <= 3 and all(20 <= h <= 50 for h in meta["hidden_layers"])
     assert not sensor.mismatch  # trained on the preset's house
+    # trained on the fluxes this code computes (flux terms, sky temperature, step): else retrain
+    diffs = probe_differences(meta.get("code_probe", {}), kind, gh)
+    assert not diffs, f"{path.name} was trained on other fluxes; retrain (docs/vsensor.md): {diffs}"
     for name in BASELINES:
         VentSensor(path.with_name(f"{kind}.{name}.onnx"), gh, kind)
     assert path.with_suffix(".md").exists()

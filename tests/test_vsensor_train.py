@@ -91,7 +91,8 @@ def test_exported_graph_has_pca_and_metadata():
     model = onnx.load(str(path))
     meta = {p.key: p.value for p in model.metadata_props}
     for key in ("features", "input_delays", "output_delays", "model_kind", "training_ranges",
-                "metrics", "data_fingerprint", "version", "pca", "greenhouse", "online_overrides"):
+                "metrics", "data_fingerprint", "version", "pca", "greenhouse", "online_overrides",
+                "code_probe"):
         assert key in meta, key
     ops = [n.op_type for n in model.graph.node]
     assert "MatMul" in ops and ops.count("Gemm") == 3  # PCA, then 8-8-1
@@ -103,6 +104,27 @@ def test_exported_graph_has_pca_and_metadata():
     assert "correlation_circle.png" in card and "| Q_vent [W m-2] | calm |" in card
     report = path.with_name("tiny.report")
     assert (report / "correlation_circle.png").stat().st_size > 10_000
+
+
+def test_code_probe_names_a_change_of_the_model_layer(monkeypatch):
+    """The probe stored in a model catches what made the shipped model stale before: another
+    integration step or another sky temperature, with names still matching."""
+    from dataclasses import replace
+
+    from gateway.model import sky, step
+    from gateway.vsensor import probe
+
+    gh = load_greenhouse(vd.GREENHOUSE)
+    stored = probe.code_probe("almeria", gh)
+    assert probe.probe_differences(stored, "almeria", gh) == []
+    built = probe.build_model
+    monkeypatch.setattr(probe, "build_model",
+                        lambda kind, g: replace(built(kind, g), integration=step.FROZEN))
+    diffs = probe.probe_differences(stored, "almeria", gh)
+    assert len(diffs) == 1 and diffs[0].startswith("one_step_t_in: trained with")
+    monkeypatch.setattr(probe, "build_model", built)
+    monkeypatch.setattr(sky, "sky_temperature", lambda t_out, rh_out, cloud: t_out - 20.0)
+    assert any(d.startswith("t_sky:") for d in probe.probe_differences(stored, "almeria", gh))
 
 
 def test_onnx_matches_the_numpy_network():

@@ -5,7 +5,9 @@ signal (its ventilation flow G, III.31–32, is the target [m3 s-1]) and without
 fluxes, with wind and the inside–outside temperature and humidity differences, are the
 inputs). Both replays take minutes per week of data, so their products are cached in
 ``cache_dir`` under a key made of the file's bytes, the greenhouse, the model kind, the
-online settings and this module's version: a second ``train`` on the same files only reads.
+online settings, this module's version and the model layer's code probe (gateway/vsensor/
+probe.py: a changed flux term, sky temperature or step replays again): a second ``train`` on
+the same files only reads.
 """
 
 from __future__ import annotations
@@ -24,8 +26,9 @@ from gateway.model.model import check_columns
 from gateway.series import Series, load_series
 from gateway.vsensor.adaptive import Overrides, explicit_model, has_vents, run_adaptive, settings_for
 from gateway.vsensor.features import feature_names, filter_gains, heat_loss, low_pass, raw_features
+from gateway.vsensor.probe import code_probe
 
-CACHE_VERSION = 1
+CACHE_VERSION = 2
 KEEP = ("t_in", "t_out", "rh_in", "rh_out", "wind", "i_glob")
 """Drivers kept beside the fluxes (the report's day classes and the heat loss need them)."""
 WARMUP_STEPS = 60
@@ -53,7 +56,8 @@ def file_sha256(path: str | Path) -> str:
 def cache_key(csv_sha: str, gh: Greenhouse, kind: str, overrides: Overrides | None, seed: int) -> str:
     gh_text = Path(gh.source).read_bytes().hex() if Path(gh.source).exists() else repr(gh)
     settings = {g: {k: float(v) for k, v in t.items()} for g, t in (overrides or {}).items()}
-    blob = json.dumps([CACHE_VERSION, csv_sha, gh_text, kind, settings, seed], sort_keys=True)
+    probe = code_probe(kind, gh)  # a change of the model layer's fluxes or step: replay again
+    blob = json.dumps([CACHE_VERSION, csv_sha, gh_text, kind, settings, seed, probe], sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:24]
 
 

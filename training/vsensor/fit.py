@@ -125,8 +125,11 @@ def _epochs(mlp, h, t, hv, tv, epochs: int, patience: int, progress: Progress, l
 
 def fit_narx(name: str, split: Split, mean, std, projection, seed: int, hidden=HIDDEN,
              epochs: int = 150, rounds: int = 3, round_epochs: int = 30,
-             progress: Progress | None = None) -> tuple[Narx, dict]:
-    """Train one network (series-parallel, then closed-loop rounds). Returns it and a log."""
+             progress: Progress | None = None, round_lr: float | None = None) -> tuple[Narx, dict]:
+    """Train one network (series-parallel, then closed-loop rounds). Returns it and a log.
+
+    ``round_lr``: Adam's step size during the closed-loop rounds (default: the series-parallel
+    one, 1e-3); a smaller step fine-tunes instead of jumping between rounds."""
     from sklearn.neural_network import MLPRegressor
 
     progress = progress or (lambda **k: None)
@@ -142,6 +145,8 @@ def fit_narx(name: str, split: Split, mean, std, projection, seed: int, hidden=H
     log = {"series_parallel_val_mse": float(np.mean((mlp.predict(hv) - tv) ** 2)),
            "closed_loop_val_mae": [validation_mae(net, split)]}
     best = (log["closed_loop_val_mae"][0], net.layers)
+    if round_lr is not None and hasattr(mlp, "_optimizer"):
+        mlp._optimizer.learning_rate_init = round_lr  # Adam keeps its moments; only the step
     for r in range(rounds):
         sims = simulate(net, split)
         train_sims = [y[:c] for y, c in zip(sims, split.cut, strict=True)]

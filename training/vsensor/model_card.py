@@ -72,6 +72,9 @@ def model_card(out: Path, meta: dict, metrics: dict, t18: dict, circle: dict, na
         f"Greenhouse signature (another house is flagged, not trusted): {gh['signature']}.",
         f"Online estimator overrides: {meta['online_overrides'] or 'none (model and greenhouse defaults)'}; "
         f"seed {meta['seed']}; data fingerprint `{meta['data_fingerprint'][:16]}…`; serra {meta['version']}.",
+        "The metadata's `code_probe` holds the fluxes, sky temperature and one-step T_in the model "
+        "layer computed at training time on a fixed probe (gateway/vsensor/probe.py); the "
+        "shipped-model test fails when the code no longer computes them: retrain then.",
         "",
         "| file | rows | sha256 |",
         "| --- | --- | --- |",

@@ -24,6 +24,7 @@ from gateway.vsensor.features import (
     flow_limits,
     greenhouse_signature,
 )
+from gateway.vsensor.probe import code_probe
 from training.vsensor import fit, report
 from training.vsensor.dataset import Segment, build_segment, fingerprint
 from training.vsensor.export import write_model
@@ -77,8 +78,8 @@ def _ranges(split: fit.Split, names: list[str]) -> tuple[dict, dict]:
 
 def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: str | Path | None,
           overrides=None, seed: int = 0, hidden=fit.HIDDEN, epochs: int = 100, rounds: int = 6,
-          progress: Callable[..., None] | None = None, report_dir: str | Path | None = None
-          ) -> TrainResult:
+          progress: Callable[..., None] | None = None, report_dir: str | Path | None = None,
+          round_lr: float | None = None) -> TrainResult:
     """Build the datasets, fit the three networks, write the models, card and report (PNGs in
     ``report_dir``, default ``<out stem>.report/`` beside the model)."""
     progress = progress or (lambda **k: None)
@@ -104,7 +105,8 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
     progress(description="fitting")
     for name, proj in (("pca_narx", loadings), ("narx_no_pca", None)):
         nets[name], logs[name] = fit.fit_narx(name, split, mean, std, proj, seed, hidden, epochs,
-                                              rounds, min(30, epochs), progress=progress)
+                                              rounds, min(30, epochs), progress=progress,
+                                              round_lr=round_lr)
     nets["linear_arx"] = fit.fit_arx(split, mean, std)
     nets["pca_narx"].explained = share[:kept]
     seconds["fit"] = time.perf_counter() - t1
@@ -128,7 +130,9 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
         "greenhouse": {"name": gh.name, "signature": greenhouse_signature(gh)},
         "data_fingerprint": fingerprint(segments, kind),
         "sources": [{"file": Path(s.source).name, "sha256": s.sha256, "rows": len(s.flow)} for s in segments],
-        "online_overrides": overrides or {}, "seed": seed,
+        "online_overrides": overrides or {}, "seed": seed, "code_probe": code_probe(kind, gh),
+        "training_settings": {"hidden": list(hidden), "epochs": epochs, "rounds": rounds,
+                              "round_lr": round_lr},
         "version": _version(), "pca": pca_info,
         "metrics": {"validation_closed_loop": metrics,
                     "training_log": {k: v for k, v in logs.items()}},

@@ -23,6 +23,9 @@ def add_train_parser(sub: argparse._SubParsersAction, data_args) -> None:
                    help="hidden layer sizes (default 30,50,20, the thesis's)")
     p.add_argument("--epochs", type=int, default=100, help="series-parallel epochs at most (100)")
     p.add_argument("--rounds", type=int, default=6, help="closed-loop refinement rounds (6)")
+    p.add_argument("--round-lr", type=float, default=None, metavar="LR",
+                   help="Adam step size in the closed-loop rounds (default: the series-parallel "
+                   "one, 1e-3)")
     p.add_argument("--report", metavar="DIR",
                    help="where the report's PNGs go (default: MODEL.report/ beside the model)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -47,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
     with progress_bar("train", total, True) as bar, threadpool_limits(1):
         result = train(args.data, gh, args.model, args.out, args.cache, overrides(args.set) or None,
                        args.seed, hidden, args.epochs, args.rounds, progress=bar,
-                       report_dir=args.report)
+                       report_dir=args.report, round_lr=args.round_lr)
     summary = {"models": {k: str(v) for k, v in result.paths.items()}, "card": str(result.card),
                "pca": {k: v for k, v in result.pca.items() if k != "all_shares"},
                "validation_closed_loop": result.metrics,

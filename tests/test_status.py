@@ -223,19 +223,30 @@ def screen_text(app: StatusApp) -> str:
     return "\n".join(s.text for s in app.screen._compositor.render_strips())
 
 
-async def _drive(source, keys_and_checks, size=(80, 24)) -> list[str]:
+async def _shown(app, pilot, marker: str, what: str) -> str:
+    """The screen once ``marker`` is on it: panels are filled from snapshots taken in a thread,
+    so a key's effect can show a few frames later on a busy machine (generous deadline)."""
+    deadline = time.monotonic() + 60
+    while marker not in (text := screen_text(app)):
+        assert time.monotonic() < deadline, f"{what}: {marker!r} not shown in 60 s:\n{text}"
+        await pilot.pause(0.05)
+    return text
+
+
+async def _drive(source, keys_and_markers, size=(80, 24)) -> list[str]:
+    """Screens: the first one, then one after each (key, the text that shows it took effect)."""
     app = StatusApp(source, interval=0.5)
     shots: list[str] = []
     async with app.run_test(size=size) as pilot:
         deadline = time.monotonic() + 60
-        while app.refreshes == 0 or "q quit" not in screen_text(app):  # the first snapshot
-            assert time.monotonic() < deadline, "no snapshot in 60 s"  # (taken in a thread)
+        while app.refreshes == 0:  # the first snapshot (taken in a thread)
+            assert time.monotonic() < deadline, "no snapshot in 60 s"
             await pilot.pause(0.05)
-        shots.append(screen_text(app))
-        for key in keys_and_checks:
+        shots.append(await _shown(app, pilot, "q quit", "the first snapshot"))
+        for key, marker in keys_and_markers:
             await pilot.press(key)
             await pilot.pause()
-            shots.append(screen_text(app))
+            shots.append(await _shown(app, pilot, marker, f"after {key!r}"))
         await pilot.press("q")
     assert app.return_code == 0
     return shots
@@ -246,7 +257,8 @@ def test_app_at_80x24_switches_panels_and_quits(store: Filled) -> None:
     src = StoreSource(store.path)
     before = digest(store.path)
     try:
-        home, kits, gateway, back = asyncio.run(_drive(src, ["2", "3", "g"]))
+        steps = [("2", "SILENT"), ("3", "Service"), ("g", "Inside T  measured")]
+        home, kits, gateway, back = asyncio.run(_drive(src, steps))
     finally:
         src.close()
     assert digest(store.path) == before  # the screen never writes
@@ -267,7 +279,7 @@ def test_app_on_an_empty_store_and_with_the_link_down(store: Filled, tmp_path: P
     Store(tmp_path / "empty.db").close()
     src = StoreSource(tmp_path / "empty.db")
     try:
-        (home, gw) = asyncio.run(_drive(src, ["w"]))
+        (home, gw) = asyncio.run(_drive(src, [("w", "unknown: no status from a gateway")]))
     finally:
         src.close()
     assert "No greenhouse in this store yet." in home
@@ -275,7 +287,7 @@ def test_app_on_an_empty_store_and_with_the_link_down(store: Filled, tmp_path: P
     fresh_status(store, peers=0, waiting=("serra/f1/north/forecast",))
     src = StoreSource(store.path)
     try:
-        (_, gw) = asyncio.run(_drive(src, ["3"]))
+        (_, gw) = asyncio.run(_drive(src, [("3", "DOWN: no peer or router connected")]))
     finally:
         src.close()
     assert "DOWN: no peer or router connected" in gw
@@ -293,7 +305,7 @@ def test_app_keeps_the_last_snapshot_when_a_refresh_fails(store: Filled) -> None
 
     src = Flaky(store.path)
     try:
-        (_, again) = asyncio.run(_drive(src, ["r"]))
+        (_, again) = asyncio.run(_drive(src, [("r", "refresh failed")]))
     finally:
         src.close()
     assert "refresh failed (showing the last snapshot): OperationalError: disk I/O" in again

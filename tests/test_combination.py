@@ -74,3 +74,26 @@ def test_the_live_combiner_step_by_step_gives_the_series_weights_and_resumes():
         live.step(measured[t], {H: {"a": f["a"][t], "b": f["b"][t]}})
         w = live.weights(H)
         assert abs(w["a"] - whole["a"][t]) < 1e-12, t
+
+
+def test_a_diverging_part_is_left_out_and_scored_at_the_range_edge() -> None:
+    """A linear baseline that diverges (as the RLS ARX did on 1-minute data that barely excite
+    it) must not drag the combination with it: a tiny weight times 1e50 is still 1e50."""
+    from gateway.estimate.combination import LiveCombiner, combine, mix
+
+    n, h = 400, 3
+    measured = 20.0 + np.sin(np.arange(n) / 20.0)
+    good = np.roll(measured, -h) + 0.1
+    bad = good.copy()
+    bad[200:] = 1e50 * np.arange(1, n - 199)  # explodes half-way
+    mixed = combine({"good": good, "bad": bad}, measured, h, 100)
+    assert np.all(np.abs(mixed[200:n - h] - good[200:n - h]) < 1e-9)
+    live = LiveCombiner(["good", "bad"], [h], 100)
+    out = []
+    for t in range(n):
+        live.observe(measured[t])
+        w = live.weights(h)
+        out.append(mix({"good": good[t], "bad": bad[t]}, w))
+        live.add({h: {"good": good[t], "bad": bad[t]}})
+    np.testing.assert_allclose(out[210:n - h], good[210:n - h], atol=1e-9)
+    assert max(live.errors[h]["bad"]) <= (80.0 - 19.0) ** 2  # scored at the range's edge

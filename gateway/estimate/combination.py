@@ -25,6 +25,37 @@ import numpy as np
 
 WINDOW_S = 86400.0
 """[s] the trailing window of matured forecast errors (one day)."""
+PLAUSIBLE_C = (-50.0, 80.0)
+"""[°C] the range a greenhouse air temperature forecast can take. A part whose forecast leaves
+it (a linear baseline diverging on data that do not excite it) is left out of that start's
+combination, and its errors are scored as if it had forecast the range's edge: a tiny weight
+times an exploded forecast is still an exploded forecast."""
+
+
+def implausible(f: np.ndarray) -> np.ndarray:
+    """True where a forecast is a number outside ``PLAUSIBLE_C`` (±inf included; NaN is not:
+    a missing forecast stays missing)."""
+    f = np.asarray(f, dtype=float)
+    lo, hi = PLAUSIBLE_C
+    with np.errstate(invalid="ignore"):
+        return ~np.isnan(f) & ~((f >= lo) & (f <= hi))
+
+
+def scored(f: np.ndarray | float) -> np.ndarray:
+    """The forecast as its error is scored: clipped to ``PLAUSIBLE_C`` (NaN stays NaN)."""
+    return np.clip(np.asarray(f, dtype=float), *PLAUSIBLE_C)
+
+
+def mix(forecasts: Mapping[str, float], w: Mapping[str, float]) -> float:
+    """Σ w_i f_i over the plausible parts, the weights renormalised over them; NaN when a part is
+    missing (NaN) or none is plausible."""
+    if any(math.isnan(f) for f in forecasts.values()):
+        return math.nan
+    ok = {n: f for n, f in forecasts.items() if not implausible(f)}
+    total = sum(w[n] for n in ok)
+    if not ok or total <= 0.0:
+        return math.nan if not ok else float(np.mean(list(ok.values())))
+    return sum(w[n] * f for n, f in ok.items()) / total
 
 
 def trailing_mean(values: np.ndarray, window: int) -> np.ndarray:
@@ -51,7 +82,7 @@ def weights(forecasts: Mapping[str, np.ndarray], measured: np.ndarray, horizon: 
     inv = {}
     for name, f in forecasts.items():
         mse = np.full(n, np.nan)
-        mse[horizon:] = trailing_mean((np.asarray(f, dtype=float) - target) ** 2, window)[: n - horizon]
+        mse[horizon:] = trailing_mean((scored(f) - target) ** 2, window)[: n - horizon]
         inv[name] = 1.0 / np.maximum(mse, 1e-12)
     total = sum(inv.values())
     names = list(forecasts)
@@ -65,9 +96,20 @@ def weights(forecasts: Mapping[str, np.ndarray], measured: np.ndarray, horizon: 
 
 def combine(forecasts: Mapping[str, np.ndarray], measured: np.ndarray, horizon: int,
             window: int) -> np.ndarray:
-    """The combined forecast (T,): Σ_i w_i f_i (NaN where a forecast is NaN)."""
+    """The combined forecast (T,): Σ_i w_i f_i over the plausible parts, weights renormalised
+    over them (NaN where a forecast is NaN or none is plausible; as ``mix``)."""
     w = weights(forecasts, measured, horizon, window)
-    return sum(w[name] * np.asarray(f, dtype=float) for name, f in forecasts.items())
+    f = np.array([np.asarray(v, dtype=float) for v in forecasts.values()])
+    ww = np.array([w[name] for name in forecasts])
+    ok = ~implausible(f)
+    wm = np.where(ok, ww, 0.0)
+    total = wm.sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mixed = np.where(ok, f, 0.0)
+        out = np.where(total > 0.0, (wm * mixed).sum(axis=0) / np.where(total > 0.0, total, 1.0),
+                       np.where(ok.any(axis=0), mixed.sum(axis=0) / np.maximum(ok.sum(axis=0), 1),
+                                np.nan))
+    return np.where(np.isnan(f).any(axis=0), np.nan, out)
 
 
 class LiveCombiner:
@@ -99,7 +141,7 @@ class LiveCombiner:
                 old = queue.popleft()
                 for n in self.names:
                     f = math.nan if old is None else old.get(n, math.nan)
-                    self.errors[h][n].append((f - reading) ** 2)
+                    self.errors[h][n].append((float(scored(f)) - reading) ** 2)
 
     def add(self, made: Mapping[int, Mapping[str, float]] | None) -> None:
         """The forecasts made now, {horizon: {name: forecast}} (None when none were made)."""

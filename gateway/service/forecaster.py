@@ -89,9 +89,9 @@ class LiveForecaster:
                 lin = arx_baseline.ArxResult(self.arx.theta[None, :], np.zeros(0), self.arx.updates)
                 arx = float(lin.forecast(x, rows, h)[0])
                 made[h] = {"adaptive_kf": kf, "arx": arx}
-                w = self.comb.weights(h)
-                if math.isfinite(kf) and math.isfinite(arx):
-                    out[h] = w["adaptive_kf"] * kf + w["arx"] * arx
+                mixed = combination.mix({"adaptive_kf": kf, "arx": arx}, self.comb.weights(h))
+                if math.isfinite(mixed):
+                    out[h] = mixed
         if self.comb is not None and not self._added:
             self.comb.add(made)
             self._added = True

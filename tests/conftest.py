@@ -2,12 +2,28 @@
 
 from __future__ import annotations
 
+import signal
+import threading
+
 import numpy as np
 import pytest
 
 from gateway.greenhouse import load_greenhouse
 from gateway.series import Series
 from training.weather import load_bleiswijk, to_minutes
+
+
+def _terminate_as_interrupt(signum: int, frame: object) -> None:
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # a second SIGTERM ends pytest at once
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    # By default a SIGTERM (a CI timeout, a killed job) ends pytest on the spot, and the routers,
+    # gateways and kits that tests start in sessions of their own outlive it. As an interrupt it
+    # unwinds the tests' with-blocks and fixture teardowns, which stop them.
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _terminate_as_interrupt)
 
 
 @pytest.fixture(scope="session")

@@ -7,10 +7,11 @@ Unknown keys and impossible values are errors that name the key.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from gateway.tomlfile import read_toml
 
 PRESET_DIR = Path(__file__).parent / "presets"
 
@@ -126,11 +127,7 @@ def load_greenhouse(spec: str | Path) -> Greenhouse:
         raise GreenhouseError(
             f"{spec}: no such file, and not a preset (presets: {', '.join(list_presets())})"
         )
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise GreenhouseError(f"{path}: invalid TOML: {exc}") from None
-    return parse_greenhouse(raw, str(path))
+    return parse_greenhouse(read_toml(path, GreenhouseError, "greenhouse file"), str(path))
 
 
 def parse_greenhouse(raw: dict[str, Any], source: str = "<memory>") -> Greenhouse:

@@ -18,7 +18,6 @@ The documented example is ``docs/examples/subscriber.toml``; every error names t
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -27,6 +26,7 @@ from gateway.net.acl import ALL, parse_access
 from gateway.net.certs import CertError, common_name, load_certificate
 from gateway.net.tomlcheck import ConfigError, Table
 from gateway.net.zenohcfg import Retry, TlsFiles, check_endpoint, parse_tls, session_entries
+from gateway.tomlfile import read_toml
 
 KEYS = ("mode", "connect", "listen", "keys", "farms", "access", "db", "dsn", "schema", "history",
         "retry_initial_ms", "retry_max_ms")
@@ -75,12 +75,7 @@ class SubscribeSettings:
 
 def load_settings(path: str | Path) -> SubscribeSettings:
     path = Path(path)
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read subscriber config: {exc.strerror}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: invalid TOML: {exc}") from None
+    raw = read_toml(path, ConfigError, "subscriber config")
     return parse_settings(raw, str(path), path.resolve().parent)
 
 
@@ -120,9 +115,9 @@ def farms_from_access(router_toml: Path, tls: TlsFiles | None) -> tuple[str, ...
                           "certificate's common name: give [tls] cert")
     try:
         name = common_name(load_certificate(tls.cert))
-        raw = tomllib.loads(router_toml.read_text(encoding="utf-8"))
-    except (OSError, tomllib.TOMLDecodeError, CertError) as exc:
-        raise ConfigError(f"{router_toml}: {exc}") from None
+    except (OSError, CertError) as exc:
+        raise ConfigError(f"{tls.cert}: {exc}") from None
+    raw = read_toml(router_toml, ConfigError, "router config")
     spec = parse_access(Table(raw, str(router_toml)).table("access"))
     if spec is None:
         raise ConfigError(f"{router_toml}: no [access] table")

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import math
-import tomllib
 from pathlib import Path
 
 import numpy as np
 
 from gateway.model.model import Model
+from gateway.tomlfile import read_toml
 
 
 class ParamsFileError(ValueError):
@@ -17,10 +17,7 @@ class ParamsFileError(ValueError):
 
 def read_params(path: str | Path, model: Model) -> np.ndarray:
     """The parameter vector of ``model``: its defaults with the file's ``[params]`` on top."""
-    try:
-        raw = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise ParamsFileError(f"{path}: cannot read parameters: {exc}") from None
+    raw = read_toml(path, ParamsFileError, "parameters file")
     params = raw.get("params")
     if not isinstance(params, dict):
         raise ParamsFileError(f"{path}: no [params] table")

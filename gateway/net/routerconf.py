@@ -5,7 +5,6 @@ The documented example is ``images/gateway/router.toml``; docs/fleet.md explains
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -21,6 +20,7 @@ from gateway.net.zenohcfg import (
     parse_tls,
     tls_entries,
 )
+from gateway.tomlfile import read_toml
 
 LOG_LEVELS = ("error", "warn", "info", "debug", "trace")
 ACL_LOG_TARGET = "zenoh::net::routing::interceptor::access_control"
@@ -64,12 +64,7 @@ class RouterSettings:
 
 def load_router_config(path: str | Path) -> RouterSettings:
     path = Path(path)
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read router config: {exc.strerror}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: invalid TOML: {exc}") from None
+    raw = read_toml(path, ConfigError, "router config")
     return parse_router_config(raw, str(path), path.resolve().parent)
 
 

@@ -9,23 +9,20 @@ from __future__ import annotations
 
 import math
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from gateway.ingest.service import DEFAULT_PORT
+from gateway.net.tomlcheck import ConfigError
 from gateway.net.zenohcfg import Retry, TlsFiles
+from gateway.tomlfile import read_toml
 
 NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,62}$")
 """Farm and greenhouse names: one Zenoh key chunk (no /, *, $, ?, #, @), at most 63 characters."""
 RESERVED = {"unassigned", "history"}
 """Greenhouse names the key space uses itself."""
 _REQUIRED = object()
-
-
-class ConfigError(ValueError):
-    """A config that cannot be used; the message names the file and the key."""
 
 
 @dataclass(frozen=True)
@@ -208,14 +205,7 @@ def _time(t: _Table, key: str) -> float | None:
 def load_config(path: str | Path) -> GatewayConfig:
     """Read and validate ``path``; raises :class:`ConfigError` naming the key."""
     path = Path(path)
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as e:
-        raise ConfigError(f"{path}: cannot read: {e.strerror or e}") from None
-    except UnicodeDecodeError as e:
-        raise ConfigError(f"{path}: not UTF-8 text ({e.reason} at byte {e.start})") from None
-    except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"{path}: invalid TOML: {e}") from None
+    raw = read_toml(path, ConfigError, "gateway config")
     return parse_config(raw, str(path), path.resolve().parent)
 
 
@@ -308,7 +298,6 @@ def _tls(z: _Table, base: Path, farm: str) -> TlsFiles | None:
     """``[zenoh.tls]`` (gateway.net.zenohcfg.parse_tls): files checked, key mode 0600, and the
     certificate's common name must be the farm (the routers' access control keys on it)."""
     from gateway.net.certs import CertError, common_name, load_certificate
-    from gateway.net.tomlcheck import ConfigError as TableError
     from gateway.net.tomlcheck import Table
     from gateway.net.zenohcfg import parse_tls
 
@@ -316,7 +305,7 @@ def _tls(z: _Table, base: Path, farm: str) -> TlsFiles | None:
     try:
         tls = parse_tls(Table(raw, z.source, z.where("tls")), base)
         cn = common_name(load_certificate(tls.cert)) if tls is not None and tls.cert else None
-    except (TableError, CertError) as e:
+    except CertError as e:
         raise ConfigError(str(e)) from None
     if cn is not None and cn != farm:
         z.fail("tls.cert", f"{tls.cert} is for {cn!r}, not this gateway's farm {farm!r}: the "

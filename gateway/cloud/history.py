@@ -47,10 +47,7 @@ class CloudHistory:
 
     def _on_query(self, query: zenoh.Query, farm: str) -> None:
         with query:
-            try:
-                rng = K.parse_range(lambda name: query.parameters.get(name))
-            except K.SelectorError as e:
-                query.reply_err(str(e))
+            if (rng := K.query_range(query)) is None:
                 return
             f = history_filter(str(query.key_expr))
             if f.farm not in (None, farm):

@@ -57,10 +57,7 @@ class HistoryQueryable:
 
     def _on_query(self, query: zenoh.Query) -> None:
         with query:
-            try:
-                rng = K.parse_range(lambda name: query.parameters.get(name))
-            except K.SelectorError as e:
-                query.reply_err(str(e))
+            if (rng := K.query_range(query)) is None:
                 return
             asked = query.key_expr
             try:

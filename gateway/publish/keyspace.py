@@ -90,3 +90,13 @@ def parse_range(get) -> HistoryRange:
             raise SelectorError(f"last={text!r}: expected a whole number in 1..{MAX_LIMIT}")
         last = int(text)
     return HistoryRange(start, end, limit, last)
+
+
+def query_range(query) -> HistoryRange | None:
+    """The range a Zenoh history query asks for; ``None`` once the query has been answered with
+    the error (a bad selector parameter names itself)."""
+    try:
+        return parse_range(lambda name: query.parameters.get(name))
+    except SelectorError as e:
+        query.reply_err(str(e))
+        return None

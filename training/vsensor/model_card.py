@@ -14,7 +14,7 @@ def _m(m: dict) -> str:
 
 
 def model_card(out: Path, meta: dict, metrics: dict, t18: dict, circle: dict, names: list[str],
-               nets: dict, rep_dir: Path, _pkg: str) -> str:
+               nets: dict, rep_dir: Path, _pkg: str, heldout: str | None = None) -> str:
     """The Markdown text of the card."""
     pca = meta["pca"]
     gh = meta["greenhouse"]
@@ -63,10 +63,27 @@ def model_card(out: Path, meta: dict, metrics: dict, t18: dict, circle: dict, na
     ]
     for name, m in metrics.items():
         lines.append(f"| {name} | {_m(m)} |")
+    st = meta["training_settings"]
     lines += [
         "",
-        "Figures on a site and season training never saw are in the README and docs/vsensor.md.",
+        f"Settings: hidden {'-'.join(map(str, st['hidden']))}, PCA to "
+        f"{100 * st.get('pca_variance', 0.9):g} % of the variance, at most {st['epochs']} "
+        f"series-parallel epochs, {st['rounds']} closed-loop rounds"
+        + (f" (Adam step {st['round_lr']:g})" if st.get("round_lr") else "") + ".",
         "",
+    ]
+    if heldout:
+        lines += [
+            "## Held-out files (`train --test`: closed loop through `VentSensor`, first hour left out)",
+            "",
+            "Scored after the fit against the explicit flow; never used to choose a setting.",
+            "",
+            heldout,
+        ]
+    else:
+        lines += ["Figures on a site and season training never saw are in the README and "
+                  "docs/vsensor.md.", ""]
+    lines += [
         "## Training data",
         "",
         f"Greenhouse signature (another house is flagged, not trusted): {gh['signature']}.",

@@ -148,6 +148,8 @@ def test_exported_graph_has_pca_and_metadata():
     assert pca["variance_total"] >= 0.90 and pca["components"] < len(feature_names("almeria"))
     card = path.with_suffix(".md").read_text()
     assert "correlation_circle.png" in card and "| Q_vent [W m-2] | calm |" in card
+    assert "Trained with: `python -m training.vsensor train --data train-grower.csv train-controller." in card
+    assert "--set t_in.iterations=2" in card and "--pca-variance 0.9 --out tiny.onnx`" in card
     report = path.with_name("tiny.report")
     assert (report / "correlation_circle.png").stat().st_size > 10_000
 

@@ -165,5 +165,6 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
     seconds["total"] = time.perf_counter() - t0
     card = out.with_suffix(".md")
     card.write_text(model_card(out, base_meta, metrics, t18, circle, names, nets, rep_dir, gateway.__name__,
-                               heldout.table(held) if held else None), encoding="utf-8")
+                               heldout.table(held) if held else None,
+                               tuple(Path(p).name for p in test_paths or ())), encoding="utf-8")
     return TrainResult(written, card, metrics, pca_info, seconds, held)

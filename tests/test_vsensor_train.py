@@ -79,6 +79,52 @@ def test_dataset_refuses_a_file_without_vents(tmp_path):
         build_segment(path, gh, "almeria", None, vd.TINY)
 
 
+def test_reference_study_describes_the_training_target_beside_the_truth():
+    from training.vsensor.reference import describe, study
+
+    gh = load_greenhouse(vd.GREENHOUSE)
+    path = vd.train_files()[0]
+    seg = build_segment(path, gh, "almeria", vd.workdir() / "cache", vd.TINY)
+    s = study(path, gh, "almeria", vd.TINY, above=0.0)
+    flow = seg.flow[60:]
+    # the very target the dataset holds (same replay, same seed)
+    assert s.minutes == flow.size and s.explicit["max"] == pytest.approx(np.max(flow))
+    assert s.explicit["mean"] == pytest.approx(np.mean(flow))
+    assert s.truth is not None and s.truth["max"] > 0 and -1 <= s.r_truth <= 1  # the simulator's file
+    assert s.peaks.minutes == s.minutes and s.peaks.truth_mean == pytest.approx(s.truth["mean"])
+    assert 0.05 <= s.peaks.c_ven_d <= 1.0 and s.peaks.hours  # bounds of c_ven_d
+    high = study(path, gh, "almeria", vd.TINY, above=1e6)
+    assert high.peaks.minutes == 0 and high.peaks.truth_mean is None
+    assert "peaks above" in describe(s) and "true flow" in describe(s)
+
+
+def test_pca_variance_is_refused_below_the_issues_floor(tmp_path):
+    from training.vsensor.train import train
+
+    with pytest.raises(ValueError, match="pca_variance 0.8"):
+        train([str(p) for p in vd.train_files()], load_greenhouse(vd.GREENHOUSE), "almeria",
+              tmp_path / "m.onnx", vd.workdir() / "cache", vd.TINY, pca_variance=0.8)
+
+
+def test_held_out_score_is_what_the_gateway_cli_reports():
+    """``train --test`` scores from the cached replays exactly as ``python -m gateway vsensor``."""
+    from gateway.series import load_series
+    from gateway.vsensor.batch import baseline_paths, run_series, score
+    from training.vsensor.heldout import score_segment, table
+
+    gh = load_greenhouse(vd.GREENHOUSE)
+    model = vd.tiny_model()
+    seg = build_segment(vd.test_file(), gh, "almeria", vd.workdir() / "cache", vd.TINY)
+    ours = score_segment(seg, {"pca_narx": model, **baseline_paths(model)}, gh, "almeria")
+    cli = score(run_series(model, load_series(str(vd.test_file()), step=60.0), gh, "almeria"))
+    assert set(ours) == set(cli) == {"pca_narx", "narx_no_pca", "linear_arx"}
+    for name in cli:
+        assert ours[name]["flow"]["mae"] == pytest.approx(cli[name]["flow"]["mae"], rel=1e-9)
+        assert ours[name]["q_vent"]["rmse"] == pytest.approx(cli[name]["q_vent"]["rmse"], rel=1e-9)
+        assert ours[name]["out_of_range"] == cli[name]["out_of_range"]
+    assert "| test-grower, range" in table({"test-grower": ours})
+
+
 def test_training_is_seeded_and_byte_reproducible():
     a, b = vd.tiny_model("a"), vd.tiny_model("b")
     assert a.read_bytes() == b.read_bytes()
@@ -102,6 +148,8 @@ def test_exported_graph_has_pca_and_metadata():
     assert pca["variance_total"] >= 0.90 and pca["components"] < len(feature_names("almeria"))
     card = path.with_suffix(".md").read_text()
     assert "correlation_circle.png" in card and "| Q_vent [W m-2] | calm |" in card
+    assert "Trained with: `python -m training.vsensor train --data train-grower.csv train-controller." in card
+    assert "--set t_in.iterations=2" in card and "--pca-variance 0.9 --out tiny.onnx`" in card
     report = path.with_name("tiny.report")
     assert (report / "correlation_circle.png").stat().st_size > 10_000
 

@@ -4,6 +4,8 @@
 - ``dataset --data FILE... --greenhouse G --model KIND --cache DIR``: run the two replays of
   each file and cache their products (what ``train`` does first; run several in parallel).
 - ``train --data FILE... --greenhouse G --model KIND --out MODEL.onnx``: train and export.
+- ``reference --data FILE... --greenhouse G --model KIND``: the explicit flow (the target)
+  beside the simulator's truth, and what its peaks are made of (training/vsensor/reference.py).
 """
 
 from __future__ import annotations
@@ -50,6 +52,17 @@ def build_parser() -> argparse.ArgumentParser:
     from training.vsensor.train_cli import add_train_parser
 
     add_train_parser(sub, _data_args)
+    r = sub.add_parser("reference", help="the explicit (vent-based) flow beside the simulator's "
+                       "truth, and its peaks' conditions",
+                       description="Replay each file with the vent signal, keeping the estimator's "
+                       "parameters, and describe the explicit flow G (the training target): level "
+                       "and spread beside the true flow (<stem>.truth.npz of the simulator), and "
+                       "the wind, |T_in - T_out|, vents and vent coefficients at its peaks.")
+    _data_args(r)
+    r.add_argument("--above", type=float, default=30.0, metavar="M3_S",
+                   help="a peak is a minute with G above this [m3 s-1] (default 30)")
+    r.add_argument("--json", action="store_true", help="print the studies as JSON")
+    r.set_defaults(func=_reference)
     return parser
 
 
@@ -84,6 +97,21 @@ def _dataset(args: argparse.Namespace) -> int:
         t0 = time.perf_counter()
         seg = build_segment(path, gh, args.model, args.cache, overrides(args.set), args.seed)
         print(f"{path}: {len(seg.time)} rows in {time.perf_counter() - t0:.0f} s", flush=True)
+    return 0
+
+
+def _reference(args: argparse.Namespace) -> int:
+    import json
+
+    from training.vsensor.reference import as_dict, describe, study
+
+    gh = load_greenhouse(args.greenhouse)
+    studies = [study(p, gh, args.model, overrides(args.set) or None, args.seed, args.above)
+               for p in args.data]
+    if args.json:
+        print(json.dumps([as_dict(s) for s in studies], indent=1))
+    else:
+        print("\n".join(describe(s) for s in studies))
     return 0
 
 

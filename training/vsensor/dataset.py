@@ -15,7 +15,7 @@ from __future__ import annotations
 import hashlib
 import json
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +47,7 @@ class Segment:
     flow: np.ndarray  # (T,) target: the explicit ventilation flow G [m3 s-1]
     q_vent: np.ndarray  # (T,) its heat loss [W m-2] (III.32)
     x: dict[str, np.ndarray]  # KEEP drivers
+    fluxes: dict[str, np.ndarray] = field(default_factory=dict)  # no-vent replay's fluxes [W m-2]
 
 
 def file_sha256(path: str | Path) -> str:
@@ -119,6 +120,7 @@ def _segment(source: str, sha: str, a: dict[str, np.ndarray], gh: Greenhouse, ki
     return Segment(
         source=source, sha256=sha, time=a["time"].astype("datetime64[s]"), raw=raw,
         inputs=inputs, flow=flow, q_vent=heat_loss(flow, x["t_in"] - x["t_out"], gh), x=x,
+        fluxes=fluxes,
     )
 
 

@@ -13,8 +13,27 @@ def _m(m: dict) -> str:
     return f"{m['mae']:.3f} | {m['rmse']:.3f} | {m['maxae']:.2f} | {m['r2']:.3f} | {pct}"
 
 
+def train_command(out: Path, meta: dict, held_files: tuple[str, ...] = ()) -> str:
+    """The ``train`` command line that gives this model (file names only, from the metadata)."""
+    st = meta["training_settings"]
+    parts = ["python -m training.vsensor train --data", *(s["file"] for s in meta["sources"]),
+             "--greenhouse", meta["greenhouse"]["name"], "--model", meta["model_kind"]]
+    for group, items in sorted((meta["online_overrides"] or {}).items()):
+        parts += [f"--set {group}.{k}={v:g}" for k, v in sorted(items.items())]
+    if meta["seed"]:
+        parts.append(f"--seed {meta['seed']}")
+    parts += [f"--hidden {','.join(map(str, st['hidden']))}", f"--epochs {st['epochs']}",
+              f"--rounds {st['rounds']}", f"--pca-variance {st.get('pca_variance', 0.9):g}"]
+    if st.get("round_lr"):
+        parts.append(f"--round-lr {st['round_lr']:g}")
+    if held_files:
+        parts += ["--test", *held_files]
+    return " ".join([*parts, "--out", out.name])
+
+
 def model_card(out: Path, meta: dict, metrics: dict, t18: dict, circle: dict, names: list[str],
-               nets: dict, rep_dir: Path, _pkg: str) -> str:
+               nets: dict, rep_dir: Path, _pkg: str, heldout: str | None = None,
+               held_files: tuple[str, ...] = ()) -> str:
     """The Markdown text of the card."""
     pca = meta["pca"]
     gh = meta["greenhouse"]
@@ -63,10 +82,29 @@ def model_card(out: Path, meta: dict, metrics: dict, t18: dict, circle: dict, na
     ]
     for name, m in metrics.items():
         lines.append(f"| {name} | {_m(m)} |")
+    st = meta["training_settings"]
     lines += [
         "",
-        "Figures on a site and season training never saw are in the README and docs/vsensor.md.",
+        f"Settings: hidden {'-'.join(map(str, st['hidden']))}, PCA to "
+        f"{100 * st.get('pca_variance', 0.9):g} % of the variance, at most {st['epochs']} "
+        f"series-parallel epochs, {st['rounds']} closed-loop rounds"
+        + (f" (Adam step {st['round_lr']:g})" if st.get("round_lr") else "") + ".",
         "",
+    ]
+    lines += [f"Trained with: `{train_command(out, meta, held_files)}` (paths in docs/vsensor.md).", ""]
+    if heldout:
+        lines += [
+            "## Held-out files (`train --test`: closed loop through `VentSensor`, first hour left out)",
+            "",
+            "Scored after the fit against the explicit flow, the three networks in one run; never "
+            "used to choose a setting.",
+            "",
+            heldout,
+        ]
+    else:
+        lines += ["Figures on a site and season training never saw are in the README and "
+                  "docs/vsensor.md.", ""]
+    lines += [
         "## Training data",
         "",
         f"Greenhouse signature (another house is flagged, not trusted): {gh['signature']}.",

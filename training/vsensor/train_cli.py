@@ -26,6 +26,13 @@ def add_train_parser(sub: argparse._SubParsersAction, data_args) -> None:
     p.add_argument("--round-lr", type=float, default=None, metavar="LR",
                    help="Adam step size in the closed-loop rounds (default: the series-parallel "
                    "one, 1e-3)")
+    p.add_argument("--pca-variance", type=float, default=0.90, metavar="SHARE",
+                   help="keep the fewest principal components reaching this share of the "
+                   "variance (0.90 to 1; default 0.90)")
+    p.add_argument("--test", nargs="+", default=[], metavar="FILE",
+                   help="held-out kit CSVs scored after the fit (closed loop, the three models, as "
+                   "python -m gateway vsensor does) into the model card and the summary; never "
+                   "used by the fit")
     p.add_argument("--report", metavar="DIR",
                    help="where the report's PNGs go (default: MODEL.report/ beside the model)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -45,16 +52,19 @@ def run(args: argparse.Namespace) -> int:
         hidden = tuple(int(v) for v in args.hidden.split(","))
     except ValueError:
         raise ValueError(f"--hidden {args.hidden!r}: expected sizes like 30,50,20") from None
-    total = len(args.data) + 2 * (args.epochs + 30 * args.rounds)
+    total = len(args.data) + len(args.test) + 2 * (args.epochs + 30 * args.rounds)
     t0 = time.perf_counter()
     with progress_bar("train", total, True) as bar, threadpool_limits(1):
         result = train(args.data, gh, args.model, args.out, args.cache, overrides(args.set) or None,
                        args.seed, hidden, args.epochs, args.rounds, progress=bar,
-                       report_dir=args.report, round_lr=args.round_lr)
+                       report_dir=args.report, round_lr=args.round_lr,
+                       pca_variance=args.pca_variance, test_paths=args.test)
     summary = {"models": {k: str(v) for k, v in result.paths.items()}, "card": str(result.card),
                "pca": {k: v for k, v in result.pca.items() if k != "all_shares"},
                "validation_closed_loop": result.metrics,
-               "seconds": {k: round(v, 1) for k, v in result.seconds.items()}}
+               "seconds": {k: round(v, 1) for k, v in result.seconds.items()},
+               "held_out": {f: {n: {k: s[k] for k in ("flow", "q_vent", "flow_error_pct", "out_of_range")}
+                                for n, s in per.items()} for f, per in result.heldout.items()}}
     if args.json:
         print(json.dumps(summary, indent=2))
     else:
@@ -65,4 +75,9 @@ def run(args: argparse.Namespace) -> int:
         for name, m in result.metrics.items():
             print(f"  {name:<12} closed-loop validation MAE {m['mae']:.3f} m3 s-1 "
                   f"({m['mae_pct_range']:.2f} % of range), R² {m['r2']:.3f}")
+        for file, per in result.heldout.items():
+            for name, s in per.items():
+                f = s["flow"]
+                print(f"  held out {file} {name:<12} MAE {f['mae']:.3f} m3 s-1 "
+                      f"({f['mae_pct_range']:.2f} % of range), R² {f['r2']:.3f}")
     return 0

@@ -32,6 +32,46 @@ def test_paired_p_has_its_nominal_size_under_the_null(phi):
     assert np.mean(p <= 0.5) == pytest.approx(0.5, abs=0.05)  # not degenerate either
 
 
+def _mean_only_p(d: np.ndarray) -> float:
+    """The test before issue 10's detrending: r about the mean, Kendall's (1 + 4r)/n."""
+    n = len(d)
+    z = d - d.mean()
+    r = float(z[1:] @ z[:-1]) / float(z @ z)
+    r = min(max(r + (1.0 + 4.0 * r) / n, 0.0), 0.9)
+    n_eff = n * (1.0 - r) / (1.0 + r)
+    return jd.student_t_sf(float(d.mean() / (np.std(d, ddof=1) / np.sqrt(n_eff))),
+                           max(n_eff - 1.0, 1.0))
+
+
+@pytest.mark.parametrize(("n", "phi"), [(16, 0.5), (16, 0.8), (20, 0.8)])
+def test_detrended_autocorrelation_is_no_less_conservative(n, phi):
+    """From ``DETREND_MIN_PIECES`` pieces r is read about a line in time: on null differences
+    its size is not above the mean-only estimate's (same draws; 0.5 % of slack for the draws)."""
+    assert n >= jd.DETREND_MIN_PIECES
+    rng = np.random.default_rng(7)
+    draws = [_ar1(rng, n, phi) for _ in range(2000)]
+    new = np.mean([jd.paired_p(d) <= 0.05 for d in draws])
+    old = np.mean([_mean_only_p(d) <= 0.05 for d in draws])
+    assert new <= old + 0.005, (new, old)
+    assert new <= 0.08, new
+
+
+def test_a_gain_growing_in_time_is_significant():
+    """A drift's gain grows over the held-out week: every piece better, more and more. Read as
+    autocorrelation the trend made it insignificant; about a line it is not."""
+    rng = np.random.default_rng(8)
+    draws = [0.1 + 0.05 * np.arange(28) + 0.3 * _ar1(rng, 28, 0.5) for _ in range(400)]
+    new = np.mean([jd.paired_p(d) <= 0.05 for d in draws])
+    old = np.mean([_mean_only_p(d) <= 0.05 for d in draws])
+    assert new >= 0.75 and old <= 0.5, (new, old)
+
+
+def test_few_pieces_keep_the_mean_only_estimate():
+    rng = np.random.default_rng(9)
+    d = 0.3 + _ar1(rng, jd.DETREND_MIN_PIECES - 1, 0.5)
+    assert jd.paired_p(d) == pytest.approx(_mean_only_p(d))
+
+
 def test_student_t_tail_matches_published_quantiles():
     # one-sided critical values of Student's t (any table): df 6 → 1.943 (5 %), 3.143 (1 %),
     # 3.707 (0.5 %); df 1 → 6.314 (5 %); df 30 → 1.697 (5 %)

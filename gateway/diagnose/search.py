@@ -39,6 +39,8 @@ FIT_STEP_S = 300.0
 MAX_EFFECTS = 3
 TRIES_PER_ROUND = 3
 REFIT_LM_ITERATIONS = 12
+TAU_ROUNDS = 2
+"""Alternations of τ scan and joint refit in ``_fit_effect``."""
 COARSE_TAU_S = 3 * 3600.0
 """Spacing of the coarse grid of candidate start times [s]; refined to COARSE/36 around the best."""
 
@@ -256,18 +258,33 @@ def _refit(ctx: _Context, model: Model, theta: np.ndarray, segments) -> np.ndarr
 def _fit_effect(ctx: _Context, new_model, old_model, theta_old, e: Effect, segments, seed,
                 latest: bool = True):
     """τ scan (``_scan``) then a joint refit (base parameters + amplitude, τ held) on
-    ``segments``."""
+    ``segments``, alternated ``TAU_ROUNDS`` times while the SSE falls.
+
+    The base was calibrated on data that may hold the start of the change (the calibration
+    part ends after it): with those parameters held, the first scan sees the change's first
+    hours already fitted by the base and puts τ late (at the next piece of data the base cannot
+    carry, typically the next morning). Refitted with the effect from that τ, the base is freed
+    of the change and a second scan finds where it really starts (coordinate descent on τ and
+    the other parameters; kept only when it lowers the SSE)."""
     th = carry(theta_old, old_model, new_model, ctx.gh)
     shoot = ctx.shooting(new_model, segments)
     sse_old, npair = shoot.sse(th[None, :])
-    sc = _scan(shoot, th, e, ctx.last, segments, latest)
-    th[new_model.index(e.tau_name)] = sc.taus[sc.best]
-    th[new_model.index(e.amp_name)] = sc.amps[sc.best]
     lo, hi = new_model.bounds(ctx.gh)
     free = free_parameters(new_model)
     if e.evidence.fits_start(new_model, ctx.x):
         free = [j for j in free if new_model.names[j] != e.amp_name]  # fixed by the 2nd output
-    th = fit_lm(shoot, th, free, lo, hi, REFIT_LM_ITERATIONS)
-    sse_new, _ = shoot.sse(th[None, :])
-    dbic = delta_bic(float(sse_new[0]), float(sse_old[0]), effective_samples(npair, ctx.dt), 2)
-    return th, dbic + _evidence(e, new_model, ctx.x, th, segments, sc)
+    ja, jt = new_model.index(e.amp_name), new_model.index(e.tau_name)
+    best, best_sse, sc_best = None, np.inf, None
+    for _ in range(TAU_ROUNDS):
+        sc = _scan(shoot, th, e, ctx.last, segments, latest)
+        trial = th.copy()
+        trial[jt], trial[ja] = sc.taus[sc.best], sc.amps[sc.best]
+        trial = fit_lm(shoot, trial, free, lo, hi, REFIT_LM_ITERATIONS)
+        sse = float(shoot.sse(trial[None, :])[0][0])
+        if best is not None and not sse < best_sse:
+            break
+        best, best_sse, sc_best = trial, sse, sc
+        th = trial.copy()
+        th[ja] = e.neutral  # the next scan starts from the refitted base without the effect
+    dbic = delta_bic(best_sse, float(sse_old[0]), effective_samples(npair, ctx.dt), 2)
+    return best, dbic + _evidence(e, new_model, ctx.x, best, segments, sc_best)

@@ -76,9 +76,24 @@ def test_twice_the_same_greenhouse_and_no_location(tmp_path: Path) -> None:
     own.write_text("[geometry]\nfloor_area = 1.0\nvolume = 1.0\n")
     with pytest.raises(ConfigError, match=r"greenhouse\[1\].greenhouse: .* no \[site\]"):
         parse_config(with_("greenhouse.0.greenhouse", str(own)), "gw.toml")
-    cfg = parse_config(with_("location", {"latitude": 52.0, "longitude": 4.5},
-                             with_("greenhouse.0.greenhouse", str(own))), "gw.toml")
+    located = with_("location", {"latitude": 52.0, "longitude": 4.5},
+                    with_("greenhouse.0.greenhouse", str(own)))
+    cfg = parse_config(located, "gw.toml")
     assert (cfg.greenhouses[0].latitude, cfg.greenhouses[0].longitude) == (52.0, 4.5)
+    # no [site]: the clear sky cannot be placed, so the default outlook holds the latest values
+    assert cfg.greenhouses[0].outlook == "hold-latest"
+    with pytest.raises(ConfigError, match=r"greenhouse\[1\].outlook: clear-sky-trend needs"):
+        parse_config(with_("greenhouse.0.outlook", "clear-sky-trend", located), "gw.toml")
+
+
+def test_the_default_outlook_is_the_clear_sky_one_and_can_be_named(tmp_path: Path) -> None:
+    """A greenhouse with a [site] forecasts with clear-sky-trend unless the config names
+    another outlook ([estimator] for all, or per greenhouse)."""
+    assert parse_config(GOOD, "gw.toml").greenhouses[0].outlook == "clear-sky-trend"
+    held = parse_config(with_("estimator.outlook", "hold-latest"), "gw.toml")
+    assert held.greenhouses[0].outlook == "hold-latest"
+    own = parse_config(with_("greenhouse.0.outlook", "hold-latest"), "gw.toml")
+    assert own.greenhouses[0].outlook == "hold-latest"
 
 
 def test_what_the_config_names_is_checked_before_start(tmp_path: Path) -> None:

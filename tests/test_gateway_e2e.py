@@ -93,7 +93,7 @@ def test_kit_to_gateway_to_cloud(tmp_path: Path) -> None:
         for doc in docs[:: max(1, len(docs) // 15)]:
             assert validate.errors(doc) == [], kind
     fc = by_kind["forecast"][-1]
-    assert fc["outlook"]["value"] == "hold-latest"
+    assert fc["outlook"]["value"] == "clear-sky-trend"  # the default for a greenhouse with a [site]
     assert [f["horizon"]["value"] for f in fc["airTemperatureForecast"]] == [15, 30, 60]
     # the kit CSV rebuilt from the cloud's copy equals the gateway's own export, minute by minute
     export_kit_csv(cloud, "f1", "north", tmp_path / "cloud.csv")

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from gateway.estimate.clear_sky_trend import ClearSkyTrend, trailing_line
-from gateway.estimate.outlook import OUTLOOKS, HoldLatest, forecast_drivers, make_outlook
+from gateway.estimate.outlook import OUTLOOKS, HoldLatest, default_outlook, forecast_drivers, make_outlook
 from gateway.greenhouse import Site, parse_greenhouse
 from gateway.model.psychrometrics import saturation_vapour_pressure
 from gateway.model.solar import clear_sky_global, solar_position
@@ -134,6 +134,8 @@ def test_protocol_call_registry_and_generic_batch_path():
     no_site = parse_greenhouse({"geometry": {"floor_area": 1.0, "volume": 1.0}})
     with pytest.raises(ValueError, match=r"needs \[site\]"):
         make_outlook("clear-sky-trend", no_site)
+    # the default of replay and of the live gateway: the clear sky where the sun can be placed
+    assert default_outlook(gh) == "clear-sky-trend" and default_outlook(no_site) == "hold-latest"
 
     class Plain:  # an Outlook with only the protocol's single-start call
         name = "plain"

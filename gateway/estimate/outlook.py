@@ -74,6 +74,14 @@ OUTLOOKS: dict[str, Callable[[Greenhouse], Outlook]] = {
 (``clear-sky-trend`` needs its ``[site]``)."""
 
 
+def default_outlook(gh: Greenhouse) -> str:
+    """The outlook used when none is named: ``clear-sky-trend`` for a greenhouse with a
+    ``[site]`` (it needs the sun's position), else ``hold-latest``. Side by side on the same
+    replays it is better at 60 min and level at 30 (docs/online-estimator.md, "Which outlook
+    live")."""
+    return "clear-sky-trend" if gh.site is not None else "hold-latest"
+
+
 def make_outlook(name: str, gh: Greenhouse) -> Outlook:
     """The outlook called ``name`` for greenhouse ``gh``; a clear error for an unknown name."""
     if name not in OUTLOOKS:

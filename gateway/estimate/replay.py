@@ -34,7 +34,7 @@ from gateway.estimate import arx as arx_baseline
 from gateway.estimate import combination, disturbance
 from gateway.estimate.horizon import HorizonDrivers, outlook_drivers
 from gateway.estimate.online import Counters, GroupSettings, OnlineEstimator
-from gateway.estimate.outlook import Outlook, make_outlook
+from gateway.estimate.outlook import Outlook, default_outlook, make_outlook
 from gateway.greenhouse import Greenhouse
 from gateway.metrics import metrics
 from gateway.model.model import Model
@@ -130,7 +130,7 @@ def replay(
     reach = steps_of(horizons, series.step)
     if reach:
         if outlook is None:
-            outlook = make_outlook("clear-sky-trend" if gh.site is not None else "hold-latest", gh)
+            outlook = make_outlook(default_outlook(gh), gh)
         result.ahead = outlook_drivers(outlook, x, list(series.columns), series.time, series.step,
                                        gh, np.arange(max(n - 1, 0)), max(reach.values()))
     score_forecasts(result, reach)

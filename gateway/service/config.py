@@ -51,7 +51,7 @@ class GreenhouseSettings:
     inside: int  # device id carrying t_in, rh_in
     outside: int  # device id carrying t_out, rh_out, i_glob, wind, rain
     params: Path | None = None  # calibrated parameters (calibrate --out)
-    outlook: str = "hold-latest"
+    outlook: str = "hold-latest"  # from a config file: outlook.default_outlook unless named
     vsensor: Path | None = None  # ONNX model of the virtual ventilation sensor (issue 11)
     latitude: float | None = None  # from the greenhouse's [site], else [location]
     longitude: float | None = None
@@ -249,7 +249,7 @@ def parse_config(raw: dict[str, Any], source: str = "<config>", base: Path = Pat
     if not isinstance(items, list) or not items:
         top.fail("greenhouse", "at least one [[greenhouse]] table is required")
     ghs = tuple(_greenhouse(_Table(source, f"greenhouse[{i + 1}]", item), base, lat, lon,
-                            est_outlook=top.raw.get("estimator", {}).get("outlook", "hold-latest"))
+                            est_outlook=top.raw.get("estimator", {}).get("outlook"))
                 for i, item in enumerate(items))
     names = [x.name for x in ghs]
     for i, n in enumerate(names):
@@ -321,7 +321,7 @@ def _estimator(e: _Table) -> EstimatorSettings:
     if not horizons or not all(isinstance(h, int) and not isinstance(h, bool) and 1 <= h <= 1440
                                for h in horizons):
         e.fail("horizons_min", f"must be whole minutes in 1..1440, got {horizons!r}")
-    e.get("outlook", str, "hold-latest")  # checked per greenhouse
+    e.get("outlook", str, None)  # checked per greenhouse (default: outlook.default_outlook)
     s = EstimatorSettings(
         horizons_min=tuple(sorted(set(horizons))),
         seed=e.get("seed", int, 0, lo=0),
@@ -359,8 +359,8 @@ def _clock(c: _Table) -> ClockSettings:
 
 
 def _greenhouse(t: _Table, base: Path, lat: float | None, lon: float | None,
-                est_outlook: str) -> GreenhouseSettings:
-    from gateway.estimate.outlook import OUTLOOKS
+                est_outlook: str | None) -> GreenhouseSettings:
+    from gateway.estimate.outlook import OUTLOOKS, default_outlook
     from gateway.greenhouse import GreenhouseError, load_greenhouse
     from gateway.model import MODEL_NAMES
 
@@ -379,9 +379,12 @@ def _greenhouse(t: _Table, base: Path, lat: float | None, lon: float | None,
     outside = t.get("outside", int, inside, lo=0, hi=0xFFFFFFFF)
     params = t.get("params", str, None)
     vsensor = t.get("vsensor", str, None)
-    outlook = t.get("outlook", str, est_outlook)
+    outlook = t.get("outlook", str, est_outlook or default_outlook(gh))
     if outlook not in OUTLOOKS:
         t.fail("outlook", f"unknown weather outlook {outlook!r} (known: {', '.join(sorted(OUTLOOKS))})")
+    if outlook == "clear-sky-trend" and gh.site is None:
+        t.fail("outlook", f"clear-sky-trend needs the sun's position: {gh.source} has no [site] "
+                          "(add latitude and longitude there, or choose hold-latest)")
     t.done()
     site = gh.site
     g_lat = site.latitude if site else lat

@@ -2,7 +2,7 @@
 fluxes, (virtual ventilation sensor) → estimate rows, saved with the estimator's state.
 
 Forecasts are causal: over the horizon the outside drivers come from the greenhouse's weather
-outlook (gateway/estimate/outlook.py, ``hold-latest`` unless the config names another), which
+outlook (gateway/estimate/outlook.py, the config's; ``default_outlook`` unless it names another), which
 sees only what was measured up to now; each forecast row names the outlook. The forecast is
 replay's ``combined`` by default (gateway/service/forecaster.py: the model from its disturbance
 filter's state, combined with the RLS ARX by recent skill); ``forecast="adaptive_kf"`` or

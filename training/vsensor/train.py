@@ -67,6 +67,12 @@ def validation_metrics(net: Narx, split: fit.Split) -> tuple[dict, list[np.ndarr
          "maxae": float(np.max(np.abs(e))), "r2": float(r * r), "n": int(ok.sum()),
          "range": [float(ref[ok].min()), float(ref[ok].max())],
          "mae_pct_range": 100.0 * float(np.mean(np.abs(e))) / span if span > 0 else None}
+    by_file = {}
+    for s, y, c in zip(split.segments, sims, split.cut, strict=True):
+        ef = np.abs(y[c:] - s.flow[c:])
+        ef = ef[np.isfinite(ef)]
+        by_file[Path(s.source).stem] = {"mae": float(ef.mean()) if ef.size else None, "n": int(ef.size)}
+    m["by_file"] = by_file  # the grower's and the controller's files apart
     return m, sims
 
 

@@ -85,6 +85,9 @@ def run(args: argparse.Namespace) -> int:
         for name, m in result.metrics.items():
             print(f"  {name:<12} closed-loop validation MAE {m['mae']:.3f} m3 s-1 "
                   f"({m['mae_pct_range']:.2f} % of range), R² {m['r2']:.3f}")
+        by_file = result.metrics["pca_narx"]["by_file"]
+        print("  pca_narx validation MAE by file: "
+              + ", ".join(f"{k} {v['mae']:.3f}" for k, v in by_file.items() if v["mae"] is not None))
         for name, e in summary["ensemble"].items():
             print(f"  {name:<12} members' validation MAE "
                   f"{', '.join(f'{v:.3f}' for v in e['member_val_mae'])}; ensemble of the first "

@@ -196,6 +196,58 @@ def test_onnx_matches_the_numpy_network():
     del fit
 
 
+def test_ensemble_graph_averages_its_members():
+    """An ensemble in one graph: shared pre-processing, the members' outputs averaged (ONNX
+    Mean), the same flows as the numpy mean of the single networks."""
+    from training.vsensor.export import write_model
+    from training.vsensor.narx import Layer, Narx
+
+    rng = np.random.default_rng(1)
+    f = 8
+
+    def stack():
+        return [Layer(rng.normal(size=(23, 8)), rng.normal(size=8), "tanh"),
+                Layer(rng.normal(size=(8, 1)), rng.normal(size=1), "identity")]
+
+    members = [stack() for _ in range(3)]
+    args = ("pca_narx", rng.normal(size=f), rng.uniform(0.5, 2, f), rng.normal(size=(f, 3)), 2.0, 1.5)
+    net = Narx(*args, members[0], members=members)
+    path = vd.workdir() / "ensemble.onnx"
+    write_model(net, f, {"model_kind": "almeria"}, path)
+    ops = [n.op_type for n in onnx.load(str(path)).graph.node]
+    assert ops.count("Gemm") == 6 and ops.count("Mean") == 1 and ops.count("MatMul") == 1
+    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    u = rng.normal(size=(40, 6, f))
+    yp = rng.uniform(0, 5, size=(40, 5))
+    got = sess.run(None, {"u": u.astype(np.float32), "y_past": yp.astype(np.float32)})[0][:, 0]
+    singles = [Narx(*args, m).predict(u, yp) for m in members]
+    assert np.allclose(net.predict(u, yp), np.mean(singles, axis=0))
+    assert np.allclose(got, np.mean(singles, axis=0), rtol=1e-4, atol=1e-4)
+
+
+def test_ensemble_training_is_reproducible_and_runs_in_the_gateway():
+    import json
+
+    from gateway.vsensor import VentSensor
+
+    a, b = vd.tiny_model("ens-a", ensemble=2), vd.tiny_model("ens-b", ensemble=2)
+    assert a.read_bytes() == b.read_bytes()
+    meta = {p.key: p.value for p in onnx.load(str(a)).metadata_props}
+    assert json.loads(meta["training_settings"])["ensemble"] == 2
+    log = json.loads(meta["metrics"])["training_log"]["pca_narx"]
+    assert log["seeds"] == [0, 1] and len(log["ensemble_val_mae_by_size"]) == 2
+    single = vd.tiny_model()
+    # member 0 is the single network of the same seed, so one member is its figure
+    single_log = json.loads({p.key: p.value for p in onnx.load(str(single)).metadata_props}["metrics"])
+    assert log["ensemble_val_mae_by_size"][0] == pytest.approx(
+        single_log["validation_closed_loop"]["pca_narx"]["mae"], rel=1e-9)
+    assert "--ensemble 2" in a.with_suffix(".md").read_text()
+    sensor = VentSensor(a, load_greenhouse(vd.GREENHOUSE), "almeria")
+    est = sensor.step({"t_in": 24.0, "t_out": 18.0, "rh_in": 70.0, "rh_out": 55.0, "wind": 3.0},
+                      dict.fromkeys(feature_names("almeria")[3:], 0.0))
+    assert np.isfinite(est.flow) and est.flow >= 0
+
+
 def test_prototype_kind_trains_and_runs(tmp_path):
     """The kit's own model: fluxes of the prototype model, the Kittas vent term added in its
     units for the explicit estimate, the prototype's q_loss as the leakage."""

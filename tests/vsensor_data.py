@@ -44,7 +44,7 @@ def test_file() -> Path:
 
 
 @functools.cache
-def tiny_model(tag: str = "a") -> Path:
+def tiny_model(tag: str = "a", ensemble: int = 1) -> Path:
     """Train the tiny sensor (cache shared between tags, so a second tag only re-fits)."""
     from threadpoolctl import threadpool_limits
 
@@ -54,5 +54,6 @@ def tiny_model(tag: str = "a") -> Path:
     out = workdir() / tag / "tiny.onnx"
     with threadpool_limits(1):
         train([str(p) for p in train_files()], load_greenhouse(GREENHOUSE), "almeria", out,
-              workdir() / "cache", TINY, seed=0, hidden=(8, 8), epochs=8, rounds=1)
+              workdir() / "cache", TINY, seed=0, hidden=(8, 8), epochs=8, rounds=1,
+              ensemble=ensemble)
     return out

@@ -60,24 +60,32 @@ def _per_call_us(fn, calls: int = CALLS) -> tuple[float, float]:
 
 
 def _sklearn_peer(meta: dict, sess) -> tuple:
-    """An MLPRegressor holding the shipped network's weights, read back from the graph."""
+    """MLPRegressors holding the shipped network's weights, read back from the graph (one per
+    ensemble member: ``m<j>_w<i>``; a single network: ``w<i>``)."""
+    import re
+    import warnings
+
     from onnx import load, numpy_helper
     from sklearn.neural_network import MLPRegressor
 
     model = load(str(shipped_model("almeria")))
     w = {t.name: numpy_helper.to_array(t).astype(np.float64) for t in model.graph.initializer}
-    layers = sorted(k for k in w if k.startswith("w"))
-    hidden = tuple(w[k].shape[1] for k in layers[:-1])
-    mlp = MLPRegressor(hidden_layer_sizes=hidden, activation="tanh", max_iter=1)
-    n_in = w["w0"].shape[0]
-    import warnings
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        mlp.fit(np.zeros((4, n_in)), np.zeros(4))
-    mlp.coefs_ = [w[k] for k in layers]
-    mlp.intercepts_ = [w[k.replace("w", "b")] for k in layers]
-    return mlp, w
+    prefixes = sorted({m.group(1) for k in w if (m := re.fullmatch(r"(m\d+_)?w\d+", k))},
+                      key=lambda p: p or "")
+    mlps = []
+    for pre in prefixes:
+        pre = pre or ""
+        layers = sorted((k for k in w if re.fullmatch(rf"{pre}w\d+", k)),
+                        key=lambda k: int(k[len(pre) + 1:]))
+        mlp = MLPRegressor(hidden_layer_sizes=tuple(w[k].shape[1] for k in layers[:-1]),
+                           activation="tanh", max_iter=1)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            mlp.fit(np.zeros((4, w[layers[0]].shape[0])), np.zeros(4))
+        mlp.coefs_ = [w[k] for k in layers]
+        mlp.intercepts_ = [w[f"{pre}b{k[len(pre) + 1:]}"] for k in layers]
+        mlps.append(mlp)
+    return mlps, w
 
 
 def timing() -> dict:
@@ -92,7 +100,7 @@ def timing() -> dict:
     rng = np.random.default_rng(0)
     u = rng.normal(size=(1, 6, n_f)).astype(np.float32) * 0.1 + sensor.info.mean.astype(np.float32)
     yp = np.full((1, 5), sensor.info.y0, dtype=np.float32)
-    mlp, w = _sklearn_peer(sensor.info.meta, sess)
+    mlps, w = _sklearn_peer(sensor.info.meta, sess)
     mean, std, pca = w["mean"], w["std"], w.get("pca")
     y_mean, y_std = float(w["y_mean"][0]), float(w["y_std"][0])
 
@@ -101,7 +109,7 @@ def timing() -> dict:
         if pca is not None:
             z = z @ pca
         h = np.concatenate([z.reshape(-1), (yp[0] - y_mean) / y_std])[None, :]
-        return mlp.predict(h)[0] * y_std + y_mean
+        return float(np.mean([m.predict(h)[0] for m in mlps])) * y_std + y_mean
 
     onnx_out = sess.run(None, {"u": u, "y_past": yp})[0][0, 0]
     assert abs(onnx_out - sk_step()) < 1e-3 * max(1.0, abs(onnx_out)), "peer differs from the graph"

@@ -51,6 +51,9 @@ TRAIN = (
     Run("bleiswijk-autumn-controller", "sim", "bleiswijk", "2009-10-21", 6, "controller", 16),
     Run("bleiswijk-autumn-grower", "sim", "bleiswijk", "2009-11-10", 6, "grower", 17),
     Run("twonode-bleiswijk-autumn", "twonode", "bleiswijk", "2009-10-20", 6, "controller", 18),
+    Run("almeria-late-summer-grower", "sim", "almeria", "2020-08-25", 6, "grower", 19),
+    Run("almeria-early-winter-grower", "sim", "almeria", "2020-12-10", 6, "grower", 20),
+    Run("bleiswijk-late-autumn-grower", "sim", "bleiswijk", "2009-11-25", 6, "grower", 23),
 )
 TEST = (
     Run("biskra-spring-grower", "sim", "biskra", "2019-04-10", 5, "grower", 21),

@@ -3,7 +3,8 @@
 Built with ``onnx.helper`` from the numpy weights (standard operators only; opset 17, IR 8, so
 onnxruntime ≥ 1.17 loads it). Inputs ``u`` float32 (N, 6, F): the filtered inputs at k - d,
 d = 0..5; ``y_past`` float32 (N, 5): the sensor's outputs at k - 1 … k - 5. Output ``flow``
-float32 (N, 1) [m3 s-1], unclamped (the runtime clamps to the physical range).
+float32 (N, 1) [m3 s-1], unclamped (the runtime clamps to the physical range). An ensemble's
+members share the pre-processing; an ONNX ``Mean`` averages their outputs.
 
 ``metadata_props`` carry everything the runtime checks and a reader needs: the feature names,
 order, units and filter time constants, the delays, the model kind the fluxes come from, the
@@ -59,14 +60,22 @@ def build_graph(net: Narx, n_features: int):
         helper.make_node("Div", ["y_c", "y_std"], ["y_s"], name="y_reduce"),
         helper.make_node("Concat", ["z_flat", "y_s"], ["h0"], axis=1, name="narx_input"),
     ]
-    h = "h0"
-    for i, layer in enumerate(net.layers):
-        inits += [_const(f"w{i}", layer.weight), _const(f"b{i}", layer.bias)]
-        out = f"a{i}" if layer.activation == "tanh" else f"h{i + 1}"
-        nodes.append(helper.make_node("Gemm", [h, f"w{i}", f"b{i}"], [out], name=f"layer{i}"))
-        if layer.activation == "tanh":
-            nodes.append(helper.make_node("Tanh", [out], [f"h{i + 1}"], name=f"tanh{i}"))
-        h = f"h{i + 1}"
+    outs = []
+    for j, stack in enumerate(net.stacks):
+        pre = "" if len(net.stacks) == 1 else f"m{j}_"
+        h = "h0"
+        for i, layer in enumerate(stack):
+            w, b, a, nxt = f"{pre}w{i}", f"{pre}b{i}", f"{pre}a{i}", f"{pre}h{i + 1}"
+            inits += [_const(w, layer.weight), _const(b, layer.bias)]
+            out = a if layer.activation == "tanh" else nxt
+            nodes.append(helper.make_node("Gemm", [h, w, b], [out], name=f"{pre}layer{i}"))
+            if layer.activation == "tanh":
+                nodes.append(helper.make_node("Tanh", [out], [nxt], name=f"{pre}tanh{i}"))
+            h = nxt
+        outs.append(h)
+    if len(outs) > 1:  # the ensemble: the members' mean
+        nodes.append(helper.make_node("Mean", outs, ["h_mean"], name="ensemble_mean"))
+        h = "h_mean"
     nodes += [
         helper.make_node("Mul", [h, "y_std"], ["y_scaled"], name="y_unscale"),
         helper.make_node("Add", ["y_scaled", "y_mean"], ["flow"], name="y_uncentre"),

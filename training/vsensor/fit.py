@@ -163,6 +163,30 @@ def fit_narx(name: str, split: Split, mean, std, projection, seed: int, hidden=H
     return net, log
 
 
+def fit_ensemble(name: str, split: Split, mean, std, projection, seeds: list[int],
+                 hidden=HIDDEN, epochs: int = 150, rounds: int = 3, round_epochs: int = 30,
+                 progress: Progress | None = None, round_lr: float | None = None
+                 ) -> tuple[Narx, dict]:
+    """``fit_narx`` once per seed on the same rows; the members' outputs are averaged.
+
+    Each member is fitted (and its closed-loop rounds run) on its own, as a single network; the
+    ensemble, deployed, feeds every member its own mean past outputs. One seed: the single
+    network, unchanged. The log holds every member's log and the ensemble's closed-loop
+    validation MAE with its first k members, k = 1 … K (how much averaging buys)."""
+    fitted = [fit_narx(name, split, mean, std, projection, s, hidden, epochs, rounds,
+                       round_epochs, progress, round_lr) for s in seeds]
+    net = fitted[0][0]
+    if len(fitted) == 1:
+        return net, fitted[0][1]
+    log = {"seeds": list(seeds), "members": [lg for _, lg in fitted],
+           "member_val_mae": [min(lg["closed_loop_val_mae"]) for _, lg in fitted],
+           "ensemble_val_mae_by_size": []}
+    for k in range(1, len(fitted) + 1):
+        net.members = [n.layers for n, _ in fitted[:k]]
+        log["ensemble_val_mae_by_size"].append(validation_mae(net, split))
+    return net, log
+
+
 def fit_arx(split: Split, mean, std, ridge: float = 1e-3) -> Narx:
     """Linear ARX on the same inputs and delays, least squares (series-parallel), no PCA."""
     y_train = np.concatenate([y for _, y in split.part("train")])

@@ -26,6 +26,10 @@ def train_command(out: Path, meta: dict, held_files: tuple[str, ...] = ()) -> st
               f"--rounds {st['rounds']}", f"--pca-variance {st.get('pca_variance', 0.9):g}"]
     if st.get("round_lr"):
         parts.append(f"--round-lr {st['round_lr']:g}")
+    if st.get("ensemble", 1) > 1:
+        parts.append(f"--ensemble {st['ensemble']}")
+    if st.get("net_seed", meta["seed"]) != meta["seed"]:
+        parts.append(f"--net-seed {st['net_seed']}")
     if held_files:
         parts += ["--test", *held_files]
     return " ".join([*parts, "--out", out.name])
@@ -70,7 +74,10 @@ def model_card(out: Path, meta: dict, metrics: dict, t18: dict, circle: dict, na
         "components, 93.8 %).",
         f"- NARX: {pca['components']} × {len(meta['input_delays'])} delayed components + "
         f"{len(meta['output_delays'])} past outputs → tanh layers "
-        f"{'-'.join(map(str, nets['pca_narx'].hidden))} → flow (thesis: 30-50-20).",
+        f"{'-'.join(map(str, nets['pca_narx'].hidden))} → flow (thesis: 30-50-20)"
+        + (f"; an ensemble of {len(nets['pca_narx'].stacks)} such networks (seeds "
+           f"{meta['training_settings']['net_seed']}…), their outputs averaged in the graph, "
+           "each fed the ensemble's past outputs." if len(nets['pca_narx'].stacks) > 1 else "."),
         "- One ONNX graph: standardisation, PCA and network; baselines beside it with the same "
         f"interface: `{out.stem}.narx_no_pca.onnx` (same network on the standardised inputs, no "
         f"PCA) and `{out.stem}.linear_arx.onnx` (linear ARX on the same inputs and delays).",

@@ -6,6 +6,10 @@ so that one forward pass (numpy here, ONNX at run time: training/vsensor/export.
     z_d = ((u(k-d) - mean) / std) @ P          d = 0..5   (P: PCA loadings, or identity)
     h   = [z_0, z_1, …, z_5, (y(k-1..k-5) - y_mean) / y_std]
     y   = layers(h) * y_std + y_mean            (tanh hidden layers, linear output)
+
+An ensemble (``members``: several layer stacks fitted from different seeds on the same rows)
+shares the pre-processing and averages the stacks' outputs; in closed loop every member hears
+the ensemble's own past outputs (one ``y_past``, the runtime's interface).
 """
 
 from __future__ import annotations
@@ -38,6 +42,12 @@ class Narx:
     y_std: float
     layers: list[Layer] = field(default_factory=list)
     explained: np.ndarray | None = None  # (m,) variance share of each kept component
+    members: list[list[Layer]] = field(default_factory=list)  # ensemble stacks; empty: ``layers``
+
+    @property
+    def stacks(self) -> list[list[Layer]]:
+        """The layer stacks whose outputs are averaged (one for a single network)."""
+        return self.members or [self.layers]
 
     @property
     def width(self) -> int:
@@ -46,7 +56,7 @@ class Narx:
 
     @property
     def hidden(self) -> tuple[int, ...]:
-        return tuple(layer.weight.shape[1] for layer in self.layers[:-1])
+        return tuple(layer.weight.shape[1] for layer in self.stacks[0][:-1])
 
     def reduce(self, inputs: np.ndarray) -> np.ndarray:
         """Standardised (and projected) inputs: (..., F) → (..., m)."""
@@ -59,12 +69,17 @@ class Narx:
         return np.concatenate([z_lags.reshape(len(z_lags), -1), ys], axis=1)
 
     def forward(self, h: np.ndarray) -> np.ndarray:
-        """Scaled output of the layers for rows ``h`` (N, D m + 5) → (N,)."""
-        for layer in self.layers:
-            h = h @ layer.weight + layer.bias
-            if layer.activation == "tanh":
-                h = np.tanh(h)
-        return h[:, 0]
+        """Scaled output of the layers (the mean over an ensemble's stacks) for rows ``h``
+        (N, D m + 5) → (N,)."""
+        out = np.zeros(len(h))
+        for stack in self.stacks:
+            a = h
+            for layer in stack:
+                a = a @ layer.weight + layer.bias
+                if layer.activation == "tanh":
+                    a = np.tanh(a)
+            out += a[:, 0]
+        return out / len(self.stacks)
 
     def predict(self, u: np.ndarray, y_past: np.ndarray) -> np.ndarray:
         """Flows (N,) [m3 s-1] from raw inputs u (N, D, F) and past flows (N, 5)."""

@@ -29,6 +29,12 @@ def add_train_parser(sub: argparse._SubParsersAction, data_args) -> None:
     p.add_argument("--pca-variance", type=float, default=0.90, metavar="SHARE",
                    help="keep the fewest principal components reaching this share of the "
                    "variance (0.90 to 1; default 0.90)")
+    p.add_argument("--ensemble", type=int, default=1, metavar="K",
+                   help="average K networks fitted from seeds NET_SEED … NET_SEED+K-1 inside each "
+                   "NARX graph (PCA and no-PCA alike; default 1: one network)")
+    p.add_argument("--net-seed", type=int, default=None, metavar="N",
+                   help="first seed of the networks (default: --seed, which also seeds the "
+                   "estimator's replays; changing only this reuses the cached replays)")
     p.add_argument("--test", nargs="+", default=[], metavar="FILE",
                    help="held-out kit CSVs scored after the fit (closed loop, the three models, as "
                    "python -m gateway vsensor does) into the model card and the summary; never "
@@ -52,16 +58,20 @@ def run(args: argparse.Namespace) -> int:
         hidden = tuple(int(v) for v in args.hidden.split(","))
     except ValueError:
         raise ValueError(f"--hidden {args.hidden!r}: expected sizes like 30,50,20") from None
-    total = len(args.data) + len(args.test) + 2 * (args.epochs + 30 * args.rounds)
+    total = len(args.data) + len(args.test) + 2 * args.ensemble * (args.epochs + 30 * args.rounds)
     t0 = time.perf_counter()
     with progress_bar("train", total, True) as bar, threadpool_limits(1):
         result = train(args.data, gh, args.model, args.out, args.cache, overrides(args.set) or None,
                        args.seed, hidden, args.epochs, args.rounds, progress=bar,
                        report_dir=args.report, round_lr=args.round_lr,
-                       pca_variance=args.pca_variance, test_paths=args.test)
+                       pca_variance=args.pca_variance, test_paths=args.test,
+                       ensemble=args.ensemble, net_seed=args.net_seed)
     summary = {"models": {k: str(v) for k, v in result.paths.items()}, "card": str(result.card),
                "pca": {k: v for k, v in result.pca.items() if k != "all_shares"},
                "validation_closed_loop": result.metrics,
+               "ensemble": {k: {"member_val_mae": lg["member_val_mae"],
+                                "ensemble_val_mae_by_size": lg["ensemble_val_mae_by_size"]}
+                            for k, lg in result.logs.items() if "member_val_mae" in lg},
                "seconds": {k: round(v, 1) for k, v in result.seconds.items()},
                "held_out": {f: {n: {k: s[k] for k in ("flow", "q_vent", "flow_error_pct", "out_of_range")}
                                 for n, s in per.items()} for f, per in result.heldout.items()}}
@@ -75,6 +85,13 @@ def run(args: argparse.Namespace) -> int:
         for name, m in result.metrics.items():
             print(f"  {name:<12} closed-loop validation MAE {m['mae']:.3f} m3 s-1 "
                   f"({m['mae_pct_range']:.2f} % of range), R² {m['r2']:.3f}")
+        by_file = result.metrics["pca_narx"]["by_file"]
+        print("  pca_narx validation MAE by file: "
+              + ", ".join(f"{k} {v['mae']:.3f}" for k, v in by_file.items() if v["mae"] is not None))
+        for name, e in summary["ensemble"].items():
+            print(f"  {name:<12} members' validation MAE "
+                  f"{', '.join(f'{v:.3f}' for v in e['member_val_mae'])}; ensemble of the first "
+                  f"1…K: {', '.join(f'{v:.3f}' for v in e['ensemble_val_mae_by_size'])}")
         for file, per in result.heldout.items():
             for name, s in per.items():
                 f = s["flow"]

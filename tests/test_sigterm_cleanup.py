@@ -7,8 +7,9 @@ import signal
 import subprocess
 import sys
 import textwrap
-import time
 from pathlib import Path
+
+from tests.gateway_harness import wait_for
 
 ROOT = Path(__file__).resolve().parents[1]
 DEADLINE = 120.0
@@ -16,15 +17,14 @@ DEADLINE = 120.0
 # The inner test starts a child in a session of its own (as the fleet routers are), tells us its
 # pid and then waits for ever; only its with-block's exit can stop the child.
 INNER = '''
-import subprocess, sys, time
+import signal, subprocess, sys
 
 def test_holds_a_child(tmp_path):
-    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"],
+    child = subprocess.Popen([sys.executable, "-c", "import signal; signal.pause()"],
                              start_new_session=True)
     try:
         print(f"CHILD {child.pid}", flush=True)
-        while True:
-            time.sleep(0.5)
+        signal.pause()  # until pytest is signalled
     finally:
         child.terminate()
         child.wait(60)
@@ -59,10 +59,7 @@ def test_sigterm_to_pytest_stops_the_tests_children(tmp_path: Path) -> None:
         assert child is not None, "the inner test never started its child"
         pytest.send_signal(signal.SIGTERM)
         out = pytest.communicate(timeout=DEADLINE)[0]
-        deadline = time.monotonic() + DEADLINE
-        while _alive(child) and time.monotonic() < deadline:
-            time.sleep(0.1)  # polling a condition with a generous deadline, not a timing assert
-        assert not _alive(child), f"the test's child {child} outlived pytest:\n{out}"
+        wait_for(lambda: not _alive(child), DEADLINE, f"the test's child {child} to end:\n{out}")
         assert "KeyboardInterrupt" in out
     finally:
         if pytest.poll() is None:

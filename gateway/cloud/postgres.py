@@ -282,6 +282,13 @@ class PgStore:
         self.conn.commit()
         return [(str(f), str(g)) for f, g in rows]
 
+    def latest(self) -> dict[str, float]:
+        rows = self.conn.execute(sql.SQL(
+            "SELECT farm, extract(epoch FROM max(observed))::float8 FROM {}.message "
+            "WHERE observed IS NOT NULL GROUP BY farm").format(sql.Identifier(self.schema))).fetchall()
+        self.conn.commit()
+        return {str(f): float(t) for f, t in rows}
+
     def reader(self) -> PgStore:
         """A second connection (one connection serves one thread at a time)."""
         return PgStore.connect(self.dsn, self.schema, create=False)

@@ -91,6 +91,10 @@ class CloudStore(Protocol):
         `limit`; `match(key)`, when given, must also accept the message key."""
         ...
 
+    def latest(self) -> dict[str, float]:
+        """Farm → the newest observation time stored [unix s] (where a catch-up starts)."""
+        ...
+
     def reader(self) -> CloudStore:
         """Another connection to the same store, for queries from another thread."""
         ...
@@ -209,6 +213,10 @@ class SqliteCloudStore:
                 if len(out) >= limit:
                     break
         return out
+
+    def latest(self) -> dict[str, float]:
+        return {f: t for f, t in self.conn.execute(
+            "SELECT farm, max(t) FROM messages WHERE t IS NOT NULL GROUP BY farm")}
 
     def reader(self) -> SqliteCloudStore:
         return SqliteCloudStore(self.path)

@@ -76,6 +76,12 @@ def test_history_order_range_limit_and_filters(store: PgStore) -> None:
         store.history("farm-a", limit=0)
 
 
+def test_latest_is_the_newest_observation_per_farm(store: PgStore) -> None:
+    assert store.latest() == {}
+    store.insert_batch([msg(i) for i in range(5)] + [msg(2, farm="farm-b", gh="gh9")])
+    assert store.latest() == {"farm-a": T0 + 240, "farm-b": T0 + 120}  # where a catch-up starts
+
+
 def test_the_schema_serves_a_cloud_engineer(store: PgStore, pg: PgCluster) -> None:
     store.insert_batch([msg(i) for i in range(5)])
     with psycopg.connect(pg.dsn) as c:

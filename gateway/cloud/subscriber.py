@@ -2,10 +2,13 @@
 subscribe``), and the kit CSV per greenhouse rebuilt from the measurements it received.
 
 It declares a zenoh-ext advanced subscriber per key expression (one per farm behind the routers'
-access control: gateway.net.acl.AccessSpec.subscriptions): on joining it asks each publisher for
-its cache (``HistoryConfig``), and with heartbeat recovery it detects and fetches samples it
-missed (``RecoveryConfig``); repeats from either path, and from a gateway re-sending after a
-restart, are dropped by idempotency key in the store. Samples arrive on Zenoh's threads, are
+access control: gateway.net.acl.AccessSpec.subscriptions) with heartbeat recovery
+(``RecoveryConfig``: it detects and fetches from the publisher's cache samples it missed), and on
+each join it catches up from the gateways' history (gateway/cloud/catchup.py). It does not ask the
+publishers' caches on joining (``HistoryConfig``): with that, zenoh-ext 1.10 can drop a backlog
+drained while its first query runs (docs/cloud.md, "Joining while a backlog drains"). Repeats
+from any path, and from a gateway re-sending after a restart, are dropped by idempotency key in
+the store. Samples arrive on Zenoh's threads, are
 stamped with their arrival time, and one writer thread stores them in batches; a batch the
 store refuses (the database is down) is kept and retried, never dropped. With ``history_farms``
 it also answers history queries for those farms from the store (gateway/cloud/history.py).
@@ -43,6 +46,8 @@ class SubscribeStats:
     repeats: int = 0
     not_messages: int = 0
     missed: int = 0  # samples Zenoh reported missed (then recovered from the publisher's cache, or not)
+    caught_up: int = 0  # history replies received by the catch-up on joining (new or repeats)
+    catch_up_errors: int = 0
     store_retries: int = 0  # batches the store refused at first (kept and retried)
     store_s: float = 0.0  # wall seconds spent storing (rows / store_s: what the store sustains)
 
@@ -72,6 +77,9 @@ class Subscriber:
         self.history: Any = None
         self.opener: Any = None
         self.error: BaseException | None = None
+        self.catching_up: threading.Thread | None = None
+        self._cancel: Any = None  # the catch-up's zenoh.CancellationToken
+        self.caught_up = threading.Event()  # set when the catch-up of the last join has ended
 
     def start(self) -> bool:
         """Open the session and subscribe (client mode: retried in the background while no
@@ -97,17 +105,18 @@ class Subscriber:
         return self.opener.opened
 
     def _declare(self, session: Any) -> None:
-        from zenoh.ext import HistoryConfig, RecoveryConfig, declare_advanced_subscriber
+        import zenoh
+        from zenoh.ext import RecoveryConfig, declare_advanced_subscriber
 
         from gateway.cloud.history import CloudHistory
 
         self.session = session
+        self.caught_up.clear()
         try:
+            latest = self._latest()  # before anything new arrives: where the catch-up starts
             for key in self.keys:
-                sub = declare_advanced_subscriber(
-                    session, key, self._on_sample,
-                    history=HistoryConfig(detect_late_publishers=True),
-                    recovery=RecoveryConfig(heartbeat=True))
+                sub = declare_advanced_subscriber(session, key, self._on_sample,
+                                                  recovery=RecoveryConfig(heartbeat=True))
                 self.subs.append((sub, sub.sample_miss_listener(self._on_miss)))
             if self.history_farms:
                 self.history = CloudHistory(session, self.store, self.history_farms)
@@ -115,11 +124,35 @@ class Subscriber:
             self._undeclare()
             self.session = None
             raise
+        self._cancel = zenoh.CancellationToken()
+        self.catching_up = threading.Thread(target=self._catch_up, args=(session, latest, self._cancel),
+                                            name="serra-cloud-catch-up", daemon=True)
+        self.catching_up.start()
+
+    def _latest(self) -> dict[str, float]:
+        reader = self.store.reader()  # the writer thread owns the store's own connection
+        try:
+            return reader.latest()
+        finally:
+            reader.close()
+
+    def _catch_up(self, session: Any, latest: dict[str, float], cancel: Any) -> None:
+        from gateway.cloud.catchup import run_logged
+
+        try:
+            stats = run_logged(session, self.keys, latest, self._on_raw, cancel)
+            self.stats.caught_up += stats.replies
+            self.stats.catch_up_errors += len(stats.errors)
+        finally:
+            self.caught_up.set()
 
     def _on_sample(self, sample) -> None:
+        self._on_raw(str(sample.key_expr), sample.payload.to_bytes())
+
+    def _on_raw(self, key: str, payload: bytes) -> None:
         with self._idle:
             self._queued += 1
-        self._q.put((str(sample.key_expr), sample.payload.to_bytes(), time.time()))
+        self._q.put((key, payload, time.time()))
 
     def _on_miss(self, miss) -> None:
         self.stats.missed += int(miss.nb)
@@ -201,6 +234,10 @@ class Subscriber:
         """Undeclare (a declared callback blocks interpreter exit), close, store what came."""
         if self.opener is not None:
             self.opener.stop()
+        if self._cancel is not None:
+            self._cancel.cancel()  # a catch-up under way stops asking
+        if self.catching_up is not None:
+            self.catching_up.join(timeout=30)
         self._undeclare()
         if self.session is not None:
             self.session.close()

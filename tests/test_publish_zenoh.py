@@ -215,3 +215,26 @@ def test_client_mode_through_a_router_holds_until_a_subscriber_reaches_the_route
             if s is not None:
                 s.close()
         store.close()
+
+
+def test_history_answers_a_key_made_after_an_earlier_query(gateway_side) -> None:
+    """The queryable reuses its list of stored keys between full listings; a key the outbox
+    gained since must still be answered (a cloud's catch-up asks the moment it joins, before the
+    gateway has made its first message of every kind)."""
+    db, session, _ = gateway_side
+    hist = HistoryQueryable(session, db, "f1")
+    try:
+        first = list(session.get("serra/f1/north/history/**?limit=1000",
+                                 consolidation=zenoh.ConsolidationMode.NONE))
+        assert len(first) == 60
+        store = Store(db)
+        late = Message("serra/f1/north/status", "status", T0, "f1/north/status/0",
+                       json.dumps({"n": 60}))
+        Outbox(store.conn).put(late)
+        store.close()
+        replies = list(session.get("serra/f1/north/history/status",
+                                   consolidation=zenoh.ConsolidationMode.NONE))
+    finally:
+        hist.close()
+    assert [json.loads(r.ok.payload.to_string())["n"] for r in replies] == [60]
+    assert str(replies[0].ok.key_expr) == "serra/f1/north/history/status"

@@ -23,7 +23,7 @@ import zenoh
 from gateway.publish import keyspace as K
 
 log = logging.getLogger("serra.publish")
-KEYS_TTL = 10.0  # [s] how long the list of stored keys is reused
+KEYS_TTL = 600.0  # [s] between full listings of the stored keys (drops keys retention emptied)
 
 
 class HistoryQueryable:
@@ -34,8 +34,9 @@ class HistoryQueryable:
                                     timeout=30)
         self.conn.execute("PRAGMA busy_timeout=30000")
         self.lock = threading.Lock()
-        self._keys: list[str] = []
+        self._keys: set[str] = set()
         self._keys_at = -KEYS_TTL
+        self._keys_id = 0  # the outbox id up to which _keys is complete
         self.answered = 0
         self.queryable = session.declare_queryable(
             f"{K.PREFIX}/{farm}/*/{K.HISTORY}/**", self._on_query, complete=False)
@@ -50,10 +51,19 @@ class HistoryQueryable:
             self.conn.close()
 
     def _stored_keys(self) -> list[str]:
+        """Every key in the outbox. A full listing scans the table, so between two (every
+        :data:`KEYS_TTL`) only the rows added since the last look are read: a key made a moment
+        ago is answered at once (a cloud subscriber's catch-up asks as soon as it joins)."""
+        top = self.conn.execute("SELECT coalesce(max(id), 0) FROM outbox").fetchone()[0]
         if time.monotonic() - self._keys_at > KEYS_TTL:
-            self._keys = [r[0] for r in self.conn.execute("SELECT DISTINCT key FROM outbox")]
+            self._keys = {k for k, in self.conn.execute(
+                "SELECT DISTINCT key FROM outbox WHERE id <= ?", (top,))}
             self._keys_at = time.monotonic()
-        return self._keys
+        elif top > self._keys_id:  # the rowid range since the last look: cheap
+            self._keys.update(k for k, in self.conn.execute(
+                "SELECT DISTINCT key FROM outbox WHERE id > ? AND id <= ?", (self._keys_id, top)))
+        self._keys_id = top
+        return sorted(self._keys)
 
     def _on_query(self, query: zenoh.Query) -> None:
         with query:

@@ -73,10 +73,19 @@ def test_the_outcome_of_a_start_is_first_used_h_steps_later():
     time = np.datetime64("2020-01-01T00:00", "s") + np.arange(n) * np.timedelta64(300, "s")
     s = 100
     forecast[s] = 19.0  # the start s errs by +1 K (its target is 20 at s + H)
-    out = correct_series({H: forecast}, measured, x, time, DT)[H]
+    out = correct_series({H: forecast}, measured, x, time, DT, warmup_s=0.0)[H]
     assert np.all(out[:s] == forecast[:s])
     assert np.all(out[s + 1: s + H] == forecast[s + 1: s + H])
     assert out[s + H] > 20.0
+
+
+def test_nothing_is_corrected_before_a_day_of_matured_starts():
+    measured, x, time, forecast = _series(seed=7)
+    out = correct_series({H: forecast}, measured, x, time, DT)[H]
+    day = int(86400 / DT)
+    first = day + H - 1  # at t the starts 0 … t − H have matured: a day of them at t = day + H − 1
+    np.testing.assert_array_equal(out[:first], forecast[:first])
+    assert np.all(out[first:] != forecast[first:])
 
 
 def test_the_correction_is_bounded_and_a_missing_forecast_stays_missing():

@@ -45,6 +45,9 @@ FEATURES = ("1", "f - t_in", "last error", "i_glob", "t_out - t_in", "arx - f", 
 repeated daily error (the sun stored and given back later in the day) is learnt by phase."""
 SCALE = np.array([1.0, 1.0, 1.0, 1e-3, 0.1, 1.0, 1.0, 1.0])
 """φ in these units (I_glob per kW m-2, T_out − T_in per 10 K) so one ridge suits all."""
+WARMUP_S = 86400.0
+"""[s] the correction is applied once a horizon has learnt from this long of matured starts (a
+day: the daily harmonic is not identified before); until then ``combined`` goes out as it is."""
 MAX_CORRECTION_K = 3.0
 """[K] bound on |ê|: a correction larger than that is a fit gone wrong, not a forecast."""
 
@@ -77,8 +80,9 @@ class Corrector:
     each step ``observe`` the reading, then ``correct`` the forecasts made now, then ``add``."""
 
     def __init__(self, horizons: Sequence[int], dt: float, memory_s: float = MEMORY_S,
-                 ridge: float = RIDGE) -> None:
+                 ridge: float = RIDGE, warmup_s: float = WARMUP_S) -> None:
         self.horizons, self.lam, self.ridge = tuple(horizons), forgetting(dt, memory_s), ridge
+        self.warmup = int(math.ceil(warmup_s / dt))  # learnt starts before the first correction
         self.reset()
 
     def reset(self) -> None:
@@ -86,6 +90,7 @@ class Corrector:
         self.r_mat = {h: np.zeros((k, k)) for h in self.horizons}
         self.r_vec = {h: np.zeros(k) for h in self.horizons}
         self.last = {h: math.nan for h in self.horizons}
+        self.learnt = dict.fromkeys(self.horizons, 0)
         self.pending: dict[int, deque] = {h: deque() for h in self.horizons}
         self._made: dict[int, list[float]] = {}
 
@@ -112,6 +117,7 @@ class Corrector:
                 continue
             self.r_mat[h] = self.lam * self.r_mat[h] + np.outer(phi, phi)
             self.r_vec[h] = self.lam * self.r_vec[h] + phi * e
+            self.learnt[h] += 1
 
     def beta(self, h: int) -> np.ndarray:
         k = len(FEATURES)
@@ -126,6 +132,8 @@ class Corrector:
         if not (math.isfinite(f) and np.all(np.isfinite(phi))):
             return f
         self._made[h] = [*phi.tolist(), f]
+        if self.learnt[h] < self.warmup:
+            return f
         e_hat = float(np.clip(self.beta(h) @ phi, -MAX_CORRECTION_K, MAX_CORRECTION_K))
         return f + e_hat
 
@@ -139,6 +147,7 @@ class Corrector:
         return {"r_mat": {str(h): m.tolist() for h, m in self.r_mat.items()},
                 "r_vec": {str(h): v.tolist() for h, v in self.r_vec.items()},
                 "last": {str(h): v for h, v in self.last.items()},
+                "learnt": {str(h): v for h, v in self.learnt.items()},
                 "pending": {str(h): list(q) for h, q in self.pending.items()}}
 
     def restore(self, snap: Mapping | None) -> None:
@@ -153,18 +162,19 @@ class Corrector:
                 self.r_vec[h] = np.asarray(snap["r_vec"][key], dtype=float)
             last = snap.get("last", {}).get(key)
             self.last[h] = math.nan if last is None else float(last)
+            self.learnt[h] = int(snap.get("learnt", {}).get(key, 0))
             self.pending[h].extend(snap.get("pending", {}).get(key, []))
 
 
 def correct_series(forecasts: Mapping[int, np.ndarray], measured: np.ndarray,
                    x: Mapping[str, np.ndarray], time: np.ndarray, dt: float,
                    arx: Mapping[int, np.ndarray] | None = None, memory_s: float = MEMORY_S,
-                   ridge: float = RIDGE) -> dict[int, np.ndarray]:
+                   ridge: float = RIDGE, warmup_s: float = WARMUP_S) -> dict[int, np.ndarray]:
     """``forecasts`` {h: (T,) forecast of T_in[t + h] made at t}, on the series' grid (NaN where
     none was made; ``arx`` the same for the ARX, stacked), corrected by ``Corrector`` run step by
     step: the figures the live gateway gives."""
     n = len(measured)
-    corr = Corrector(list(forecasts), dt, memory_s, ridge)
+    corr = Corrector(list(forecasts), dt, memory_s, ridge, warmup_s)
     out = {h: np.full(n, np.nan) for h in forecasts}
     nan = np.full(n, np.nan)
     g = {h: np.asarray((arx or {}).get(h, nan), dtype=float) for h in forecasts}

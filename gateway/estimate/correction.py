@@ -9,7 +9,7 @@ follows the season. For each horizon h, with the error e(t) = T_in[t + h] − f(
 
     ê(t) = β(t) · φ(t),     corrected f(t) + ê(t),
     φ(t) = (1, f(t) − T_in[t], e(t − h), I_glob[t] / 1 kW m-2, (T_out − T_in)[t] / 10 K,
-            g(t) − f(t), sin ωτ(t), cos ωτ(t)),    ω = 2π / 24 h, τ the hour of the day,
+            g(t) − f(t), sin ωτ(t), cos ωτ(t)),    ω = 2π / 24 h, τ the UTC hour,
 
 ``g`` a second forecast of the same target (the ARX baseline: the regression re-weights the
 two, stacking, Wolpert 1992, "Stacked generalization", Neural Networks 5, 241-259), ``e(t − h)``
@@ -22,7 +22,9 @@ regularization in recursive least squares identification", Proc. 35th IEEE CDC, 
 over the starts s ≤ t − h only (their target is measured at t): nothing after t is read. The
 constant ridge ρ keeps β bounded where forgetting would let an unexcited direction (no sun at
 night) wind up, and shrinks the correction toward zero until the errors say otherwise.
-λ = exp(−Δt / ``MEMORY_S``): the same memory in time at any model step. Settings are fixed
+λ = exp(−Δt / ``MEMORY_S``): the same memory in time at any model step. A horizon's
+correction is applied once it has learnt from a day of matured starts (``WARMUP_S``) and is
+bounded (``MAX_CORRECTION_K``). Settings are fixed
 here, chosen once on the generality suite's refsim and twonode windows (never on the held-out
 generator) and never tuned per greenhouse.
 """

@@ -66,7 +66,7 @@ bench-generality: $(STAMP)
 	$(PY) tests/generality/suite.py --jobs 2
 
 ## bench-forecasts: the suite's forecast part alone (9 effect-free replays; persistence, ARX, adaptive,
-## adaptive + disturbance filter, combined; measured weather and outlook). JSON in bench/results/forecasts.json.
+## adaptive + disturbance filter, combined, corrected; measured weather and outlook). JSON in bench/results/forecasts.json.
 bench-forecasts: $(STAMP)
 	$(PY) tests/generality/forecasts.py --jobs 2
 

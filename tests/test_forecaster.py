@@ -36,7 +36,7 @@ def test_step_by_step_is_the_replay_forecast(result, kind):
             snap = json.loads(json.dumps(live.snapshot()))
             live = LiveForecaster(ALMERIA, GH, result.dt, HORIZONS, kind)
             live.restore(snap)
-        live.update({k: float(v[t]) for k, v in x.items()}, theta[t])
+        live.update({k: float(v[t]) for k, v in x.items()}, theta[t], result.time[t])
         if np.isfinite(result.measured[t]):
             block = {k: v[t: t + max(HORIZONS) + 1] for k, v in x.items()}
             for h, v in live.forecasts(theta[t], block, HORIZONS).items():
@@ -57,3 +57,21 @@ def test_unknown_kind_and_a_foreign_state():
     b = LiveForecaster(ALMERIA, GH, 60.0, HORIZONS, "combined")
     b.restore(a.snapshot())  # another kind's state: start afresh
     assert b.kf is not None and b.kf.estimate() is None and b.arx is not None
+
+
+def test_a_combined_state_goes_on_as_corrected(result):
+    """A gateway that published ``combined`` and restarts with ``corrected`` (the default since
+    the correction) keeps the filter, the ARX and the combiner's errors; the correction starts
+    afresh."""
+    x, theta = result.x, result.theta
+    a = LiveForecaster(ALMERIA, GH, result.dt, HORIZONS, "combined")
+    for t in range(200):
+        a.update({k: float(v[t]) for k, v in x.items()}, theta[t], result.time[t])
+        block = {k: v[t: t + max(HORIZONS) + 1] for k, v in x.items()}
+        a.forecasts(theta[t], block, HORIZONS)
+    b = LiveForecaster(ALMERIA, GH, result.dt, HORIZONS, "corrected")
+    b.restore(json.loads(json.dumps(a.snapshot())))
+    assert b.arx is not None and a.arx is not None and b.arx.updates == a.arx.updates > 100
+    assert b.comb is not None and b.comb.snapshot() == a.comb.snapshot()
+    assert b.kf is not None and b.kf.estimate() == a.kf.estimate()
+    assert b.corr is not None and not any(b.corr.pending.values())

@@ -175,8 +175,9 @@ def test_report_has_the_arx_baseline_and_the_outlook_forecasts(result):
     assert rep["outlook"] == "clear-sky-trend"  # the preset has a [site]
     assert "arx" in rep["metrics"]
     for block in rep["horizons"].values():
-        assert {"adaptive", "adaptive_kf", "combined", "constant", "arx", "persistence",
-                "adaptive_outlook", "adaptive_kf_outlook", "combined_outlook", "arx_outlook"} == set(block)
+        assert {"adaptive", "adaptive_kf", "combined", "corrected", "constant", "arx",
+                "persistence", "adaptive_outlook", "adaptive_kf_outlook", "combined_outlook",
+                "corrected_outlook", "arx_outlook"} == set(block)
         assert len({m["n"] for m in block.values()}) == 1  # one set of samples per comparison
 
 

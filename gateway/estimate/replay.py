@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from gateway.estimate import arx as arx_baseline
-from gateway.estimate import combination, disturbance
+from gateway.estimate import combination, correction, disturbance
 from gateway.estimate.horizon import HorizonDrivers, outlook_drivers
 from gateway.estimate.online import Counters, GroupSettings, OnlineEstimator
 from gateway.estimate.outlook import Outlook, default_outlook, make_outlook
@@ -43,8 +43,9 @@ from gateway.series import Series
 
 HORIZONS = (15, 30, 60)
 """Forecast horizons [min] of the report (reached in whole model steps)."""
-FORECASTS = ("adaptive", "adaptive_kf", "combined", "constant", "arx", "persistence",
-             "adaptive_outlook", "adaptive_kf_outlook", "combined_outlook", "arx_outlook")
+FORECASTS = ("adaptive", "adaptive_kf", "combined", "corrected", "constant", "arx", "persistence",
+             "adaptive_outlook", "adaptive_kf_outlook", "combined_outlook", "corrected_outlook",
+             "arx_outlook")
 """Forecasts of the report, in order: measured weather (model skill), then with the outlook."""
 
 
@@ -157,6 +158,8 @@ def score_forecasts(result: ReplayResult, reach: Mapping[int, int]) -> None:
     result.filtered = disturbance.filter_series(result.model, result.theta, result.x, result.gh,
                                                 result.dt)
     result.horizons = {minutes: forecasts(result, steps) for minutes, steps in reach.items()}
+    for suffix in ("", "_outlook"):
+        _corrected(result, reach, suffix)
 
 
 def forecasts(result: ReplayResult, horizon: int) -> dict[str, np.ndarray]:
@@ -218,6 +221,25 @@ def _combined(result: ReplayResult, starts: np.ndarray, horizon: int,
     window = max(int(round(combination.WINDOW_S / result.dt)), 1)
     named = {str(k): a for k, a in enumerate(full)}
     return combination.combine(named, result.measured, horizon, window)[starts]
+
+
+def _corrected(result: ReplayResult, reach: Mapping[int, int], suffix: str) -> None:
+    """``corrected{suffix}``: ``combined{suffix}`` with its online error correction
+    (gateway/estimate/correction.py, the ARX stacked), on the series' grid, every horizon."""
+    n = len(result.measured)
+    combined, arx, starts = {}, {}, {}
+    for minutes, steps in reach.items():
+        f = result.horizons[minutes]
+        if f"combined{suffix}" not in f:
+            return
+        starts[minutes] = f["target"] - steps
+        for into, name in ((combined, "combined"), (arx, "arx")):
+            into[steps] = np.full(n, np.nan)
+            into[steps][starts[minutes]] = f[f"{name}{suffix}"]
+    out = correction.correct_series(combined, result.measured, result.x, result.time, result.dt,
+                                    arx)
+    for minutes, steps in reach.items():
+        result.horizons[minutes][f"corrected{suffix}"] = out[steps][starts[minutes]]
 
 
 def _common(measured: np.ndarray, preds: Mapping[str, np.ndarray], keep: np.ndarray) -> dict:

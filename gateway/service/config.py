@@ -65,7 +65,7 @@ class EstimatorSettings:
     settle_s: float = 60.0  # a minute is final this long after the next one started
     gap_s: float = 300.0  # a longer hole restarts the estimator's window (not its parameters)
     history_min: int = 1440  # minutes of history handed to the weather outlook
-    forecast: str = "combined"  # which forecast is published (gateway/service/forecaster.py)
+    forecast: str = "corrected"  # which forecast is published (gateway/service/forecaster.py)
 
 
 @dataclass(frozen=True)
@@ -329,7 +329,7 @@ def _estimator(e: _Table) -> EstimatorSettings:
         settle_s=e.get("settle_s", float, 60.0, lo=0.0),
         gap_s=e.get("gap_s", float, 300.0, lo=60.0),
         history_min=e.get("history_min", int, 1440, lo=1, hi=100_000),
-        forecast=e.get("forecast", str, "combined", choices=KINDS),
+        forecast=e.get("forecast", str, "corrected", choices=KINDS),
     )
     e.done()
     return s

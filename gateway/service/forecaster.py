@@ -1,9 +1,12 @@
-"""The live forecasts of one greenhouse: replay's ``adaptive``, ``adaptive_kf`` or ``combined``.
+"""The live forecasts of one greenhouse: replay's ``adaptive``, ``adaptive_kf``, ``combined`` or
+``corrected``.
 
 - ``adaptive``: the model run forward with the parameters in force from the measured T_in;
 - ``adaptive_kf``: the same from the disturbance filter's state (gateway/estimate/disturbance.py);
-- ``combined`` (default): ``adaptive_kf`` and the RLS ARX baseline (gateway/estimate/arx.py, run
-  live on the same rows) weighted by their recent skill (gateway/estimate/combination.py).
+- ``combined``: ``adaptive_kf`` and the RLS ARX baseline (gateway/estimate/arx.py, run
+  live on the same rows) weighted by their recent skill (gateway/estimate/combination.py);
+- ``corrected`` (default): ``combined`` with its online error correction, the ARX stacked
+  (gateway/estimate/correction.py).
 
 Per model step, call ``update`` after the estimator's update, then ``forecasts`` when the step
 makes forecasts (a step that makes none is recorded as such at the next ``update``). The state
@@ -19,21 +22,23 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from gateway.estimate import arx as arx_baseline
-from gateway.estimate import combination, disturbance
+from gateway.estimate import combination, correction, disturbance
 from gateway.greenhouse import Greenhouse
 from gateway.model.model import Model
 
-KINDS = ("adaptive", "adaptive_kf", "combined")
+KINDS = ("adaptive", "adaptive_kf", "combined", "corrected")
 PARTS = ("adaptive_kf", "arx")
 """The combined forecast's parts, in the combiner's order (the first alone until both have
 met targets)."""
+UPGRADES = {"corrected": ("combined",)}
+"""A kind whose saved state another kind continues (its parts are the same)."""
 
 
 class LiveForecaster:
     """Forecasts of T_in ``horizons`` model steps ahead, of the ``kind`` in ``KINDS``."""
 
     def __init__(self, model: Model, gh: Greenhouse, dt: float, horizons: Sequence[int],
-                 kind: str = "combined") -> None:
+                 kind: str = "corrected") -> None:
         if kind not in KINDS:
             raise ValueError(f"unknown forecast {kind!r} (known: {', '.join(KINDS)})")
         self.model, self.gh, self.dt, self.kind = model, gh, dt, kind
@@ -43,21 +48,27 @@ class LiveForecaster:
     def _start(self) -> None:
         kind, dt = self.kind, self.dt
         self.kf = disturbance.LiveFilter(self.model, self.gh, dt) if kind != "adaptive" else None
-        self.arx = arx_baseline.Rls() if kind == "combined" else None
+        mixed = kind in ("combined", "corrected")
+        self.arx = arx_baseline.Rls() if mixed else None
         window = max(int(round(combination.WINDOW_S / dt)), 1)
-        self.comb = (combination.LiveCombiner(PARTS, self.horizons, window)
-                     if kind == "combined" else None)
+        self.comb = combination.LiveCombiner(PARTS, self.horizons, window) if mixed else None
+        self.corr = correction.Corrector(self.horizons, dt) if kind == "corrected" else None
+        self._row: dict[str, float] = {}  # the correction's drivers now
         self._arx_prev: tuple[np.ndarray, float] | None = None  # φ and T_in of the last step
         self._added = True  # the last step's forecasts were handed to the combiner
 
-    def update(self, row: Mapping[str, float], theta: np.ndarray) -> None:
-        """The drivers at t (the estimator's ``last_row``) and the parameters in force at t."""
+    def update(self, row: Mapping[str, float], theta: np.ndarray,
+               time: np.datetime64 | None = None) -> None:
+        """The drivers at t (the estimator's ``last_row``), the parameters in force at t and t
+        itself (UTC; the correction's hour of the day, ``corrected`` only)."""
         if self.kf is not None:
             self.kf.update(row, theta)
         if self.arx is None or self.comb is None:
             return
         if not self._added:
             self.comb.add(None)  # the last step made no forecasts
+            if self.corr is not None:
+                self.corr.add()
         t_in = float(row.get("t_in", math.nan))
         x = {k: np.array([v], dtype=float) for k, v in row.items()}
         try:
@@ -68,6 +79,11 @@ class LiveForecaster:
             self.arx.update(self._arx_prev[0], t_in - self._arx_prev[1])
         self._arx_prev = (phi, t_in)
         self.comb.observe(t_in)
+        if self.corr is not None:
+            self.corr.observe(t_in)
+            hour = math.nan if time is None else float(correction.hour_of_day(np.array([time]))[0])
+            self._row = {"i_glob": float(row.get("i_glob", math.nan)),
+                         "t_out": float(row.get("t_out", math.nan)), "hour": hour, "t_in": t_in}
         self._added = False
 
     def forecasts(self, theta: np.ndarray, x: Mapping[str, np.ndarray],
@@ -92,8 +108,13 @@ class LiveForecaster:
                 mixed = combination.mix({"adaptive_kf": kf, "arx": arx}, self.comb.weights(h))
                 if math.isfinite(mixed):
                     out[h] = mixed
+                if self.corr is not None and math.isfinite(mixed):
+                    out[h] = self.corr.correct(h, mixed, self._row.get("t_in", math.nan),
+                                                self._row, arx)
         if self.comb is not None and not self._added:
             self.comb.add(made)
+            if self.corr is not None:
+                self.corr.add()
             self._added = True
         return out
 
@@ -104,6 +125,8 @@ class LiveForecaster:
             self.kf.reset()
         if self.comb is not None:
             self.comb.drop_pending()
+        if self.corr is not None:
+            self.corr.drop_pending()
         self._arx_prev, self._added = None, True
 
     def snapshot(self) -> dict:
@@ -113,12 +136,14 @@ class LiveForecaster:
                 "arx": self.arx.snapshot() if self.arx is not None else None,
                 "arx_prev": None if prev is None else [prev[0].tolist(), prev[1]],
                 "combination": self.comb.snapshot() if self.comb is not None else None,
-                "added": self._added}
+                "correction": self.corr.snapshot() if self.corr is not None else None,
+                "row": self._row, "added": self._added}
 
     def restore(self, snap: Mapping | None) -> None:
-        """Continue from a ``snapshot``; None or another kind's state: start afresh."""
+        """Continue from a ``snapshot``; None or another kind's state: start afresh (a
+        ``combined`` state goes on as ``corrected``'s parts, the correction starting afresh)."""
         self._start()
-        if not snap or snap.get("kind") != self.kind:
+        if not snap or snap.get("kind") not in (self.kind, *UPGRADES.get(self.kind, ())):
             return
         if self.kf is not None:
             self.kf.restore(snap["disturbance"])
@@ -126,6 +151,9 @@ class LiveForecaster:
             self.arx.restore(snap["arx"])
         if self.comb is not None:
             self.comb.restore(snap["combination"])
+        if self.corr is not None:
+            self.corr.restore(snap.get("correction"))
+            self._row = dict(snap.get("row") or {})
         prev = snap.get("arx_prev")
         self._arx_prev = None if prev is None else (np.asarray(prev[0], float), float(prev[1]))
         self._added = bool(snap.get("added", True))

@@ -4,9 +4,10 @@ fluxes, (virtual ventilation sensor) → estimate rows, saved with the estimator
 Forecasts are causal: over the horizon the outside drivers come from the greenhouse's weather
 outlook (gateway/estimate/outlook.py, the config's; ``default_outlook`` unless it names another), which
 sees only what was measured up to now; each forecast row names the outlook. The forecast is
-replay's ``combined`` by default (gateway/service/forecaster.py: the model from its disturbance
-filter's state, combined with the RLS ARX by recent skill); ``forecast="adaptive_kf"`` or
-``"adaptive"`` chooses another. A hole in the data
+replay's ``corrected`` by default (gateway/service/forecaster.py: the model from its disturbance
+filter's state, combined with the RLS ARX by recent skill, then corrected by a regression on its
+own matured errors); ``forecast="combined"``, ``"adaptive_kf"`` or ``"adaptive"`` chooses
+another. A hole in the data
 longer than ``gap_s`` restarts the estimator's window and keeps its parameters; shorter holes
 are stepped as missing minutes (the estimator dead-reckons through them, as in ``replay``).
 Each batch of minutes is one transaction: its rows and the estimator's snapshot after it, so a
@@ -71,7 +72,7 @@ class GreenhousePipeline:
                  theta0: np.ndarray | None, *, horizons: tuple[int, ...] = (15, 30, 60),
                  outlook: str = "hold-latest", seed: int = 0, gap_s: float = 300.0,
                  history_min: int = 1440, ventilation: Ventilation | None = None,
-                 forecast: str = "combined") -> None:
+                 forecast: str = "corrected") -> None:
         self.name, self.gh, self.model = name, gh, model
         self.inside, self.outside = inside, outside
         self.devices = {inside, outside}
@@ -185,7 +186,7 @@ class GreenhousePipeline:
     def _step(self, m: Minute) -> list[EstimateRow]:
         self._remember(m)
         pred = self.est.update(m.values, time=np.datetime64(int(m.minute), "s"))
-        self.forecaster.update(self.est.last_row, pred.theta)
+        self.forecaster.update(self.est.last_row, pred.theta, np.datetime64(int(m.minute), "s"))
         self.cursor = m.minute
         self.state = "running"
         t, g = float(m.minute), self.name

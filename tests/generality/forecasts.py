@@ -34,13 +34,14 @@ from tests.generality.suite import _commit, _init_worker  # noqa: E402
 
 RESULTS = ROOT / "bench" / "results" / "forecasts.json"
 COLUMNS = (("persistence", "persistence"), ("arx", "ARX"), ("adaptive", "adaptive"),
-           ("adaptive_kf", "adaptive + KF"), ("combined", "combined"),
+           ("adaptive_kf", "adaptive + KF"), ("combined", "combined"), ("corrected", "corrected"),
            ("arx_outlook", "ARX, outlook"), ("adaptive_outlook", "adaptive, outlook"),
-           ("adaptive_kf_outlook", "adaptive + KF, outlook"), ("combined_outlook", "combined, outlook"))
+           ("adaptive_kf_outlook", "adaptive + KF, outlook"), ("combined_outlook", "combined, outlook"),
+           ("corrected_outlook", "corrected, outlook"))
 """(report key, table heading), in the table's order."""
 
 
-NAMES = ("adaptive", "adaptive_kf", "combined")
+NAMES = ("adaptive", "adaptive_kf", "combined", "corrected")
 """The forecasts whose goals are marked (each with its ``_outlook`` twin)."""
 
 
@@ -58,7 +59,7 @@ def markdown(results: list[dict]) -> str:
     mark = {True: "✓", False: "✗", None: ""}
     head = [c[1] for c in COLUMNS]
     lines = ["| generator | window | h [min] | " + " | ".join(head)
-             + " | goal, measured (adaptive / + KF / combined) | goal, outlook (same) |",
+             + " | goal, measured (adaptive / + KF / combined / corrected) | goal, outlook (same) |",
              "| --- " * (len(head) + 5) + "|"]
     order = {g: i for i, g in enumerate(GENERATORS)}
     for r in sorted(results, key=lambda r: (order[r["case"]["generator"]],
@@ -74,6 +75,41 @@ def markdown(results: list[dict]) -> str:
             lines.append(f"| {label} | {w} | {minutes} | " + " | ".join(cells)
                          + " | " + " / ".join(mark[m] for m, _ in marks)
                          + " | " + " / ".join(mark[o] for _, o in marks) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _label(r: dict) -> str:
+    return f"{r['case']['generator']} {r['case']['window']}"
+
+
+def summary(results: list[dict]) -> str:
+    """Per window (all three horizons), for each marked forecast: on how many windows it beats
+    the ARX at every horizon, is ≥ 30 % better than persistence at every horizon, meets the
+    measured-weather goal and the outlook goal; the held-out generator counted apart."""
+    order = {g: i for i, g in enumerate(GENERATORS)}
+    ok = sorted((r for r in results if "error" not in r),
+                key=lambda r: (order[r["case"]["generator"]], MAIN_WINDOWS.index(r["case"]["window"])))
+    held = sum(r["case"]["generator"] in HELD_OUT for r in ok)
+    lines = ["| forecast | beats the ARX at every horizon | ≥ 30 % better than persistence at "
+             "every horizon | measured-weather goal | outlook goal (≥ 20 % at 30 and 60) |",
+             "| --- | --- | --- | --- | --- |"]
+    for name in NAMES:
+        sets: list[list[str]] = [[], [], [], []]
+        for r in ok:
+            hs = r["horizons"]
+            tests = (all(h[name]["mae"] < h["arx"]["mae"] for h in hs.values()),
+                     all(h[name]["mae"] <= 0.7 * h["persistence"]["mae"] for h in hs.values()),
+                     all(goals(h, name, int(m))[0] for m, h in hs.items()),
+                     all(goals(h, name, int(m))[1] is not False for m, h in hs.items()))
+            for k, passed in enumerate(tests):
+                if passed:
+                    sets[k].append(r)
+        cells = []
+        for s in sets:
+            h = sum(r["case"]["generator"] in HELD_OUT for r in s)
+            where = "; ".join(_label(r) for r in s)
+            cells.append(f"{len(s)} / {len(ok)} (held out {h} / {held})" + (f": {where}" if where else ""))
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -135,6 +171,7 @@ def main(argv: list[str] | None = None) -> int:
     out.write_text(json.dumps({"meta": meta, "results": results}, indent=1) + "\n", encoding="utf-8")
     print(f"wrote {out}\n")
     print(markdown(results))
+    print(summary(results))
     return 0
 
 

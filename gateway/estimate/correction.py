@@ -1,0 +1,191 @@
+"""Horizon-specific error correction of a forecast, learnt online from its own matured errors.
+
+A forecast of T_in[t + h] made at t errs in ways that repeat: a bias the model does not know
+(a heater, a storage of the day's sun), an error that persists from one start to the next. A
+regression of the error on what is known at the start corrects it, as model output statistics
+correct a weather model's output (Glahn & Lowry 1972, "The use of model output statistics (MOS)
+in objective weather forecasting", J. Appl. Meteor. 11, 1203-1211), here refitted online so it
+follows the season. For each horizon h, with the error e(t) = T_in[t + h] − f(t),
+
+    ê(t) = β(t) · φ(t),     corrected f(t) + ê(t),
+    φ(t) = (1, f(t) − T_in[t], e(t − h), I_glob[t] / 1 kW m-2, (T_out − T_in)[t] / 10 K,
+            g(t) − f(t), sin ωτ(t), cos ωτ(t)),    ω = 2π / 24 h, τ the UTC hour,
+
+``g`` a second forecast of the same target (the ARX baseline: the regression re-weights the
+two, stacking, Wolpert 1992, "Stacked generalization", Neural Networks 5, 241-259), ``e(t − h)``
+the last error already measured at t. β(t) is the exponentially weighted least squares estimate
+with a constant ridge toward "no correction" (Gunnarsson 1996, "Combining tracking and
+regularization in recursive least squares identification", Proc. 35th IEEE CDC, 2551-2552):
+
+    β(t) = (R(t) + ρ I)⁻¹ r(t),   R(t) = Σ_s λ^(t−s) φ(s) φ(s)ᵀ,   r(t) = Σ_s λ^(t−s) φ(s) e(s),
+
+over the starts s ≤ t − h only (their target is measured at t): nothing after t is read. The
+constant ridge ρ keeps β bounded where forgetting would let an unexcited direction (no sun at
+night) wind up, and shrinks the correction toward zero until the errors say otherwise.
+λ = exp(−Δt / ``MEMORY_S``): the same memory in time at any model step. A horizon's
+correction is applied once it has learnt from a day of matured starts (``WARMUP_S``) and is
+bounded (``MAX_CORRECTION_K``). Settings are fixed
+here, chosen once on the generality suite's refsim and twonode windows (never on the held-out
+generator) and never tuned per greenhouse.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+MEMORY_S = 4 * 86400.0
+"""[s] time constant of the forgetting: the errors of the last four days weigh most."""
+RIDGE = 50.0
+"""ρ [-], in units of one start's weight: the correction's prior toward zero."""
+FEATURES = ("1", "f - t_in", "last error", "i_glob", "t_out - t_in", "arx - f", "sin hour",
+            "cos hour")
+"""Names of φ, in order: the last two are the hour of the day (UTC) as a daily harmonic, so a
+repeated daily error (the sun stored and given back later in the day) is learnt by phase."""
+SCALE = np.array([1.0, 1.0, 1.0, 1e-3, 0.1, 1.0, 1.0, 1.0])
+"""φ in these units (I_glob per kW m-2, T_out − T_in per 10 K) so one ridge suits all."""
+WARMUP_S = 86400.0
+"""[s] the correction is applied once a horizon has learnt from this long of matured starts (a
+day: the daily harmonic is not identified before); until then ``combined`` goes out as it is."""
+MAX_CORRECTION_K = 3.0
+"""[K] bound on |ê|: a correction larger than that is a fit gone wrong, not a forecast."""
+
+
+def forgetting(dt: float, memory_s: float = MEMORY_S) -> float:
+    """λ per model step of ``dt`` [s]."""
+    return math.exp(-dt / memory_s)
+
+
+def features(f: float, t_in: float, last_error: float, row: Mapping[str, float],
+             arx: float) -> np.ndarray:
+    """φ (scaled, ``FEATURES``) at one start: ``row`` holds ``i_glob``, ``t_out`` and ``hour``
+    (UTC, 0-24) at the start. A missing last error or ARX forecast counts as 0; a missing driver
+    makes φ NaN (no correction)."""
+    w = 2.0 * math.pi * row.get("hour", math.nan) / 24.0
+    raw = np.array([1.0, f - t_in, last_error if math.isfinite(last_error) else 0.0,
+                    row.get("i_glob", math.nan), row.get("t_out", math.nan) - t_in,
+                    arx - f if math.isfinite(arx) else 0.0, math.sin(w), math.cos(w)])
+    return raw * SCALE
+
+
+def hour_of_day(t: np.ndarray) -> np.ndarray:
+    """UTC hour of the day (0-24) of datetime64 times."""
+    t = np.asarray(t, dtype="datetime64[s]")
+    return (t - t.astype("datetime64[D]")).astype(float) / 3600.0
+
+
+class Corrector:
+    """The corrections of every horizon, one model step at a time (live gateway and replay):
+    each step ``observe`` the reading, then ``correct`` the forecasts made now, then ``add``."""
+
+    def __init__(self, horizons: Sequence[int], dt: float, memory_s: float = MEMORY_S,
+                 ridge: float = RIDGE, warmup_s: float = WARMUP_S) -> None:
+        self.horizons, self.lam, self.ridge = tuple(horizons), forgetting(dt, memory_s), ridge
+        self.warmup = int(math.ceil(warmup_s / dt))  # learnt starts before the first correction
+        self.reset()
+
+    def reset(self) -> None:
+        k = len(FEATURES)
+        self.r_mat = {h: np.zeros((k, k)) for h in self.horizons}
+        self.r_vec = {h: np.zeros(k) for h in self.horizons}
+        self.last = {h: math.nan for h in self.horizons}
+        self.learnt = dict.fromkeys(self.horizons, 0)
+        self.pending: dict[int, deque] = {h: deque() for h in self.horizons}
+        self._made: dict[int, list[float]] = {}
+
+    def drop_pending(self) -> None:
+        """A gap: the forecasts waiting for a target will never meet it; β is kept."""
+        self.pending = {h: deque() for h in self.horizons}
+        self.last = {h: math.nan for h in self.horizons}
+        self._made = {}
+
+    def observe(self, reading: float) -> None:
+        """The reading now matures the forecasts made h steps ago: forget, then learn each."""
+        for h in self.horizons:
+            queue = self.pending[h]
+            if len(queue) < h:
+                continue
+            old = queue.popleft()
+            if old is None:
+                self.last[h] = math.nan
+                continue
+            phi, f = np.asarray(old[:-1]), old[-1]
+            e = reading - f
+            self.last[h] = e
+            if not (math.isfinite(e) and np.all(np.isfinite(phi))):
+                continue
+            self.r_mat[h] = self.lam * self.r_mat[h] + np.outer(phi, phi)
+            self.r_vec[h] = self.lam * self.r_vec[h] + phi * e
+            self.learnt[h] += 1
+
+    def beta(self, h: int) -> np.ndarray:
+        k = len(FEATURES)
+        return np.linalg.solve(self.r_mat[h] + self.ridge * np.eye(k), self.r_vec[h])
+
+    def correct(self, h: int, f: float, t_in: float, row: Mapping[str, float],
+                arx: float = math.nan) -> float:
+        """The corrected forecast of horizon ``h`` made now from the reading ``t_in``, the
+        drivers ``row`` (``features``) and the ARX's forecast of the same target; ``f``
+        unchanged where φ cannot be formed. Remembered for ``add``."""
+        phi = features(f, t_in, self.last[h], row, arx)
+        if not (math.isfinite(f) and np.all(np.isfinite(phi))):
+            return f
+        self._made[h] = [*phi.tolist(), f]
+        if self.learnt[h] < self.warmup:
+            return f
+        e_hat = float(np.clip(self.beta(h) @ phi, -MAX_CORRECTION_K, MAX_CORRECTION_K))
+        return f + e_hat
+
+    def add(self) -> None:
+        """Close the step: the forecasts ``correct`` saw now wait h steps for their target."""
+        for h in self.horizons:
+            self.pending[h].append(self._made.get(h))
+        self._made = {}
+
+    def snapshot(self) -> dict:
+        return {"r_mat": {str(h): m.tolist() for h, m in self.r_mat.items()},
+                "r_vec": {str(h): v.tolist() for h, v in self.r_vec.items()},
+                "last": {str(h): v for h, v in self.last.items()},
+                "learnt": {str(h): v for h, v in self.learnt.items()},
+                "pending": {str(h): list(q) for h, q in self.pending.items()}}
+
+    def restore(self, snap: Mapping | None) -> None:
+        """Continue from a ``snapshot`` (None: start afresh)."""
+        self.reset()
+        if not snap:
+            return
+        for h in self.horizons:
+            key = str(h)
+            if key in snap.get("r_mat", {}):
+                self.r_mat[h] = np.asarray(snap["r_mat"][key], dtype=float)
+                self.r_vec[h] = np.asarray(snap["r_vec"][key], dtype=float)
+            last = snap.get("last", {}).get(key)
+            self.last[h] = math.nan if last is None else float(last)
+            self.learnt[h] = int(snap.get("learnt", {}).get(key, 0))
+            self.pending[h].extend(snap.get("pending", {}).get(key, []))
+
+
+def correct_series(forecasts: Mapping[int, np.ndarray], measured: np.ndarray,
+                   x: Mapping[str, np.ndarray], time: np.ndarray, dt: float,
+                   arx: Mapping[int, np.ndarray] | None = None, memory_s: float = MEMORY_S,
+                   ridge: float = RIDGE, warmup_s: float = WARMUP_S) -> dict[int, np.ndarray]:
+    """``forecasts`` {h: (T,) forecast of T_in[t + h] made at t}, on the series' grid (NaN where
+    none was made; ``arx`` the same for the ARX, stacked), corrected by ``Corrector`` run step by
+    step: the figures the live gateway gives."""
+    n = len(measured)
+    corr = Corrector(list(forecasts), dt, memory_s, ridge, warmup_s)
+    out = {h: np.full(n, np.nan) for h in forecasts}
+    nan = np.full(n, np.nan)
+    g = {h: np.asarray((arx or {}).get(h, nan), dtype=float) for h in forecasts}
+    cols = {"i_glob": x["i_glob"], "t_out": x["t_out"], "hour": hour_of_day(time)}
+    for t in range(n):
+        corr.observe(float(measured[t]))
+        row = {k: float(v[t]) for k, v in cols.items()}
+        for h, f in forecasts.items():
+            if math.isfinite(f[t]):
+                out[h][t] = corr.correct(h, float(f[t]), float(measured[t]), row, float(g[h][t]))
+        corr.add()
+    return out

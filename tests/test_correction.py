@@ -1,0 +1,134 @@
+"""Online error correction of a forecast (gateway/estimate/correction.py): it learns a bias,
+reads no outcome later than its start, and the live step-by-step form resumes exactly."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+from gateway.estimate.correction import (
+    MAX_CORRECTION_K,
+    Corrector,
+    correct_series,
+    hour_of_day,
+)
+
+H = 6
+DT = 300.0
+
+
+def _series(seed: int = 0, n: int = 2000, bias: float = 0.8):
+    """A temperature, its drivers and times, and a forecast of it H steps ahead off by ``bias``."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n)
+    measured = 18.0 + 3.0 * np.sin(2 * np.pi * t / 288) + np.cumsum(rng.normal(0, 0.02, n))
+    target = np.full(n, np.nan)
+    target[: n - H] = measured[H:]
+    x = {"i_glob": np.clip(600 * np.sin(2 * np.pi * t / 288), 0, None),
+         "t_out": measured - 6.0 + rng.normal(0, 0.5, n)}
+    time = np.datetime64("2020-01-01T00:00", "s") + t * np.timedelta64(int(DT), "s")
+    forecast = target - bias + rng.normal(0, 0.1, n)
+    return measured, x, time, forecast
+
+
+def _mae_late(measured, f):
+    return float(np.mean(np.abs(f[1000:-H] - measured[1000 + H:])))
+
+
+def test_it_learns_a_constant_bias():
+    measured, x, time, forecast = _series()
+    corrected = correct_series({H: forecast}, measured, x, time, DT)[H]
+    before, after = _mae_late(measured, forecast), _mae_late(measured, corrected)
+    assert before > 0.75 and after < 0.15, (before, after)
+
+
+def test_an_unbiased_forecast_is_left_nearly_alone():
+    measured, x, time, forecast = _series(seed=1, bias=0.0)
+    corrected = correct_series({H: forecast}, measured, x, time, DT)[H]
+    before, after = _mae_late(measured, forecast), _mae_late(measured, corrected)
+    assert after < 1.05 * before, (before, after)
+
+
+def test_the_correction_at_t_reads_no_outcome_after_t():
+    """Another future after t changes nothing up to t: a correction at t uses the targets of
+    the starts up to t − H only (measured at t at the latest)."""
+    measured, x, time, forecast = _series(seed=2)
+    a = correct_series({H: forecast}, measured, x, time, DT)[H]
+    t = 1200
+    later = measured.copy()
+    later[t + 1:] += 5.0
+    b = correct_series({H: forecast}, later, x, time, DT)[H]
+    np.testing.assert_array_equal(a[: t + 1], b[: t + 1])
+    assert not np.allclose(a[t + H + 1: t + 50], b[t + H + 1: t + 50])
+
+
+def test_the_outcome_of_a_start_is_first_used_h_steps_later():
+    """A single error at start s moves the correction from s + H on, not before."""
+    n = 200
+    measured = np.full(n, 20.0)
+    forecast = np.full(n, 20.0)
+    x = {"i_glob": np.zeros(n), "t_out": np.full(n, 15.0)}
+    time = np.datetime64("2020-01-01T00:00", "s") + np.arange(n) * np.timedelta64(300, "s")
+    s = 100
+    forecast[s] = 19.0  # the start s errs by +1 K (its target is 20 at s + H)
+    out = correct_series({H: forecast}, measured, x, time, DT, warmup_s=0.0)[H]
+    assert np.all(out[:s] == forecast[:s])
+    assert np.all(out[s + 1: s + H] == forecast[s + 1: s + H])
+    assert out[s + H] > 20.0
+
+
+def test_nothing_is_corrected_before_a_day_of_matured_starts():
+    measured, x, time, forecast = _series(seed=7)
+    out = correct_series({H: forecast}, measured, x, time, DT)[H]
+    day = int(86400 / DT)
+    first = day + H - 1  # at t the starts 0 … t − H have matured: a day of them at t = day + H − 1
+    np.testing.assert_array_equal(out[:first], forecast[:first])
+    assert np.all(out[first:] != forecast[first:])
+
+
+def test_the_correction_is_bounded_and_a_missing_forecast_stays_missing():
+    measured, x, time, forecast = _series(seed=3, bias=50.0)
+    forecast[500:510] = np.nan
+    out = correct_series({H: forecast}, measured, x, time, DT)[H]
+    assert np.all(np.isnan(out[500:510]))
+    ok = np.isfinite(out)
+    assert np.all(np.abs(out[ok] - forecast[ok]) <= MAX_CORRECTION_K + 1e-12)
+    assert np.mean(np.abs(out[ok] - forecast[ok]) > MAX_CORRECTION_K - 1e-9) > 0.5
+
+
+def test_the_stacked_forecast_is_weighted_in():
+    """Given a second forecast that is better, the correction moves toward it."""
+    measured, x, time, forecast = _series(seed=5, bias=0.0)
+    rng = np.random.default_rng(6)
+    target = np.concatenate([measured[H:], np.full(H, np.nan)])
+    poor = target + rng.normal(0, 0.4, len(target))
+    good = target + rng.normal(0, 0.1, len(target))
+    out = correct_series({H: poor}, measured, x, time, DT, {H: good})[H]
+    assert _mae_late(measured, out) < 0.6 * _mae_late(measured, poor)
+
+
+def test_hour_of_day():
+    t = np.array(["2020-03-01T00:00", "2020-03-01T13:30"], dtype="datetime64[s]")
+    np.testing.assert_allclose(hour_of_day(t), [0.0, 13.5])
+
+
+def test_live_steps_resume_from_a_snapshot():
+    measured, x, time, forecast = _series(seed=4, n=800)
+    whole = correct_series({H: forecast}, measured, x, time, DT)[H]
+    hours = hour_of_day(time)
+    live = Corrector([H], DT)
+    got = np.full(len(measured), np.nan)
+    for t in range(len(measured)):
+        if t == 400:  # a restarted gateway
+            snap = json.loads(json.dumps(live.snapshot()))
+            live = Corrector([H], DT)
+            live.restore(snap)
+        live.observe(float(measured[t]))
+        if math.isfinite(forecast[t]):
+            row = {"i_glob": float(x["i_glob"][t]), "t_out": float(x["t_out"][t]),
+                   "hour": float(hours[t])}
+            got[t] = live.correct(H, float(forecast[t]), float(measured[t]), row)
+        live.add()
+    np.testing.assert_allclose(got, whole, rtol=0, atol=1e-12)

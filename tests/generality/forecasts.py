@@ -163,7 +163,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"[{i}/{len(cases)}] {Case(**r['case']).label} ({r['seconds']:.0f} s)",
                       flush=True)
     meta = {"command": "tests/generality/forecasts.py" + (" --rescore" if a.rescore else ""),
-            "cases": len(results), "jobs": a.jobs,
+            "cases": len(results), "jobs": None if a.rescore else a.jobs,  # a rescore runs none
             "minutes": (time.perf_counter() - t0) / 60.0, "commit": _commit(),
             "when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
     out = Path(a.json)

@@ -289,6 +289,18 @@ def test_feedback_noise_offsets_only_the_past_outputs_seeded_and_never_below_zer
     assert 0.35 < np.sqrt(np.mean(above ** 2)) < 0.65  # the positive half of N(0, 0.5)
 
 
+def test_high_flow_rows_weigh_more_with_a_mean_weight_of_one():
+    from training.vsensor.fit import RowOptions, row_weights
+
+    t = np.arange(10.0)
+    assert row_weights(t, 7.5, 1.0) is None
+    w = row_weights(t, 7.5, 4.0)
+    assert w.mean() == pytest.approx(1.0) and w[9] == pytest.approx(4 * w[0])
+    assert np.all(w[:8] == w[0]) and np.all(w[8:] == w[9])
+    assert RowOptions().as_settings() == {}  # the defaults leave the model's settings unchanged
+    assert RowOptions(0.1, 2.0).as_settings() == {"feedback_noise": 0.1, "high_flow_weight": 2.0}
+
+
 def test_rounds_on_the_ensemble_feedback_are_seeded_and_logged(tmp_path):
     import json
 
@@ -303,7 +315,7 @@ def test_rounds_on_the_ensemble_feedback_are_seeded_and_logged(tmp_path):
         with threadpool_limits(1):
             r = train(paths, gh, "almeria", tmp_path / tag / "m.onnx", vd.workdir() / "cache",
                       vd.TINY, hidden=(8, 8), epochs=8, rounds=2, ensemble=2,
-                      feedback="ensemble", feedback_noise=0.2)
+                      feedback="ensemble", feedback_noise=0.2, high_flow_weight=3.0)
         out.append(r)
     assert out[0].paths["pca_narx"].read_bytes() == out[1].paths["pca_narx"].read_bytes()
     log = out[0].logs["pca_narx"]
@@ -314,8 +326,9 @@ def test_rounds_on_the_ensemble_feedback_are_seeded_and_logged(tmp_path):
     meta = {p.key: p.value for p in onnx.load(str(out[0].paths["pca_narx"])).metadata_props}
     st = json.loads(meta["training_settings"])
     assert st["feedback"] == "ensemble" and st["feedback_noise"] == 0.2
+    assert st["high_flow_weight"] == 3.0
     card = out[0].card.read_text()
-    assert "--feedback ensemble --feedback-noise 0.2" in card
+    assert "--feedback ensemble --feedback-noise 0.2 --high-flow-weight 3" in card
     with pytest.raises(ValueError, match="feedback 'own'"):
         train(paths, gh, "almeria", tmp_path / "c.onnx", vd.workdir() / "cache", vd.TINY,
               hidden=(8,), epochs=1, rounds=1, ensemble=2, feedback="own")

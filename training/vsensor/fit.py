@@ -108,6 +108,35 @@ def _layers(mlp) -> list[Layer]:
 
 
 Noise = Callable[[np.ndarray], np.ndarray]
+HIGH_FLOW_QUANTILE = 0.90
+"""``RowOptions.high_weight`` weighs the rows whose target is above this quantile of the
+training targets."""
+
+
+@dataclass(frozen=True)
+class RowOptions:
+    """How the training rows are presented to the networks (defaults: as they are)."""
+
+    noise_sigma: float = 0.0  # see feedback_noise
+    high_weight: float = 1.0  # loss weight of the rows above HIGH_FLOW_QUANTILE (the peaks)
+
+    def as_settings(self) -> dict[str, float]:
+        """The non-default options, for the model's training settings."""
+        out = {}
+        if self.noise_sigma:
+            out["feedback_noise"] = self.noise_sigma
+        if self.high_weight != 1.0:
+            out["high_flow_weight"] = self.high_weight
+        return out
+
+
+def row_weights(t: np.ndarray, threshold: float, high_weight: float) -> np.ndarray | None:
+    """Loss weights of rows with (scaled) targets ``t``: ``high_weight`` above ``threshold``,
+    1 elsewhere, normalised to a mean of 1 (the step size stays comparable); None for 1."""
+    if high_weight == 1.0:
+        return None
+    w = np.where(t > threshold, high_weight, 1.0)
+    return w / w.mean()
 
 
 def feedback_noise(sigma: float, floor: float, rng: np.random.Generator) -> Noise | None:
@@ -131,12 +160,13 @@ def feedback_noise(sigma: float, floor: float, rng: np.random.Generator) -> Nois
 
 
 def _epochs(mlp, h, t, hv, tv, epochs: int, patience: int, progress: Progress, label: str,
-            noise: Noise | None = None):
+            noise: Noise | None = None, weights: np.ndarray | None = None):
     """partial_fit one pass at a time, keep the weights of the best validation loss
-    (``noise``: applied afresh to the training rows at every pass; validation stays clean)."""
+    (``noise``: applied afresh to the training rows at every pass; ``weights``: the rows' loss
+    weights; validation stays clean and unweighted)."""
     best, best_w, stale = np.inf, None, 0
     for e in range(epochs):
-        mlp.partial_fit(h if noise is None else noise(h), t)
+        mlp.partial_fit(h if noise is None else noise(h), t, sample_weight=weights)
         loss = float(np.mean((mlp.predict(hv) - tv) ** 2))
         if loss < best - 1e-7:
             best, stale = loss, 0
@@ -159,12 +189,13 @@ class Member:
     mlp: object  # MLPRegressor
     rows: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # h, t, h_val, t_val
     noise: Noise | None
+    weigh: Callable[[np.ndarray], np.ndarray | None]  # scaled targets → loss weights
     log: dict
 
 
 def start_member(name: str, split: Split, mean, std, projection, seed: int, hidden=HIDDEN,
                  epochs: int = 150, progress: Progress | None = None,
-                 round_lr: float | None = None, noise_sigma: float = 0.0) -> Member:
+                 round_lr: float | None = None, opts: RowOptions = RowOptions()) -> Member:
     """A network fitted series-parallel (past outputs = the target's), not yet refined."""
     from sklearn.neural_network import MLPRegressor
 
@@ -174,16 +205,21 @@ def start_member(name: str, split: Split, mean, std, projection, seed: int, hidd
                float(np.nanstd(y_train)) or 1.0)
     h, t = rows(net, split.part("train"))
     hv, tv = rows(net, split.part("validation"))
-    noise = feedback_noise(noise_sigma, -net.y_mean / net.y_std, np.random.default_rng(seed))
+    noise = feedback_noise(opts.noise_sigma, -net.y_mean / net.y_std, np.random.default_rng(seed))
+    threshold = float(np.quantile(t, HIGH_FLOW_QUANTILE))
+
+    def weigh(targets: np.ndarray) -> np.ndarray | None:
+        return row_weights(targets, threshold, opts.high_weight)
+
     mlp = MLPRegressor(hidden_layer_sizes=hidden, activation="tanh", solver="adam", alpha=1e-4,
                        batch_size=256, learning_rate_init=1e-3, random_state=seed, shuffle=True)
-    _epochs(mlp, h, t, hv, tv, epochs, 20, progress, name, noise)
+    _epochs(mlp, h, t, hv, tv, epochs, 20, progress, name, noise, weigh(t))
     net.layers = _layers(mlp)
     log = {"series_parallel_val_mse": float(np.mean((mlp.predict(hv) - tv) ** 2)),
            "closed_loop_val_mae": [validation_mae(net, split)]}
     if round_lr is not None and hasattr(mlp, "_optimizer"):
         mlp._optimizer.learning_rate_init = round_lr  # Adam keeps its moments; only the step
-    return Member(net, mlp, (h, t, hv, tv), noise, log)
+    return Member(net, mlp, (h, t, hv, tv), noise, weigh, log)
 
 
 def refine(m: Member, split: Split, sims: list[np.ndarray], round_epochs: int,
@@ -193,23 +229,24 @@ def refine(m: Member, split: Split, sims: list[np.ndarray], round_epochs: int,
     h, t, hv, tv = m.rows
     train_sims = [y[:c] for y, c in zip(sims, split.cut, strict=True)]
     hc, tc = rows(m.net, split.part("train"), train_sims)
-    _epochs(m.mlp, np.concatenate([h, hc]), np.concatenate([t, tc]), hv, tv, round_epochs,
-            round_epochs, progress, label, m.noise)
+    tt = np.concatenate([t, tc])
+    _epochs(m.mlp, np.concatenate([h, hc]), tt, hv, tv, round_epochs, round_epochs, progress,
+            label, m.noise, m.weigh(tt))
     m.net.layers = _layers(m.mlp)
 
 
 def fit_narx(name: str, split: Split, mean, std, projection, seed: int, hidden=HIDDEN,
              epochs: int = 150, rounds: int = 3, round_epochs: int = 30,
              progress: Progress | None = None, round_lr: float | None = None,
-             noise_sigma: float = 0.0) -> tuple[Narx, dict]:
+             opts: RowOptions = RowOptions()) -> tuple[Narx, dict]:
     """Train one network (series-parallel, then closed-loop rounds). Returns it and a log.
 
     ``round_lr``: Adam's step size during the closed-loop rounds (default: the series-parallel
-    one, 1e-3); a smaller step fine-tunes instead of jumping between rounds. ``noise_sigma``:
-    see :func:`feedback_noise`."""
+    one, 1e-3); a smaller step fine-tunes instead of jumping between rounds. ``opts``: noise
+    on the past outputs and loss weights of the rows (:class:`RowOptions`)."""
     progress = progress or (lambda **k: None)
     m = start_member(name, split, mean, std, projection, seed, hidden, epochs, progress,
-                     round_lr, noise_sigma)
+                     round_lr, opts)
     log = m.log
     best = (log["closed_loop_val_mae"][0], m.net.layers)
     for r in range(rounds):
@@ -226,12 +263,12 @@ def fit_narx(name: str, split: Split, mean, std, projection, seed: int, hidden=H
 
 def _joint(name: str, split: Split, mean, std, projection, seeds: list[int], hidden, epochs: int,
            rounds: int, round_epochs: int, progress: Progress, round_lr: float | None,
-           noise_sigma: float) -> tuple[Narx, dict]:
+           opts: RowOptions) -> tuple[Narx, dict]:
     """Members fitted series-parallel apart, then refined together: in every round each member
     learns from rows whose past outputs are **the ensemble's** closed-loop flows (what it hears
     deployed); the round whose ensemble has the best closed-loop validation MAE is kept."""
     ms = [start_member(name, split, mean, std, projection, s, hidden, epochs, progress,
-                       round_lr, noise_sigma) for s in seeds]
+                       round_lr, opts) for s in seeds]
     stacks = [m.net.layers for m in ms]
     ens = Narx(name, mean, std, projection, ms[0].net.y_mean, ms[0].net.y_std, stacks[0],
                members=list(stacks))
@@ -263,7 +300,7 @@ def _joint(name: str, split: Split, mean, std, projection, seeds: list[int], hid
 def fit_ensemble(name: str, split: Split, mean, std, projection, seeds: list[int],
                  hidden=HIDDEN, epochs: int = 150, rounds: int = 3, round_epochs: int = 30,
                  progress: Progress | None = None, round_lr: float | None = None,
-                 noise_sigma: float = 0.0, feedback: str = "member") -> tuple[Narx, dict]:
+                 opts: RowOptions = RowOptions(), feedback: str = "member") -> tuple[Narx, dict]:
     """``fit_narx`` once per seed on the same rows; the members' outputs are averaged.
 
     ``feedback`` "member": each member is fitted (and its closed-loop rounds run) on its own,
@@ -276,9 +313,9 @@ def fit_ensemble(name: str, split: Split, mean, std, projection, seeds: list[int
     progress = progress or (lambda **k: None)
     if feedback == "ensemble" and len(seeds) > 1:
         return _joint(name, split, mean, std, projection, seeds, hidden, epochs, rounds,
-                      round_epochs, progress, round_lr, noise_sigma)
+                      round_epochs, progress, round_lr, opts)
     fitted = [fit_narx(name, split, mean, std, projection, s, hidden, epochs, rounds,
-                       round_epochs, progress, round_lr, noise_sigma) for s in seeds]
+                       round_epochs, progress, round_lr, opts) for s in seeds]
     net = fitted[0][0]
     if len(fitted) == 1:
         return net, fitted[0][1]

@@ -126,7 +126,7 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
           round_lr: float | None = None, pca_variance: float = fit.MIN_VARIANCE,
           test_paths: list[str] | None = None, ensemble: int = 1,
           net_seed: int | None = None, feedback: str = "member",
-          feedback_noise: float = 0.0) -> TrainResult:
+          feedback_noise: float = 0.0, high_flow_weight: float = 1.0) -> TrainResult:
     """Build the datasets, fit the three networks, write the models, card and report (PNGs in
     ``report_dir``, default ``<out stem>.report/`` beside the model). ``pca_variance``: the
     share of the variance the kept components must reach (the issue asks for at least 0.90).
@@ -134,14 +134,16 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
     through the gateway's runtime) for the model card; they never steer the fit. ``ensemble``:
     networks averaged in each NARX (PCA and no-PCA alike), seeded ``net_seed`` + 0 … K - 1
     (``net_seed`` defaults to ``seed``, which also seeds the estimator's replays). ``feedback``
-    and ``feedback_noise``: the closed-loop rounds on each member's or the ensemble's feedback,
-    and the noise on the past outputs of the training rows (fit.fit_ensemble, fit.feedback_noise)."""
+    , ``feedback_noise`` and ``high_flow_weight``: the closed-loop rounds on each member's or the
+    ensemble's feedback, the noise on the past outputs of the training rows and the loss weight
+    of the rows above the targets' 90th percentile (fit.fit_ensemble, fit.RowOptions)."""
     if not fit.MIN_VARIANCE <= pca_variance <= 1.0:
         raise ValueError(f"pca_variance {pca_variance}: must be in [{fit.MIN_VARIANCE}, 1]")
     if ensemble < 1:
         raise ValueError(f"ensemble {ensemble}: at least one network")
     net_seed = seed if net_seed is None else net_seed
     seeds = [net_seed + j for j in range(ensemble)]
+    opts = fit.RowOptions(feedback_noise, high_flow_weight)
     progress = progress or (lambda **k: None)
     out = Path(out)
     t0 = time.perf_counter()
@@ -156,7 +158,7 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
         nets[name], logs[name] = fit.fit_ensemble(name, split, mean, std, proj, seeds, hidden,
                                                   epochs, rounds, min(30, epochs),
                                                   progress=progress, round_lr=round_lr,
-                                                  noise_sigma=feedback_noise, feedback=feedback)
+                                                  opts=opts, feedback=feedback)
     nets["linear_arx"] = fit.fit_arx(split, mean, std)
     nets["pca_narx"].explained = share[:kept]
     seconds["fit"] = time.perf_counter() - t1
@@ -186,7 +188,7 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
                               **({"ensemble": ensemble, "net_seed": net_seed}
                                  if ensemble > 1 or net_seed != seed else {}),
                               **({"feedback": feedback} if feedback != "member" else {}),
-                              **({"feedback_noise": feedback_noise} if feedback_noise else {})},
+                              **opts.as_settings()},
         "version": _version(), "pca": pca_info,
         "metrics": {"validation_closed_loop": metrics,
                     "training_log": {k: v for k, v in logs.items()}},

@@ -53,6 +53,9 @@ def add_feedback_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--feedback-noise", type=float, default=0.0, metavar="SIGMA",
                    help="a common N(0, SIGMA) offset, in units of the target's standard deviation, "
                    "on the five past outputs of every training row, redrawn each epoch (default 0)")
+    p.add_argument("--high-flow-weight", type=float, default=1.0, metavar="W",
+                   help="loss weight of the training rows whose target is above the targets' 90th "
+                   "percentile, the others 1 (default 1: unweighted)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -76,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
                        report_dir=args.report, round_lr=args.round_lr,
                        pca_variance=args.pca_variance, test_paths=args.test,
                        ensemble=args.ensemble, net_seed=args.net_seed, feedback=args.feedback,
-                       feedback_noise=args.feedback_noise)
+                       feedback_noise=args.feedback_noise, high_flow_weight=args.high_flow_weight)
     summary = {"models": {k: str(v) for k, v in result.paths.items()}, "card": str(result.card),
                "pca": {k: v for k, v in result.pca.items() if k != "all_shares"},
                "validation_closed_loop": result.metrics,

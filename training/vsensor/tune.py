@@ -74,13 +74,15 @@ def run(args: argparse.Namespace) -> int:
                        args.seed, args.pca_variance, lambda **k: None)
         net, log = fit.fit_ensemble("pca_narx", prep.split, prep.mean, prep.std, prep.loadings,
                                     seeds, hidden, args.epochs, args.rounds, min(30, args.epochs),
-                                    round_lr=args.round_lr, noise_sigma=args.feedback_noise,
+                                    round_lr=args.round_lr,
+                                    opts=fit.RowOptions(args.feedback_noise, args.high_flow_weight),
                                     feedback=args.feedback)
         m, _ = validation_metrics(net, prep.split)
     summary = {"label": args.label, "components": int(prep.loadings.shape[1]),
                "variance": float(np.sum(prep.share[: prep.loadings.shape[1]])),
                "settings": {k: getattr(args, k) for k in ("hidden", "epochs", "rounds", "round_lr",
-                            "pca_variance", "ensemble", "feedback", "feedback_noise")}
+                            "pca_variance", "ensemble", "feedback", "feedback_noise",
+                                                 "high_flow_weight")}
                | {"net_seed": net_seed},
                "mae": m["mae"], "mae_pct_range": m["mae_pct_range"], "range": m["range"],
                "by_file": {k: v["mae"] for k, v in m["by_file"].items()},

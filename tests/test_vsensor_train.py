@@ -271,3 +271,93 @@ def test_prototype_kind_trains_and_runs(tmp_path):
     novent = run_adaptive("prototype", load_series(str(vd.test_file())), gh, False, vd.TINY)
     run = run_sensor(VentSensor(out, gh, "prototype"), novent)
     assert np.all(np.isfinite(run.flow)) and run.flow.min() >= 0
+
+
+def test_feedback_noise_offsets_only_the_past_outputs_seeded_and_never_below_zero_flow():
+    from training.vsensor.fit import feedback_noise
+
+    assert feedback_noise(0.0, -1.0, np.random.default_rng(0)) is None
+    h = np.zeros((2000, 12))
+    a = feedback_noise(0.5, -0.3, np.random.default_rng(4))(h)
+    b = feedback_noise(0.5, -0.3, np.random.default_rng(4))(h)
+    assert np.array_equal(a, b) and np.all(h == 0)  # seeded, the rows themselves untouched
+    assert np.all(a[:, :-5] == 0)  # the inputs' columns are not touched
+    past = a[:, -5:]
+    assert np.all(past == past[:, :1])  # one common offset per row over the five delays
+    assert past.min() == pytest.approx(-0.3)  # clipped at the scaled zero flow
+    above = past[:, 0][past[:, 0] > 0]
+    assert 0.35 < np.sqrt(np.mean(above ** 2)) < 0.65  # the positive half of N(0, 0.5)
+
+
+def test_high_flow_rows_weigh_more_with_a_mean_weight_of_one():
+    from training.vsensor.fit import RowOptions, row_weights
+
+    t = np.arange(10.0)
+    assert row_weights(t, 7.5, 1.0) is None
+    w = row_weights(t, 7.5, 4.0)
+    assert w.mean() == pytest.approx(1.0) and w[9] == pytest.approx(4 * w[0])
+    assert np.all(w[:8] == w[0]) and np.all(w[8:] == w[9])
+    assert RowOptions().as_settings() == {}  # the defaults leave the model's settings unchanged
+    assert RowOptions(0.1, 2.0).as_settings() == {"feedback_noise": 0.1, "high_flow_weight": 2.0}
+
+
+def test_rounds_on_the_ensemble_feedback_are_seeded_and_logged(tmp_path):
+    import json
+
+    from threadpoolctl import threadpool_limits
+
+    from training.vsensor.train import train
+
+    gh = load_greenhouse(vd.GREENHOUSE)
+    paths = [str(p) for p in vd.train_files()]
+    out = []
+    for tag in ("a", "b"):
+        with threadpool_limits(1):
+            r = train(paths, gh, "almeria", tmp_path / tag / "m.onnx", vd.workdir() / "cache",
+                      vd.TINY, hidden=(8, 8), epochs=8, rounds=2, ensemble=2,
+                      feedback="ensemble", feedback_noise=0.2, high_flow_weight=3.0)
+        out.append(r)
+    assert out[0].paths["pca_narx"].read_bytes() == out[1].paths["pca_narx"].read_bytes()
+    log = out[0].logs["pca_narx"]
+    assert log["feedback"] == "ensemble" and len(log["ensemble_round_val_mae"]) == 3
+    # the kept round's ensemble is the model: its figure is the validation metric
+    assert min(log["ensemble_round_val_mae"]) == pytest.approx(out[0].metrics["pca_narx"]["mae"])
+    assert log["ensemble_val_mae_by_size"][-1] == pytest.approx(out[0].metrics["pca_narx"]["mae"])
+    meta = {p.key: p.value for p in onnx.load(str(out[0].paths["pca_narx"])).metadata_props}
+    st = json.loads(meta["training_settings"])
+    assert st["feedback"] == "ensemble" and st["feedback_noise"] == 0.2
+    assert st["high_flow_weight"] == 3.0
+    card = out[0].card.read_text()
+    assert "--feedback ensemble --feedback-noise 0.2 --high-flow-weight 3" in card
+    with pytest.raises(ValueError, match="feedback 'own'"):
+        train(paths, gh, "almeria", tmp_path / "c.onnx", vd.workdir() / "cache", vd.TINY,
+              hidden=(8,), epochs=1, rounds=1, ensemble=2, feedback="own")
+
+
+def test_tune_prints_the_pca_narx_train_would_fit(tmp_path, capsys):
+    import json
+
+    from training.vsensor.cli import main
+
+    paths = [str(p) for p in vd.train_files()]
+    log = tmp_path / "tune.jsonl"
+    args = ["--data", *paths, "--greenhouse", vd.GREENHOUSE, "--model", "almeria",
+            "--cache", str(vd.workdir() / "cache"), "--set", "t_in.iterations=2",
+            "--set", "t_in.bats=4", "--set", "i_in.iterations=2", "--set", "i_in.bats=4",
+            "--hidden", "8,8", "--epochs", "8", "--rounds", "1"]
+    assert main(["tune", *args, "--subset", "train-grower", "--log", str(log)]) == 0
+    got = json.loads(log.read_text())
+    model = tmp_path / "m.onnx"
+    assert main(["train", *args, "--out", str(model)]) == 0
+    meta = {p.key: p.value for p in onnx.load(str(model)).metadata_props}
+    trained = json.loads(meta["metrics"])["validation_closed_loop"]["pca_narx"]
+    assert got["mae"] == pytest.approx(trained["mae"], rel=1e-12)
+    assert got["groups"]["grower"] == pytest.approx(trained["by_file"]["train-grower"]["mae"])
+    assert got["groups"]["controller"] == pytest.approx(trained["by_file"]["train-controller"]["mae"])
+    assert got["groups"]["subset"] == got["groups"]["grower"]
+    capsys.readouterr()
+    assert main(["errors", "--sensor", str(model), *args[:-6]]) == 0
+    text = capsys.readouterr().out
+    assert "by file:" in text and "by vents:" in text and "train-grower" in text
+    shares = [float(line.split()[-2].rstrip("%")) for line in text.splitlines()[2:4]]
+    assert sum(shares) == pytest.approx(100.0, abs=0.2)  # the two files share all the error

@@ -4,6 +4,10 @@
 - ``dataset --data FILE... --greenhouse G --model KIND --cache DIR``: run the two replays of
   each file and cache their products (what ``train`` does first; run several in parallel).
 - ``train --data FILE... --greenhouse G --model KIND --out MODEL.onnx``: train and export.
+- ``tune --data FILE... [setting]``: one setting's PCA-NARX on the validation quarters only
+  (what ``train`` fits first, nothing written; training/vsensor/tune.py).
+- ``errors --sensor MODEL.onnx --data FILE...``: where a model's closed-loop validation error
+  comes from (by file, wind, vents, hour, flow level, |ΔT|; training/vsensor/errors.py).
 - ``reference --data FILE... --greenhouse G --model KIND``: the explicit flow (the target)
   beside the simulator's truth, and what its peaks are made of (training/vsensor/reference.py).
 """
@@ -52,6 +56,9 @@ def build_parser() -> argparse.ArgumentParser:
     from training.vsensor.train_cli import add_train_parser
 
     add_train_parser(sub, _data_args)
+    from training.vsensor.tune import add_tune_parser
+
+    add_tune_parser(sub, _data_args)
     r = sub.add_parser("reference", help="the explicit (vent-based) flow beside the simulator's "
                        "truth, and its peaks' conditions",
                        description="Replay each file with the vent signal, keeping the estimator's "
@@ -63,6 +70,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a peak is a minute with G above this [m3 s-1] (default 30)")
     r.add_argument("--json", action="store_true", help="print the studies as JSON")
     r.set_defaults(func=_reference)
+    e = sub.add_parser("errors", help="where a model's closed-loop validation error comes from",
+                       description="Run MODEL in closed loop over the training files and split its "
+                       "absolute flow error on their validation quarters (last 25 %) by file, wind, "
+                       "vents, hour, explicit flow and |T_in - T_out|.")
+    _data_args(e)
+    e.add_argument("--sensor", dest="onnx", required=True, metavar="MODEL.onnx",
+                   help="the written sensor to study (e.g. gateway/vsensor/models/almeria.onnx)")
+    e.add_argument("--only", metavar="TEXT", help="the breakdowns over files whose name has TEXT")
+    e.set_defaults(func=_errors)
     return parser
 
 
@@ -112,6 +128,15 @@ def _reference(args: argparse.Namespace) -> int:
         print(json.dumps([as_dict(s) for s in studies], indent=1))
     else:
         print("\n".join(describe(s) for s in studies))
+    return 0
+
+
+def _errors(args: argparse.Namespace) -> int:
+    from training.vsensor.errors import describe, study
+
+    gh = load_greenhouse(args.greenhouse)
+    print(describe(study(args.onnx, args.data, gh, args.model, args.cache,
+                         overrides(args.set) or None, args.seed, args.only)))
     return 0
 
 

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gateway.vsensor.features import OUTPUT_DELAYS
 from gateway.vsensor.loop import closed_loop, fill_missing
 from training.vsensor.dataset import Segment
 from training.vsensor.narx import Layer, Narx, lag_rows
@@ -23,6 +24,8 @@ from training.vsensor.narx import Layer, Narx, lag_rows
 TRAIN_SHARE = 0.75
 MIN_VARIANCE = 0.90
 HIDDEN = (30, 50, 20)
+FEEDBACKS = ("member", "ensemble")
+"""Closed-loop rounds of an ensemble: each member on its own feedback, or on the ensemble's."""
 Progress = Callable[..., None]
 
 
@@ -104,11 +107,66 @@ def _layers(mlp) -> list[Layer]:
             for i, (w, b) in enumerate(zip(mlp.coefs_, mlp.intercepts_, strict=True))]
 
 
-def _epochs(mlp, h, t, hv, tv, epochs: int, patience: int, progress: Progress, label: str):
-    """partial_fit one pass at a time, keep the weights of the best validation loss."""
+Noise = Callable[[np.ndarray], np.ndarray]
+HIGH_FLOW_QUANTILE = 0.90
+"""``RowOptions.high_weight`` weighs the rows whose target is above this quantile of the
+training targets."""
+
+
+@dataclass(frozen=True)
+class RowOptions:
+    """How the training rows are presented to the networks (defaults: as they are)."""
+
+    noise_sigma: float = 0.0  # see feedback_noise
+    high_weight: float = 1.0  # loss weight of the rows above HIGH_FLOW_QUANTILE (the peaks)
+
+    def as_settings(self) -> dict[str, float]:
+        """The non-default options, for the model's training settings."""
+        out = {}
+        if self.noise_sigma:
+            out["feedback_noise"] = self.noise_sigma
+        if self.high_weight != 1.0:
+            out["high_flow_weight"] = self.high_weight
+        return out
+
+
+def row_weights(t: np.ndarray, threshold: float, high_weight: float) -> np.ndarray | None:
+    """Loss weights of rows with (scaled) targets ``t``: ``high_weight`` above ``threshold``,
+    1 elsewhere, normalised to a mean of 1 (the step size stays comparable); None for 1."""
+    if high_weight == 1.0:
+        return None
+    w = np.where(t > threshold, high_weight, 1.0)
+    return w / w.mean()
+
+
+def feedback_noise(sigma: float, floor: float, rng: np.random.Generator) -> Noise | None:
+    """Rows with a common random offset on their five past outputs (robustness of the loop).
+
+    Closed loop, the past outputs the network hears are its own, off by a slowly varying error;
+    here every row's past outputs (scaled: units of the target's standard deviation) get one
+    offset drawn from N(0, ``sigma``), redrawn at every epoch, never below ``floor`` (the scaled
+    zero flow: the deployed outputs are clipped at 0). ``sigma`` 0: no noise (None)."""
+    if sigma <= 0:
+        return None
+    n_out = len(OUTPUT_DELAYS)
+
+    def noisy(h: np.ndarray) -> np.ndarray:
+        out = h.copy()
+        off = sigma * rng.standard_normal(len(h))
+        out[:, -n_out:] = np.maximum(out[:, -n_out:] + off[:, None], floor)
+        return out
+
+    return noisy
+
+
+def _epochs(mlp, h, t, hv, tv, epochs: int, patience: int, progress: Progress, label: str,
+            noise: Noise | None = None, weights: np.ndarray | None = None):
+    """partial_fit one pass at a time, keep the weights of the best validation loss
+    (``noise``: applied afresh to the training rows at every pass; ``weights``: the rows' loss
+    weights; validation stays clean and unweighted)."""
     best, best_w, stale = np.inf, None, 0
     for e in range(epochs):
-        mlp.partial_fit(h, t)
+        mlp.partial_fit(h if noise is None else noise(h), t, sample_weight=weights)
         loss = float(np.mean((mlp.predict(hv) - tv) ** 2))
         if loss < best - 1e-7:
             best, stale = loss, 0
@@ -123,13 +181,22 @@ def _epochs(mlp, h, t, hv, tv, epochs: int, patience: int, progress: Progress, l
         mlp.coefs_, mlp.intercepts_ = best_w
 
 
-def fit_narx(name: str, split: Split, mean, std, projection, seed: int, hidden=HIDDEN,
-             epochs: int = 150, rounds: int = 3, round_epochs: int = 30,
-             progress: Progress | None = None, round_lr: float | None = None) -> tuple[Narx, dict]:
-    """Train one network (series-parallel, then closed-loop rounds). Returns it and a log.
+@dataclass
+class Member:
+    """One network being fitted: its numpy form, its scikit-learn form and its rows."""
 
-    ``round_lr``: Adam's step size during the closed-loop rounds (default: the series-parallel
-    one, 1e-3); a smaller step fine-tunes instead of jumping between rounds."""
+    net: Narx
+    mlp: object  # MLPRegressor
+    rows: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # h, t, h_val, t_val
+    noise: Noise | None
+    weigh: Callable[[np.ndarray], np.ndarray | None]  # scaled targets → loss weights
+    log: dict
+
+
+def start_member(name: str, split: Split, mean, std, projection, seed: int, hidden=HIDDEN,
+                 epochs: int = 150, progress: Progress | None = None,
+                 round_lr: float | None = None, opts: RowOptions = RowOptions()) -> Member:
+    """A network fitted series-parallel (past outputs = the target's), not yet refined."""
     from sklearn.neural_network import MLPRegressor
 
     progress = progress or (lambda **k: None)
@@ -138,43 +205,117 @@ def fit_narx(name: str, split: Split, mean, std, projection, seed: int, hidden=H
                float(np.nanstd(y_train)) or 1.0)
     h, t = rows(net, split.part("train"))
     hv, tv = rows(net, split.part("validation"))
+    noise = feedback_noise(opts.noise_sigma, -net.y_mean / net.y_std, np.random.default_rng(seed))
+    threshold = float(np.quantile(t, HIGH_FLOW_QUANTILE))
+
+    def weigh(targets: np.ndarray) -> np.ndarray | None:
+        return row_weights(targets, threshold, opts.high_weight)
+
     mlp = MLPRegressor(hidden_layer_sizes=hidden, activation="tanh", solver="adam", alpha=1e-4,
                        batch_size=256, learning_rate_init=1e-3, random_state=seed, shuffle=True)
-    _epochs(mlp, h, t, hv, tv, epochs, 20, progress, name)
+    _epochs(mlp, h, t, hv, tv, epochs, 20, progress, name, noise, weigh(t))
     net.layers = _layers(mlp)
     log = {"series_parallel_val_mse": float(np.mean((mlp.predict(hv) - tv) ** 2)),
            "closed_loop_val_mae": [validation_mae(net, split)]}
-    best = (log["closed_loop_val_mae"][0], net.layers)
     if round_lr is not None and hasattr(mlp, "_optimizer"):
         mlp._optimizer.learning_rate_init = round_lr  # Adam keeps its moments; only the step
+    return Member(net, mlp, (h, t, hv, tv), noise, weigh, log)
+
+
+def refine(m: Member, split: Split, sims: list[np.ndarray], round_epochs: int,
+           progress: Progress, label: str) -> None:
+    """One closed-loop round: the training rows again, plus rows whose past outputs are
+    ``sims`` (closed-loop flows of whole segments) and whose targets stay the explicit flow."""
+    h, t, hv, tv = m.rows
+    train_sims = [y[:c] for y, c in zip(sims, split.cut, strict=True)]
+    hc, tc = rows(m.net, split.part("train"), train_sims)
+    tt = np.concatenate([t, tc])
+    _epochs(m.mlp, np.concatenate([h, hc]), tt, hv, tv, round_epochs, round_epochs, progress,
+            label, m.noise, m.weigh(tt))
+    m.net.layers = _layers(m.mlp)
+
+
+def fit_narx(name: str, split: Split, mean, std, projection, seed: int, hidden=HIDDEN,
+             epochs: int = 150, rounds: int = 3, round_epochs: int = 30,
+             progress: Progress | None = None, round_lr: float | None = None,
+             opts: RowOptions = RowOptions()) -> tuple[Narx, dict]:
+    """Train one network (series-parallel, then closed-loop rounds). Returns it and a log.
+
+    ``round_lr``: Adam's step size during the closed-loop rounds (default: the series-parallel
+    one, 1e-3); a smaller step fine-tunes instead of jumping between rounds. ``opts``: noise
+    on the past outputs and loss weights of the rows (:class:`RowOptions`)."""
+    progress = progress or (lambda **k: None)
+    m = start_member(name, split, mean, std, projection, seed, hidden, epochs, progress,
+                     round_lr, opts)
+    log = m.log
+    best = (log["closed_loop_val_mae"][0], m.net.layers)
     for r in range(rounds):
-        sims = simulate(net, split)
-        train_sims = [y[:c] for y, c in zip(sims, split.cut, strict=True)]
-        hc, tc = rows(net, split.part("train"), train_sims)
-        _epochs(mlp, np.concatenate([h, hc]), np.concatenate([t, tc]), hv, tv, round_epochs,
-                round_epochs, progress, f"{name} closed-loop round {r + 1}")
-        net.layers = _layers(mlp)
-        mae = validation_mae(net, split)
+        refine(m, split, simulate(m.net, split), round_epochs, progress,
+               f"{name} closed-loop round {r + 1}")
+        mae = validation_mae(m.net, split)
         log["closed_loop_val_mae"].append(mae)
         if mae < best[0]:
-            best = (mae, net.layers)
-    net.layers = best[1]
+            best = (mae, m.net.layers)
+    m.net.layers = best[1]
     log["kept_round"] = int(np.argmin(log["closed_loop_val_mae"]))
-    return net, log
+    return m.net, log
+
+
+def _joint(name: str, split: Split, mean, std, projection, seeds: list[int], hidden, epochs: int,
+           rounds: int, round_epochs: int, progress: Progress, round_lr: float | None,
+           opts: RowOptions) -> tuple[Narx, dict]:
+    """Members fitted series-parallel apart, then refined together: in every round each member
+    learns from rows whose past outputs are **the ensemble's** closed-loop flows (what it hears
+    deployed); the round whose ensemble has the best closed-loop validation MAE is kept."""
+    ms = [start_member(name, split, mean, std, projection, s, hidden, epochs, progress,
+                       round_lr, opts) for s in seeds]
+    stacks = [m.net.layers for m in ms]
+    ens = Narx(name, mean, std, projection, ms[0].net.y_mean, ms[0].net.y_std, stacks[0],
+               members=list(stacks))
+    log = {"seeds": list(seeds), "feedback": "ensemble",
+           "members": [m.log for m in ms], "ensemble_round_val_mae": [validation_mae(ens, split)]}
+    best = (log["ensemble_round_val_mae"][0], list(stacks))
+    for r in range(rounds):
+        sims = simulate(ens, split)
+        for j, m in enumerate(ms):
+            refine(m, split, sims, round_epochs, progress, f"{name} joint round {r + 1} member {j}")
+            stacks[j] = m.net.layers
+        ens.members = list(stacks)
+        mae = validation_mae(ens, split)
+        log["ensemble_round_val_mae"].append(mae)
+        if mae < best[0]:
+            best = (mae, list(stacks))
+    log["kept_round"] = int(np.argmin(log["ensemble_round_val_mae"]))
+    ens.members = best[1]
+    ens.layers = best[1][0]
+    log["member_val_mae"], log["ensemble_val_mae_by_size"] = [], []
+    for k in range(1, len(seeds) + 1):
+        one = Narx(name, mean, std, projection, ens.y_mean, ens.y_std, best[1][k - 1])
+        log["member_val_mae"].append(validation_mae(one, split))
+        ens.members = best[1][:k]
+        log["ensemble_val_mae_by_size"].append(validation_mae(ens, split))
+    return ens, log
 
 
 def fit_ensemble(name: str, split: Split, mean, std, projection, seeds: list[int],
                  hidden=HIDDEN, epochs: int = 150, rounds: int = 3, round_epochs: int = 30,
-                 progress: Progress | None = None, round_lr: float | None = None
-                 ) -> tuple[Narx, dict]:
+                 progress: Progress | None = None, round_lr: float | None = None,
+                 opts: RowOptions = RowOptions(), feedback: str = "member") -> tuple[Narx, dict]:
     """``fit_narx`` once per seed on the same rows; the members' outputs are averaged.
 
-    Each member is fitted (and its closed-loop rounds run) on its own, as a single network; the
-    ensemble, deployed, feeds every member its own mean past outputs. One seed: the single
+    ``feedback`` "member": each member is fitted (and its closed-loop rounds run) on its own,
+    as a single network; "ensemble": the rounds run on the ensemble's feedback (``_joint``).
+    The ensemble, deployed, feeds every member its own mean past outputs. One seed: the single
     network, unchanged. The log holds every member's log and the ensemble's closed-loop
     validation MAE with its first k members, k = 1 … K (how much averaging buys)."""
+    if feedback not in FEEDBACKS:
+        raise ValueError(f"feedback {feedback!r}: one of {FEEDBACKS}")
+    progress = progress or (lambda **k: None)
+    if feedback == "ensemble" and len(seeds) > 1:
+        return _joint(name, split, mean, std, projection, seeds, hidden, epochs, rounds,
+                      round_epochs, progress, round_lr, opts)
     fitted = [fit_narx(name, split, mean, std, projection, s, hidden, epochs, rounds,
-                       round_epochs, progress, round_lr) for s in seeds]
+                       round_epochs, progress, round_lr, opts) for s in seeds]
     net = fitted[0][0]
     if len(fitted) == 1:
         return net, fitted[0][1]

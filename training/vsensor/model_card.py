@@ -30,6 +30,12 @@ def train_command(out: Path, meta: dict, held_files: tuple[str, ...] = ()) -> st
         parts.append(f"--ensemble {st['ensemble']}")
     if st.get("net_seed", meta["seed"]) != meta["seed"]:
         parts.append(f"--net-seed {st['net_seed']}")
+    if st.get("feedback", "member") != "member":
+        parts.append(f"--feedback {st['feedback']}")
+    if st.get("feedback_noise"):
+        parts.append(f"--feedback-noise {st['feedback_noise']:g}")
+    if st.get("high_flow_weight", 1.0) != 1.0:
+        parts.append(f"--high-flow-weight {st['high_flow_weight']:g}")
     if held_files:
         parts += ["--test", *held_files]
     return " ".join([*parts, "--out", out.name])
@@ -95,7 +101,12 @@ def model_card(out: Path, meta: dict, metrics: dict, t18: dict, circle: dict, na
         f"Settings: hidden {'-'.join(map(str, st['hidden']))}, PCA to "
         f"{100 * st.get('pca_variance', 0.9):g} % of the variance, at most {st['epochs']} "
         f"series-parallel epochs, {st['rounds']} closed-loop rounds"
-        + (f" (Adam step {st['round_lr']:g})" if st.get("round_lr") else "") + ".",
+        + (f" (Adam step {st['round_lr']:g})" if st.get("round_lr") else "")
+        + (" on the ensemble's feedback" if st.get("feedback", "member") != "member" else "")
+        + (f", past outputs of the training rows offset by N(0, {st['feedback_noise']:g}) "
+           "target standard deviations" if st.get("feedback_noise") else "")
+        + (f", rows above the targets' 90th percentile weighing {st['high_flow_weight']:g}"
+           if st.get("high_flow_weight", 1.0) != 1.0 else "") + ".",
         "",
     ]
     lines += [f"Trained with: `{train_command(out, meta, held_files)}` (paths in docs/vsensor.md).", ""]

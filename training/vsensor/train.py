@@ -84,27 +84,24 @@ def _ranges(split: fit.Split, names: list[str]) -> tuple[dict, dict]:
             {n: float(v) for n, v in zip(names, mean, strict=True)})
 
 
-def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: str | Path | None,
-          overrides=None, seed: int = 0, hidden=fit.HIDDEN, epochs: int = 100, rounds: int = 6,
-          progress: Callable[..., None] | None = None, report_dir: str | Path | None = None,
-          round_lr: float | None = None, pca_variance: float = fit.MIN_VARIANCE,
-          test_paths: list[str] | None = None, ensemble: int = 1,
-          net_seed: int | None = None) -> TrainResult:
-    """Build the datasets, fit the three networks, write the models, card and report (PNGs in
-    ``report_dir``, default ``<out stem>.report/`` beside the model). ``pca_variance``: the
-    share of the variance the kept components must reach (the issue asks for at least 0.90).
-    ``test_paths``: held-out files scored after the fit with the written models (closed loop,
-    through the gateway's runtime) for the model card; they never steer the fit. ``ensemble``:
-    networks averaged in each NARX (PCA and no-PCA alike), seeded ``net_seed`` + 0 … K - 1
-    (``net_seed`` defaults to ``seed``, which also seeds the estimator's replays)."""
-    if not fit.MIN_VARIANCE <= pca_variance <= 1.0:
-        raise ValueError(f"pca_variance {pca_variance}: must be in [{fit.MIN_VARIANCE}, 1]")
-    if ensemble < 1:
-        raise ValueError(f"ensemble {ensemble}: at least one network")
-    net_seed = seed if net_seed is None else net_seed
-    seeds = [net_seed + j for j in range(ensemble)]
-    progress = progress or (lambda **k: None)
-    out = Path(out)
+@dataclass
+class Prepared:
+    """The training files' segments, their split, and the standardisation and PCA of their
+    training rows: everything the networks are fitted on."""
+
+    segments: list[Segment]
+    split: fit.Split
+    names: list[str]
+    mean: np.ndarray
+    std: np.ndarray
+    loadings: np.ndarray  # (F, kept)
+    share: np.ndarray  # every component's share of the variance
+    seconds: float
+
+
+def prepare(paths: list[str], gh: Greenhouse, kind: str, cache, overrides, seed: int,
+            pca_variance: float, progress: Callable[..., None]) -> Prepared:
+    """Build (or read from the cache) every file's replays, split, standardise, PCA."""
     t0 = time.perf_counter()
     segments: list[Segment] = []
     for p in paths:
@@ -112,8 +109,7 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
         segments.append(build_segment(p, gh, kind, cache, overrides, seed,
                                       progress=lambda done: progress(advance=0, info=f"row {done}")))
         progress(advance=1)
-    seconds = {"datasets": time.perf_counter() - t0}
-    t1 = time.perf_counter()
+    seconds = time.perf_counter() - t0
     limits = flow_limits(gh, kind)
     upper = [limits.upper(s.x["t_in"] - s.x["t_out"], s.x["t_out"], s.x["wind"]) for s in segments]
     split = fit.make_split(segments, upper)
@@ -121,13 +117,48 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
     mean, std = fit.scaler(split)
     z = (np.concatenate([i for i, _ in split.part("train")]) - mean) / std
     loadings, share = fit.pca(z, seed, pca_variance)
-    kept = loadings.shape[1]
+    return Prepared(segments, split, names, mean, std, loadings, share, seconds)
+
+
+def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: str | Path | None,
+          overrides=None, seed: int = 0, hidden=fit.HIDDEN, epochs: int = 100, rounds: int = 6,
+          progress: Callable[..., None] | None = None, report_dir: str | Path | None = None,
+          round_lr: float | None = None, pca_variance: float = fit.MIN_VARIANCE,
+          test_paths: list[str] | None = None, ensemble: int = 1,
+          net_seed: int | None = None, feedback: str = "member",
+          feedback_noise: float = 0.0, high_flow_weight: float = 1.0) -> TrainResult:
+    """Build the datasets, fit the three networks, write the models, card and report (PNGs in
+    ``report_dir``, default ``<out stem>.report/`` beside the model). ``pca_variance``: the
+    share of the variance the kept components must reach (the issue asks for at least 0.90).
+    ``test_paths``: held-out files scored after the fit with the written models (closed loop,
+    through the gateway's runtime) for the model card; they never steer the fit. ``ensemble``:
+    networks averaged in each NARX (PCA and no-PCA alike), seeded ``net_seed`` + 0 … K - 1
+    (``net_seed`` defaults to ``seed``, which also seeds the estimator's replays). ``feedback``
+    , ``feedback_noise`` and ``high_flow_weight``: the closed-loop rounds on each member's or the
+    ensemble's feedback, the noise on the past outputs of the training rows and the loss weight
+    of the rows above the targets' 90th percentile (fit.fit_ensemble, fit.RowOptions)."""
+    if not fit.MIN_VARIANCE <= pca_variance <= 1.0:
+        raise ValueError(f"pca_variance {pca_variance}: must be in [{fit.MIN_VARIANCE}, 1]")
+    if ensemble < 1:
+        raise ValueError(f"ensemble {ensemble}: at least one network")
+    net_seed = seed if net_seed is None else net_seed
+    seeds = [net_seed + j for j in range(ensemble)]
+    opts = fit.RowOptions(feedback_noise, high_flow_weight)
+    progress = progress or (lambda **k: None)
+    out = Path(out)
+    t0 = time.perf_counter()
+    prep = prepare(paths, gh, kind, cache, overrides, seed, pca_variance, progress)
+    segments, split, names, mean, std = prep.segments, prep.split, prep.names, prep.mean, prep.std
+    loadings, share, kept = prep.loadings, prep.share, prep.loadings.shape[1]
+    seconds = {"datasets": prep.seconds}
+    t1 = time.perf_counter()
     nets, logs = {}, {}
     progress(description="fitting")
     for name, proj in (("pca_narx", loadings), ("narx_no_pca", None)):
         nets[name], logs[name] = fit.fit_ensemble(name, split, mean, std, proj, seeds, hidden,
                                                   epochs, rounds, min(30, epochs),
-                                                  progress=progress, round_lr=round_lr)
+                                                  progress=progress, round_lr=round_lr,
+                                                  opts=opts, feedback=feedback)
     nets["linear_arx"] = fit.fit_arx(split, mean, std)
     nets["pca_narx"].explained = share[:kept]
     seconds["fit"] = time.perf_counter() - t1
@@ -155,7 +186,9 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
         "training_settings": {"hidden": list(hidden), "epochs": epochs, "rounds": rounds,
                               "round_lr": round_lr, "pca_variance": pca_variance,
                               **({"ensemble": ensemble, "net_seed": net_seed}
-                                 if ensemble > 1 or net_seed != seed else {})},
+                                 if ensemble > 1 or net_seed != seed else {}),
+                              **({"feedback": feedback} if feedback != "member" else {}),
+                              **opts.as_settings()},
         "version": _version(), "pca": pca_info,
         "metrics": {"validation_closed_loop": metrics,
                     "training_log": {k: v for k, v in logs.items()}},

@@ -35,6 +35,7 @@ def add_train_parser(sub: argparse._SubParsersAction, data_args) -> None:
     p.add_argument("--net-seed", type=int, default=None, metavar="N",
                    help="first seed of the networks (default: --seed, which also seeds the "
                    "estimator's replays; changing only this reuses the cached replays)")
+    add_feedback_args(p)
     p.add_argument("--test", nargs="+", default=[], metavar="FILE",
                    help="held-out kit CSVs scored after the fit (closed loop, the three models, as "
                    "python -m gateway vsensor does) into the model card and the summary; never "
@@ -43,6 +44,18 @@ def add_train_parser(sub: argparse._SubParsersAction, data_args) -> None:
                    help="where the report's PNGs go (default: MODEL.report/ beside the model)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run)
+
+
+def add_feedback_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--feedback", choices=("member", "ensemble"), default="member",
+                   help="closed-loop rounds of an ensemble on each member's own feedback (default) "
+                   "or on the ensemble's (what every member hears deployed)")
+    p.add_argument("--feedback-noise", type=float, default=0.0, metavar="SIGMA",
+                   help="a common N(0, SIGMA) offset, in units of the target's standard deviation, "
+                   "on the five past outputs of every training row, redrawn each epoch (default 0)")
+    p.add_argument("--high-flow-weight", type=float, default=1.0, metavar="W",
+                   help="loss weight of the training rows whose target is above the targets' 90th "
+                   "percentile, the others 1 (default 1: unweighted)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -65,7 +78,8 @@ def run(args: argparse.Namespace) -> int:
                        args.seed, hidden, args.epochs, args.rounds, progress=bar,
                        report_dir=args.report, round_lr=args.round_lr,
                        pca_variance=args.pca_variance, test_paths=args.test,
-                       ensemble=args.ensemble, net_seed=args.net_seed)
+                       ensemble=args.ensemble, net_seed=args.net_seed, feedback=args.feedback,
+                       feedback_noise=args.feedback_noise, high_flow_weight=args.high_flow_weight)
     summary = {"models": {k: str(v) for k, v in result.paths.items()}, "card": str(result.card),
                "pca": {k: v for k, v in result.pca.items() if k != "all_shares"},
                "validation_closed_loop": result.metrics,

@@ -1,0 +1,99 @@
+"""``python -m training.vsensor tune``: one setting's PCA-NARX judged on the validation quarters.
+
+What ``train`` fits first, and nothing else: the same files (cached replays), split,
+standardisation, PCA and ``fit.fit_ensemble`` call with the same arguments, so a setting's
+figure here is the PCA-NARX line ``train`` would print for it, without the baselines, the
+export, the report or any held-out file (~half of ``train``'s time). Prints the closed-loop MAE
+on the last 25 % of every file: overall, per file, over the grower's files (stem containing
+``grower``) and the others (the controllers'), and over ``--subset`` stems (e.g. the files
+of an earlier pass); ``--log FILE`` appends the summary as one JSON line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def add_tune_parser(sub: argparse._SubParsersAction, data_args) -> None:
+    from training.vsensor.train_cli import add_feedback_args
+
+    p = sub.add_parser("tune", help="a setting's PCA-NARX on the validation quarters only",
+                       description=__doc__.split("\n\n")[1].replace("\n", " "))
+    data_args(p)
+    p.add_argument("--hidden", default="30,50,20", metavar="N,N,N")
+    p.add_argument("--epochs", type=int, default=100)
+    p.add_argument("--rounds", type=int, default=6)
+    p.add_argument("--round-lr", type=float, default=None, metavar="LR")
+    p.add_argument("--pca-variance", type=float, default=0.90, metavar="SHARE")
+    p.add_argument("--ensemble", type=int, default=1, metavar="K")
+    p.add_argument("--net-seed", type=int, default=None, metavar="N")
+    add_feedback_args(p)
+    p.add_argument("--subset", nargs="+", default=[], metavar="STEM",
+                   help="also report the MAE over these files' validation quarters")
+    p.add_argument("--label", default="", help="a name for the setting in the log")
+    p.add_argument("--log", metavar="FILE", help="append the summary as one JSON line")
+    p.set_defaults(func=run)
+
+
+def groups(by_file: dict[str, dict], subset: list[str]) -> dict[str, float | None]:
+    """MAE over the grower's files, the others, and ``subset`` (weighted by minutes)."""
+    def mae(stems: list[str]) -> float | None:
+        n = sum(by_file[s]["n"] for s in stems)
+        return sum(by_file[s]["mae"] * by_file[s]["n"] for s in stems) / n if n else None
+
+    grower = [s for s in by_file if "grower" in s]
+    out = {"grower": mae(grower), "controller": mae([s for s in by_file if s not in grower])}
+    if subset:
+        sub = [s for s in by_file if s in subset]
+        out["subset"] = mae(sub)
+        out["subset_grower"] = mae([s for s in sub if s in grower])
+        out["subset_controller"] = mae([s for s in sub if s not in grower])
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    from threadpoolctl import threadpool_limits
+
+    from gateway.greenhouse import load_greenhouse
+    from training.vsensor import fit
+    from training.vsensor.cli import overrides
+    from training.vsensor.train import prepare, validation_metrics
+
+    gh = load_greenhouse(args.greenhouse)
+    hidden = tuple(int(v) for v in args.hidden.split(","))
+    net_seed = args.seed if args.net_seed is None else args.net_seed
+    seeds = [net_seed + j for j in range(args.ensemble)]
+    t0 = time.perf_counter()
+    with threadpool_limits(1):
+        prep = prepare(args.data, gh, args.model, args.cache, overrides(args.set) or None,
+                       args.seed, args.pca_variance, lambda **k: None)
+        net, log = fit.fit_ensemble("pca_narx", prep.split, prep.mean, prep.std, prep.loadings,
+                                    seeds, hidden, args.epochs, args.rounds, min(30, args.epochs),
+                                    round_lr=args.round_lr,
+                                    opts=fit.RowOptions(args.feedback_noise, args.high_flow_weight),
+                                    feedback=args.feedback)
+        m, _ = validation_metrics(net, prep.split)
+    summary = {"label": args.label, "components": int(prep.loadings.shape[1]),
+               "variance": float(np.sum(prep.share[: prep.loadings.shape[1]])),
+               "settings": {k: getattr(args, k) for k in ("hidden", "epochs", "rounds", "round_lr",
+                            "pca_variance", "ensemble", "feedback", "feedback_noise",
+                                                 "high_flow_weight")}
+               | {"net_seed": net_seed},
+               "mae": m["mae"], "mae_pct_range": m["mae_pct_range"], "range": m["range"],
+               "by_file": {k: v["mae"] for k, v in m["by_file"].items()},
+               "groups": groups(m["by_file"], args.subset),
+               "members": log.get("member_val_mae"),
+               "ensemble_by_size": log.get("ensemble_val_mae_by_size"),
+               "rounds_log": log.get("ensemble_round_val_mae")
+               or [lg["closed_loop_val_mae"] for lg in log.get("members", [log])],
+               "seconds": round(time.perf_counter() - t0, 1)}
+    print(json.dumps(summary, indent=1))
+    if args.log:
+        with Path(args.log).open("a", encoding="utf-8") as f:
+            f.write(json.dumps(summary) + "\n")
+    return 0

@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import json
 import tempfile
-import time
 from pathlib import Path
 
 import zenoh
@@ -28,6 +27,7 @@ from gateway.publish import zconfig
 from gateway.publish.publisher import OutboxPublisher
 from gateway.store import Store
 from gateway.store.outbox import Outbox
+from tests.gateway_harness import wait_for
 from tests.test_publish_zenoh import KEYS, message
 
 
@@ -49,15 +49,6 @@ class WithCache(LiveOnly):
     history_config = HistoryConfig(detect_late_publishers=True)
 
 
-def _wait(cond, timeout: float) -> bool:
-    end = time.monotonic() + timeout
-    while not cond():
-        if time.monotonic() > end:
-            return False
-        time.sleep(0.01)
-    return True
-
-
 def one_run(folder: Path, kind: type[Subscriber]) -> dict[str, list[int]] | None:
     """None when the cloud got all 60, else what it got per key."""
     db = folder / "gw.db"
@@ -71,14 +62,17 @@ def one_run(folder: Path, kind: type[Subscriber]) -> dict[str, list[int]] | None
         (endpoint,) = zconfig.resolve_listen(["tcp/127.0.0.1:0"], before)
         pub = OutboxPublisher(session, db, cache=8)
         pub.start()
-        _wait(lambda: len(pub.state.waiting_keys) == 2, 30)
+        wait_for(lambda: len(pub.state.waiting_keys) == 2, 30, "both keys waiting for a subscriber")
         cloud = SqliteCloudStore(folder / "cloud.db")
         sub = kind(cloud, [endpoint])
         sub.start()
         pub.wake.set()
-        _wait(lambda: Outbox(store.conn).pending() == 0, 30)
-        if _wait(lambda: cloud.count() >= 60, 10):
+        wait_for(lambda: Outbox(store.conn).pending() == 0, 30, "the backlog marked sent")
+        try:
+            wait_for(lambda: cloud.count() >= 60, 10, "all 60 in the cloud")
             return None
+        except AssertionError:
+            pass  # short: report what it has
         return {k: [json.loads(m.payload)["n"] for m in cloud.messages() if m.key == k] for k in KEYS}
     finally:
         for part in (sub, pub):

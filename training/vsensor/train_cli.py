@@ -19,6 +19,19 @@ def add_train_parser(sub: argparse._SubParsersAction, data_args) -> None:
     )
     data_args(p)
     p.add_argument("--out", required=True, metavar="MODEL.onnx", help="where to write the sensor")
+    add_fit_args(p)
+    p.add_argument("--test", nargs="+", default=[], metavar="FILE",
+                   help="held-out kit CSVs scored after the fit (closed loop, the three models, as "
+                   "python -m gateway vsensor does) into the model card and the summary; never "
+                   "used by the fit")
+    p.add_argument("--report", metavar="DIR",
+                   help="where the report's PNGs go (default: MODEL.report/ beside the model)")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.set_defaults(func=run)
+
+
+def add_fit_args(p: argparse.ArgumentParser) -> None:
+    """The fit's settings, shared by ``train`` and ``tune`` (same defaults: same figure)."""
     p.add_argument("--hidden", default="30,50,20", metavar="N,N,N",
                    help="hidden layer sizes (default 30,50,20, the thesis's)")
     p.add_argument("--epochs", type=int, default=100, help="series-parallel epochs at most (100)")
@@ -35,18 +48,6 @@ def add_train_parser(sub: argparse._SubParsersAction, data_args) -> None:
     p.add_argument("--net-seed", type=int, default=None, metavar="N",
                    help="first seed of the networks (default: --seed, which also seeds the "
                    "estimator's replays; changing only this reuses the cached replays)")
-    add_feedback_args(p)
-    p.add_argument("--test", nargs="+", default=[], metavar="FILE",
-                   help="held-out kit CSVs scored after the fit (closed loop, the three models, as "
-                   "python -m gateway vsensor does) into the model card and the summary; never "
-                   "used by the fit")
-    p.add_argument("--report", metavar="DIR",
-                   help="where the report's PNGs go (default: MODEL.report/ beside the model)")
-    p.add_argument("--json", action="store_true", help="print the summary as JSON")
-    p.set_defaults(func=run)
-
-
-def add_feedback_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--feedback", choices=("member", "ensemble"), default="member",
                    help="closed-loop rounds of an ensemble on each member's own feedback (default) "
                    "or on the ensemble's (what every member hears deployed)")

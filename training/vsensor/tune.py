@@ -20,19 +20,12 @@ import numpy as np
 
 
 def add_tune_parser(sub: argparse._SubParsersAction, data_args) -> None:
-    from training.vsensor.train_cli import add_feedback_args
+    from training.vsensor.train_cli import add_fit_args
 
     p = sub.add_parser("tune", help="a setting's PCA-NARX on the validation quarters only",
                        description=__doc__.split("\n\n")[1].replace("\n", " "))
     data_args(p)
-    p.add_argument("--hidden", default="30,50,20", metavar="N,N,N")
-    p.add_argument("--epochs", type=int, default=100)
-    p.add_argument("--rounds", type=int, default=6)
-    p.add_argument("--round-lr", type=float, default=None, metavar="LR")
-    p.add_argument("--pca-variance", type=float, default=0.90, metavar="SHARE")
-    p.add_argument("--ensemble", type=int, default=1, metavar="K")
-    p.add_argument("--net-seed", type=int, default=None, metavar="N")
-    add_feedback_args(p)
+    add_fit_args(p)
     p.add_argument("--subset", nargs="+", default=[], metavar="STEM",
                    help="also report the MAE over these files' validation quarters")
     p.add_argument("--label", default="", help="a name for the setting in the log")

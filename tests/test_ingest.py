@@ -20,7 +20,7 @@ from gateway import protocol as p
 from gateway.ingest import service
 from gateway.ingest.counters import RateLimitedLog
 from gateway.ingest.framing import Deframer, FramingError, cobs_decode, cobs_encode
-from gateway.store.keys import write_keys
+from gateway.store.keys import set_key, write_keys
 
 KEY = hashlib.sha256(b"serra test key: device 7").digest()
 OTHER = hashlib.sha256(b"serra test key: device 9").digest()
@@ -136,6 +136,61 @@ def test_restart_keeps_replay_state_and_reacks_duplicates(tmp_path: Path) -> Non
 
     run(first())
     run(second())
+
+
+async def until(cond, what: str, timeout: float = 30.0) -> None:
+    """Wait (on the event loop, not blocking it) until ``cond()`` holds; a generous deadline."""
+    loop = asyncio.get_running_loop()
+    end = loop.time() + timeout
+    while not cond():
+        if loop.time() > end:
+            raise AssertionError(f"timed out waiting for {what}")
+        await asyncio.sleep(0.02)
+
+
+def test_keys_file_is_read_again_while_running(tmp_path: Path,
+                                               caplog: pytest.LogCaptureFixture) -> None:
+    """Adding, rotating and removing a device take effect without a restart; a broken file
+    is logged and the keys in use stay."""
+    new8 = hashlib.sha256(b"serra test key: device 8").digest()
+    new7 = hashlib.sha256(b"serra test key: device 7, reflashed").digest()
+
+    async def go() -> None:
+        async with Gateway(tmp_path) as g:
+            c = g.core.counters
+            assert p.decode_ack(await g.exchange(pkt(0, boot=4)), KEY).status == p.ACK_STORED
+            await g.exchange(p.encode_record(rec(0, dev=8), new8), expect_reply=False)
+            await until(lambda: c["unknown_device"] == 1, "device 8 refused")
+
+            set_key(g.keys, 8, new8)  # added
+            await until(lambda: 8 in g.core.devs, "device 8 taken")
+            a = p.decode_ack(await g.exchange(p.encode_record(rec(0, dev=8), new8)), new8)
+            assert (a.device_id, a.status) == (8, p.ACK_STORED)
+
+            set_key(g.keys, 7, new7, rotate=True)  # reflashed board: boot counter back at 0
+            await until(lambda: g.core.keys[7] == new7, "device 7's new key taken")
+            await g.exchange(pkt(1, boot=4), expect_reply=False)  # the old key's packets
+            await until(lambda: c["bad_tag"] == 1, "the old key refused")
+            a = p.decode_ack(await g.exchange(p.encode_record(rec(0, boot=0), new7)), new7)
+            assert (a.boot, a.seq, a.status) == (0, 0, p.ACK_STORED)
+
+            with caplog.at_level(logging.ERROR, logger="serra.ingest"):
+                g.keys.write_text("7 zz\n")  # a typo while editing
+                await until(lambda: "not taken" in caplog.text, "the broken file logged")
+            assert f"{g.keys}:1" in caplog.text
+            a = p.decode_ack(await g.exchange(p.encode_record(rec(1, dev=8), new8)), new8)
+            assert a.status == p.ACK_STORED  # the keys in use stayed
+
+            write_keys(g.keys, {7: new7, 8: new8})  # device 9 removed
+            await until(lambda: 9 not in g.core.devs, "device 9 removed")
+            await g.exchange(p.encode_record(rec(0, dev=9), OTHER), expect_reply=False)
+            await until(lambda: c["unknown_device"] == 2, "device 9 refused")
+
+    run(go())
+    with sqlite3.connect(tmp_path / "g.db") as conn:
+        rows = conn.execute("SELECT device_id, boot, seq FROM samples ORDER BY device_id, boot, "
+                            "seq").fetchall()
+    assert rows == [(7, 4, 0), (7, 5, 0), (8, 1, 0), (8, 1, 1)]  # new key: above the old boots
 
 
 def test_minute_aggregates_are_computed_by_the_service(tmp_path: Path) -> None:

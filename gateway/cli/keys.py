@@ -60,7 +60,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Replace the key of DEVICE_ID (kept: its name and the other lines). Use it "
         "when a board is reflashed or replaced: with the new key it may start its boot counter "
         "again at 0; the gateway stores it after everything the old key sent, and the old "
-        "key's packets are refused. Prints the new config.json line; restart the gateway.")
+        "key's packets are refused. Prints the new config.json line; a running gateway reads "
+        "the file again by itself.")
     for q in (a, r):
         q.add_argument("device_id", type=_device_id, metavar="DEVICE_ID",
                        help="the board's device_id (0..4294967295)")
@@ -97,8 +98,9 @@ def run(args: argparse.Namespace) -> int:
             f"{key_id(done.key)}")
     where = f"{args.keys} (created, mode 600)" if done.created_file else str(args.keys)
     print(f"{what} in {where}.\nNext: put the line above in the board's config.json (it "
-          "replaces the \"device_id\" and \"key\" lines), then restart the gateway so it reads "
-          "the new key (e.g. systemctl restart serra-gateway).", file=sys.stderr)
+          "replaces the \"device_id\" and \"key\" lines). A running gateway takes the new key "
+          "within its maintenance period (10 s by default), no restart; its log says "
+          "'keys file ... read again'.", file=sys.stderr)
     return 0
 
 

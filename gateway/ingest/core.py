@@ -7,6 +7,11 @@ Boots are stored as the board's boot counter plus the boot base of its key (Stor
 a board reflashed with a new key (``python -m gateway keys rotate``) starts above everything
 its old key stored. A device refused as a whole (an old boot: a reflashed board, or a replay)
 is named in `refused` and in one log line with the command that recovers it.
+
+The keys can change while running (``reload_keys``: the service reads the keys file again when
+it changes): an added device is accepted from then on, a rotated key takes its boot base, a
+removed device is refused as ``unknown_device``. Records already authenticated are committed and
+acknowledged with the key they came under.
 """
 
 from __future__ import annotations
@@ -65,6 +70,25 @@ class _Pending:
     rec: p.Record
     t_recv: float
     waiters: list[tuple[Send, Hashable]]
+    dev: _Dev  # the device state (key, boot base) the record was authenticated with
+
+
+@dataclass(frozen=True)
+class KeysReloaded:
+    """What ``IngestCore.reload_keys`` changed (device ids)."""
+
+    added: tuple[int, ...]
+    rotated: tuple[int, ...]
+    removed: tuple[int, ...]
+
+    def __bool__(self) -> bool:
+        return bool(self.added or self.rotated or self.removed)
+
+    def __str__(self) -> str:
+        parts = [f"{what} {', '.join(map(str, ids))}" for what, ids in
+                 (("added", self.added), ("new key for", self.rotated),
+                  ("removed", self.removed)) if ids]
+        return "; ".join(parts) or "no change"
 
 
 class IngestCore:
@@ -88,19 +112,41 @@ class IngestCore:
         self.max_pending = max_pending
         self.alarm_at = int(max_pending * alarm_fraction)
         self.batch_delay = batch_delay
-        self.devs: dict[int, _Dev] = {
-            d: _Dev(p.Mac(k), store.boot_base(d, key_id(k))) for d, k in keys.items()}
-        for dev, st in store.device_states().items():
-            d = self.devs.get(dev)
-            if d is not None:
-                d.boot, d.max_seq = st.boot, st.max_seq
-                d.seen = store.stored_seqs(dev, st.boot, st.max_seq - WINDOW)
+        self.keys = dict(keys)
+        self.devs: dict[int, _Dev] = self._load_devs(self.keys)
         self._pending: dict[tuple[int, int, int], _Pending] = {}
         self._queue: list[tuple[int, int, int]] = []
         self._wake = asyncio.Event()
         # SQLite work runs in one dedicated thread so the event loop keeps receiving.
         self._exec = ThreadPoolExecutor(1, thread_name_prefix="serra-store")
         self.alarm = False
+
+    def _load_devs(self, keys: dict[int, bytes]) -> dict[int, _Dev]:
+        """The receiving state of ``keys``' devices from the store (runs on the store's thread
+        once the writer runs): boot base of each key, latest stored boot, its committed seqs."""
+        devs = {d: _Dev(p.Mac(k), self.store.boot_base(d, key_id(k))) for d, k in keys.items()}
+        for dev, st in self.store.device_states().items():
+            d = devs.get(dev)
+            if d is not None:
+                d.boot, d.max_seq = st.boot, st.max_seq
+                d.seen = self.store.stored_seqs(dev, st.boot, st.max_seq - WINDOW)
+        return devs
+
+    async def reload_keys(self, keys: dict[int, bytes]) -> KeysReloaded:
+        """Take a new set of device keys without stopping (call on the event loop)."""
+        fresh = {d: k for d, k in keys.items() if self.keys.get(d) != k}
+        removed = tuple(sorted(set(self.keys) - set(keys)))
+        # Committed rows are read after the queue is flushed, so no record of a rotated device
+        # is missing from its new state's replay window.
+        await self._commit(asyncio.get_running_loop())
+        devs = await self.run_in_store_thread(self._load_devs, fresh)
+        for d in removed:
+            self.devs.pop(d, None)
+        self.devs.update(devs)
+        changed = KeysReloaded(tuple(sorted(d for d in fresh if d not in self.keys)),
+                               tuple(sorted(d for d in fresh if d in self.keys)), removed)
+        self.keys = dict(keys)
+        return changed
 
     # -- receiving ------------------------------------------------------------------------
     def _reject(self, reason: str, detail: str, peer: Hashable, device: int | None = None) -> None:
@@ -125,9 +171,9 @@ class IngestCore:
             "device %d refused (replay_old_boot): packet from %s carries boot %d, older than "
             "boot %d already stored, so its records are dropped unanswered. A board reflashed "
             "or replaced (its boot counter lost) looks like this, and so do replayed packets. "
-            "To take the board back (stored data is kept): %s, restart the gateway, and put the "
-            "printed line in the board's config.json", dev_id, peer, boot, latest, cmd,
-            device=dev_id)
+            "To take the board back (stored data is kept): %s (the gateway reads the keys file "
+            "again by itself) and put the printed line in the board's config.json", dev_id, peer,
+            boot, latest, cmd, device=dev_id)
 
     def handle(self, data: bytes, peer: Hashable, send: Send) -> None:
         """Process one datagram/frame; never raises on any input."""
@@ -188,7 +234,7 @@ class IngestCore:
         if rec.seq > d.max_seq:
             d.max_seq = rec.seq
         self._pending[k] = _Pending(rec._replace(boot=boot) if d.base else rec, self.clock(),
-                                    [(send, peer)])
+                                    [(send, peer)], d)
         self._queue.append(k)
         self._wake.set()
         alarm = len(self._pending) >= self.alarm_at
@@ -231,7 +277,7 @@ class IngestCore:
         self.counters["stored"] += len(keys)
         for k in keys:
             pend = self._pending.pop(k)
-            d = self.devs[k[0]]
+            d = pend.dev
             if d.boot == k[1]:
                 d.seen.add(k[2])
                 if len(d.seen) > 2 * WINDOW:

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from gateway.ingest.core import IngestCore
+from gateway.ingest.keys_watch import KeysWatch
 from gateway.ingest.udp import UdpServer
 from gateway.store import Store, StoreError, aggregate, retention
 from gateway.store.keys import KeyFileError, load_keys
@@ -42,7 +43,7 @@ class IngestConfig:
     baudrate: int = 115200
     batch_delay: float = 0.0  # extra wait to grow a batch (commits are already grouped)
     max_pending: int = 50_000
-    maintenance_every: float = 10.0  # aggregation, retention, capacity alarms [s]
+    maintenance_every: float = 10.0  # aggregation, retention, capacity alarms, keys file [s]
     stats_every: float = 60.0
     policy: retention.Policy = field(default_factory=retention.Policy)
     # The live gateway (gateway/service/run.py): its clock and a callback after each durable batch.
@@ -105,11 +106,13 @@ class Running:
 async def serve(config: IngestConfig,
                 on_ready: Callable[[Running], None] | None = None) -> None:
     """Run until cancelled. Prints one 'listening' line per transport (tests read the port)."""
+    watch = KeysWatch(config.keys)
     keys = load_keys(config.keys)
     if not keys:
         log.warning("keys file %s lists no device: every packet will be refused as "
                     "unknown_device. Add one with: python -m gateway keys add DEVICE_ID --keys "
-                    "%s, then restart the gateway", config.keys, config.keys)
+                    "%s (read again within %g s, no restart)", config.keys, config.keys,
+                    config.maintenance_every)
     store = Store(config.db)
     core = IngestCore(store, keys, max_pending=config.max_pending,
                       batch_delay=config.batch_delay, keys_path=config.keys,
@@ -137,6 +140,11 @@ async def serve(config: IngestConfig,
             if writer.done():
                 writer.result()  # surface a writer crash
             await core.run_in_store_thread(_maintenance, store, config.policy, config.clock())
+            new_keys = watch.changed_keys()
+            if new_keys is not None:
+                changed = await core.reload_keys(new_keys)
+                log.info("keys file %s read again: %s (%d devices)", config.keys, changed,
+                         len(new_keys))
             if loop.time() - t_stats >= config.stats_every:
                 t_stats = loop.time()
                 log.info("ingest counters %s%s", core.counters.snapshot(), _refused(core))

@@ -101,67 +101,86 @@ def read_kit_csv(path: str | Path, required: Iterable[str] = ()) -> KitData:
         handle = path.open(newline="", encoding="utf-8-sig")
     except OSError as exc:
         raise KitCsvError(f"{path}: cannot open: {exc.strerror}") from exc
+    notices: list[str] = []
     with handle:
         reader = csv.reader(handle)
-        try:
-            header = [h.strip() for h in next(reader)]
-        except StopIteration:
-            raise KitCsvError(f"{path}: empty file, expected a header row") from None
-        except UnicodeDecodeError as exc:
-            raise KitCsvError(f"{path}: not UTF-8 text ({exc.reason})") from None
-        if not header or header[0] != "time":
-            sep = next((c for c in ";\t|" if header and c in header[0]), None)
-            hint = f" (the separator must be a comma, not {sep!r})" if sep else ""
-            raise KitCsvError(
-                f"{path}:1: the first column must be 'time', found {header[:1]}{hint}"
-            )
-        if len(set(header)) != len(header):
-            dup = sorted({h for h in header if header.count(h) > 1})
-            raise KitCsvError(f"{path}:1: duplicate column(s) {', '.join(dup)}")
-        missing = [c for c in required if c not in header]
-        if missing:
-            raise KitCsvError(f"{path}:1: missing required column(s) {', '.join(missing)}")
-        notices = []
+        header = _read_header(path, reader, required, notices)
         known = [(i, h) for i, h in enumerate(header) if h in COLUMNS]
-        extra = [h for h in header[1:] if h not in COLUMNS]
-        if extra:
-            notices.append(f"{path}: ignoring unknown column(s) {', '.join(extra)}")
-            log.warning(notices[-1])
-        times: list[np.datetime64] = []
-        values: dict[str, list[float]] = {h: [] for _, h in known}
-        previous = None
-        previous_cells: list[str] = []
-        repeats: list[int] = []  # lines of exact repeats of the row before (logger re-sends)
-        for row in reader:
-            line = reader.line_num
-            if not row or (len(row) == 1 and not row[0].strip()):
-                continue
-            if len(row) != len(header):
-                raise KitCsvError(
-                    f"{path}:{line}: {len(row)} cells, the header has {len(header)}"
-                )
-            try:
-                stamp = parse_time(row[0])
-            except ValueError as exc:
-                raise KitCsvError(f"{path}:{line}: column time: bad time {row[0]!r}: {exc}") from None
-            cells = [row[i].strip() for i, _ in known]
-            if stamp == previous and cells == previous_cells:
-                repeats.append(line)  # the same sample twice: keeping one loses nothing
-                continue
-            if stamp == previous:
-                raise KitCsvError(
-                    f"{path}:{line}: column time: {row[0]} repeats the previous row's time with "
-                    f"other values; which one is the measurement?"
-                )
-            if previous is not None and stamp < previous:
-                raise KitCsvError(
-                    f"{path}:{line}: column time: {row[0]} is not after the previous row "
-                    f"({previous}Z); rows must be in time order"
-                )
-            previous, previous_cells = stamp, cells
-            times.append(stamp)
-            for i, name in known:
-                values[name].append(_parse_cell(path, line, name, row[i]))
+        times, values = _read_rows(path, reader, len(header), known, notices)
+    _refuse_rh_fractions(path, values)
+    return KitData(
+        time=np.array(times, dtype="datetime64[s]"),
+        columns={k: np.array(v, dtype=float) for k, v in values.items()},
+        source=str(path),
+        notices=notices,
+    )
+
+
+def _read_header(path: Path, reader, required: Iterable[str], notices: list[str]) -> list[str]:
+    """The header row, checked (``time`` first, no duplicate, the required columns present);
+    unknown columns are noted in ``notices``."""
+    try:
+        header = [h.strip() for h in next(reader)]
+    except StopIteration:
+        raise KitCsvError(f"{path}: empty file, expected a header row") from None
+    except UnicodeDecodeError as exc:
+        raise KitCsvError(f"{path}: not UTF-8 text ({exc.reason})") from None
+    if not header or header[0] != "time":
+        sep = next((c for c in ";\t|" if header and c in header[0]), None)
+        hint = f" (the separator must be a comma, not {sep!r})" if sep else ""
+        raise KitCsvError(
+            f"{path}:1: the first column must be 'time', found {header[:1]}{hint}"
+        )
+    if len(set(header)) != len(header):
+        dup = sorted({h for h in header if header.count(h) > 1})
+        raise KitCsvError(f"{path}:1: duplicate column(s) {', '.join(dup)}")
+    missing = [c for c in required if c not in header]
+    if missing:
+        raise KitCsvError(f"{path}:1: missing required column(s) {', '.join(missing)}")
+    extra = [h for h in header[1:] if h not in COLUMNS]
+    if extra:
+        notices.append(f"{path}: ignoring unknown column(s) {', '.join(extra)}")
+        log.warning(notices[-1])
+    return header
+
+
+def _read_rows(path: Path, reader, width: int, known: list[tuple[int, str]],
+               notices: list[str]) -> tuple[list[np.datetime64], dict[str, list[float]]]:
+    """The data rows: times strictly increasing (an exact repeat of the row before is skipped
+    with a notice), every known column's cells parsed and range-checked."""
+    times: list[np.datetime64] = []
+    values: dict[str, list[float]] = {h: [] for _, h in known}
+    previous = None
+    previous_cells: list[str] = []
+    repeats: list[int] = []  # lines of exact repeats of the row before (logger re-sends)
+    for row in reader:
+        line = reader.line_num
+        if not row or (len(row) == 1 and not row[0].strip()):
+            continue
+        if len(row) != width:
+            raise KitCsvError(f"{path}:{line}: {len(row)} cells, the header has {width}")
+        try:
+            stamp = parse_time(row[0])
+        except ValueError as exc:
+            raise KitCsvError(f"{path}:{line}: column time: bad time {row[0]!r}: {exc}") from None
+        cells = [row[i].strip() for i, _ in known]
+        if stamp == previous and cells == previous_cells:
+            repeats.append(line)  # the same sample twice: keeping one loses nothing
+            continue
+        if stamp == previous:
+            raise KitCsvError(
+                f"{path}:{line}: column time: {row[0]} repeats the previous row's time with "
+                f"other values; which one is the measurement?"
+            )
+        if previous is not None and stamp < previous:
+            raise KitCsvError(
+                f"{path}:{line}: column time: {row[0]} is not after the previous row "
+                f"({previous}Z); rows must be in time order"
+            )
+        previous, previous_cells = stamp, cells
+        times.append(stamp)
+        for i, name in known:
+            values[name].append(_parse_cell(path, line, name, row[i]))
     if not times:
         raise KitCsvError(f"{path}: no data rows")
     if repeats:
@@ -170,6 +189,10 @@ def read_kit_csv(path: str | Path, required: Iterable[str] = ()) -> KitData:
             f"(line(s) {', '.join(map(str, repeats[:5]))}{' …' if len(repeats) > 5 else ''})"
         )
         log.warning(notices[-1])
+    return times, values
+
+
+def _refuse_rh_fractions(path: Path, values: dict[str, list[float]]) -> None:
     for name in ("rh_in", "rh_out"):
         rh = np.array(values.get(name, []), dtype=float)
         rh = rh[np.isfinite(rh)]
@@ -179,12 +202,6 @@ def read_kit_csv(path: str | Path, required: Iterable[str] = ()) -> KitData:
                 f"{path}: column {name}: every value is between 0 and 1 (max {rh.max():g}): "
                 f"looks like a fraction, the kit CSV wants % (0-100)"
             )
-    return KitData(
-        time=np.array(times, dtype="datetime64[s]"),
-        columns={k: np.array(v, dtype=float) for k, v in values.items()},
-        source=str(path),
-        notices=notices,
-    )
 
 
 def _parse_cell(path: Path, line: int, name: str, cell: str) -> float:

@@ -64,12 +64,7 @@ def diagnose(
     n, dt = len(coarse), coarse.step
     s = int(round(split * n))
     horizon = max(int(round(HORIZON_S / dt)), 2)
-    if s < 3 * horizon or n - s < 2 * horizon:  # before drivers(): it needs a first row
-        raise ValueError(
-            f"{series.source}: {len(series)} samples of {series.step:g} s are too few to "
-            f"diagnose: the calibration part needs at least {3 * HORIZON_S / 3600:g} h and "
-            f"the held-out part {2 * HORIZON_S / 3600:g} h"
-        )
+    _check_length(series, s, n, horizon)  # before drivers(): it needs a first row
     x = drivers(coarse, gh)
     duration = float(x["_index"][-1])
     blocks = jd.heldout_blocks(s, n, dt)
@@ -120,15 +115,7 @@ def diagnose(
                                  "delta_bic": verdict.delta_bic})
         if not passed:
             break
-        score = jd.scores([c[4] for c in passed], x["t_in"], s, dt)
-        order = np.argsort(score)
-        e, new_model, new_thetas, pred, verdict = passed[order[0]]
-        for i in order[1:]:
-            other = passed[i]
-            rejected.append({"effect": other[0].name, "reason": "passed, but a rival has "
-                             f"more evidence (score {score[i]:.0f} vs {score[order[0]]:.0f},"
-                             " fit ΔBIC with second output + held-out): " + other[4].why,
-                             "delta_bic": other[4].delta_bic})
+        e, new_model, new_thetas, pred, verdict = _pick(passed, x["t_in"], s, dt, rejected)
         th_all, dbic_full = _fit_effect(ctx, new_model, model, theta_all, e, [(0, n)], seed + 101,
                                         latest=False)
         findings.append(make_finding(e, new_model, th_all, series, current_pred, verdict,
@@ -141,6 +128,30 @@ def diagnose(
                 structure_log, k, s, n, blocks, folds, duration, t_start)
     d.trials = trials
     return d
+
+
+def _check_length(series: Series, s: int, n: int, horizon: int) -> None:
+    """A clear error for data too short to split into a calibration and a held-out part."""
+    if s < 3 * horizon or n - s < 2 * horizon:
+        raise ValueError(
+            f"{series.source}: {len(series)} samples of {series.step:g} s are too few to "
+            f"diagnose: the calibration part needs at least {3 * HORIZON_S / 3600:g} h and "
+            f"the held-out part {2 * HORIZON_S / 3600:g} h"
+        )
+
+
+def _pick(passed: list[tuple], t_in: np.ndarray, s: int, dt: float, rejected: list[dict]
+          ) -> tuple:
+    """The passed candidate with the most evidence; the others go to ``rejected`` with why."""
+    score = jd.scores([c[4] for c in passed], t_in, s, dt)
+    order = np.argsort(score)
+    for i in order[1:]:
+        other = passed[i]
+        rejected.append({"effect": other[0].name, "reason": "passed, but a rival has "
+                         f"more evidence (score {score[i]:.0f} vs {score[order[0]]:.0f},"
+                         " fit ΔBIC with second output + held-out): " + other[4].why,
+                         "delta_bic": other[4].delta_bic})
+    return passed[order[0]]
 
 
 def _report(series, gh, model0, base_theta, model, thetas, theta_all, findings, rejected,

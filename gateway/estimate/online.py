@@ -26,20 +26,14 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from gateway.estimate.sample_check import STUCK_SAMPLES, StuckRun, check_sample
 from gateway.estimate.settings import DEFAULT_ITERATIONS, GroupSettings, online_settings  # noqa: F401 (re-exported)
 from gateway.estimate.swarm import ALMERIA_OFFLINE, SearchResult, bat
 from gateway.greenhouse import Greenhouse
-from gateway.kitcsv import COLUMNS
 from gateway.model.drivers import prepare_drivers, site_of
 from gateway.model.model import Model
 from gateway.model.sky import CloudTracker
 from gateway.series import Series
-
-STUCK_SAMPLES = 30
-"""An inside temperature repeated bit for bit this many samples in a row (30 min at 1 min) is a
-stuck sensor: real air temperature, read to 0.01 °C, always moves within half an hour. When the
-run is recognised, the repeats already accepted are struck out and the parameters fitted to them
-are rolled back (``OnlineEstimator._strike_stuck_run``)."""
 
 MIN_RADIATION_PAIRS = 10
 """The radiation sub-model is only re-estimated with at least this many sunlit samples."""
@@ -120,8 +114,7 @@ class OnlineEstimator:
         self._cap = max(4 * self.history, 512)
         self._buf: dict[str, np.ndarray] = {}
         self._n = 0  # rows stored in the buffer
-        self._stuck_value = np.nan
-        self._stuck_run = 0
+        self._stuck = StuckRun()
         # Parameters at the start of each of the last STUCK_SAMPLES updates, to undo what a
         # stuck run taught the estimator before it was recognised.
         self._theta_before: deque[np.ndarray] = deque(maxlen=STUCK_SAMPLES)
@@ -140,8 +133,9 @@ class OnlineEstimator:
         self.counters.samples += 1
         step = self.counters.samples - 1  # index of this sample since start
         self._theta_before.append(self.theta.copy())
-        values, faults = self._check(sample)
-        if self._stuck_run == STUCK_SAMPLES:
+        values, faults = check_sample(sample, self.model.requires, self._stuck,
+                                      self.counters.faults)
+        if self._stuck.length == STUCK_SAMPLES:
             self._strike_stuck_run()
         if faults:
             self.counters.faulty_samples += 1
@@ -175,7 +169,7 @@ class OnlineEstimator:
         """Forget the window (after a gap in the data, e.g. the kit was off for hours): the next
         estimations wait for a full window of new samples. The parameters are kept."""
         self._buf, self._n = {}, 0
-        self._stuck_value, self._stuck_run = np.nan, 0
+        self._stuck = StuckRun()
         self._theta_before.clear()
         self._last_prediction = None
 
@@ -189,7 +183,7 @@ class OnlineEstimator:
             "theta": self.theta.tolist(), "theta0": self.theta0.tolist(),
             "rng": self.rng.bit_generator.state,
             "window": {k: v[a : self._n].tolist() for k, v in self._buf.items()},
-            "stuck": [self._stuck_value, self._stuck_run],
+            "stuck": [self._stuck.value, self._stuck.length],
             "theta_before": [t.tolist() for t in self._theta_before],
             "last_prediction": self._last_prediction,
             "sky": self._sky.state(),
@@ -216,7 +210,7 @@ class OnlineEstimator:
         for k, v in rows.items():
             self._buf[k] = np.full(self._cap, np.nan)
             self._buf[k][: self._n] = v[len(v) - self._n :]
-        self._stuck_value, self._stuck_run = float(snap["stuck"][0]), int(snap["stuck"][1])
+        self._stuck = StuckRun(float(snap["stuck"][0]), int(snap["stuck"][1]))
         self._theta_before.extend(np.asarray(t, dtype=float) for t in snap["theta_before"])
         self._last_prediction = snap["last_prediction"]
         if "sky" in snap:  # states saved before the cloud tracker existed start it afresh
@@ -226,42 +220,6 @@ class OnlineEstimator:
                                  dict(c["estimated"]), dict(c["skipped"]), c["no_prediction"])
 
     # -- checks and buffer ----------------------------------------------------------------
-    def _check(self, sample: Mapping[str, float]) -> tuple[dict[str, float], list[str]]:
-        values: dict[str, float] = {}
-        faults = []
-        for name, raw in sample.items():
-            col = COLUMNS.get(name)
-            if col is None:
-                continue  # not a kit measurement (time stamps, ids)
-            try:
-                v = float(raw)
-            except (TypeError, ValueError):
-                v = np.nan
-            reason = None
-            if not np.isfinite(v):
-                reason = "missing"
-            elif not col.lower <= v <= col.upper:
-                reason = "out_of_range"
-            if name == "t_in" and reason is None:
-                self._stuck_run = self._stuck_run + 1 if v == self._stuck_value else 1
-                self._stuck_value = v
-                if self._stuck_run >= STUCK_SAMPLES:
-                    reason = "stuck"
-            if reason is not None:
-                v = np.nan
-                if reason != "missing" or name in self.model.requires:
-                    faults.append(name)
-                    key = f"{name}:{reason}"
-                    self.counters.faults[key] = self.counters.faults.get(key, 0) + 1
-            values[name] = v
-        for name in self.model.requires:
-            if name not in values:
-                values[name] = np.nan
-                faults.append(name)
-                key = f"{name}:missing"
-                self.counters.faults[key] = self.counters.faults.get(key, 0) + 1
-        return values, faults
-
     def _strike_stuck_run(self) -> None:
         """A stuck run was just recognised: its repeats 2 … STUCK_SAMPLES − 1 were accepted as
         measurements. Strike them from the buffer (no later window uses them) and restore the

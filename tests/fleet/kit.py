@@ -61,6 +61,18 @@ def stays_false(cond: Callable[[], Any], duration: float) -> bool:
     return not cond()
 
 
+def pump_lines(proc: subprocess.Popen[str], log_path: Path, lines: list[str]) -> None:
+    """A child's output, line by line without colour codes, into ``lines`` and its log file
+    (run on a reader thread until the child closes its output)."""
+    assert proc.stdout is not None
+    with open(log_path, "a", encoding="utf-8") as log:
+        for line in proc.stdout:
+            line = ANSI.sub("", line.rstrip("\n"))
+            lines.append(line)
+            log.write(line + "\n")
+            log.flush()
+
+
 @dataclass
 class Pki:
     """A fleet CA in a folder and the certificates issued by it, by common name."""
@@ -148,22 +160,14 @@ class RouterProc:
             [sys.executable, "-m", "gateway", "router", "--config", str(self.config)],
             cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
             errors="replace")
-        self._reader = threading.Thread(target=self._read, args=(self.proc,), daemon=True)
+        self._reader = threading.Thread(target=pump_lines, args=(self.proc, self.log, self.lines),
+                                        daemon=True)
         self._reader.start()
         ready = wait_until(lambda: self._ready() or self._died(), timeout, f"{self.config.name} ready")
         if ready == "died":
             self._finish()
             raise AssertionError(f"router {self.config.name} exited: {self.log_text()[-2000:]}")
         return self
-
-    def _read(self, proc: subprocess.Popen[str]) -> None:
-        assert proc.stdout is not None
-        with open(self.log, "a", encoding="utf-8") as log:
-            for line in proc.stdout:
-                line = ANSI.sub("", line.rstrip("\n"))
-                self.lines.append(line)
-                log.write(line + "\n")
-                log.flush()
 
     def _ready(self) -> bool:
         for line in self.lines:
@@ -287,7 +291,8 @@ class LineProc:
     def start(self, timeout: float = DEADLINE) -> LineProc:
         self.proc = subprocess.Popen(self.argv, cwd=ROOT, env=self.env, stdout=subprocess.PIPE,
                                      stderr=subprocess.STDOUT, text=True, errors="replace")
-        self._reader = threading.Thread(target=self._read, args=(self.proc,), daemon=True)
+        self._reader = threading.Thread(target=pump_lines, args=(self.proc, self.log, self.lines),
+                                        daemon=True)
         self._reader.start()
         found = wait_until(lambda: self.line(self.ready) or (self.proc is not None and self.proc.poll()
                                                              is not None and "died"),
@@ -296,15 +301,6 @@ class LineProc:
             self.stop()
             raise AssertionError(f"{' '.join(self.argv[1:5])} exited: {self.text()[-2000:]}")
         return self
-
-    def _read(self, proc: subprocess.Popen[str]) -> None:
-        assert proc.stdout is not None
-        with open(self.log, "a", encoding="utf-8") as log:
-            for line in proc.stdout:
-                line = ANSI.sub("", line.rstrip("\n"))
-                self.lines.append(line)
-                log.write(line + "\n")
-                log.flush()
 
     def line(self, prefix: str) -> str:
         return next((x for x in list(self.lines) if x.startswith(prefix)), "")

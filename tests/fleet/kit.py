@@ -73,6 +73,20 @@ def pump_lines(proc: subprocess.Popen[str], log_path: Path, lines: list[str]) ->
             log.flush()
 
 
+def signal_and_wait(proc: subprocess.Popen[str], sig: int, timeout: float, what: str) -> None:
+    """Send ``sig`` to a running child and wait: it must exit by itself (a hang is killed and
+    is a failure)."""
+    if proc.poll() is not None:
+        return
+    proc.send_signal(sig)
+    try:
+        proc.wait(timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+        raise AssertionError(f"{what} did not stop on signal {sig}") from None
+
+
 @dataclass
 class Pki:
     """A fleet CA in a folder and the certificates issued by it, by common name."""
@@ -201,14 +215,7 @@ class RouterProc:
         """Signal (SIGTERM) and wait; the router must exit by itself (a hang is a failure)."""
         if self.proc is None:
             return 0
-        if self.proc.poll() is None:
-            self.proc.send_signal(sig)
-            try:
-                self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-                raise AssertionError(f"router {self.config.name} did not stop on SIGTERM") from None
+        signal_and_wait(self.proc, sig, timeout, f"router {self.config.name}")
         return self._finish()
 
     def kill(self) -> None:
@@ -311,14 +318,7 @@ class LineProc:
     def stop(self, timeout: float = DEADLINE, sig: int = signal.SIGTERM) -> int:
         if self.proc is None:
             return 0
-        if self.proc.poll() is None:
-            self.proc.send_signal(sig)
-            try:
-                self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-                raise AssertionError(f"{' '.join(self.argv[1:5])} did not stop on SIGTERM") from None
+        signal_and_wait(self.proc, sig, timeout, " ".join(self.argv[1:5]))
         rc = self.proc.returncode
         if self._reader is not None:
             self._reader.join(10)

@@ -12,8 +12,9 @@ B. ``corrected_outlook`` (what the gateway publishes) on the kept tuning replays
    twonode) with: the current outlook; each driver replaced by the measured future and a
    perfect hourly cloudiness (not causal: what a weather forecast would be worth); the causal
    radiation variants.
-C. The outlook's error correction with extra features: a second daily harmonic, the last
-   matured error of the measured-weather forecast, the hold-latest forecast stacked.
+C. The error correction with extra features: a second daily harmonic, the last matured error
+   of the measured-weather forecast, the hold-latest forecast stacked (these two for the
+   outlook only).
 
 ``--held-out`` scores the held-out generator's replays instead (part B's causal rows and C),
 once, after the choice; part A is the weather only.
@@ -138,22 +139,25 @@ def _on_grid(res, minutes: int, key: str) -> np.ndarray:
     return out
 
 
-def _extra_features(res, hold: dict[int, np.ndarray]) -> dict[str, dict[int, np.ndarray]]:
+def _extra_features(res, hold: dict[int, np.ndarray]) -> dict[str, tuple[dict[int, np.ndarray], bool]]:
     """Part C's extra columns per horizon (in model steps), values at each start, all known
-    at the start: sin/cos 2ωτ; the error of the measured-weather ``combined`` made h earlier,
-    whose target is the reading now; the hold-latest ``combined`` minus this outlook's."""
+    at the start, and whether they also go into the measured-weather correction: sin/cos 2ωτ;
+    the error of the measured-weather ``combined`` made h earlier, whose target is the reading
+    now; the hold-latest ``combined`` minus this outlook's. (The reading's level and its
+    departure from the last day's mean, studied here first, are in the correction itself since
+    2026-11-26.)"""
     n, w = len(res.measured), 4.0 * np.pi * correction.hour_of_day(res.time) / 24.0
-    out: dict[str, dict[int, np.ndarray]] = {"second daily harmonic": {},
-                                             "last measured-weather error": {},
-                                             "hold-latest stacked": {}}
+    out: dict[str, tuple[dict[int, np.ndarray], bool]] = {}
     for minutes in res.horizons:
         steps = int(round(minutes * 60.0 / res.dt))
-        out["second daily harmonic"][steps] = np.column_stack([np.sin(w), np.cos(w)])
         last = np.full(n, np.nan)
         last[steps:] = res.measured[steps:] - _on_grid(res, minutes, "combined")[:-steps]
-        out["last measured-weather error"][steps] = last[:, None]
         stacked = hold[minutes] - _on_grid(res, minutes, "combined_outlook")
-        out["hold-latest stacked"][steps] = stacked[:, None]
+        for label, cols, both in (
+                ("second daily harmonic", [np.sin(w), np.cos(w)], True),
+                ("last measured-weather error", [last], False),
+                ("hold-latest stacked", [stacked], False)):
+            out.setdefault(label, ({}, both))[0][steps] = np.column_stack(cols)
     return out
 
 
@@ -175,11 +179,12 @@ def _case(res, held_out: bool) -> dict[str, dict]:
     hold = {m: _on_grid(res, m, "combined_outlook") for m in res.horizons}
     _score(res, ClearSkyTrend(site))
     extras = _extra_features(res, hold)
-    for label, extra in extras.items():
+    for label, (extra, both) in extras.items():
         correct_with(res, extra, "_outlook")
+        correct_with(res, extra if both else {}, "")
         got[f"correction + {label}"] = _mae(res)
     _score(res, IndexBlend(site, 86400.0, 3600.0))  # the small causal gains together
-    correct_with(res, extras["second daily harmonic"], "_outlook")
+    correct_with(res, extras["second daily harmonic"][0], "_outlook")
     got[BEST_CAUSAL] = _mae(res)
     return got
 
@@ -218,6 +223,29 @@ def markdown(table: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def measured_markdown(table: dict) -> str:
+    """Part C with the measured weather: ``corrected`` at 15/30/60 min per case for the
+    correction features that also go into the measured-weather correction, the mean ratio to
+    the current one and the windows meeting the measured-weather goal (≤ 0.7 × persistence and
+    below the ARX at every horizon)."""
+    now = table["clear-sky-trend (now)"]
+    cases = list(now)
+    lines = ["| correction | " + " | ".join(f"{c} 15 / 30 / 60" for c in cases)
+             + " | / now | measured goal |", "|" + " --- |" * (len(cases) + 3)]
+    for label in ("clear-sky-trend (now)", "correction + second daily harmonic"):
+        per, cells, ratios, goal = table[label], [], [], 0
+        for c in cases:
+            hs = per[c]
+            cells.append(" / ".join(f"{hs[h]['corrected']:.3f}" for h in ("15", "30", "60")))
+            ratios += [hs[h]["corrected"] / now[c][h]["corrected"] for h in hs]
+            goal += all(m["corrected"] <= 0.7 * m["persistence"] and m["corrected"] < m["arx"]
+                        for m in hs.values())
+        spread = f"{np.mean(ratios):.3f} ({min(ratios):.3f}-{max(ratios):.3f})"
+        name = "now" if label.startswith("clear") else label.removeprefix("correction + ")
+        lines.append(f"| {name} | " + " | ".join(cells) + f" | {spread} | {goal} / {len(cases)} |")
+    return "\n".join(lines) + "\n"
+
+
 def side_by_side(table: dict) -> str:
     """Per case and horizon: persistence, the ARX (measured weather and outlook), ``corrected``
     with the outlook now, with the best causal variant and with a perfect hourly cloudiness."""
@@ -249,6 +277,8 @@ def main(argv: list[str] | None = None) -> int:
     table = study(Path(a.kept), a.held_out)
     print(markdown(table))
     print(side_by_side(table))
+    print("C, measured weather: corrected MAE [K]\n")
+    print(measured_markdown(table))
     return 0
 
 

@@ -19,7 +19,7 @@ C. The error correction with extra features: a second daily harmonic, the last m
 ``--held-out`` scores the held-out generator's replays instead (part B's causal rows and C),
 once, after the choice; part A is the weather only.
 
-    nice -n 5 .venv/bin/python tests/generality/outlook_study.py out/fc       # ~2 min
+    nice -n 5 .venv/bin/python tests/generality/outlook_study.py out/fc       # ~4 min
     nice -n 5 .venv/bin/python tests/generality/outlook_study.py out/fc --held-out
 """
 

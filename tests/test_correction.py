@@ -7,8 +7,11 @@ import json
 import math
 
 import numpy as np
+import pytest
 
+from gateway.estimate import correction
 from gateway.estimate.correction import (
+    FEATURES,
     MAX_CORRECTION_K,
     Corrector,
     correct_series,
@@ -107,6 +110,50 @@ def test_the_stacked_forecast_is_weighted_in():
     good = target + rng.normal(0, 0.1, len(target))
     out = correct_series({H: poor}, measured, x, time, DT, {H: good})[H]
     assert _mae_late(measured, out) < 0.6 * _mae_late(measured, poor)
+
+
+def test_a_controlled_house_going_back_to_its_day_mean_is_learnt(monkeypatch):
+    """A forecast that misses how far the house goes back toward its usual temperature (its
+    error a share of the reading's departure from the last day's mean): the level and departure
+    features learn it; the day mean is that of the readings observed so far."""
+    rng = np.random.default_rng(8)
+    n = 2000
+    excursion = np.zeros(n)  # a regulated house: kicks away from 21 °C that decay
+    for t in range(1, n):
+        kick = rng.choice([-6.0, 6.0]) if t % 37 == 0 else 0.0
+        excursion[t] = 0.9 * excursion[t - 1] + kick + rng.normal(0, 0.02)
+    measured = 21.0 + excursion
+    x = {"i_glob": np.zeros(n), "t_out": np.full(n, 10.0)}
+    time = np.datetime64("2020-01-01T00:00", "s") + np.arange(n) * np.timedelta64(300, "s")
+    forecast = measured.copy()  # persistence: it misses the way back
+    forecast[: n - H] = measured[: n - H]
+    forecast[n - H:] = np.nan
+    corrected = correct_series({H: forecast}, measured, x, time, DT)[H]
+    mask = np.array([0.0 if n.startswith("t_in") else 1.0 for n in FEATURES])
+    full = correction.features
+    monkeypatch.setattr(correction, "features", lambda *a: full(*a) * mask)
+    without = correct_series({H: forecast}, measured, x, time, DT)[H]
+    starts = np.arange(1000, n - H)
+    calm = (starts % 37) < 37 - H  # no kick within the horizon (a kick is not foreseeable)
+    err = {k: np.mean(np.abs(f[starts][calm] - measured[starts + H][calm]))
+           for k, f in (("before", forecast), ("without", without), ("after", corrected))}
+    assert err["after"] < 0.6 * err["before"] and err["after"] < 0.8 * err["without"], err
+    live = Corrector([H], DT)
+    for v in measured[:400]:
+        live.observe(float(v))
+    assert live.day_mean == pytest.approx(np.mean(measured[400 - 288:400]))
+
+
+def test_an_older_snapshot_starts_afresh():
+    """A state saved with another φ (before the T_in features: 8 columns) is not mixed in."""
+    k = len(FEATURES) - 2
+    old = {"r_mat": {str(H): np.eye(k).tolist()}, "r_vec": {str(H): [0.0] * k},
+           "last": {str(H): 0.1}, "learnt": {str(H): 500}, "pending": {str(H): [[0.0] * (k + 1)]}}
+    live = Corrector([H], DT)
+    live.restore(old)
+    assert live.learnt[H] == 0 and len(live.pending[H]) == 0
+    live.observe(20.0)
+    assert live.correct(H, 20.5, 20.0, {"i_glob": 0.0, "t_out": 10.0, "hour": 3.0}) == 20.5
 
 
 def test_hour_of_day():

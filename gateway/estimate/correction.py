@@ -9,10 +9,14 @@ follows the season. For each horizon h, with the error e(t) = T_in[t + h] − f(
 
     ê(t) = β(t) · φ(t),     corrected f(t) + ê(t),
     φ(t) = (1, f(t) − T_in[t], e(t − h), I_glob[t] / 1 kW m-2, (T_out − T_in)[t] / 10 K,
-            g(t) − f(t), sin ωτ(t), cos ωτ(t)),    ω = 2π / 24 h, τ the UTC hour,
+            g(t) − f(t), (T_in[t] − 20 °C) / 10 K, (T_in[t] − T̄_in(t)) / 10 K,
+            sin ωτ(t), cos ωτ(t)),    ω = 2π / 24 h, τ the UTC hour,
 
-``g`` a second forecast of the same target (the ARX baseline: the regression re-weights the
-two, stacking, Wolpert 1992, "Stacked generalization", Neural Networks 5, 241-259), ``e(t − h)``
+``T̄_in(t)`` the mean reading of the last day up to t (a controlled house goes back to its
+setpoints and its usual temperature: the level and the departure from the day's mean let the
+regression learn how far and how fast), ``g`` a second forecast of the same target (the ARX
+baseline: the regression re-weights the two, stacking, Wolpert 1992, "Stacked generalization",
+Neural Networks 5, 241-259), ``e(t − h)``
 the last error already measured at t. β(t) is the exponentially weighted least squares estimate
 with a constant ridge toward "no correction" (Gunnarsson 1996, "Combining tracking and
 regularization in recursive least squares identification", Proc. 35th IEEE CDC, 2551-2552):
@@ -41,12 +45,18 @@ MEMORY_S = 4 * 86400.0
 """[s] time constant of the forgetting: the errors of the last four days weigh most."""
 RIDGE = 50.0
 """ρ [-], in units of one start's weight: the correction's prior toward zero."""
-FEATURES = ("1", "f - t_in", "last error", "i_glob", "t_out - t_in", "arx - f", "sin hour",
-            "cos hour")
+FEATURES = ("1", "f - t_in", "last error", "i_glob", "t_out - t_in", "arx - f", "t_in level",
+            "t_in - day mean", "sin hour", "cos hour")
 """Names of φ, in order: the last two are the hour of the day (UTC) as a daily harmonic, so a
 repeated daily error (the sun stored and given back later in the day) is learnt by phase."""
-SCALE = np.array([1.0, 1.0, 1.0, 1e-3, 0.1, 1.0, 1.0, 1.0])
-"""φ in these units (I_glob per kW m-2, T_out − T_in per 10 K) so one ridge suits all."""
+SCALE = np.array([1.0, 1.0, 1.0, 1e-3, 0.1, 1.0, 0.1, 0.1, 1.0, 1.0])
+"""φ in these units (I_glob per kW m-2, temperature differences per 10 K) so one ridge suits
+all."""
+T_LEVEL_C = 20.0
+"""[°C] the reading's level is counted from here (a greenhouse's usual air temperature; the
+constant column takes the rest)."""
+DAY_MEAN_S = 86400.0
+"""[s] the span of the mean reading the departure is counted from."""
 WARMUP_S = 86400.0
 """[s] the correction is applied once a horizon has learnt from this long of matured starts (a
 day: the daily harmonic is not identified before); until then ``combined`` goes out as it is."""
@@ -60,14 +70,15 @@ def forgetting(dt: float, memory_s: float = MEMORY_S) -> float:
 
 
 def features(f: float, t_in: float, last_error: float, row: Mapping[str, float],
-             arx: float) -> np.ndarray:
+             arx: float, day_mean: float = math.nan) -> np.ndarray:
     """φ (scaled, ``FEATURES``) at one start: ``row`` holds ``i_glob``, ``t_out`` and ``hour``
-    (UTC, 0-24) at the start. A missing last error or ARX forecast counts as 0; a missing driver
-    makes φ NaN (no correction)."""
+    (UTC, 0-24) at the start, ``day_mean`` the mean reading of the last day. A missing last
+    error, ARX forecast or day mean counts as 0; a missing driver makes φ NaN (no correction)."""
     w = 2.0 * math.pi * row.get("hour", math.nan) / 24.0
     raw = np.array([1.0, f - t_in, last_error if math.isfinite(last_error) else 0.0,
                     row.get("i_glob", math.nan), row.get("t_out", math.nan) - t_in,
-                    arx - f if math.isfinite(arx) else 0.0, math.sin(w), math.cos(w)])
+                    arx - f if math.isfinite(arx) else 0.0, t_in - T_LEVEL_C,
+                    t_in - day_mean if math.isfinite(day_mean) else 0.0, math.sin(w), math.cos(w)])
     return raw * SCALE
 
 
@@ -85,6 +96,7 @@ class Corrector:
                  ridge: float = RIDGE, warmup_s: float = WARMUP_S) -> None:
         self.horizons, self.lam, self.ridge = tuple(horizons), forgetting(dt, memory_s), ridge
         self.warmup = int(math.ceil(warmup_s / dt))  # learnt starts before the first correction
+        self.day = max(int(round(DAY_MEAN_S / dt)), 1)  # readings in the day mean
         self.reset()
 
     def reset(self) -> None:
@@ -95,6 +107,8 @@ class Corrector:
         self.learnt = dict.fromkeys(self.horizons, 0)
         self.pending: dict[int, deque] = {h: deque() for h in self.horizons}
         self._made: dict[int, list[float]] = {}
+        self.readings: deque = deque(maxlen=self.day)  # the last day's readings (NaN kept)
+        self.day_mean = math.nan
 
     def drop_pending(self) -> None:
         """A gap: the forecasts waiting for a target will never meet it; β is kept."""
@@ -102,8 +116,16 @@ class Corrector:
         self.last = {h: math.nan for h in self.horizons}
         self._made = {}
 
+    def observe_reading(self, reading: float | None) -> None:
+        """The reading joins the last day's mean (``observe`` does this itself)."""
+        self.readings.append(math.nan if reading is None else float(reading))
+        got = [v for v in self.readings if math.isfinite(v)]
+        self.day_mean = math.fsum(got) / len(got) if got else math.nan
+
     def observe(self, reading: float) -> None:
-        """The reading now matures the forecasts made h steps ago: forget, then learn each."""
+        """The reading now matures the forecasts made h steps ago: forget, then learn each;
+        it joins the day's mean."""
+        self.observe_reading(reading)
         for h in self.horizons:
             queue = self.pending[h]
             if len(queue) < h:
@@ -130,7 +152,7 @@ class Corrector:
         """The corrected forecast of horizon ``h`` made now from the reading ``t_in``, the
         drivers ``row`` (``features``) and the ARX's forecast of the same target; ``f``
         unchanged where φ cannot be formed. Remembered for ``add``."""
-        phi = features(f, t_in, self.last[h], row, arx)
+        phi = features(f, t_in, self.last[h], row, arx, self.day_mean)
         if not (math.isfinite(f) and np.all(np.isfinite(phi))):
             return f
         self._made[h] = [*phi.tolist(), f]
@@ -150,13 +172,20 @@ class Corrector:
                 "r_vec": {str(h): v.tolist() for h, v in self.r_vec.items()},
                 "last": {str(h): v for h, v in self.last.items()},
                 "learnt": {str(h): v for h, v in self.learnt.items()},
-                "pending": {str(h): list(q) for h, q in self.pending.items()}}
+                "pending": {str(h): list(q) for h, q in self.pending.items()},
+                "readings": list(self.readings)}
 
     def restore(self, snap: Mapping | None) -> None:
-        """Continue from a ``snapshot`` (None: start afresh)."""
+        """Continue from a ``snapshot`` (None, or one made with other features: start
+        afresh)."""
         self.reset()
         if not snap:
             return
+        k = len(FEATURES)
+        if any(np.shape(m) != (k, k) for m in snap.get("r_mat", {}).values()):
+            return  # an older φ: its sums and pending starts do not fit this one
+        for v in snap.get("readings", []):
+            self.observe_reading(v)
         for h in self.horizons:
             key = str(h)
             if key in snap.get("r_mat", {}):

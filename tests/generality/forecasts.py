@@ -115,7 +115,9 @@ def summary(results: list[dict]) -> str:
 
 def rescore(folder: Path) -> list[dict]:
     """The cases again from the replays pickled by ``--keep``: the estimator's loop is not run,
-    everything after it (ARX, filter, forecasts, report) is, with the code as it is now."""
+    everything after it (ARX, filter, forecasts, report) is, with the code as it is now. The
+    outlook's driver blocks are the kept ones (``res.ahead``): tests/generality/outlooks.py and
+    outlook_study.py recompute them, for an outlook changed since."""
     import pickle
 
     from gateway.estimate.replay import HORIZONS, score_forecasts, steps_of

@@ -1,0 +1,202 @@
+"""Variants of the weather outlook and of the outlook's error correction, for the study
+tests/generality/outlook_study.py (issue 10: what a causal outlook could still gain).
+
+Causal variants of ``clear-sky-trend``'s radiation (nothing after the start is read; checked by
+tests/test_outlook_variants.py):
+
+- :class:`IndexBlend`: the clear-sky index relaxed from its current value k_now toward a
+  reference k_ref, the ratio of sums over the last ``ref_window`` (the recent days' cloudiness),
+  with the lead time:  k(t + h) = k_ref + (k_now − k_ref) exp(−h / tau).  A convex combination
+  of climatology and persistence (Yang 2019, "Making reference solar forecasts with
+  climatology, persistence, and their optimal convex combination", Solar Energy 193, 981-985),
+  with a fixed e-folding time instead of the optimal weight.
+- :class:`OnlineBlend`: the same with Yang's weight estimated online, per lead time, as the
+  least-squares slope of the index h steps later on the index now, over the pairs of the last
+  ``memory`` whose later end is already measured (the mean-square-optimal convex weight when
+  the index is stationary); the reference is the mean index of the same span.
+
+Not causal, diagnostics only (what a perfect weather forecast would be worth):
+
+- :class:`Measured`: the named columns replaced by what was measured later;
+- :class:`HourlyCloudiness`: radiation = the clear sky × the clear-sky index measured over each
+  clock hour (a perfect hourly cloudiness forecast, as a weather service could at best send).
+
+:func:`correct_with` runs gateway/estimate/correction.py's ``Corrector`` with extra feature
+columns appended to φ (e.g. a second daily harmonic, the last error of the measured-weather
+forecast) on a scored replay.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from gateway.estimate import correction
+from gateway.estimate.clear_sky_trend import ClearSkyTrend, _trailing_sums, _unix, forward_fill
+from gateway.greenhouse import Site
+
+
+class IndexBlend(ClearSkyTrend):
+    """``clear-sky-trend`` with the index relaxed toward its ``ref_window`` [s] ratio of sums
+    with e-folding time ``tau`` [s] of lead time (module doc)."""
+
+    name = "index-blend"
+
+    def __init__(self, site: Site, ref_window: float = 86400.0, tau: float = 3600.0) -> None:
+        super().__init__(site)
+        self.ref_window, self.tau = ref_window, tau
+
+    def reference_index(self, i_glob: np.ndarray, unix: np.ndarray, dt: float) -> np.ndarray:
+        """Ratio of sums (measured / clear sky) over the last ``ref_window`` of the samples
+        whose clear sky is at least ``MIN_CLEAR``; the current index until half an hour of
+        such samples was seen."""
+        clear = self._clear(unix)
+        use = (clear >= self.MIN_CLEAR) & np.isfinite(i_glob)
+        win = max(int(round(self.ref_window / dt)), 1)
+        s_meas, _ = _trailing_sums(np.where(use, i_glob, np.nan), win)
+        s_clear, n = _trailing_sums(np.where(use, clear, np.nan), win)
+        enough = n * dt >= 1800.0
+        k = forward_fill(np.where(enough, s_meas / np.where(enough, s_clear, 1.0), np.nan))
+        now = self.clear_sky_index(i_glob, unix, dt)
+        return np.clip(np.where(np.isfinite(k), k, now), 0.0, 1.3)
+
+    def index_ahead(self, i_glob: np.ndarray, unix: np.ndarray, starts: np.ndarray,
+                    horizon: int, dt: float) -> np.ndarray:
+        """(N, horizon) clear-sky index at the steps start + 1 … start + horizon."""
+        now = self.clear_sky_index(i_glob, unix, dt)[starts][:, None]
+        ref = self.reference_index(i_glob, unix, dt)[starts][:, None]
+        w = np.exp(-np.arange(1, horizon + 1) * dt / self.tau)[None, :]
+        return ref + (now - ref) * w
+
+    def drivers_at(self, columns: Mapping[str, np.ndarray], time: np.ndarray,
+                   starts: np.ndarray, horizon: int, dt: float) -> dict[str, np.ndarray]:
+        out = super().drivers_at(columns, time, starts, horizon, dt)
+        if "i_glob" in columns:
+            starts = np.asarray(starts, dtype=int)
+            unix = _unix(time)
+            k = self.index_ahead(np.asarray(columns["i_glob"], float), unix, starts, horizon, dt)
+            future = unix[starts][:, None] + np.arange(1, horizon + 1)[None, :] * dt
+            out["i_glob"] = k * self._clear(future.ravel()).reshape(future.shape)
+        return out
+
+
+class OnlineBlend(IndexBlend):
+    """:class:`IndexBlend` with the weight of each lead time estimated online (module doc)
+    over the last ``memory`` [s]; at least ``min_pairs`` pairs, else persistence (weight 1)."""
+
+    name = "online-blend"
+
+    def __init__(self, site: Site, memory: float = 3 * 86400.0, min_pairs: int = 24) -> None:
+        super().__init__(site, ref_window=memory)
+        self.min_pairs = min_pairs
+
+    def weights(self, i_glob: np.ndarray, unix: np.ndarray, horizon: int,
+                dt: float) -> np.ndarray:
+        """(T, horizon) weight of the current index at each index and lead time, from the
+        pairs (s, s + h) with s + h at or before that index."""
+        clear = self._clear(unix)
+        strong = (clear >= self.MIN_CLEAR) & np.isfinite(i_glob)
+        k_inst = np.where(strong, i_glob / np.where(strong, clear, 1.0), np.nan)
+        k_now = np.where(strong, self.clear_sky_index(i_glob, unix, dt), np.nan)
+        win = max(int(round(self.ref_window / dt)), 1)
+        n = len(i_glob)
+        out = np.ones((n, horizon))
+        for h in range(1, min(horizon, n - 1) + 1):
+            x, y = np.full(n, np.nan), np.full(n, np.nan)
+            x[h:], y[h:] = k_now[:-h], k_inst[h:]  # stamped at the later end: known there
+            ok = np.isfinite(x) & np.isfinite(y)
+            x, y = np.where(ok, x, np.nan), np.where(ok, y, np.nan)
+            sx, c = _trailing_sums(x, win)
+            sy, _ = _trailing_sums(y, win)
+            sxx, _ = _trailing_sums(x * x, win)
+            sxy, _ = _trailing_sums(x * y, win)
+            c1 = np.maximum(c, 1.0)
+            var, cov = sxx - sx * sx / c1, sxy - sx * sy / c1
+            good = (c >= self.min_pairs) & (var > 1e-9)
+            slope = np.where(good, cov / np.where(good, var, 1.0), np.nan)
+            out[:, h - 1] = np.clip(np.where(np.isfinite(slope), slope, 1.0), 0.0, 1.0)
+        return out
+
+    def index_ahead(self, i_glob: np.ndarray, unix: np.ndarray, starts: np.ndarray,
+                    horizon: int, dt: float) -> np.ndarray:
+        now = self.clear_sky_index(i_glob, unix, dt)[starts][:, None]
+        ref = self.reference_index(i_glob, unix, dt)[starts][:, None]
+        return ref + (now - ref) * self.weights(i_glob, unix, horizon, dt)[starts]
+
+
+class Measured:
+    """NOT causal: ``base``'s outlook with ``columns`` replaced by the measured future."""
+
+    def __init__(self, base, columns: tuple[str, ...]) -> None:
+        self.base, self.columns = base, columns
+        self.name = "measured " + ", ".join(columns)
+
+    def drivers_at(self, columns: Mapping[str, np.ndarray], time: np.ndarray,
+                   starts: np.ndarray, horizon: int, dt: float) -> dict[str, np.ndarray]:
+        out = self.base.drivers_at(columns, time, starts, horizon, dt)
+        n = len(time)
+        rows = np.clip(np.asarray(starts, int)[:, None] + np.arange(1, horizon + 1)[None, :], 0, n - 1)
+        for c in self.columns:
+            if c in columns:
+                out[c] = np.asarray(columns[c], float)[rows]
+        return out
+
+
+class HourlyCloudiness(ClearSkyTrend):
+    """NOT causal: radiation = clear sky × the index measured over each clock hour."""
+
+    name = "hourly-cloudiness"
+
+    def drivers_at(self, columns: Mapping[str, np.ndarray], time: np.ndarray,
+                   starts: np.ndarray, horizon: int, dt: float) -> dict[str, np.ndarray]:
+        out = super().drivers_at(columns, time, starts, horizon, dt)
+        unix = _unix(time)
+        clear = self._clear(unix)
+        hour = (unix // 3600.0).astype(np.int64)
+        hour -= hour[0]
+        i_glob = np.nan_to_num(np.asarray(columns["i_glob"], float))
+        s_meas, s_clear = np.bincount(hour, weights=i_glob), np.bincount(hour, weights=clear)
+        k = np.clip(np.where(s_clear > 1.0, s_meas / np.maximum(s_clear, 1e-9), 0.0), 0.0, 1.5)
+        n = len(unix)
+        rows = np.clip(np.asarray(starts, int)[:, None] + np.arange(1, horizon + 1)[None, :], 0, n - 1)
+        out["i_glob"] = k[hour[rows]] * clear[rows]
+        return out
+
+
+def correct_with(res, extra: Mapping[int, np.ndarray], suffix: str) -> None:
+    """Replace ``corrected{suffix}`` of the scored replay ``res`` by the correction with the
+    columns ``extra[steps]`` (T, m) (their values at each start, NaN counted as 0) appended to
+    φ; ``extra`` empty gives gateway/estimate/correction.py's own figures."""
+    n = len(res.measured)
+    comb, arx, starts = {}, {}, {}
+    for minutes, f in res.horizons.items():
+        steps = int(round(minutes * 60.0 / res.dt))
+        starts[minutes] = f["target"] - steps
+        comb[steps], arx[steps] = np.full(n, np.nan), np.full(n, np.nan)
+        comb[steps][starts[minutes]] = f[f"combined{suffix}"]
+        arx[steps][starts[minutes]] = f[f"arx{suffix}"]
+    m = next(iter(extra.values())).shape[1] if extra else 0
+    base_features, base_names = correction.features, correction.FEATURES
+    now: dict[str, np.ndarray] = {"extra": np.zeros(m)}
+    correction.features = lambda *a: np.concatenate([base_features(*a), now["extra"]])  # type: ignore[assignment]
+    correction.FEATURES = (*base_names, *(f"extra {i}" for i in range(m)))
+    try:
+        corr = correction.Corrector(list(comb), res.dt)
+        out = {h: np.full(n, np.nan) for h in comb}
+        cols = {"i_glob": res.x["i_glob"], "t_out": res.x["t_out"],
+                "hour": correction.hour_of_day(res.time)}
+        for t in range(n):
+            corr.observe(float(res.measured[t]))
+            row = {k: float(v[t]) for k, v in cols.items()}
+            for h, f in comb.items():
+                if math.isfinite(f[t]):
+                    now["extra"] = np.nan_to_num(extra[h][t]) if m else np.zeros(0)
+                    out[h][t] = corr.correct(h, float(f[t]), float(res.measured[t]), row,
+                                             float(arx[h][t]))
+            corr.add()
+    finally:
+        correction.features, correction.FEATURES = base_features, base_names  # type: ignore[assignment]
+    for minutes, f in res.horizons.items():
+        f[f"corrected{suffix}"] = out[int(round(minutes * 60.0 / res.dt))][starts[minutes]]

@@ -1,0 +1,70 @@
+"""The outlook study's variants (tests/generality/outlook_variants.py): the causal ones read
+nothing after the start, blend between the current and the reference index as documented, and
+the diagnostics that may read the future do."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gateway.estimate.clear_sky_trend import ClearSkyTrend, _unix
+from gateway.greenhouse import Site
+from gateway.model.solar import clear_sky_global, solar_position
+from tests.generality.outlook_variants import HourlyCloudiness, IndexBlend, Measured, OnlineBlend
+
+SITE = Site(52.03, 4.53)
+DT = 300.0
+
+
+def _weather(days: int = 5, seed: int = 3) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    time = np.datetime64("2009-11-01T00:00", "s") + np.arange(days * 288) * np.timedelta64(300, "s")
+    clear = clear_sky_global(solar_position(time, SITE.latitude, SITE.longitude).cos_zenith)
+    rng = np.random.default_rng(seed)
+    index = np.clip(0.5 + 0.3 * np.sin(np.arange(len(time)) / 7.0) + 0.1 * rng.normal(size=len(time)),
+                    0.05, 1.1)
+    hours = (time - time.astype("datetime64[D]")).astype(float) / 3600.0
+    t_out = 6.0 + 3.0 * np.sin(2 * np.pi * (hours - 9.0) / 24.0)
+    return time, {"i_glob": index * clear, "t_out": t_out, "rh_out": np.full(len(time), 80.0),
+                  "wind": np.full(len(time), 3.0), "t_in": t_out + 2.0}
+
+
+def test_the_causal_variants_read_nothing_after_the_start():
+    time, w = _weather()
+    starts = np.array([3 * 288 + 130, 4 * 288 + 140])  # late morning on days 4 and 5
+    changed = {k: v.copy() for k, v in w.items()}
+    for s in starts:
+        for v in changed.values():
+            v[s + 1:] *= 1.7
+        for variant in (IndexBlend(SITE), IndexBlend(SITE, 3 * 86400.0, 1800.0), OnlineBlend(SITE)):
+            a = variant.drivers_at(w, time, np.array([s]), 12, DT)
+            b = variant.drivers_at(changed, time, np.array([s]), 12, DT)
+            for k in a:
+                np.testing.assert_array_equal(a[k], b[k], err_msg=f"{variant.name} {k}")
+        changed = {k: v.copy() for k, v in w.items()}
+    # the diagnostics do read the future (that is what they are for)
+    for diagnostic in (Measured(ClearSkyTrend(SITE), ("i_glob",)), HourlyCloudiness(SITE)):
+        for v in changed.values():
+            v[starts[0] + 1:] *= 1.7
+        a = diagnostic.drivers_at(w, time, starts[:1], 12, DT)["i_glob"]
+        b = diagnostic.drivers_at(changed, time, starts[:1], 12, DT)["i_glob"]
+        assert not np.allclose(a, b)
+        changed = {k: v.copy() for k, v in w.items()}
+
+
+def test_the_blend_goes_from_the_current_index_to_the_reference():
+    time, w = _weather()
+    unix = _unix(time)
+    blend = IndexBlend(SITE, 86400.0, 3600.0)
+    s = np.array([3 * 288 + 130])
+    now = blend.clear_sky_index(w["i_glob"], unix, DT)[s]
+    ref = blend.reference_index(w["i_glob"], unix, DT)[s]
+    k = blend.index_ahead(w["i_glob"], unix, s, 12, DT)[0]
+    expected = ref + (now - ref) * np.exp(-np.arange(1, 13) * DT / 3600.0)
+    np.testing.assert_allclose(k, expected)
+    assert abs(now[0] - ref[0]) > 0.01  # the test is not trivial
+    # a very long e-folding time is clear-sky-trend's index persistence
+    a = IndexBlend(SITE, 86400.0, 1e15).drivers_at(w, time, s, 12, DT)["i_glob"]
+    b = ClearSkyTrend(SITE).drivers_at(w, time, s, 12, DT)["i_glob"]
+    np.testing.assert_allclose(a, b, rtol=1e-6)
+    # online weights: in [0, 1] and falling with lead time on a mean-reverting index
+    wts = OnlineBlend(SITE).weights(w["i_glob"], unix, 12, DT)[s[0]]
+    assert np.all((wts >= 0.0) & (wts <= 1.0)) and wts[0] > wts[-1]

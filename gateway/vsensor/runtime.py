@@ -24,13 +24,16 @@ import numpy as np
 
 from gateway.greenhouse import Greenhouse
 from gateway.vsensor.features import (
+    EXTRAS,
     INPUT_DELAYS,
     OUTPUT_DELAYS,
     STEP_S,
     check_names,
+    extras_of,
     features,
     filter_gains,
     flow_limits,
+    flux_names,
     greenhouse_signature,
     rho_cp_per_area,
     signature_mismatch,
@@ -119,12 +122,14 @@ def _json(text: str):
 
 
 def check_model(info: ModelInfo, kind: str, n_graph_features: int | None = None) -> None:
-    """Raise :class:`ModelMismatch` unless the model reads what this code computes for ``kind``."""
+    """Raise :class:`ModelMismatch` unless the model reads what this code computes for ``kind``
+    (with the extra features the model names, when the code knows them)."""
     where = info.path
     if info.kind != kind:
         raise ModelMismatch(f"{where}: trained on fluxes of the '{info.kind}' model, but the "
                             f"gateway runs the '{kind}' model")
-    code = features(kind)
+    extra = tuple(n for n in extras_of(kind, info.names) if n in EXTRAS)
+    code = features(kind, extra)
     diff = check_names([f.name for f in code], info.names)
     if diff:
         raise ModelMismatch(f"{where}: {diff} (model kind '{kind}')")
@@ -176,11 +181,13 @@ class VentSensor:
         self.mismatch = signature_mismatch(trained, greenhouse_signature(gh))
         self.limits = flow_limits(gh, model_kind)
         self.rho_cp_a = rho_cp_per_area(gh)
-        self._gains = [float(a) for a in filter_gains(model_kind)]
+        self.extra = extras_of(model_kind, self.info.names)
+        self._extra_fns = [EXTRAS[n][1] for n in self.extra]
+        self._gains = [float(a) for a in filter_gains(model_kind, extra=self.extra)]
         lo, hi = self.info.ranges[:, 0], self.info.ranges[:, 1]
         pad = RANGE_MARGIN * np.maximum(hi - lo, 1e-9)
         self._lo, self._hi = [float(v) for v in lo - pad], [float(v) for v in hi + pad]
-        self._flux_names = self.info.names[3:]
+        self._flux_names = flux_names(model_kind)
         self._out = [self.session.get_outputs()[0].name]
         self._feeds: dict[str, np.ndarray] = {}
         self.counts = SensorCounts()
@@ -201,6 +208,10 @@ class VentSensor:
         dt = _num(m.get("t_in")) - _num(m.get("t_out"))
         raw = [_num(m.get("wind")), dt, _num(m.get("rh_in")) - _num(m.get("rh_out"))]
         raw += [_num(fluxes.get(n)) for n in self._flux_names]
+        if self._extra_fns:  # the same functions as training's raw_features, on this minute
+            def col(name: str) -> np.ndarray:
+                return np.array([_num(m.get(name))])
+            raw += [float(f(col)[0]) for f in self._extra_fns]
         row, missing, outside = self._filter(raw)
         if not self._started:
             self._u[0, :] = row

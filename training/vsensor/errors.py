@@ -18,7 +18,7 @@ import numpy as np
 
 from gateway.greenhouse import Greenhouse
 from gateway.series import load_series
-from gateway.vsensor.features import flow_limits
+from gateway.vsensor.features import extras_of, flow_limits
 from gateway.vsensor.loop import closed_loop, fill_missing
 from training.vsensor import fit
 from training.vsensor.dataset import Segment, build_segment
@@ -58,6 +58,16 @@ def onnx_predict(model: str | Path):
         return np.asarray(out[0], dtype=float).reshape(len(u))
 
     return predict, sess
+
+
+def model_feature_names(model: str | Path) -> list[str]:
+    """The input names in a written model's metadata (its extra features among them)."""
+    import json
+
+    import onnx
+
+    props = {p.key: p.value for p in onnx.load(str(model)).metadata_props}
+    return [f["name"] for f in json.loads(props["features"])]
 
 
 def simulate_model(model: str | Path, segments: list[Segment], gh: Greenhouse, kind: str
@@ -139,7 +149,8 @@ def breakdowns(segments: list[Segment], sims: list[np.ndarray], vents: list[dict
 
 def study(model: str | Path, paths: list[str], gh: Greenhouse, kind: str, cache, overrides,
           seed: int, only: str | None = None) -> list[Breakdown]:
-    segments = [build_segment(p, gh, kind, cache, overrides, seed) for p in paths]
+    extra = extras_of(kind, model_feature_names(model))
+    segments = [build_segment(p, gh, kind, cache, overrides, seed, extra=extra) for p in paths]
     vents = []
     for p in paths:
         series = load_series(str(p), step=60.0)

@@ -4,7 +4,9 @@ Built with ``onnx.helper`` from the numpy weights (standard operators only; opse
 onnxruntime ≥ 1.17 loads it). Inputs ``u`` float32 (N, 6, F): the filtered inputs at k - d,
 d = 0..5; ``y_past`` float32 (N, 5): the sensor's outputs at k - 1 … k - 5. Output ``flow``
 float32 (N, 1) [m3 s-1], unclamped (the runtime clamps to the physical range). An ensemble's
-members share the pre-processing; an ONNX ``Mean`` averages their outputs.
+members share the pre-processing; an ONNX ``Mean`` averages their outputs. A network trained on
+a transformed flow (√G, log(1 + G): ``Narx.target``) has the transform on ``y_past`` and its
+inverse on the output in the graph, so the interface stays flows in, flow out.
 
 ``metadata_props`` carry everything the runtime checks and a reader needs: the feature names,
 order, units and filter time constants, the delays, the model kind the fluxes come from, the
@@ -54,9 +56,19 @@ def build_graph(net: Narx, n_features: int):
         inits.append(_const("pca", net.projection))
         nodes.append(helper.make_node("MatMul", ["z", "pca"], ["pcs"], name="pca"))
         z = "pcs"
+    y_in = "y_past"
+    if net.target != "identity":  # the past flows into the network's target space
+        inits.append(_const("one", np.array([1.0])))
+        nodes.append(helper.make_node("Relu", ["y_past"], ["y_pos"], name="y_nonneg"))
+        if net.target == "sqrt":
+            nodes.append(helper.make_node("Sqrt", ["y_pos"], ["y_t"], name="y_sqrt"))
+        else:
+            nodes += [helper.make_node("Add", ["y_pos", "one"], ["y_p1"], name="y_plus_one"),
+                      helper.make_node("Log", ["y_p1"], ["y_t"], name="y_log")]
+        y_in = "y_t"
     nodes += [
         helper.make_node("Reshape", [z, "flat_shape"], ["z_flat"], name="delays"),
-        helper.make_node("Sub", ["y_past", "y_mean"], ["y_c"], name="y_centre"),
+        helper.make_node("Sub", [y_in, "y_mean"], ["y_c"], name="y_centre"),
         helper.make_node("Div", ["y_c", "y_std"], ["y_s"], name="y_reduce"),
         helper.make_node("Concat", ["z_flat", "y_s"], ["h0"], axis=1, name="narx_input"),
     ]
@@ -78,8 +90,15 @@ def build_graph(net: Narx, n_features: int):
         h = "h_mean"
     nodes += [
         helper.make_node("Mul", [h, "y_std"], ["y_scaled"], name="y_unscale"),
-        helper.make_node("Add", ["y_scaled", "y_mean"], ["flow"], name="y_uncentre"),
+        helper.make_node("Add", ["y_scaled", "y_mean"],
+                         ["flow" if net.target == "identity" else "v"], name="y_uncentre"),
     ]
+    if net.target == "sqrt":  # back to a flow: max(v, 0)²
+        nodes += [helper.make_node("Relu", ["v"], ["v_pos"], name="v_nonneg"),
+                  helper.make_node("Mul", ["v_pos", "v_pos"], ["flow"], name="v_square")]
+    elif net.target == "log1p":  # e^v − 1
+        nodes += [helper.make_node("Exp", ["v"], ["v_exp"], name="v_exp"),
+                  helper.make_node("Sub", ["v_exp", "one"], ["flow"], name="v_minus_one")]
     graph = helper.make_graph(
         nodes, f"serra_vsensor_{net.name}",
         [helper.make_tensor_value_info("u", TensorProto.FLOAT, ["N", d_in, n_features]),

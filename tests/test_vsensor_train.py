@@ -421,6 +421,7 @@ def test_extra_features_and_sqrt_target_run_the_same_live_as_in_training(tmp_pat
     assert names == [*feature_names("almeria"), *extra]
     st = json.loads(meta["training_settings"])
     assert st["target_transform"] == "sqrt" and st["extra_features"] == list(extra)
+    assert "--target sqrt --extra-features dvp_in_out wind_dt" in r.card.read_text()
     seg = build_segment(vd.test_file(), gh, "almeria", vd.workdir() / "cache", vd.TINY, extra=extra)
     assert seg.inputs.shape[1] == len(names)
     batch = simulate_model(model, [seg], gh, "almeria")[0]

@@ -36,6 +36,10 @@ def train_command(out: Path, meta: dict, held_files: tuple[str, ...] = ()) -> st
         parts.append(f"--feedback-noise {st['feedback_noise']:g}")
     if st.get("high_flow_weight", 1.0) != 1.0:
         parts.append(f"--high-flow-weight {st['high_flow_weight']:g}")
+    if st.get("target_transform", "identity") != "identity":
+        parts.append(f"--target {st['target_transform']}")
+    if st.get("extra_features"):
+        parts.append(f"--extra-features {' '.join(st['extra_features'])}")
     if held_files:
         parts += ["--test", *held_files]
     return " ".join([*parts, "--out", out.name])
@@ -106,7 +110,9 @@ def model_card(out: Path, meta: dict, metrics: dict, t18: dict, circle: dict, na
         + (f", past outputs of the training rows offset by N(0, {st['feedback_noise']:g}) "
            "target standard deviations" if st.get("feedback_noise") else "")
         + (f", rows above the targets' 90th percentile weighing {st['high_flow_weight']:g}"
-           if st.get("high_flow_weight", 1.0) != 1.0 else "") + ".",
+           if st.get("high_flow_weight", 1.0) != 1.0 else "")
+        + (f", the networks learning and feeding back {st['target_transform']}(G), inverted in the "
+           "graph" if st.get("target_transform", "identity") != "identity" else "") + ".",
         "",
     ]
     lines += [f"Trained with: `{train_command(out, meta, held_files)}` (paths in docs/vsensor.md).", ""]

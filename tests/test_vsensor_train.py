@@ -466,3 +466,41 @@ def test_members_on_their_own_feedback_are_k_loops_averaged():
     own = fit.simulate_own_feedback(two, prep.split)
     for i, y in enumerate(own):
         assert np.allclose(y, (singles[0][i] + singles[1][i]) / 2)
+
+
+def test_members_on_their_own_past_run_the_same_live_as_in_training(tmp_path):
+    """``--own-feedback``: the graph takes K output histories and gives K flows; the gateway's
+    VentSensor (minute by minute) gives the batch closed loop's flows, and the validation figure
+    is that of K loops averaged."""
+    import json
+
+    from threadpoolctl import threadpool_limits
+
+    from gateway.vsensor import VentSensor
+    from gateway.vsensor.adaptive import AdaptiveRun
+    from gateway.vsensor.batch import run_sensor
+    from training.vsensor.errors import simulate_model
+    from training.vsensor.train import train
+
+    gh = load_greenhouse(vd.GREENHOUSE)
+    with threadpool_limits(1):
+        r = train([str(p) for p in vd.train_files()], gh, "almeria", tmp_path / "m.onnx",
+                  vd.workdir() / "cache", vd.TINY, hidden=(8, 8), epochs=8, rounds=1,
+                  ensemble=2, own_feedback=True, target="log1p")
+    model = r.paths["pca_narx"]
+    meta = {p.key: p.value for p in onnx.load(str(model)).metadata_props}
+    assert json.loads(meta["feedback_histories"]) == 2
+    assert json.loads(meta["training_settings"])["own_feedback"] is True
+    assert "--ensemble 2 --target log1p --own-feedback" in r.card.read_text()
+    sess = ort.InferenceSession(str(model), providers=["CPUExecutionProvider"])
+    assert sess.get_inputs()[1].shape[1:] == [2, 5] and sess.get_outputs()[0].shape[1] == 2
+    seg = build_segment(vd.test_file(), gh, "almeria", vd.workdir() / "cache", vd.TINY)
+    batch = simulate_model(model, [seg], gh, "almeria")[0]
+    nov = AdaptiveRun(seg.time, seg.x, seg.fluxes, np.empty((len(seg.time), 0)), [])
+    sensor = VentSensor(model, gh, "almeria")
+    live = run_sensor(sensor, nov).flow
+    assert sensor.histories == 2
+    assert np.allclose(live, batch, rtol=1e-4, atol=1e-4)
+    # the train log's shared-feedback ensemble differs from the shipped own-feedback figure
+    log = r.logs["pca_narx"]
+    assert r.metrics["pca_narx"]["mae"] != pytest.approx(log["ensemble_val_mae_by_size"][-1], rel=1e-9)

@@ -55,7 +55,7 @@ def onnx_predict(model: str | Path):
 
     def predict(u: np.ndarray, y_past: np.ndarray) -> np.ndarray:
         out = sess.run(None, {"u": u.astype(np.float32), "y_past": y_past.astype(np.float32)})
-        return np.asarray(out[0], dtype=float).reshape(len(u))
+        return np.asarray(out[0], dtype=float).reshape(len(u), -1)  # (N, K): K output histories
 
     return predict, sess
 
@@ -88,7 +88,7 @@ def simulate_model(model: str | Path, segments: list[Segment], gh: Greenhouse, k
         u[i, : len(filled)] = filled
         u[i, len(filled):] = filled[-1]
         up[i, : len(filled)] = limits.upper(s.x["t_in"] - s.x["t_out"], s.x["t_out"], s.x["wind"])
-    y = closed_loop(predict, u, up, y0)
+    y = closed_loop(predict, u, up, y0, int(json.loads(meta.get("feedback_histories", "1"))))
     return [y[i, : len(s.flow)] for i, s in enumerate(segments)]
 
 

@@ -11,6 +11,7 @@ error is kept. Everything is seeded and single-threaded, so the same data give t
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -90,19 +91,15 @@ def simulate(net: Narx, split: Split) -> list[np.ndarray]:
         u[i, : len(filled)] = filled
         u[i, len(filled):] = filled[-1]
         up[i, : len(filled)] = split.upper[i]
-    y = closed_loop(net.predict, u, up, net.y0)
+    y = closed_loop(net.predict, u, up, net.y0, net.histories)
     return [y[i, : len(s.flow)] for i, s in enumerate(split.segments)]
 
 
 def simulate_own_feedback(net: Narx, split: Split) -> list[np.ndarray]:
     """Closed-loop flows of an ensemble whose members each hear **their own** past outputs
-    (K loops, each clipped to the physical range), averaged: what a runtime keeping one output
-    history per member would give. A single network: ``simulate``."""
-    if len(net.stacks) == 1:
-        return simulate(net, split)
-    runs = [simulate(Narx(net.name, net.mean, net.std, net.projection, net.y_mean, net.y_std,
-                          stack, target=net.target), split) for stack in net.stacks]
-    return [np.mean([r[i] for r in runs], axis=0) for i in range(len(split.segments))]
+    (K histories, each member's output clipped to the physical range, then averaged): what the
+    graph and runtime of an ``own_feedback`` model do. A single network: ``simulate``."""
+    return simulate(dataclasses.replace(net, own_feedback=True), split)
 
 
 def validation_mae(net: Narx, split: Split) -> float:

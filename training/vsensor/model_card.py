@@ -40,6 +40,8 @@ def train_command(out: Path, meta: dict, held_files: tuple[str, ...] = ()) -> st
         parts.append(f"--target {st['target_transform']}")
     if st.get("extra_features"):
         parts.append(f"--extra-features {' '.join(st['extra_features'])}")
+    if st.get("own_feedback"):
+        parts.append("--own-feedback")
     if held_files:
         parts += ["--test", *held_files]
     return " ".join([*parts, "--out", out.name])
@@ -86,8 +88,11 @@ def model_card(out: Path, meta: dict, metrics: dict, t18: dict, circle: dict, na
         f"{len(meta['output_delays'])} past outputs → tanh layers "
         f"{'-'.join(map(str, nets['pca_narx'].hidden))} → flow (thesis: 30-50-20)"
         + (f"; an ensemble of {len(nets['pca_narx'].stacks)} such networks (seeds "
-           f"{meta['training_settings']['net_seed']}…), their outputs averaged in the graph, "
-           "each fed the ensemble's past outputs." if len(nets['pca_narx'].stacks) > 1 else "."),
+           f"{meta['training_settings']['net_seed']}…), their outputs averaged"
+           + (", each fed its own past outputs (one output history per member, the runtime "
+              "clips and averages the members' flows)." if nets['pca_narx'].histories > 1
+              else " in the graph, each fed the ensemble's past outputs.")
+           if len(nets['pca_narx'].stacks) > 1 else "."),
         "- One ONNX graph: standardisation, PCA and network; baselines beside it with the same "
         f"interface: `{out.stem}.narx_no_pca.onnx` (same network on the standardised inputs, no "
         f"PCA) and `{out.stem}.linear_arx.onnx` (linear ARX on the same inputs and delays).",

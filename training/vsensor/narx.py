@@ -12,7 +12,8 @@ T(G) over the training rows.
 
 An ensemble (``members``: several layer stacks fitted from different seeds on the same rows)
 shares the pre-processing and averages the stacks' outputs; in closed loop every member hears
-the ensemble's own past outputs (one ``y_past``, the runtime's interface).
+the ensemble's own past outputs (one ``y_past``), or, with ``own_feedback``, its own (K output
+histories: ``y_past`` (N, K, 5), one flow per member, averaged by the loop after clipping).
 """
 
 from __future__ import annotations
@@ -72,6 +73,12 @@ class Narx:
     explained: np.ndarray | None = None  # (m,) variance share of each kept component
     members: list[list[Layer]] = field(default_factory=list)  # ensemble stacks; empty: ``layers``
     target: str = "identity"  # TARGETS: y_mean, y_std and the layers' output are in this space
+    own_feedback: bool = False  # an ensemble's members each hear their own past (K histories)
+
+    @property
+    def histories(self) -> int:
+        """Output histories the closed loop keeps: K for own feedback, else 1."""
+        return len(self.stacks) if self.own_feedback else 1
 
     @property
     def y0(self) -> float:
@@ -107,18 +114,30 @@ class Narx:
         (N, D m + 5) → (N,)."""
         out = np.zeros(len(h))
         for stack in self.stacks:
-            a = h
-            for layer in stack:
-                a = a @ layer.weight + layer.bias
-                if layer.activation == "tanh":
-                    a = np.tanh(a)
-            out += a[:, 0]
+            out += _run(stack, h)
         return out / len(self.stacks)
 
     def predict(self, u: np.ndarray, y_past: np.ndarray) -> np.ndarray:
-        """Flows (N,) [m3 s-1] from raw inputs u (N, D, F) and past flows (N, 5)."""
-        v = self.forward(self.head(self.reduce(u), y_past)) * self.y_std + self.y_mean
-        return from_target(v, self.target)
+        """Flows (N,) [m3 s-1] from raw inputs u (N, D, F) and past flows (N, 5); with own
+        feedback (``histories`` K > 1) y_past is (N, K, 5), member j's own past at [:, j], and
+        the result each member's flow (N, K)."""
+        z = self.reduce(u)
+        if self.histories > 1:
+            v = np.column_stack([_run(stack, self.head(z, y_past[:, j]))
+                                 for j, stack in enumerate(self.stacks)])
+        else:
+            v = self.forward(self.head(z, y_past))
+        return from_target(v * self.y_std + self.y_mean, self.target)
+
+
+def _run(stack: list[Layer], h: np.ndarray) -> np.ndarray:
+    """One layer stack's scaled output (N,) for rows ``h``."""
+    a = h
+    for layer in stack:
+        a = a @ layer.weight + layer.bias
+        if layer.activation == "tanh":
+            a = np.tanh(a)
+    return a[:, 0]
 
 
 def lag_rows(z: np.ndarray, y: np.ndarray, y_lags: np.ndarray | None = None

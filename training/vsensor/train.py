@@ -132,7 +132,8 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
           test_paths: list[str] | None = None, ensemble: int = 1,
           net_seed: int | None = None, feedback: str = "member",
           feedback_noise: float = 0.0, high_flow_weight: float = 1.0,
-          target: str = "identity", extra_features: tuple[str, ...] = ()) -> TrainResult:
+          target: str = "identity", extra_features: tuple[str, ...] = (),
+          own_feedback: bool = False) -> TrainResult:
     """Build the datasets, fit the three networks, write the models, card and report (PNGs in
     ``report_dir``, default ``<out stem>.report/`` beside the model). ``pca_variance``: the
     share of the variance the kept components must reach (the issue asks for at least 0.90).
@@ -145,7 +146,9 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
     of the rows above the targets' 90th percentile (fit.fit_ensemble, fit.RowOptions); ``target``
     the flow, √G or log(1 + G) as what the NARX networks learn and feed back (narx.TARGETS; the
     linear ARX stays on the flow); ``extra_features``: derived inputs after the base ones
-    (features.EXTRAS; the runtime computes what the model's metadata names)."""
+    (features.EXTRAS; the runtime computes what the model's metadata names); ``own_feedback``:
+    deployed, every member of an ensemble hears its own past outputs (K output histories in the
+    graph and the runtime) instead of the ensemble's; the fit is the same."""
     if not fit.MIN_VARIANCE <= pca_variance <= 1.0:
         raise ValueError(f"pca_variance {pca_variance}: must be in [{fit.MIN_VARIANCE}, 1]")
     if ensemble < 1:
@@ -169,6 +172,8 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
                                                   epochs, rounds, min(30, epochs),
                                                   progress=progress, round_lr=round_lr,
                                                   opts=opts, feedback=feedback)
+    for name in ("pca_narx", "narx_no_pca"):
+        nets[name].own_feedback = own_feedback and ensemble > 1
     nets["linear_arx"] = fit.fit_arx(split, mean, std)
     nets["pca_narx"].explained = share[:kept]
     seconds["fit"] = time.perf_counter() - t1
@@ -199,7 +204,8 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
                                  if ensemble > 1 or net_seed != seed else {}),
                               **({"feedback": feedback} if feedback != "member" else {}),
                               **opts.as_settings(),
-                              **({"extra_features": list(extra)} if extra else {})},
+                              **({"extra_features": list(extra)} if extra else {}),
+                              **({"own_feedback": True} if own_feedback and ensemble > 1 else {})},
         "version": _version(), "pca": pca_info,
         "metrics": {"validation_closed_loop": metrics,
                     "training_log": {k: v for k, v in logs.items()}},
@@ -207,7 +213,8 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
     written = {}
     for name, net in nets.items():
         path = out if name == "pca_narx" else out.with_name(f"{out.stem}.{name}.onnx")
-        meta = {**base_meta, "network": name, "hidden_layers": list(net.hidden), "y0": net.y0}
+        meta = {**base_meta, "network": name, "hidden_layers": list(net.hidden), "y0": net.y0,
+                **({"feedback_histories": net.histories} if net.histories > 1 else {})}
         write_model(net, len(names), meta, path)
         written[name] = path
     rep_dir = Path(report_dir) if report_dir else out.with_name(f"{out.stem}.report")

@@ -8,7 +8,7 @@ on the last 25 % of every file: overall, per file, over the grower's files (stem
 ``grower``) and the others (the controllers'), and over ``--subset`` stems (e.g. the files
 of an earlier pass); ``--log FILE`` appends the summary as one JSON line. For an ensemble it
 also scores the same members each fed its own past outputs (``own_feedback``: K loops averaged,
-``fit.simulate_own_feedback``), which the shipped graph and runtime (one ``y_past``) do not do.
+``fit.simulate_own_feedback``; ``--own-feedback`` makes it the figure, as train would).
 """
 
 from __future__ import annotations
@@ -72,8 +72,9 @@ def run(args: argparse.Namespace) -> int:
                                     seeds, hidden, args.epochs, args.rounds, min(30, args.epochs),
                                     round_lr=args.round_lr,
                                     opts=fit.RowOptions(args.feedback_noise, args.high_flow_weight,
-                                                                args.target),
+                                                        args.target),
                                     feedback=args.feedback)
+        net.own_feedback = args.own_feedback and len(seeds) > 1
         m, _ = validation_metrics(net, prep.split)
         own = (validation_metrics(net, prep.split, fit.simulate_own_feedback(net, prep.split))[0]
                if len(seeds) > 1 else None)
@@ -81,7 +82,8 @@ def run(args: argparse.Namespace) -> int:
                "variance": float(np.sum(prep.share[: prep.loadings.shape[1]])),
                "settings": {k: getattr(args, k) for k in ("hidden", "epochs", "rounds", "round_lr",
                             "pca_variance", "ensemble", "feedback", "feedback_noise",
-                                                 "high_flow_weight", "target", "extra_features")}
+                                                 "high_flow_weight", "target", "extra_features",
+                                                 "own_feedback")}
                | {"net_seed": net_seed},
                "mae": m["mae"], "mae_pct_range": m["mae_pct_range"], "range": m["range"],
                "by_file": {k: v["mae"] for k, v in m["by_file"].items()},

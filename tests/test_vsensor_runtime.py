@@ -65,9 +65,9 @@ def test_step_equals_the_batch_closed_loop(gh, model_path, novent):
 
     def predict(u, y_past):
         feeds = {"u": u.astype(np.float32), "y_past": y_past.astype(np.float32)}
-        return sess.run(None, feeds)[0][:, 0]
+        return sess.run(None, feeds)[0]  # (N, K): one flow per output history
 
-    batch = closed_loop(predict, filled[None], upper[None], sensor.info.y0)[0]
+    batch = closed_loop(predict, filled[None], upper[None], sensor.info.y0, sensor.histories)[0]
     assert np.allclose(run.flow, batch, rtol=1e-5, atol=1e-5)
     assert np.all(np.isfinite(run.flow)) and run.flow.min() >= 0.0
     assert np.all(np.isfinite(run.q_vent))

@@ -9,6 +9,7 @@ import pytest
 
 from gateway.greenhouse import load_greenhouse
 from gateway.vsensor.features import (
+    INPUT_DELAYS,
     feature_names,
     filter_gains,
     flow_from_heat_loss,
@@ -225,6 +226,37 @@ def test_ensemble_graph_averages_its_members():
     assert np.allclose(got, np.mean(singles, axis=0), rtol=1e-4, atol=1e-4)
 
 
+@pytest.mark.parametrize("target", ["sqrt", "log1p"])
+def test_transformed_target_graph_takes_and_gives_flows(target):
+    """A network on √G or log(1 + G): the graph transforms the past flows and inverts its
+    output, so it matches the numpy network in flows; y0 is the median flow, not its transform."""
+    from training.vsensor.export import write_model
+    from training.vsensor.narx import Layer, Narx, from_target, to_target
+
+    rng = np.random.default_rng(2)
+    f = 8
+    members = [[Layer(rng.normal(size=(23, 8)), rng.normal(size=8), "tanh"),
+                Layer(rng.normal(size=(8, 1)), rng.normal(size=1), "identity")] for _ in range(2)]
+    net = Narx("pca_narx", rng.normal(size=f), rng.uniform(0.5, 2, f), rng.normal(size=(f, 3)),
+               1.2, 0.8, members[0], members=members, target=target)
+    path = vd.workdir() / f"target-{target}.onnx"
+    write_model(net, f, {"model_kind": "almeria"}, path)
+    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    u = rng.normal(size=(40, 6, f))
+    yp = rng.uniform(0, 9, size=(40, 5))
+    got = sess.run(None, {"u": u.astype(np.float32), "y_past": yp.astype(np.float32)})[0][:, 0]
+    want = net.predict(u, yp)
+    assert np.allclose(got, want, rtol=1e-4, atol=1e-4)
+    ident = Narx("pca_narx", net.mean, net.std, net.projection, 1.2, 0.8, members[0],
+                 members=members)
+    scaled = ident.forward(np.concatenate(
+        [ident.reduce(u).reshape(40, -1), (to_target(yp, target) - 1.2) / 0.8], axis=1))
+    assert np.allclose(want, from_target(scaled * 0.8 + 1.2, target))
+    assert net.y0 == pytest.approx(float(from_target(np.array(1.2), target)))
+    y = np.array([0.0, 0.3, 4.0, 50.0])
+    assert np.allclose(from_target(to_target(y, target), target), y)
+
+
 def test_ensemble_training_is_reproducible_and_runs_in_the_gateway():
     import json
 
@@ -361,3 +393,114 @@ def test_tune_prints_the_pca_narx_train_would_fit(tmp_path, capsys):
     assert "by file:" in text and "by vents:" in text and "train-grower" in text
     shares = [float(line.split()[-2].rstrip("%")) for line in text.splitlines()[2:4]]
     assert sum(shares) == pytest.approx(100.0, abs=0.2)  # the two files share all the error
+
+
+def test_extra_features_and_sqrt_target_run_the_same_live_as_in_training(tmp_path):
+    """A model trained on √G with the derived inputs: the gateway's VentSensor (its own feature
+    code, minute by minute) gives the flows of the batch closed loop on training's features,
+    and its metadata names what it was trained with."""
+    import json
+
+    from threadpoolctl import threadpool_limits
+
+    from gateway.vsensor import VentSensor
+    from gateway.vsensor.adaptive import AdaptiveRun
+    from gateway.vsensor.batch import run_sensor
+    from training.vsensor.errors import simulate_model
+    from training.vsensor.train import train
+
+    gh = load_greenhouse(vd.GREENHOUSE)
+    extra = ("dvp_in_out", "wind_dt")
+    with threadpool_limits(1):
+        r = train([str(p) for p in vd.train_files()], gh, "almeria", tmp_path / "m.onnx",
+                  vd.workdir() / "cache", vd.TINY, hidden=(8, 8), epochs=8, rounds=1,
+                  target="sqrt", extra_features=extra)
+    model = r.paths["pca_narx"]
+    meta = {p.key: p.value for p in onnx.load(str(model)).metadata_props}
+    names = [f["name"] for f in json.loads(meta["features"])]
+    assert names == [*feature_names("almeria"), *extra]
+    st = json.loads(meta["training_settings"])
+    assert st["target_transform"] == "sqrt" and st["extra_features"] == list(extra)
+    assert "--target sqrt --extra-features dvp_in_out wind_dt" in r.card.read_text()
+    seg = build_segment(vd.test_file(), gh, "almeria", vd.workdir() / "cache", vd.TINY, extra=extra)
+    assert seg.inputs.shape[1] == len(names)
+    batch = simulate_model(model, [seg], gh, "almeria")[0]
+    nov = AdaptiveRun(seg.time, seg.x, seg.fluxes, np.empty((len(seg.time), 0)), [])
+    live = run_sensor(VentSensor(model, gh, "almeria"), nov).flow
+    assert np.allclose(live, batch, rtol=1e-4, atol=1e-4)
+    assert np.all(live >= 0)
+    # the model without its extras' code is refused, naming the input
+    from gateway.vsensor.runtime import ModelInfo, ModelMismatch, check_model
+
+    info = VentSensor(model, gh, "almeria").info
+    renamed = ModelInfo(**{**info.__dict__, "names": (*info.names[:-1], "no_such_input")})
+    with pytest.raises(ModelMismatch, match="no_such_input"):
+        check_model(renamed, "almeria")
+
+
+def test_members_on_their_own_feedback_are_k_loops_averaged():
+    """``fit.simulate_own_feedback``: two identical members hear the same past either way; two
+    different ones give the mean of their single closed loops."""
+    from training.vsensor import fit
+    from training.vsensor.narx import Layer, Narx
+    from training.vsensor.train import prepare
+
+    gh = load_greenhouse(vd.GREENHOUSE)
+    prep = prepare([str(p) for p in vd.train_files()], gh, "almeria", vd.workdir() / "cache",
+                   vd.TINY, 0, 0.95, lambda **k: None)
+    rng = np.random.default_rng(3)
+    width = len(INPUT_DELAYS) * prep.loadings.shape[1] + 5
+
+    def stack():
+        return [Layer(0.1 * rng.normal(size=(width, 4)), rng.normal(size=4), "tanh"),
+                Layer(rng.normal(size=(4, 1)), rng.normal(size=1), "identity")]
+
+    a, b = stack(), stack()
+    args = ("pca_narx", prep.mean, prep.std, prep.loadings, 2.0, 3.0)
+    same = Narx(*args, a, members=[a, a])
+    for x, y in zip(fit.simulate_own_feedback(same, prep.split), fit.simulate(same, prep.split),
+                    strict=True):
+        assert np.allclose(x, y)
+    two = Narx(*args, a, members=[a, b])
+    singles = [fit.simulate(Narx(*args, s), prep.split) for s in (a, b)]
+    own = fit.simulate_own_feedback(two, prep.split)
+    for i, y in enumerate(own):
+        assert np.allclose(y, (singles[0][i] + singles[1][i]) / 2)
+
+
+def test_members_on_their_own_past_run_the_same_live_as_in_training(tmp_path):
+    """``--own-feedback``: the graph takes K output histories and gives K flows; the gateway's
+    VentSensor (minute by minute) gives the batch closed loop's flows, and the validation figure
+    is that of K loops averaged."""
+    import json
+
+    from threadpoolctl import threadpool_limits
+
+    from gateway.vsensor import VentSensor
+    from gateway.vsensor.adaptive import AdaptiveRun
+    from gateway.vsensor.batch import run_sensor
+    from training.vsensor.errors import simulate_model
+    from training.vsensor.train import train
+
+    gh = load_greenhouse(vd.GREENHOUSE)
+    with threadpool_limits(1):
+        r = train([str(p) for p in vd.train_files()], gh, "almeria", tmp_path / "m.onnx",
+                  vd.workdir() / "cache", vd.TINY, hidden=(8, 8), epochs=8, rounds=1,
+                  ensemble=2, own_feedback=True, target="log1p")
+    model = r.paths["pca_narx"]
+    meta = {p.key: p.value for p in onnx.load(str(model)).metadata_props}
+    assert json.loads(meta["feedback_histories"]) == 2
+    assert json.loads(meta["training_settings"])["own_feedback"] is True
+    assert "--ensemble 2 --target log1p --own-feedback" in r.card.read_text()
+    sess = ort.InferenceSession(str(model), providers=["CPUExecutionProvider"])
+    assert sess.get_inputs()[1].shape[1:] == [2, 5] and sess.get_outputs()[0].shape[1] == 2
+    seg = build_segment(vd.test_file(), gh, "almeria", vd.workdir() / "cache", vd.TINY)
+    batch = simulate_model(model, [seg], gh, "almeria")[0]
+    nov = AdaptiveRun(seg.time, seg.x, seg.fluxes, np.empty((len(seg.time), 0)), [])
+    sensor = VentSensor(model, gh, "almeria")
+    live = run_sensor(sensor, nov).flow
+    assert sensor.histories == 2
+    assert np.allclose(live, batch, rtol=1e-4, atol=1e-4)
+    # the train log's shared-feedback ensemble differs from the shipped own-feedback figure
+    log = r.logs["pca_narx"]
+    assert r.metrics["pca_narx"]["mae"] != pytest.approx(log["ensemble_val_mae_by_size"][-1], rel=1e-9)

@@ -18,7 +18,7 @@ the same code in training and at run time, so a step sees exactly what training 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -69,20 +69,55 @@ STEP_S = 60.0
 """Model step [s]: the online estimator's, one sample a minute."""
 
 
-def features(kind: str) -> tuple[Feature, ...]:
-    """The sensor's inputs, in order, for fluxes of the ``kind`` model."""
+def _dvp(col: Callable[[str], np.ndarray]) -> np.ndarray:
+    return psy.vapour_pressure(col("t_in"), col("rh_in")) - psy.vapour_pressure(col("t_out"), col("rh_out"))
+
+
+def _wind_dt(col: Callable[[str], np.ndarray]) -> np.ndarray:
+    return col("wind") * (col("t_in") - col("t_out"))
+
+
+EXTRAS: dict[str, tuple[Feature, Callable[[Callable[[str], np.ndarray]], np.ndarray]]] = {
+    "dvp_in_out": (Feature("dvp_in_out", "kPa", "inside minus outside vapour pressure (the "
+                           "humidity balance's driving difference, III.3-5)"), _dvp),
+    "wind_dt": (Feature("wind_dt", "m s-1 K", "wind times (T_in - T_out) (open vents: G grows "
+                        "with the wind, so the product follows the heat to be removed)", 600.0),
+                _wind_dt),
+}
+"""Optional derived inputs after the fluxes (``--extra-features``; a model's metadata names the
+ones it was trained with and the runtime computes them): name → (feature, f(column getter))."""
+
+
+def features(kind: str, extra: Sequence[str] = ()) -> tuple[Feature, ...]:
+    """The sensor's inputs, in order, for fluxes of the ``kind`` model (plus ``extra``)."""
     if kind not in _FLUXES:
         raise ValueError(f"unknown model kind '{kind}' (choose from {', '.join(MODEL_KINDS)})")
+    unknown = [n for n in extra if n not in EXTRAS]
+    if unknown:
+        raise ValueError(f"unknown extra feature(s) {', '.join(unknown)} (choose from "
+                         f"{', '.join(EXTRAS)})")
     unit = _FLUX_UNIT[kind]
-    return _MEASURED + tuple(Feature(n, unit, m, _FLUX_TAU) for n, m in _FLUXES[kind])
+    return (_MEASURED + tuple(Feature(n, unit, m, _FLUX_TAU) for n, m in _FLUXES[kind])
+            + tuple(EXTRAS[n][0] for n in extra))
 
 
-def feature_names(kind: str) -> tuple[str, ...]:
-    return tuple(f.name for f in features(kind))
+def feature_names(kind: str, extra: Sequence[str] = ()) -> tuple[str, ...]:
+    return tuple(f.name for f in features(kind, extra))
 
 
-def raw_features(kind: str, x: Mapping[str, np.ndarray], fluxes: Mapping[str, np.ndarray]
-                 ) -> np.ndarray:
+def flux_names(kind: str) -> tuple[str, ...]:
+    """The model's flux terms the sensor reads (inputs 3 … 3 + n - 1)."""
+    return tuple(n for n, _ in _FLUXES[kind])
+
+
+def extras_of(kind: str, names: Sequence[str]) -> tuple[str, ...]:
+    """The extra features a model with input ``names`` was trained with (those after the
+    base list; an unknown name is kept, so that the model check names it)."""
+    return tuple(names[len(features(kind)):])
+
+
+def raw_features(kind: str, x: Mapping[str, np.ndarray], fluxes: Mapping[str, np.ndarray],
+                 extra: Sequence[str] = ()) -> np.ndarray:
     """Unfiltered inputs (T, F) from drivers ``x`` (kit columns, arrays) and the no-vent model's
     ``fluxes`` (term name → array). A column that is absent gives NaN (flagged downstream)."""
     n = len(np.asarray(x["t_in"]))
@@ -96,12 +131,14 @@ def raw_features(kind: str, x: Mapping[str, np.ndarray], fluxes: Mapping[str, np
     for name, _ in _FLUXES[kind]:
         v = fluxes.get(name)
         cols.append(nan if v is None else np.broadcast_to(np.asarray(v, dtype=float), (n,)))
+    cols += [np.broadcast_to(EXTRAS[e][1](col), (n,)) for e in extra]
     return np.column_stack(cols)
 
 
-def filter_gains(kind: str, step: float = STEP_S) -> np.ndarray:
+def filter_gains(kind: str, step: float = STEP_S, extra: Sequence[str] = ()) -> np.ndarray:
     """Low-pass gains a = 1 - exp(-dt/tau) per feature (1 = unfiltered)."""
-    return np.array([1.0 if f.tau <= 0 else -math.expm1(-step / f.tau) for f in features(kind)])
+    return np.array([1.0 if f.tau <= 0 else -math.expm1(-step / f.tau)
+                     for f in features(kind, extra)])
 
 
 def low_pass(raw: np.ndarray, gains: np.ndarray) -> np.ndarray:

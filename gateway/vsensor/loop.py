@@ -25,25 +25,31 @@ def fill_missing(inputs: np.ndarray, fill: np.ndarray) -> tuple[np.ndarray, np.n
     return np.where(missing, fill, inputs), missing
 
 
-def closed_loop(predict: Predict, inputs: np.ndarray, upper: np.ndarray, y0: float) -> np.ndarray:
+def closed_loop(predict: Predict, inputs: np.ndarray, upper: np.ndarray, y0: float,
+                histories: int = 1) -> np.ndarray:
     """Run the NARX over ``inputs`` (N, T, F) (no NaN: see :func:`fill_missing`) in closed loop.
 
     ``upper`` (N, T) is the physical upper limit of the flow at each step (``FlowLimits.upper``);
     every output is clipped to [0, upper]. Before the first step the past inputs repeat the
     first row and the past outputs are ``y0`` (the sensor knows no history when it starts).
+    ``histories`` K > 1: an ensemble whose members each hear their own past outputs; ``predict``
+    takes y_past (N, K, 5) and gives (N, K), each member's output is held (non-finite) and
+    clipped on its own, the flow is their mean.
     Returns the flows (N, T) [m3 s-1]. Vectorised over the N series: one call per step.
     """
     n, t_len, n_f = inputs.shape
     d_in = max(INPUT_DELAYS) + 1
     d_out = max(OUTPUT_DELAYS)
     u = np.concatenate([np.repeat(inputs[:, :1], d_in - 1, axis=1), inputs], axis=1)
-    y_past = np.full((n, d_out), float(y0))
+    k_h = int(histories)
+    y_past = np.full((n, k_h, d_out), float(y0))
     out = np.empty((n, t_len))
     for k in range(t_len):
         window = u[:, k : k + d_in][:, ::-1]  # [:, d] = inputs at k - d
-        y = np.asarray(predict(window, y_past), dtype=float).reshape(n)
-        y = np.where(np.isfinite(y), y, y_past[:, 0])  # a non-finite output holds the last one
-        y = np.clip(y, 0.0, upper[:, k])
-        out[:, k] = y
-        y_past = np.concatenate([y[:, None], y_past[:, :-1]], axis=1)
+        yp = y_past if k_h > 1 else y_past[:, 0]
+        y = np.asarray(predict(window, yp), dtype=float).reshape(n, k_h)
+        y = np.where(np.isfinite(y), y, y_past[:, :, 0])  # a non-finite output holds the last one
+        y = np.clip(y, 0.0, upper[:, k, None])
+        out[:, k] = y.mean(axis=1)
+        y_past = np.concatenate([y[:, :, None], y_past[:, :, :-1]], axis=2)
     return out

@@ -24,13 +24,16 @@ import numpy as np
 
 from gateway.greenhouse import Greenhouse
 from gateway.vsensor.features import (
+    EXTRAS,
     INPUT_DELAYS,
     OUTPUT_DELAYS,
     STEP_S,
     check_names,
+    extras_of,
     features,
     filter_gains,
     flow_limits,
+    flux_names,
     greenhouse_signature,
     rho_cp_per_area,
     signature_mismatch,
@@ -119,12 +122,14 @@ def _json(text: str):
 
 
 def check_model(info: ModelInfo, kind: str, n_graph_features: int | None = None) -> None:
-    """Raise :class:`ModelMismatch` unless the model reads what this code computes for ``kind``."""
+    """Raise :class:`ModelMismatch` unless the model reads what this code computes for ``kind``
+    (with the extra features the model names, when the code knows them)."""
     where = info.path
     if info.kind != kind:
         raise ModelMismatch(f"{where}: trained on fluxes of the '{info.kind}' model, but the "
                             f"gateway runs the '{kind}' model")
-    code = features(kind)
+    extra = tuple(n for n in extras_of(kind, info.names) if n in EXTRAS)
+    code = features(kind, extra)
     diff = check_names([f.name for f in code], info.names)
     if diff:
         raise ModelMismatch(f"{where}: {diff} (model kind '{kind}')")
@@ -176,12 +181,15 @@ class VentSensor:
         self.mismatch = signature_mismatch(trained, greenhouse_signature(gh))
         self.limits = flow_limits(gh, model_kind)
         self.rho_cp_a = rho_cp_per_area(gh)
-        self._gains = [float(a) for a in filter_gains(model_kind)]
+        self.extra = extras_of(model_kind, self.info.names)
+        self._extra_fns = [EXTRAS[n][1] for n in self.extra]
+        self._gains = [float(a) for a in filter_gains(model_kind, extra=self.extra)]
         lo, hi = self.info.ranges[:, 0], self.info.ranges[:, 1]
         pad = RANGE_MARGIN * np.maximum(hi - lo, 1e-9)
         self._lo, self._hi = [float(v) for v in lo - pad], [float(v) for v in hi + pad]
-        self._flux_names = self.info.names[3:]
+        self._flux_names = flux_names(model_kind)
         self._out = [self.session.get_outputs()[0].name]
+        self.histories = _histories(model_path, self.session, self.info)
         self._feeds: dict[str, np.ndarray] = {}
         self.counts = SensorCounts()
         self.reset()
@@ -191,7 +199,8 @@ class VentSensor:
         n_f = len(self.info.names)
         self._state: list[float] = [math.nan] * n_f
         self._u = np.zeros((1, len(INPUT_DELAYS), n_f), dtype=np.float32)
-        self._y = np.full((1, len(OUTPUT_DELAYS)), self.info.y0, dtype=np.float32)
+        shape = (1, len(OUTPUT_DELAYS)) if self.histories == 1 else (1, self.histories, len(OUTPUT_DELAYS))
+        self._y = np.full(shape, self.info.y0, dtype=np.float32)
         self._started = False
         self._last_dt = 0.0
 
@@ -201,6 +210,10 @@ class VentSensor:
         dt = _num(m.get("t_in")) - _num(m.get("t_out"))
         raw = [_num(m.get("wind")), dt, _num(m.get("rh_in")) - _num(m.get("rh_out"))]
         raw += [_num(fluxes.get(n)) for n in self._flux_names]
+        if self._extra_fns:  # the same functions as training's raw_features, on this minute
+            def col(name: str) -> np.ndarray:
+                return np.array([_num(m.get(name))])
+            raw += [float(f(col)[0]) for f in self._extra_fns]
         row, missing, outside = self._filter(raw)
         if not self._started:
             self._u[0, :] = row
@@ -209,16 +222,21 @@ class VentSensor:
             self._u[0, 1:] = self._u[0, :-1].copy()
             self._u[0, 0] = row
         self._feeds["u"], self._feeds["y_past"] = self._u, self._y
-        y = float(self.session.run(self._out, self._feeds)[0][0, 0])
-        c = self.counts
-        if not math.isfinite(y):
-            c.non_finite_output += 1
-            y = float(self._y[0, 0])
+        out = self.session.run(self._out, self._feeds)[0][0]
         upper = self.limits.upper_now(dt, _num(m.get("t_out")), raw[0])
-        clamped = not 0.0 <= y <= upper
-        y = min(max(y, 0.0), upper)
-        self._y[0, 1:] = self._y[0, :-1].copy()
-        self._y[0, 0] = y
+        if self.histories == 1:
+            y, clamped = self._limit(float(out[0]), float(self._y[0, 0]), upper)
+            self._y[0, 1:] = self._y[0, :-1].copy()
+            self._y[0, 0] = y
+        else:  # every member on its own past: each held, clipped, then averaged
+            ys, clamped = [], False
+            for j in range(self.histories):
+                v, cl = self._limit(float(out[j]), float(self._y[0, j, 0]), upper)
+                ys.append(v)
+                clamped |= cl
+            self._y[0, :, 1:] = self._y[0, :, :-1].copy()
+            self._y[0, :, 0] = ys
+            y = sum(ys) / self.histories
         if math.isfinite(dt):
             self._last_dt = dt
         q = self.rho_cp_a * y * self._last_dt + 0.0  # + 0.0: no "-0" for a closed house
@@ -226,6 +244,13 @@ class VentSensor:
                            clamped, bool(self.mismatch))
         self._count(est)
         return est
+
+    def _limit(self, y: float, last: float, upper: float) -> tuple[float, bool]:
+        """A network output held when non-finite and clipped to [0, upper]; clipped or not."""
+        if not math.isfinite(y):
+            self.counts.non_finite_output += 1
+            y = last
+        return min(max(y, 0.0), upper), not 0.0 <= y <= upper
 
     def _filter(self, raw: list[float]) -> tuple[list[float], tuple[str, ...], tuple[str, ...]]:
         """Low-pass each input (features.low_pass, one row); NaN holds the filter."""
@@ -255,6 +280,17 @@ class VentSensor:
             c.out_of_range[n] = c.out_of_range.get(n, 0) + 1
         for n in est.missing:
             c.missing[n] = c.missing.get(n, 0) + 1
+
+
+def _histories(path, session, info: ModelInfo) -> int:
+    """Output histories the graph keeps: 1 (``y_past`` (N, 5)), or K for an ensemble whose
+    members each hear their own past (``y_past`` (N, K, 5), metadata ``feedback_histories``)."""
+    shape = next(i.shape for i in session.get_inputs() if i.name == "y_past")
+    k = shape[1] if len(shape) == 3 else 1
+    want = int(info.meta.get("feedback_histories", 1))
+    if not isinstance(k, int) or k != want:
+        raise ModelMismatch(f"{path}: the graph keeps {k} output histories, the metadata says {want}")
+    return k
 
 
 def _num(v) -> float:

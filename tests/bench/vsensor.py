@@ -99,19 +99,29 @@ def timing() -> dict:
     n_f = len(sensor.info.names)
     rng = np.random.default_rng(0)
     u = rng.normal(size=(1, 6, n_f)).astype(np.float32) * 0.1 + sensor.info.mean.astype(np.float32)
-    yp = np.full((1, 5), sensor.info.y0, dtype=np.float32)
+    k_h = sensor.histories  # K > 1: every member on its own past outputs
+    yp = np.full((1, 5) if k_h == 1 else (1, k_h, 5), sensor.info.y0, dtype=np.float32)
     mlps, w = _sklearn_peer(sensor.info.meta, sess)
     mean, std, pca = w["mean"], w["std"], w.get("pca")
     y_mean, y_std = float(w["y_mean"][0]), float(w["y_std"][0])
+    target = sensor.info.meta.get("training_settings", {}).get("target_transform", "identity")
+    to_t = {"identity": lambda y: y, "sqrt": lambda y: np.sqrt(np.maximum(y, 0.0)),
+            "log1p": lambda y: np.log1p(np.maximum(y, 0.0))}[target]
+    from_t = {"identity": lambda v: v, "sqrt": lambda v: np.maximum(v, 0.0) ** 2,
+              "log1p": np.expm1}[target]
 
     def sk_step():
         z = (u[0].astype(np.float64) - mean) / std
         if pca is not None:
             z = z @ pca
-        h = np.concatenate([z.reshape(-1), (yp[0] - y_mean) / y_std])[None, :]
-        return float(np.mean([m.predict(h)[0] for m in mlps])) * y_std + y_mean
+        if k_h == 1:
+            h = np.concatenate([z.reshape(-1), (to_t(yp[0]) - y_mean) / y_std])[None, :]
+            return float(from_t(np.mean([m.predict(h)[0] for m in mlps]) * y_std + y_mean))
+        flows = [from_t(m.predict(np.concatenate([z.reshape(-1), (to_t(yp[0, j]) - y_mean) / y_std])
+                                  [None, :])[0] * y_std + y_mean) for j, m in enumerate(mlps)]
+        return float(np.mean(flows))
 
-    onnx_out = sess.run(None, {"u": u, "y_past": yp})[0][0, 0]
+    onnx_out = float(np.mean(sess.run(None, {"u": u, "y_past": yp})[0][0]))
     assert abs(onnx_out - sk_step()) < 1e-3 * max(1.0, abs(onnx_out)), "peer differs from the graph"
     meas = {"t_in": 22.0, "t_out": 18.0, "rh_in": 70.0, "rh_out": 60.0, "wind": 3.0}
     fluxes = {n: 0.0 for n in sensor.info.names[3:]}

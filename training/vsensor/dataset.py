@@ -83,8 +83,11 @@ def build_segment(
     overrides: Overrides | None = None,
     seed: int = 0,
     progress: Callable[[int], None] | None = None,
+    extra: tuple[str, ...] = (),
 ) -> Segment:
-    """Inputs and target of one kit CSV (cached). ``progress(rows)`` during the replays."""
+    """Inputs and target of one kit CSV (cached). ``progress(rows)`` during the replays;
+    ``extra``: the optional derived inputs (features.EXTRAS) after the base ones (computed
+    from the cached replays: not part of the cache key)."""
     settings_for(build_model(kind, gh), gh, overrides)  # bad overrides fail before minutes of work
     sha = file_sha256(path)
     cache = None
@@ -107,14 +110,15 @@ def build_segment(
             tmp = cache.with_suffix(".tmp.npz")
             np.savez_compressed(tmp, **arrays)
             tmp.replace(cache)
-    return _segment(str(path), sha, arrays, gh, kind)
+    return _segment(str(path), sha, arrays, gh, kind, extra)
 
 
-def _segment(source: str, sha: str, a: dict[str, np.ndarray], gh: Greenhouse, kind: str) -> Segment:
+def _segment(source: str, sha: str, a: dict[str, np.ndarray], gh: Greenhouse, kind: str,
+             extra: tuple[str, ...] = ()) -> Segment:
     x = {k: a[f"x_{k}"] for k in KEEP}
     fluxes = {k[5:]: v for k, v in a.items() if k.startswith("flux_")}
-    raw = raw_features(kind, x, fluxes)
-    inputs = low_pass(raw, filter_gains(kind))
+    raw = raw_features(kind, x, fluxes, extra)
+    inputs = low_pass(raw, filter_gains(kind, extra=extra))
     flow = a["flow"].astype(float).copy()
     flow[:WARMUP_STEPS] = np.nan
     return Segment(
@@ -124,9 +128,9 @@ def _segment(source: str, sha: str, a: dict[str, np.ndarray], gh: Greenhouse, ki
     )
 
 
-def fingerprint(segments: list[Segment], kind: str) -> str:
+def fingerprint(segments: list[Segment], kind: str, extra: tuple[str, ...] = ()) -> str:
     """sha256 over the feature names and every input and target value (float64 bytes)."""
-    h = hashlib.sha256(json.dumps(feature_names(kind)).encode())
+    h = hashlib.sha256(json.dumps(feature_names(kind, extra)).encode())
     for s in segments:
         h.update(np.ascontiguousarray(s.inputs, dtype=np.float64).tobytes())
         h.update(np.ascontiguousarray(s.flow, dtype=np.float64).tobytes())

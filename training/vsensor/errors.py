@@ -18,7 +18,7 @@ import numpy as np
 
 from gateway.greenhouse import Greenhouse
 from gateway.series import load_series
-from gateway.vsensor.features import flow_limits
+from gateway.vsensor.features import extras_of, flow_limits
 from gateway.vsensor.loop import closed_loop, fill_missing
 from training.vsensor import fit
 from training.vsensor.dataset import Segment, build_segment
@@ -55,9 +55,19 @@ def onnx_predict(model: str | Path):
 
     def predict(u: np.ndarray, y_past: np.ndarray) -> np.ndarray:
         out = sess.run(None, {"u": u.astype(np.float32), "y_past": y_past.astype(np.float32)})
-        return np.asarray(out[0], dtype=float).reshape(len(u))
+        return np.asarray(out[0], dtype=float).reshape(len(u), -1)  # (N, K): K output histories
 
     return predict, sess
+
+
+def model_feature_names(model: str | Path) -> list[str]:
+    """The input names in a written model's metadata (its extra features among them)."""
+    import json
+
+    import onnx
+
+    props = {p.key: p.value for p in onnx.load(str(model)).metadata_props}
+    return [f["name"] for f in json.loads(props["features"])]
 
 
 def simulate_model(model: str | Path, segments: list[Segment], gh: Greenhouse, kind: str
@@ -78,7 +88,7 @@ def simulate_model(model: str | Path, segments: list[Segment], gh: Greenhouse, k
         u[i, : len(filled)] = filled
         u[i, len(filled):] = filled[-1]
         up[i, : len(filled)] = limits.upper(s.x["t_in"] - s.x["t_out"], s.x["t_out"], s.x["wind"])
-    y = closed_loop(predict, u, up, y0)
+    y = closed_loop(predict, u, up, y0, int(json.loads(meta.get("feedback_histories", "1"))))
     return [y[i, : len(s.flow)] for i, s in enumerate(segments)]
 
 
@@ -139,7 +149,8 @@ def breakdowns(segments: list[Segment], sims: list[np.ndarray], vents: list[dict
 
 def study(model: str | Path, paths: list[str], gh: Greenhouse, kind: str, cache, overrides,
           seed: int, only: str | None = None) -> list[Breakdown]:
-    segments = [build_segment(p, gh, kind, cache, overrides, seed) for p in paths]
+    extra = extras_of(kind, model_feature_names(model))
+    segments = [build_segment(p, gh, kind, cache, overrides, seed, extra=extra) for p in paths]
     vents = []
     for p in paths:
         series = load_series(str(p), step=60.0)

@@ -4,7 +4,11 @@ Built with ``onnx.helper`` from the numpy weights (standard operators only; opse
 onnxruntime ≥ 1.17 loads it). Inputs ``u`` float32 (N, 6, F): the filtered inputs at k - d,
 d = 0..5; ``y_past`` float32 (N, 5): the sensor's outputs at k - 1 … k - 5. Output ``flow``
 float32 (N, 1) [m3 s-1], unclamped (the runtime clamps to the physical range). An ensemble's
-members share the pre-processing; an ONNX ``Mean`` averages their outputs.
+members share the pre-processing; an ONNX ``Mean`` averages their outputs. A network trained on
+a transformed flow (√G, log(1 + G): ``Narx.target``) has the transform on ``y_past`` and its
+inverse on the output in the graph, so the interface stays flows in, flow out. An ensemble whose
+members each hear their own past (``Narx.own_feedback``) takes ``y_past`` (N, K, 5) and gives
+``flow`` (N, K), one flow per member: the runtime clips each and averages them.
 
 ``metadata_props`` carry everything the runtime checks and a reader needs: the feature names,
 order, units and filter time constants, the delays, the model kind the fluxes come from, the
@@ -35,6 +39,30 @@ def _const(name: str, value: np.ndarray):
     return numpy_helper.from_array(np.ascontiguousarray(value, dtype=np.float32), name)
 
 
+def _y_transform(net: Narx, src: str, pre: str) -> list:
+    """Nodes taking the past flows ``src`` into the network's target space (→ ``{pre}y_t``)."""
+    from onnx import helper
+
+    if net.target == "identity":
+        return []
+    nodes = [helper.make_node("Relu", [src], [f"{pre}y_pos"], name=f"{pre}y_nonneg")]
+    if net.target == "sqrt":
+        return nodes + [helper.make_node("Sqrt", [f"{pre}y_pos"], [f"{pre}y_t"], name=f"{pre}y_sqrt")]
+    return nodes + [helper.make_node("Add", [f"{pre}y_pos", "one"], [f"{pre}y_p1"], name=f"{pre}y_plus_one"),
+                    helper.make_node("Log", [f"{pre}y_p1"], [f"{pre}y_t"], name=f"{pre}y_log")]
+
+
+def _y_input(net: Narx, src: str, pre: str) -> list:
+    """Standardise the past outputs ``src`` (empty: ``y_past``) and join the delayed inputs
+    (→ ``{pre}h0``)."""
+    from onnx import helper
+
+    return [helper.make_node("Sub", [src or "y_past", "y_mean"], [f"{pre}y_c"], name=f"{pre}y_centre"),
+            helper.make_node("Div", [f"{pre}y_c", "y_std"], [f"{pre}y_s"], name=f"{pre}y_reduce"),
+            helper.make_node("Concat", ["z_flat", f"{pre}y_s"], [f"{pre}h0"], axis=1,
+                             name=f"{pre}narx_input")]
+
+
 def build_graph(net: Narx, n_features: int):
     """The ONNX ModelProto of ``net`` (no metadata yet)."""
     from onnx import TensorProto, helper
@@ -54,16 +82,31 @@ def build_graph(net: Narx, n_features: int):
         inits.append(_const("pca", net.projection))
         nodes.append(helper.make_node("MatMul", ["z", "pca"], ["pcs"], name="pca"))
         z = "pcs"
-    nodes += [
-        helper.make_node("Reshape", [z, "flat_shape"], ["z_flat"], name="delays"),
-        helper.make_node("Sub", ["y_past", "y_mean"], ["y_c"], name="y_centre"),
-        helper.make_node("Div", ["y_c", "y_std"], ["y_s"], name="y_reduce"),
-        helper.make_node("Concat", ["z_flat", "y_s"], ["h0"], axis=1, name="narx_input"),
-    ]
+    k_h = net.histories  # K > 1: every member on its own past outputs, y_past (N, K, 5)
+    if net.target != "identity":
+        inits.append(_const("one", np.array([1.0])))
+    if k_h == 1:
+        nodes += _y_transform(net, "y_past", "")
+        nodes += [
+            helper.make_node("Reshape", [z, "flat_shape"], ["z_flat"], name="delays"),
+            *_y_input(net, "" if net.target == "identity" else "y_t", ""),
+        ]
+        heads = ["h0"] * len(net.stacks)
+    else:
+        nodes.append(helper.make_node("Reshape", [z, "flat_shape"], ["z_flat"], name="delays"))
+        heads = []
+        for j in range(k_h):
+            pre = f"m{j}_"
+            inits.append(helper.make_tensor(f"{pre}index", TensorProto.INT64, [], [j]))
+            nodes.append(helper.make_node("Gather", ["y_past", f"{pre}index"], [f"{pre}y_past"],
+                                          axis=1, name=f"{pre}own_past"))
+            nodes += _y_transform(net, f"{pre}y_past", pre)
+            nodes += _y_input(net, f"{pre}y_past" if net.target == "identity" else f"{pre}y_t", pre)
+            heads.append(f"{pre}h0")
     outs = []
     for j, stack in enumerate(net.stacks):
         pre = "" if len(net.stacks) == 1 else f"m{j}_"
-        h = "h0"
+        h = heads[j]
         for i, layer in enumerate(stack):
             w, b, a, nxt = f"{pre}w{i}", f"{pre}b{i}", f"{pre}a{i}", f"{pre}h{i + 1}"
             inits += [_const(w, layer.weight), _const(b, layer.bias)]
@@ -73,18 +116,29 @@ def build_graph(net: Narx, n_features: int):
                 nodes.append(helper.make_node("Tanh", [out], [nxt], name=f"{pre}tanh{i}"))
             h = nxt
         outs.append(h)
-    if len(outs) > 1:  # the ensemble: the members' mean
+    if k_h > 1:  # own feedback: every member's flow (the runtime clips and averages them)
+        nodes.append(helper.make_node("Concat", outs, ["h_all"], axis=1, name="members_out"))
+        h = "h_all"
+    elif len(outs) > 1:  # the ensemble: the members' mean
         nodes.append(helper.make_node("Mean", outs, ["h_mean"], name="ensemble_mean"))
         h = "h_mean"
     nodes += [
         helper.make_node("Mul", [h, "y_std"], ["y_scaled"], name="y_unscale"),
-        helper.make_node("Add", ["y_scaled", "y_mean"], ["flow"], name="y_uncentre"),
+        helper.make_node("Add", ["y_scaled", "y_mean"],
+                         ["flow" if net.target == "identity" else "v"], name="y_uncentre"),
     ]
+    if net.target == "sqrt":  # back to a flow: max(v, 0)²
+        nodes += [helper.make_node("Relu", ["v"], ["v_pos"], name="v_nonneg"),
+                  helper.make_node("Mul", ["v_pos", "v_pos"], ["flow"], name="v_square")]
+    elif net.target == "log1p":  # e^v − 1
+        nodes += [helper.make_node("Exp", ["v"], ["v_exp"], name="v_exp"),
+                  helper.make_node("Sub", ["v_exp", "one"], ["flow"], name="v_minus_one")]
+    y_shape = ["N", d_out] if k_h == 1 else ["N", k_h, d_out]
     graph = helper.make_graph(
         nodes, f"serra_vsensor_{net.name}",
         [helper.make_tensor_value_info("u", TensorProto.FLOAT, ["N", d_in, n_features]),
-         helper.make_tensor_value_info("y_past", TensorProto.FLOAT, ["N", d_out])],
-        [helper.make_tensor_value_info("flow", TensorProto.FLOAT, ["N", 1])],
+         helper.make_tensor_value_info("y_past", TensorProto.FLOAT, y_shape)],
+        [helper.make_tensor_value_info("flow", TensorProto.FLOAT, ["N", k_h])],
         initializer=inits,
     )
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)],

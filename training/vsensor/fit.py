@@ -11,6 +11,7 @@ error is kept. Everything is seeded and single-threaded, so the same data give t
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -19,7 +20,7 @@ import numpy as np
 from gateway.vsensor.features import OUTPUT_DELAYS
 from gateway.vsensor.loop import closed_loop, fill_missing
 from training.vsensor.dataset import Segment
-from training.vsensor.narx import Layer, Narx, lag_rows
+from training.vsensor.narx import TARGETS, Layer, Narx, lag_rows, to_target
 
 TRAIN_SHARE = 0.75
 MIN_VARIANCE = 0.90
@@ -75,7 +76,7 @@ def rows(net: Narx, data: list[tuple[np.ndarray, np.ndarray]], lags: list[np.nda
     for i, (u, y) in enumerate(data):
         z, yp, t = lag_rows(net.reduce(u), y, None if lags is None else lags[i])
         hs.append(net.head(z, yp))
-        ts.append((t - net.y_mean) / net.y_std)
+        ts.append((to_target(t, net.target) - net.y_mean) / net.y_std)
     return np.concatenate(hs), np.concatenate(ts)
 
 
@@ -90,8 +91,15 @@ def simulate(net: Narx, split: Split) -> list[np.ndarray]:
         u[i, : len(filled)] = filled
         u[i, len(filled):] = filled[-1]
         up[i, : len(filled)] = split.upper[i]
-    y = closed_loop(net.predict, u, up, net.y_mean)
+    y = closed_loop(net.predict, u, up, net.y0, net.histories)
     return [y[i, : len(s.flow)] for i, s in enumerate(split.segments)]
+
+
+def simulate_own_feedback(net: Narx, split: Split) -> list[np.ndarray]:
+    """Closed-loop flows of an ensemble whose members each hear **their own** past outputs
+    (K histories, each member's output clipped to the physical range, then averaged): what the
+    graph and runtime of an ``own_feedback`` model do. A single network: ``simulate``."""
+    return simulate(dataclasses.replace(net, own_feedback=True), split)
 
 
 def validation_mae(net: Narx, split: Split) -> float:
@@ -119,10 +127,17 @@ class RowOptions:
 
     noise_sigma: float = 0.0  # see feedback_noise
     high_weight: float = 1.0  # loss weight of the rows above HIGH_FLOW_QUANTILE (the peaks)
+    target: str = "identity"  # narx.TARGETS: the flow, √G or log(1 + G) learnt and fed back
 
-    def as_settings(self) -> dict[str, float]:
+    def __post_init__(self) -> None:
+        if self.target not in TARGETS:
+            raise ValueError(f"target {self.target!r}: one of {TARGETS}")
+
+    def as_settings(self) -> dict[str, float | str]:
         """The non-default options, for the model's training settings."""
-        out = {}
+        out: dict[str, float | str] = {}
+        if self.target != "identity":
+            out["target_transform"] = self.target
         if self.noise_sigma:
             out["feedback_noise"] = self.noise_sigma
         if self.high_weight != 1.0:
@@ -200,9 +215,9 @@ def start_member(name: str, split: Split, mean, std, projection, seed: int, hidd
     from sklearn.neural_network import MLPRegressor
 
     progress = progress or (lambda **k: None)
-    y_train = np.concatenate([y for _, y in split.part("train")])
+    y_train = to_target(np.concatenate([y for _, y in split.part("train")]), opts.target)
     net = Narx(name, mean, std, projection, float(np.nanmedian(y_train)),
-               float(np.nanstd(y_train)) or 1.0)
+               float(np.nanstd(y_train)) or 1.0, target=opts.target)
     h, t = rows(net, split.part("train"))
     hv, tv = rows(net, split.part("validation"))
     noise = feedback_noise(opts.noise_sigma, -net.y_mean / net.y_std, np.random.default_rng(seed))
@@ -271,7 +286,7 @@ def _joint(name: str, split: Split, mean, std, projection, seeds: list[int], hid
                        round_lr, opts) for s in seeds]
     stacks = [m.net.layers for m in ms]
     ens = Narx(name, mean, std, projection, ms[0].net.y_mean, ms[0].net.y_std, stacks[0],
-               members=list(stacks))
+               members=list(stacks), target=opts.target)
     log = {"seeds": list(seeds), "feedback": "ensemble",
            "members": [m.log for m in ms], "ensemble_round_val_mae": [validation_mae(ens, split)]}
     best = (log["ensemble_round_val_mae"][0], list(stacks))
@@ -290,7 +305,8 @@ def _joint(name: str, split: Split, mean, std, projection, seeds: list[int], hid
     ens.layers = best[1][0]
     log["member_val_mae"], log["ensemble_val_mae_by_size"] = [], []
     for k in range(1, len(seeds) + 1):
-        one = Narx(name, mean, std, projection, ens.y_mean, ens.y_std, best[1][k - 1])
+        one = Narx(name, mean, std, projection, ens.y_mean, ens.y_std, best[1][k - 1],
+                   target=opts.target)
         log["member_val_mae"].append(validation_mae(one, split))
         ens.members = best[1][:k]
         log["ensemble_val_mae_by_size"].append(validation_mae(ens, split))

@@ -36,6 +36,12 @@ def train_command(out: Path, meta: dict, held_files: tuple[str, ...] = ()) -> st
         parts.append(f"--feedback-noise {st['feedback_noise']:g}")
     if st.get("high_flow_weight", 1.0) != 1.0:
         parts.append(f"--high-flow-weight {st['high_flow_weight']:g}")
+    if st.get("target_transform", "identity") != "identity":
+        parts.append(f"--target {st['target_transform']}")
+    if st.get("extra_features"):
+        parts.append(f"--extra-features {' '.join(st['extra_features'])}")
+    if st.get("own_feedback"):
+        parts.append("--own-feedback")
     if held_files:
         parts += ["--test", *held_files]
     return " ".join([*parts, "--out", out.name])
@@ -82,8 +88,11 @@ def model_card(out: Path, meta: dict, metrics: dict, t18: dict, circle: dict, na
         f"{len(meta['output_delays'])} past outputs → tanh layers "
         f"{'-'.join(map(str, nets['pca_narx'].hidden))} → flow (thesis: 30-50-20)"
         + (f"; an ensemble of {len(nets['pca_narx'].stacks)} such networks (seeds "
-           f"{meta['training_settings']['net_seed']}…), their outputs averaged in the graph, "
-           "each fed the ensemble's past outputs." if len(nets['pca_narx'].stacks) > 1 else "."),
+           f"{meta['training_settings']['net_seed']}…), their outputs averaged"
+           + (", each fed its own past outputs (one output history per member, the runtime "
+              "clips and averages the members' flows)." if nets['pca_narx'].histories > 1
+              else " in the graph, each fed the ensemble's past outputs.")
+           if len(nets['pca_narx'].stacks) > 1 else "."),
         "- One ONNX graph: standardisation, PCA and network; baselines beside it with the same "
         f"interface: `{out.stem}.narx_no_pca.onnx` (same network on the standardised inputs, no "
         f"PCA) and `{out.stem}.linear_arx.onnx` (linear ARX on the same inputs and delays).",
@@ -106,7 +115,9 @@ def model_card(out: Path, meta: dict, metrics: dict, t18: dict, circle: dict, na
         + (f", past outputs of the training rows offset by N(0, {st['feedback_noise']:g}) "
            "target standard deviations" if st.get("feedback_noise") else "")
         + (f", rows above the targets' 90th percentile weighing {st['high_flow_weight']:g}"
-           if st.get("high_flow_weight", 1.0) != 1.0 else "") + ".",
+           if st.get("high_flow_weight", 1.0) != 1.0 else "")
+        + (f", the networks learning and feeding back {st['target_transform']}(G), inverted in the "
+           "graph" if st.get("target_transform", "identity") != "identity" else "") + ".",
         "",
     ]
     lines += [f"Trained with: `{train_command(out, meta, held_files)}` (paths in docs/vsensor.md).", ""]

@@ -4,12 +4,16 @@ One structure for the three models trained side by side (the PCA-NARX and its tw
 so that one forward pass (numpy here, ONNX at run time: training/vsensor/export.py) serves all:
 
     z_d = ((u(k-d) - mean) / std) @ P          d = 0..5   (P: PCA loadings, or identity)
-    h   = [z_0, z_1, …, z_5, (y(k-1..k-5) - y_mean) / y_std]
-    y   = layers(h) * y_std + y_mean            (tanh hidden layers, linear output)
+    h   = [z_0, z_1, …, z_5, (T(y(k-1..k-5)) - y_mean) / y_std]
+    y   = T⁻¹(layers(h) * y_std + y_mean)       (tanh hidden layers, linear output)
+
+T is the target transform (``target``: none, √G or log(1 + G)); y_mean and y_std are those of
+T(G) over the training rows.
 
 An ensemble (``members``: several layer stacks fitted from different seeds on the same rows)
 shares the pre-processing and averages the stacks' outputs; in closed loop every member hears
-the ensemble's own past outputs (one ``y_past``, the runtime's interface).
+the ensemble's own past outputs (one ``y_past``), or, with ``own_feedback``, its own (K output
+histories: ``y_past`` (N, K, 5), one flow per member, averaged by the loop after clipping).
 """
 
 from __future__ import annotations
@@ -21,6 +25,31 @@ import numpy as np
 from gateway.vsensor.features import INPUT_DELAYS, OUTPUT_DELAYS
 
 ACTIVATIONS = ("tanh", "identity")
+TARGETS = ("identity", "sqrt", "log1p")
+"""What the network learns and feeds back: the flow itself, its square root or log(1 + G)
+(a compressed target; the graph applies it to ``y_past`` and inverts it on the output)."""
+
+
+def to_target(y: np.ndarray, target: str) -> np.ndarray:
+    """Flows [m3 s-1] → the network's target space (negative flows count as 0)."""
+    if target == "identity":
+        return y
+    if target == "sqrt":
+        return np.sqrt(np.maximum(y, 0.0))
+    if target == "log1p":
+        return np.log1p(np.maximum(y, 0.0))
+    raise ValueError(f"target {target!r}: one of {TARGETS}")
+
+
+def from_target(v: np.ndarray, target: str) -> np.ndarray:
+    """The network's target space → flows [m3 s-1] (sqrt: max(v, 0)²; log1p: e^v − 1)."""
+    if target == "identity":
+        return v
+    if target == "sqrt":
+        return np.maximum(v, 0.0) ** 2
+    if target == "log1p":
+        return np.expm1(v)
+    raise ValueError(f"target {target!r}: one of {TARGETS}")
 
 
 @dataclass
@@ -43,6 +72,18 @@ class Narx:
     layers: list[Layer] = field(default_factory=list)
     explained: np.ndarray | None = None  # (m,) variance share of each kept component
     members: list[list[Layer]] = field(default_factory=list)  # ensemble stacks; empty: ``layers``
+    target: str = "identity"  # TARGETS: y_mean, y_std and the layers' output are in this space
+    own_feedback: bool = False  # an ensemble's members each hear their own past (K histories)
+
+    @property
+    def histories(self) -> int:
+        """Output histories the closed loop keeps: K for own feedback, else 1."""
+        return len(self.stacks) if self.own_feedback else 1
+
+    @property
+    def y0(self) -> float:
+        """The past flows before the first step [m3 s-1]: the training median."""
+        return float(from_target(np.asarray(self.y_mean), self.target))
 
     @property
     def stacks(self) -> list[list[Layer]]:
@@ -65,7 +106,7 @@ class Narx:
 
     def head(self, z_lags: np.ndarray, y_past: np.ndarray) -> np.ndarray:
         """The network's input row: (N, D, m) reduced inputs and (N, 5) past flows → (N, D m + 5)."""
-        ys = (y_past - self.y_mean) / self.y_std
+        ys = (to_target(y_past, self.target) - self.y_mean) / self.y_std
         return np.concatenate([z_lags.reshape(len(z_lags), -1), ys], axis=1)
 
     def forward(self, h: np.ndarray) -> np.ndarray:
@@ -73,17 +114,30 @@ class Narx:
         (N, D m + 5) → (N,)."""
         out = np.zeros(len(h))
         for stack in self.stacks:
-            a = h
-            for layer in stack:
-                a = a @ layer.weight + layer.bias
-                if layer.activation == "tanh":
-                    a = np.tanh(a)
-            out += a[:, 0]
+            out += _run(stack, h)
         return out / len(self.stacks)
 
     def predict(self, u: np.ndarray, y_past: np.ndarray) -> np.ndarray:
-        """Flows (N,) [m3 s-1] from raw inputs u (N, D, F) and past flows (N, 5)."""
-        return self.forward(self.head(self.reduce(u), y_past)) * self.y_std + self.y_mean
+        """Flows (N,) [m3 s-1] from raw inputs u (N, D, F) and past flows (N, 5); with own
+        feedback (``histories`` K > 1) y_past is (N, K, 5), member j's own past at [:, j], and
+        the result each member's flow (N, K)."""
+        z = self.reduce(u)
+        if self.histories > 1:
+            v = np.column_stack([_run(stack, self.head(z, y_past[:, j]))
+                                 for j, stack in enumerate(self.stacks)])
+        else:
+            v = self.forward(self.head(z, y_past))
+        return from_target(v * self.y_std + self.y_mean, self.target)
+
+
+def _run(stack: list[Layer], h: np.ndarray) -> np.ndarray:
+    """One layer stack's scaled output (N,) for rows ``h``."""
+    a = h
+    for layer in stack:
+        a = a @ layer.weight + layer.bias
+        if layer.activation == "tanh":
+            a = np.tanh(a)
+    return a[:, 0]
 
 
 def lag_rows(z: np.ndarray, y: np.ndarray, y_lags: np.ndarray | None = None

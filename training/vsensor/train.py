@@ -54,9 +54,11 @@ def _version() -> str:
         return "unknown"
 
 
-def validation_metrics(net: Narx, split: fit.Split) -> tuple[dict, list[np.ndarray]]:
-    """Closed-loop flow error on the validation quarter of every file (and the sims)."""
-    sims = fit.simulate(net, split)
+def validation_metrics(net: Narx, split: fit.Split, sims: list[np.ndarray] | None = None
+                       ) -> tuple[dict, list[np.ndarray]]:
+    """Closed-loop flow error on the validation quarter of every file (and the sims; given
+    ``sims``, those flows are scored instead of ``net``'s closed loop)."""
+    sims = fit.simulate(net, split) if sims is None else sims
     ref = np.concatenate([s.flow[c:] for s, c in zip(split.segments, split.cut, strict=True)])
     est = np.concatenate([y[c:] for y, c in zip(sims, split.cut, strict=True)])
     ok = np.isfinite(ref)
@@ -100,20 +102,23 @@ class Prepared:
 
 
 def prepare(paths: list[str], gh: Greenhouse, kind: str, cache, overrides, seed: int,
-            pca_variance: float, progress: Callable[..., None]) -> Prepared:
-    """Build (or read from the cache) every file's replays, split, standardise, PCA."""
+            pca_variance: float, progress: Callable[..., None],
+            extra: tuple[str, ...] = ()) -> Prepared:
+    """Build (or read from the cache) every file's replays, split, standardise, PCA
+    (``extra``: optional derived inputs, features.EXTRAS)."""
     t0 = time.perf_counter()
     segments: list[Segment] = []
     for p in paths:
         progress(description=f"replays {Path(p).name}")
         segments.append(build_segment(p, gh, kind, cache, overrides, seed,
-                                      progress=lambda done: progress(advance=0, info=f"row {done}")))
+                                      progress=lambda done: progress(advance=0, info=f"row {done}"),
+                                      extra=extra))
         progress(advance=1)
     seconds = time.perf_counter() - t0
     limits = flow_limits(gh, kind)
     upper = [limits.upper(s.x["t_in"] - s.x["t_out"], s.x["t_out"], s.x["wind"]) for s in segments]
     split = fit.make_split(segments, upper)
-    names = [f.name for f in features(kind)]
+    names = [f.name for f in features(kind, extra)]
     mean, std = fit.scaler(split)
     z = (np.concatenate([i for i, _ in split.part("train")]) - mean) / std
     loadings, share = fit.pca(z, seed, pca_variance)
@@ -126,7 +131,9 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
           round_lr: float | None = None, pca_variance: float = fit.MIN_VARIANCE,
           test_paths: list[str] | None = None, ensemble: int = 1,
           net_seed: int | None = None, feedback: str = "member",
-          feedback_noise: float = 0.0, high_flow_weight: float = 1.0) -> TrainResult:
+          feedback_noise: float = 0.0, high_flow_weight: float = 1.0,
+          target: str = "identity", extra_features: tuple[str, ...] = (),
+          own_feedback: bool = False) -> TrainResult:
     """Build the datasets, fit the three networks, write the models, card and report (PNGs in
     ``report_dir``, default ``<out stem>.report/`` beside the model). ``pca_variance``: the
     share of the variance the kept components must reach (the issue asks for at least 0.90).
@@ -136,18 +143,24 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
     (``net_seed`` defaults to ``seed``, which also seeds the estimator's replays). ``feedback``
     , ``feedback_noise`` and ``high_flow_weight``: the closed-loop rounds on each member's or the
     ensemble's feedback, the noise on the past outputs of the training rows and the loss weight
-    of the rows above the targets' 90th percentile (fit.fit_ensemble, fit.RowOptions)."""
+    of the rows above the targets' 90th percentile (fit.fit_ensemble, fit.RowOptions); ``target``
+    the flow, √G or log(1 + G) as what the NARX networks learn and feed back (narx.TARGETS; the
+    linear ARX stays on the flow); ``extra_features``: derived inputs after the base ones
+    (features.EXTRAS; the runtime computes what the model's metadata names); ``own_feedback``:
+    deployed, every member of an ensemble hears its own past outputs (K output histories in the
+    graph and the runtime) instead of the ensemble's; the fit is the same."""
     if not fit.MIN_VARIANCE <= pca_variance <= 1.0:
         raise ValueError(f"pca_variance {pca_variance}: must be in [{fit.MIN_VARIANCE}, 1]")
     if ensemble < 1:
         raise ValueError(f"ensemble {ensemble}: at least one network")
     net_seed = seed if net_seed is None else net_seed
     seeds = [net_seed + j for j in range(ensemble)]
-    opts = fit.RowOptions(feedback_noise, high_flow_weight)
+    opts = fit.RowOptions(feedback_noise, high_flow_weight, target)
     progress = progress or (lambda **k: None)
     out = Path(out)
     t0 = time.perf_counter()
-    prep = prepare(paths, gh, kind, cache, overrides, seed, pca_variance, progress)
+    extra = tuple(extra_features)
+    prep = prepare(paths, gh, kind, cache, overrides, seed, pca_variance, progress, extra)
     segments, split, names, mean, std = prep.segments, prep.split, prep.names, prep.mean, prep.std
     loadings, share, kept = prep.loadings, prep.share, prep.loadings.shape[1]
     seconds = {"datasets": prep.seconds}
@@ -159,6 +172,8 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
                                                   epochs, rounds, min(30, epochs),
                                                   progress=progress, round_lr=round_lr,
                                                   opts=opts, feedback=feedback)
+    for name in ("pca_narx", "narx_no_pca"):
+        nets[name].own_feedback = own_feedback and ensemble > 1
     nets["linear_arx"] = fit.fit_arx(split, mean, std)
     nets["pca_narx"].explained = share[:kept]
     seconds["fit"] = time.perf_counter() - t1
@@ -171,16 +186,16 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
     base_meta = {
         "model_kind": kind,
         "features": [{"name": f.name, "unit": f.unit, "meaning": f.meaning, "tau_s": f.tau}
-                     for f in features(kind)],
+                     for f in features(kind, extra)],
         "input_delays": list(INPUT_DELAYS), "output_delays": list(OUTPUT_DELAYS), "step_s": STEP_S,
         "training_ranges": ranges, "input_mean": input_mean,
         "target": "explicit ventilation flow G [m3 s-1] of the adaptive model with the vent signal "
                   "(III.31; III.32 inverted)",
         "flow_range": [float(np.nanmin(np.concatenate([s.flow for s in segments]))),
                        float(np.nanmax(np.concatenate([s.flow for s in segments])))],
-        "y0": float(nets["pca_narx"].y_mean),
+        "y0": nets["pca_narx"].y0,
         "greenhouse": {"name": gh.name, "signature": greenhouse_signature(gh)},
-        "data_fingerprint": fingerprint(segments, kind),
+        "data_fingerprint": fingerprint(segments, kind, extra),
         "sources": [{"file": Path(s.source).name, "sha256": s.sha256, "rows": len(s.flow)} for s in segments],
         "online_overrides": overrides or {}, "seed": seed, "code_probe": code_probe(kind, gh),
         "training_settings": {"hidden": list(hidden), "epochs": epochs, "rounds": rounds,
@@ -188,7 +203,9 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
                               **({"ensemble": ensemble, "net_seed": net_seed}
                                  if ensemble > 1 or net_seed != seed else {}),
                               **({"feedback": feedback} if feedback != "member" else {}),
-                              **opts.as_settings()},
+                              **opts.as_settings(),
+                              **({"extra_features": list(extra)} if extra else {}),
+                              **({"own_feedback": True} if own_feedback and ensemble > 1 else {})},
         "version": _version(), "pca": pca_info,
         "metrics": {"validation_closed_loop": metrics,
                     "training_log": {k: v for k, v in logs.items()}},
@@ -196,7 +213,8 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
     written = {}
     for name, net in nets.items():
         path = out if name == "pca_narx" else out.with_name(f"{out.stem}.{name}.onnx")
-        meta = {**base_meta, "network": name, "hidden_layers": list(net.hidden), "y0": float(net.y_mean)}
+        meta = {**base_meta, "network": name, "hidden_layers": list(net.hidden), "y0": net.y0,
+                **({"feedback_histories": net.histories} if net.histories > 1 else {})}
         write_model(net, len(names), meta, path)
         written[name] = path
     rep_dir = Path(report_dir) if report_dir else out.with_name(f"{out.stem}.report")
@@ -208,7 +226,7 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
     held = {}
     for p in test_paths or []:
         progress(description=f"held out {Path(p).name}")
-        seg = build_segment(p, gh, kind, cache, overrides, seed)
+        seg = build_segment(p, gh, kind, cache, overrides, seed, extra=extra)
         held[Path(p).stem] = heldout.score_segment(seg, written, gh, kind)
         progress(advance=1)
     seconds["total"] = time.perf_counter() - t0

@@ -57,6 +57,16 @@ def add_fit_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--high-flow-weight", type=float, default=1.0, metavar="W",
                    help="loss weight of the training rows whose target is above the targets' 90th "
                    "percentile, the others 1 (default 1: unweighted)")
+    p.add_argument("--target", choices=("identity", "sqrt", "log1p"), default="identity",
+                   help="what the NARX networks learn and feed back: the flow (default), its square "
+                   "root or log(1 + flow); the graph inverts it (flows in, flow out)")
+    p.add_argument("--extra-features", nargs="+", default=[], metavar="NAME",
+                   choices=("dvp_in_out", "wind_dt"),
+                   help="derived inputs after the base ones (gateway.vsensor.features.EXTRAS; "
+                   "default none); the runtime computes what the model's metadata names")
+    p.add_argument("--own-feedback", action="store_true",
+                   help="deployed, every member of an ensemble hears its own past outputs (K output "
+                   "histories in the graph and the runtime) instead of the ensemble's mean")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -80,7 +90,9 @@ def run(args: argparse.Namespace) -> int:
                        report_dir=args.report, round_lr=args.round_lr,
                        pca_variance=args.pca_variance, test_paths=args.test,
                        ensemble=args.ensemble, net_seed=args.net_seed, feedback=args.feedback,
-                       feedback_noise=args.feedback_noise, high_flow_weight=args.high_flow_weight)
+                       feedback_noise=args.feedback_noise, high_flow_weight=args.high_flow_weight,
+                       target=args.target, extra_features=tuple(args.extra_features),
+                       own_feedback=args.own_feedback)
     summary = {"models": {k: str(v) for k, v in result.paths.items()}, "card": str(result.card),
                "pca": {k: v for k, v in result.pca.items() if k != "all_shares"},
                "validation_closed_loop": result.metrics,

@@ -6,7 +6,9 @@ figure here is the PCA-NARX line ``train`` would print for it, without the basel
 export, the report or any held-out file (~half of ``train``'s time). Prints the closed-loop MAE
 on the last 25 % of every file: overall, per file, over the grower's files (stem containing
 ``grower``) and the others (the controllers'), and over ``--subset`` stems (e.g. the files
-of an earlier pass); ``--log FILE`` appends the summary as one JSON line.
+of an earlier pass); ``--log FILE`` appends the summary as one JSON line. For an ensemble it
+also scores the same members each fed its own past outputs (``own_feedback``: K loops averaged,
+``fit.simulate_own_feedback``; ``--own-feedback`` makes it the figure, as train would).
 """
 
 from __future__ import annotations
@@ -64,22 +66,31 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     with threadpool_limits(1):
         prep = prepare(args.data, gh, args.model, args.cache, overrides(args.set) or None,
-                       args.seed, args.pca_variance, lambda **k: None)
+                       args.seed, args.pca_variance, lambda **k: None,
+                       tuple(args.extra_features))
         net, log = fit.fit_ensemble("pca_narx", prep.split, prep.mean, prep.std, prep.loadings,
                                     seeds, hidden, args.epochs, args.rounds, min(30, args.epochs),
                                     round_lr=args.round_lr,
-                                    opts=fit.RowOptions(args.feedback_noise, args.high_flow_weight),
+                                    opts=fit.RowOptions(args.feedback_noise, args.high_flow_weight,
+                                                        args.target),
                                     feedback=args.feedback)
+        net.own_feedback = args.own_feedback and len(seeds) > 1
         m, _ = validation_metrics(net, prep.split)
+        own = (validation_metrics(net, prep.split, fit.simulate_own_feedback(net, prep.split))[0]
+               if len(seeds) > 1 else None)
     summary = {"label": args.label, "components": int(prep.loadings.shape[1]),
                "variance": float(np.sum(prep.share[: prep.loadings.shape[1]])),
                "settings": {k: getattr(args, k) for k in ("hidden", "epochs", "rounds", "round_lr",
                             "pca_variance", "ensemble", "feedback", "feedback_noise",
-                                                 "high_flow_weight")}
+                                                 "high_flow_weight", "target", "extra_features",
+                                                 "own_feedback")}
                | {"net_seed": net_seed},
                "mae": m["mae"], "mae_pct_range": m["mae_pct_range"], "range": m["range"],
                "by_file": {k: v["mae"] for k, v in m["by_file"].items()},
                "groups": groups(m["by_file"], args.subset),
+               "own_feedback": None if own is None else
+               {"mae": own["mae"], "by_file": {k: v["mae"] for k, v in own["by_file"].items()},
+                "groups": groups(own["by_file"], args.subset)},
                "members": log.get("member_val_mae"),
                "ensemble_by_size": log.get("ensemble_val_mae_by_size"),
                "rounds_log": log.get("ensemble_round_val_mae")

@@ -27,6 +27,7 @@ if str(ROOT) not in sys.path:
 from gateway.estimate import correction  # noqa: E402
 from gateway.estimate import replay as rp  # noqa: E402
 from tests.generality.generators import HELD_OUT  # noqa: E402
+from tests.generality.outlook_variants import forecasts_by_steps  # noqa: E402
 
 MARKED = ("combined", "corrected")
 
@@ -48,15 +49,8 @@ def _corrected(res, mask: np.ndarray, memory_s: float, ridge: float) -> None:
     base = correction.features
     correction.features = lambda *a: base(*a) * mask  # type: ignore[assignment]
     try:
-        n = len(res.measured)
         for suffix in ("", "_outlook"):
-            comb, arx, starts = {}, {}, {}
-            for minutes, f in res.horizons.items():
-                steps = int(round(minutes * 60.0 / res.dt))
-                starts[minutes] = f["target"] - steps
-                comb[steps], arx[steps] = np.full(n, np.nan), np.full(n, np.nan)
-                comb[steps][starts[minutes]] = f[f"combined{suffix}"]
-                arx[steps][starts[minutes]] = f[f"arx{suffix}"]
+            comb, arx, starts = forecasts_by_steps(res, suffix)
             got = correction.correct_series(comb, res.measured, res.x, res.time, res.dt, arx,
                                             memory_s, ridge)
             for minutes, f in res.horizons.items():

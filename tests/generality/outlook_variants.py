@@ -165,18 +165,30 @@ class HourlyCloudiness(ClearSkyTrend):
         return out
 
 
-def correct_with(res, extra: Mapping[int, np.ndarray], suffix: str) -> None:
-    """Replace ``corrected{suffix}`` of the scored replay ``res`` by the correction with the
-    columns ``extra[steps]`` (T, m) (their values at each start, NaN counted as 0) appended to
-    φ; ``extra`` empty gives gateway/estimate/correction.py's own figures."""
+def forecasts_by_steps(res, suffix: str) -> tuple[dict[int, np.ndarray], dict[int, np.ndarray],
+                                                  dict[int, np.ndarray]]:
+    """The scored replay's ``combined{suffix}`` and ``arx{suffix}`` forecasts as series on its
+    time axis by lead time in steps (NaN where no forecast starts), and the start indices by lead
+    time in minutes."""
     n = len(res.measured)
-    comb, arx, starts = {}, {}, {}
+    comb: dict[int, np.ndarray] = {}
+    arx: dict[int, np.ndarray] = {}
+    starts: dict[int, np.ndarray] = {}
     for minutes, f in res.horizons.items():
         steps = int(round(minutes * 60.0 / res.dt))
         starts[minutes] = f["target"] - steps
         comb[steps], arx[steps] = np.full(n, np.nan), np.full(n, np.nan)
         comb[steps][starts[minutes]] = f[f"combined{suffix}"]
         arx[steps][starts[minutes]] = f[f"arx{suffix}"]
+    return comb, arx, starts
+
+
+def correct_with(res, extra: Mapping[int, np.ndarray], suffix: str) -> None:
+    """Replace ``corrected{suffix}`` of the scored replay ``res`` by the correction with the
+    columns ``extra[steps]`` (T, m) (their values at each start, NaN counted as 0) appended to
+    φ; ``extra`` empty gives gateway/estimate/correction.py's own figures."""
+    n = len(res.measured)
+    comb, arx, starts = forecasts_by_steps(res, suffix)
     m = next(iter(extra.values())).shape[1] if extra else 0
     base_features, base_names = correction.features, correction.FEATURES
     now: dict[str, np.ndarray] = {"extra": np.zeros(m)}

@@ -26,15 +26,16 @@ from gateway.vsensor.features import MODEL_KINDS
 DEFAULT_CACHE = Path("out") / "vsensor-cache"
 
 
-def _data_args(p: argparse.ArgumentParser) -> None:
+def _data_args(p: argparse.ArgumentParser, cache: bool = True) -> None:
     p.add_argument("--data", nargs="+", required=True, metavar="FILE",
                    help="kit CSVs with vent_roof/vent_side (docs/data-format.md)")
     p.add_argument("--greenhouse", required=True, metavar="PRESET|FILE.toml",
                    help=f"greenhouse description ({', '.join(list_presets())} or a TOML file)")
     p.add_argument("--model", required=True, choices=MODEL_KINDS,
                    help="the adaptive model whose fluxes the sensor reads")
-    p.add_argument("--cache", default=str(DEFAULT_CACHE), metavar="DIR",
-                   help=f"where the replays' products are kept (default {DEFAULT_CACHE})")
+    if cache:
+        p.add_argument("--cache", default=str(DEFAULT_CACHE), metavar="DIR",
+                       help=f"where the replays' products are kept (default {DEFAULT_CACHE})")
     p.add_argument("--set", action="append", default=[], metavar="OUTPUT.KEY=VALUE",
                    help="online estimator setting, e.g. --set t_in.bats=6 (default: the "
                    "greenhouse's and the model's; recorded in the model)")
@@ -64,8 +65,10 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Replay each file with the vent signal, keeping the estimator's "
                        "parameters, and describe the explicit flow G (the training target): level "
                        "and spread beside the true flow (<stem>.truth.npz of the simulator), and "
-                       "the wind, |T_in - T_out|, vents and vent coefficients at its peaks.")
-    _data_args(r)
+                       "the wind, |T_in - T_out|, vents and vent coefficients at its peaks. It "
+                       "replays each file afresh (it needs the estimator's parameters at every "
+                       "minute, which the training cache does not keep).")
+    _data_args(r, cache=False)
     r.add_argument("--above", type=float, default=30.0, metavar="M3_S",
                    help="a peak is a minute with G above this [m3 s-1] (default 30)")
     r.add_argument("--json", action="store_true", help="print the studies as JSON")

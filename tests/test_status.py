@@ -67,15 +67,15 @@ def fresh_status(f: Filled, **kw) -> float:
 
 
 @contextlib.contextmanager
-def beating(f: Filled, every_s: float = 1.0):
-    """Status rows rewritten every ``every_s`` while the block runs, as the running service
-    rewrites its own (every 5 s): a command that takes long to start on a loaded machine still
-    finds a fresh heartbeat (the staleness limit is 20 s)."""
+def beating(f: Filled, every_s: float = 1.0, **kw):
+    """Status rows (``status_rows`` options ``kw``) rewritten every ``every_s`` while the block
+    runs, as the running service rewrites its own (every 5 s): a command that takes long to start
+    on a loaded machine still finds a fresh heartbeat (the staleness limit is 20 s)."""
     stop = threading.Event()
 
     def beat() -> None:
         while True:
-            fresh_status(f)
+            fresh_status(f, **kw)
             if stop.wait(every_s):
                 return
 
@@ -247,18 +247,25 @@ def screen_text(app: StatusApp) -> str:
     return "\n".join(s.text for s in app.screen._compositor.render_strips())
 
 
-async def _shown(app, pilot, marker: str, what: str) -> str:
-    """The screen once ``marker`` is on it: panels are filled from snapshots taken in a thread,
-    so a key's effect can show a few frames later on a busy machine (generous deadline)."""
+async def _shown(app, pilot, *markers: str, what: str) -> str:
+    """The screen once every one of ``markers`` is on it: panels are filled from snapshots taken
+    in a thread and painted part by part, so a key's effect can show a few frames later on a
+    busy machine (generous deadline)."""
     deadline = time.monotonic() + 60
-    while marker not in (text := screen_text(app)):
-        assert time.monotonic() < deadline, f"{what}: {marker!r} not shown in 60 s:\n{text}"
+    while not all(m in (text := screen_text(app)) for m in markers):
+        assert time.monotonic() < deadline, f"{what}: {markers!r} not all shown in 60 s:\n{text}"
         await pilot.pause(0.05)
     return text
 
 
-async def _drive(source, keys_and_markers, size=(80, 24)) -> list[str]:
-    """Screens: the first one, then one after each (key, the text that shows it took effect)."""
+def _all(m: str | tuple[str, ...]) -> tuple[str, ...]:
+    return (m,) if isinstance(m, str) else tuple(m)
+
+
+async def _drive(source, keys_and_markers, first: str | tuple[str, ...], size=(80, 24)
+                 ) -> list[str]:
+    """Screens: the first one once ``first`` is on it (the first snapshot is counted before its
+    panel is painted), then one after each (key, the text that shows it took effect)."""
     app = StatusApp(source, interval=0.5)
     shots: list[str] = []
     async with app.run_test(size=size) as pilot:
@@ -266,11 +273,11 @@ async def _drive(source, keys_and_markers, size=(80, 24)) -> list[str]:
         while app.refreshes == 0:  # the first snapshot (taken in a thread)
             assert time.monotonic() < deadline, "no snapshot in 60 s"
             await pilot.pause(0.05)
-        shots.append(await _shown(app, pilot, "q quit", "the first snapshot"))
+        shots.append(await _shown(app, pilot, *_all(first), "q quit", what="the first snapshot"))
         for key, marker in keys_and_markers:
             await pilot.press(key)
             await pilot.pause()
-            shots.append(await _shown(app, pilot, marker, f"after {key!r}"))
+            shots.append(await _shown(app, pilot, *_all(marker), "q quit", what=f"after {key!r}"))
         await pilot.press("q")
     assert app.return_code == 0
     return shots
@@ -293,8 +300,13 @@ def test_app_at_80x24_switches_panels_and_quits(store: Filled) -> None:
     src = PinnedClock(store.path, beat + 1.0)
     before = digest(store.path)
     try:
-        steps = [("2", "SILENT"), ("3", "Service"), ("g", "Inside T  measured")]
-        home, kits, gateway, back = asyncio.run(_drive(src, steps))
+        # each screen is read once everything asserted below is painted
+        steps = [("2", ("SILENT", "rain timeout", "bad_tag 3")),
+                 ("3", ("Service    running · pid 4242", "Zenoh      up: 1 peer")),
+                 ("g", ("Inside T  measured", "greenhouse north (1/1)"))]
+        home, kits, gateway, back = asyncio.run(_drive(
+            src, steps, ("greenhouse north (1/1)", "Inside T  measured", "Parameters (prototype",
+                         "heat_source since")))
     finally:
         src.close()
     assert digest(store.path) == before  # the screen never writes
@@ -315,7 +327,8 @@ def test_app_on_an_empty_store_and_with_the_link_down(store: Filled, tmp_path: P
     Store(tmp_path / "empty.db").close()
     src = StoreSource(tmp_path / "empty.db")
     try:
-        (home, gw) = asyncio.run(_drive(src, [("w", "unknown: no status from a gateway")]))
+        (home, gw) = asyncio.run(_drive(src, [("w", "unknown: no status from a gateway")],
+                                        "No greenhouse in this store yet."))
     finally:
         src.close()
     assert "No greenhouse in this store yet." in home
@@ -323,7 +336,8 @@ def test_app_on_an_empty_store_and_with_the_link_down(store: Filled, tmp_path: P
     beat = fresh_status(store, peers=0, waiting=("serra/f1/north/forecast",))
     src = PinnedClock(store.path, beat + 1.0)
     try:
-        (_, gw) = asyncio.run(_drive(src, [("3", "DOWN: no peer or router connected")]))
+        (_, gw) = asyncio.run(_drive(src, [("3", "DOWN: no peer or router connected")],
+                                     "Inside T  measured"))
     finally:
         src.close()
     assert "DOWN: no peer or router connected" in gw
@@ -341,7 +355,7 @@ def test_app_keeps_the_last_snapshot_when_a_refresh_fails(store: Filled) -> None
 
     src = Flaky(store.path)
     try:
-        (_, again) = asyncio.run(_drive(src, [("r", "refresh failed")]))
+        (_, again) = asyncio.run(_drive(src, [("r", "refresh failed")], "Inside T  measured"))
     finally:
         src.close()
     assert "refresh failed (showing the last snapshot): OperationalError: disk I/O" in again
@@ -355,7 +369,9 @@ def gateway_cmd(*args: str) -> subprocess.CompletedProcess[str]:
 
 
 def test_once_into_a_pipe_is_plain_text_with_an_exit_status(store: Filled, tmp_path: Path) -> None:
-    with beating(store):
+    # A gateway clock that barely moves: the time the screen reads stays the store's whatever the
+    # wall delay (at the fixture's 300x, one second of delay is five minutes: kit 7 silent).
+    with beating(store, scale=1e-9):
         r = gateway_cmd("status", "--db", str(store.path), "--once")
     assert r.returncode == 0, r.stdout + r.stderr
     assert "\x1b" not in r.stdout and "ATTENTION" not in r.stdout

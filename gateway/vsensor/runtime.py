@@ -199,8 +199,9 @@ class VentSensor:
         n_f = len(self.info.names)
         self._state: list[float] = [math.nan] * n_f
         self._u = np.zeros((1, len(INPUT_DELAYS), n_f), dtype=np.float32)
-        shape = (1, len(OUTPUT_DELAYS)) if self.histories == 1 else (1, self.histories, len(OUTPUT_DELAYS))
-        self._y = np.full(shape, self.info.y0, dtype=np.float32)
+        # one past-output history per member on its own past (K = 1: the graph reads (1, 5))
+        self._y = np.full((1, self.histories, len(OUTPUT_DELAYS)), self.info.y0, dtype=np.float32)
+        self._y_feed = self._y if self.histories > 1 else self._y[:, 0]
         self._started = False
         self._last_dt = 0.0
 
@@ -221,22 +222,17 @@ class VentSensor:
         else:
             self._u[0, 1:] = self._u[0, :-1].copy()
             self._u[0, 0] = row
-        self._feeds["u"], self._feeds["y_past"] = self._u, self._y
+        self._feeds["u"], self._feeds["y_past"] = self._u, self._y_feed
         out = self.session.run(self._out, self._feeds)[0][0]
         upper = self.limits.upper_now(dt, _num(m.get("t_out")), raw[0])
-        if self.histories == 1:
-            y, clamped = self._limit(float(out[0]), float(self._y[0, 0]), upper)
-            self._y[0, 1:] = self._y[0, :-1].copy()
-            self._y[0, 0] = y
-        else:  # every member on its own past: each held, clipped, then averaged
-            ys, clamped = [], False
-            for j in range(self.histories):
-                v, cl = self._limit(float(out[j]), float(self._y[0, j, 0]), upper)
-                ys.append(v)
-                clamped |= cl
-            self._y[0, :, 1:] = self._y[0, :, :-1].copy()
-            self._y[0, :, 0] = ys
-            y = sum(ys) / self.histories
+        ys, clamped = [], False  # every history's output held, clipped, then averaged
+        for j in range(self.histories):
+            v, cl = self._limit(float(out[j]), float(self._y[0, j, 0]), upper)
+            ys.append(v)
+            clamped |= cl
+        self._y[0, :, 1:] = self._y[0, :, :-1].copy()
+        self._y[0, :, 0] = ys
+        y = sum(ys) / self.histories
         if math.isfinite(dt):
             self._last_dt = dt
         q = self.rho_cp_a * y * self._last_dt + 0.0  # + 0.0: no "-0" for a closed house

@@ -98,7 +98,27 @@ def test_it_asks_only_from_shortly_before_what_the_store_holds(gateway_history, 
     with zenoh.open(zconfig.build(connect=[gateway_history])) as s:
         stats = catchup.catch_up(s, ["serra/**"], {"f1": T0 + 60 * 20},
                                  lambda k, p: got.append(json.loads(p)["n"]))
-    assert stats.queries == 1 and got == list(range(15, 25))
+    assert stats.queries == 2 and got == list(range(15, 25))  # the farms found, then f1's
+
+
+def test_a_farm_new_to_the_store_gets_its_older_history_too(gateway_history, monkeypatch) -> None:
+    """The store holds farm f0 up to t0 + 20 min and nothing of f1: under serra/** f1 is found
+    (its gateway answers) and asked whole, f0 from its own newest time (one start for all farms
+    would have left f1's first 15 messages out)."""
+    monkeypatch.setattr(catchup, "MARGIN_S", 300.0)
+    got: list[tuple[str, int]] = []
+    with zenoh.open(zconfig.build(connect=[gateway_history])) as s:
+        stats = catchup.catch_up(s, ["serra/**"], {"f0": T0 + 60 * 20},
+                                 lambda k, p: got.append((k.split("/")[1], json.loads(p)["n"])))
+    assert stats.errors == [] and stats.queries == 3  # the farms found, then f0, then f1
+    assert sorted(n for farm, n in got if farm == "f1") == list(range(25))
+    assert {farm for farm, _ in got} == {"f1"}
+
+
+def test_subscriptions_over_every_farm_are_split_per_farm() -> None:
+    assert catchup.per_farm("serra/**", {"b", "a"}) == ["serra/a/**", "serra/b/**"]
+    assert catchup.per_farm("serra/*/north/**", ["a"]) == ["serra/a/north/**"]
+    assert catchup.per_farm("serra/a/**", ["b"]) == ["serra/a/**"]  # names its farm: as itself
 
 
 def test_a_cancelled_catch_up_asks_nothing(gateway_history) -> None:

@@ -8,7 +8,10 @@ subscriber go, or a store restarted right after a put). The gateway's store keep
 it made for ``history_days`` and answers ``serra/<farm>/<greenhouse>/history/<kind>``
 (gateway/publish/history.py), so on each join the subscriber asks, per subscription, for the
 messages observed since shortly before the newest one it holds of that farm (everything the
-gateways keep for a farm it holds nothing of). The query goes to every queryable
+gateways keep for a farm it holds nothing of). A subscription over every farm (``serra/**``) is
+asked farm by farm: the farms are those the store holds and those a ``?last=1`` query finds, so
+a farm that joined the fleet while the subscriber was away gets its older history too (one
+start time for all farms would leave it out). The query goes to every queryable
 (``QueryTarget.ALL``; remote ones only, not this store's own history queryable), and is paged by
 observation time when a gateway's replies reach the limit.
 """
@@ -18,7 +21,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 
@@ -70,6 +73,31 @@ def since(subscription: str, latest: Mapping[str, float]) -> float | None:
     return latest[farm] - MARGIN_S if farm in latest else None
 
 
+def per_farm(subscription: str, farms: Iterable[str]) -> list[str]:
+    """A subscription over every farm (``serra/**``, ``serra/*/north/**``) as one subscription per
+    farm in ``farms`` (sorted); any other subscription as itself."""
+    parts = subscription.split("/")
+    if len(parts) < 2 or parts[1] not in ("**", "*"):
+        return [subscription]
+    rest = parts[2:] if parts[1] == "*" else ["**"]  # serra/**/x is asked whole, as before
+    return [f"{K.PREFIX}/{farm}/" + "/".join(rest) for farm in sorted(set(farms))]
+
+
+def farms_answering(session, cancel) -> set[str]:
+    """The farms whose gateways answer history: one ``?last=1`` query (one reply per key)."""
+    import zenoh
+
+    found: set[str] = set()
+    replies = session.get(f"{K.PREFIX}/*/*/{K.HISTORY}/**?last=1", target=zenoh.QueryTarget.ALL,
+                          consolidation=zenoh.ConsolidationMode.NONE,
+                          allowed_destination=zenoh.Locality.REMOTE, timeout=TIMEOUT_S,
+                          cancellation_token=cancel)
+    for r in replies:
+        if r.ok is not None:
+            found.add(str(r.ok.key_expr).split("/")[1])
+    return found
+
+
 def _iso(t: float) -> str:
     return datetime.fromtimestamp(t, UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
 
@@ -83,7 +111,7 @@ def catch_up(session, subscriptions: Sequence[str], latest: Mapping[str, float],
 
     stats = CatchUpStats()
     cancel = cancel if cancel is not None else zenoh.CancellationToken()
-    for sub in subscriptions:
+    for sub in _expanded(session, subscriptions, latest, stats, cancel):
         try:
             selector = history_selector(sub)
         except ValueError as e:
@@ -119,6 +147,21 @@ def catch_up(session, subscriptions: Sequence[str], latest: Mapping[str, float],
             start = min(full)
             log.info("catch-up: %s full page, asking again from %s", selector, _iso(start))
     return stats
+
+
+def _expanded(session, subscriptions: Sequence[str], latest: Mapping[str, float],
+              stats: CatchUpStats, cancel) -> list[str]:
+    """The subscriptions to ask, those over every farm split per farm (:func:`per_farm`); if the
+    farms cannot be found, such a subscription is asked whole from :func:`since`, as one."""
+    if cancel.is_cancelled or all(per_farm(sub, ()) == [sub] for sub in subscriptions):
+        return list(subscriptions)
+    try:
+        farms = set(latest) | farms_answering(session, cancel)
+    except Exception as e:  # a closing session: ask as before
+        stats.errors.append(f"finding the farms: {e}")
+        return list(subscriptions)
+    stats.queries += 1
+    return [one for sub in subscriptions for one in per_farm(sub, farms)]
 
 
 def _observed(payload: bytes) -> float:

@@ -119,6 +119,55 @@ PLANTS = {
 }
 
 
+def _cover(p, ta, to, tm, tsk, u, ig):
+    """Cover temperature [°C], quasi-steady (Newton on its balance), and the inside convection
+    coefficient [W m-2 K-1] at it."""
+    hco = 5.7 + 3.8 * u
+    tc = 0.5 * (ta + to)
+    for _k in range(4):
+        tck = tc + 273.15
+        hci = 1.52 * abs(ta - tc) ** (1 / 3) + 0.5
+        f = (hci * (ta - tc) + hco * (to - tc) + 0.9 * SIGMA * (tsk ** 4 - tck ** 4)
+             + (1 - p["tau_lw"]) * 0.9 * SIGMA * ((tm + 273.15) ** 4 - tck ** 4) / p["cover_ratio"]
+             + p["alpha_cover"] * ig)
+        df = -hci - hco - 4 * 0.9 * SIGMA * tck ** 3 * (1 + (1 - p["tau_lw"]) / p["cover_ratio"])
+        tc = tc - f / df
+    return tc, 1.52 * abs(ta - tc) ** (1 / 3) + 0.5
+
+
+def _air_exchange(p, plant, ta, to, u, extra, vr, vs):
+    """Leakage (+ ``extra`` air changes [h-1]) and, in the house, the vents' wind and stack flow
+    at openings ``vr``, ``vs`` [0-1]: [m3 m-2 s-1]."""
+    n_leak = p["leak0"] + p["leak_u"] * u + extra  # h-1
+    g_flow = n_leak * p["height"] / 3600
+    if plant == "house":
+        dT = max(ta - to, 0.0)
+        a_r, a_s = vr * p["a_roof"], vs * p["a_side"]
+        wind_flow = 0.62 * 0.5 * a_r * np.sqrt(0.09) * u  # Bernoulli wind, Cw = 0.09
+        stack = 0.62 * (a_r * a_s / np.sqrt(a_r ** 2 + a_s ** 2 + 1e-9)) * np.sqrt(
+            2 * G * 2.5 * dT / (ta + 273.15)) if a_s > 0 else 0.0
+        g_flow += (np.sqrt(wind_flow ** 2 + stack ** 2)) / p["floor"]
+    return g_flow
+
+
+def _mass_rate(p, plant, tm, tc, tsk, to, x, iin, q_mass):
+    """The mass node's rate of change [K s-1] and the evaporation from it [kg m-2 s-1]."""
+    tmk, tck = tm + 273.15, tc + 273.15
+    lw = (p["tau_lw"] * 0.95 * SIGMA * (tsk ** 4 - tmk ** 4)
+          + (1 - p["tau_lw"]) * 0.9 * SIGMA * (tck ** 4 - tmk ** 4))
+    if p["t_deep"] is None:
+        q_g = p["k_ground"] * (to - tm)
+    else:
+        q_g = p["k_ground"] * (p["t_deep"] - tm)
+    if plant == "house":
+        rs = 80 + 20000 / (iin + 50)
+        gv = p["lai"] / (rs + 150) * 0.5
+    else:
+        gv = 0.0008
+    evap = max(gv * (xsat(tm) - x), 0.0)
+    return (p["a_mass"] * iin - q_mass + lw + q_g - LV * evap) / p["c_mass"], evap
+
+
 def simulate(plant, start, days, effect=None, at=None, amp=None, seed=1, weather=None,
              site=(52.03, 4.53)):
     """``weather``: arrays (time, t_out, rh_out, vp [Pa], wind, i_glob) on a 60 s grid to use
@@ -164,50 +213,15 @@ def simulate(plant, start, days, effect=None, at=None, amp=None, seed=1, weather
             vr = float(np.clip((ta - v_on) / (v_full - v_on), 0, 1))
             vs = float(np.clip((ta - v_on - 3) / (v_full - v_on), 0, 1))
         for _ in range(sub):
-            # cover: quasi-steady, Newton on Tc
-            hci_c = 1.52 * abs(ta - to) ** (1 / 3) + 0.5
-            hco = 5.7 + 3.8 * u
-            tc = 0.5 * (ta + to)
-            for _k in range(4):
-                tck = tc + 273.15
-                hci = 1.52 * abs(ta - tc) ** (1 / 3) + 0.5
-                f = (hci * (ta - tc) + hco * (to - tc) + 0.9 * SIGMA * (tsk ** 4 - tck ** 4)
-                     + (1 - p["tau_lw"]) * 0.9 * SIGMA * ((tm + 273.15) ** 4 - tck ** 4) / p["cover_ratio"]
-                     + p["alpha_cover"] * ig)
-                df = -hci - hco - 4 * 0.9 * SIGMA * tck ** 3 * (1 + (1 - p["tau_lw"]) / p["cover_ratio"])
-                tc = tc - f / df
-            hci_c = 1.52 * abs(ta - tc) ** (1 / 3) + 0.5
+            tc, hci_c = _cover(p, ta, to, tm, tsk, u, ig)
             q_cov = p["cover_ratio"] * hci_c * (tc - ta)
-            # air exchange
-            n_leak = p["leak0"] + p["leak_u"] * u + extra  # h-1
-            g_flow = n_leak * h / 3600  # m3 m-2 s-1
-            if plant == "house":
-                dT = max(ta - to, 0.0)
-                a_r, a_s = vr * p["a_roof"], vs * p["a_side"]
-                wind_flow = 0.62 * 0.5 * a_r * np.sqrt(0.09) * u  # Bernoulli wind, Cw = 0.09
-                stack = 0.62 * (a_r * a_s / np.sqrt(a_r ** 2 + a_s ** 2 + 1e-9)) * np.sqrt(
-                    2 * G * 2.5 * dT / (ta + 273.15)) if a_s > 0 else 0.0
-                g_flow += (np.sqrt(wind_flow ** 2 + stack ** 2)) / p["floor"]
+            g_flow = _air_exchange(p, plant, ta, to, u, extra, vr, vs)  # m3 m-2 s-1
             q_vent = RHO * CP * g_flow * (to - ta)
             hm = 1.8 * abs(tm - ta) ** (1 / 3) + 1.0
             q_mass = hm * (tm - ta)
             q_w = hw * (tw - ta)
             dta = (q_cov + q_vent + q_mass + q_w + heat - mist + p["a_air"] * iin) / ca
-            # mass
-            tmk, tck = tm + 273.15, tc + 273.15
-            lw = (p["tau_lw"] * 0.95 * SIGMA * (tsk ** 4 - tmk ** 4)
-                  + (1 - p["tau_lw"]) * 0.9 * SIGMA * (tck ** 4 - tmk ** 4))
-            if p["t_deep"] is None:
-                q_g = p["k_ground"] * (to - tm)
-            else:
-                q_g = p["k_ground"] * (p["t_deep"] - tm)
-            if plant == "house":
-                rs = 80 + 20000 / (iin + 50)
-                gv = p["lai"] / (rs + 150) * 0.5
-            else:
-                gv = 0.0008
-            evap = max(gv * (xsat(tm) - x), 0.0)
-            dtm = (p["a_mass"] * iin - q_mass + lw + q_g - LV * evap) / p["c_mass"]
+            dtm, evap = _mass_rate(p, plant, tm, tc, tsk, to, x, iin, q_mass)
             cond = max((x - xsat(tc)) * p["cover_ratio"] * hci_c / (RHO * CP) * 1.0, 0.0)
             dx = (evap + mist / LV - g_flow * (x - xo) - cond) / h
             ta += dt * dta

@@ -165,6 +165,22 @@ def _drivers(effects: list[Effect], weather: Weather, substeps: int, volume: flo
     return drivers
 
 
+def _spin_up(p: Plant, wx: Weather, substeps: int, t_ground: float, step: float
+             ) -> tuple[State, float, float]:
+    """The state and vent positions after the first day (effects off), so the soil and cover
+    start consistent."""
+    n_spin = min(len(wx), int(round(SPINUP_DAYS * 86400.0 / step)) + 1)
+    spin = Weather(*(getattr(wx, f)[:n_spin] for f in
+                     ("time", "t_out", "rh_out", "i_glob", "wind", "t_sky", "rain")),
+                   source=wx.source, latitude=wx.latitude)
+    c0 = float(integrate.vapour_concentration(wx.t_out[0], wx.rh_out[0]))
+    state = State(wx.t_out[0], wx.t_out[0], wx.t_out[0] + 1.0, t_ground, c0)
+    traj = integrate.run(p, _substep_inputs(p, spin, substeps, t_ground, 0.0),
+                         PhysicsDrivers.neutral((n_spin - 1) * substeps), state, step, substeps)
+    state = State(traj.t_a[-1], traj.t_c[-1], traj.t_f[-1], traj.t_d[-1], traj.c_a[-1])
+    return state, traj.vent_roof[-1], traj.vent_side[-1]
+
+
 def simulate(
     plant: str | Plant = "almeria",
     weather: str | Weather = "bleiswijk",
@@ -194,18 +210,7 @@ def simulate(
     effect_list = _as_effects(effects, t0)
     t_ground = float(np.mean(wx.t_out)) + p.ground_offset
 
-    # Spin-up on the first day (effects off), so the soil and cover start consistent.
-    n_spin = min(len(wx), int(round(SPINUP_DAYS * 86400.0 / step)) + 1)
-    spin = Weather(*(getattr(wx, f)[:n_spin] for f in
-                     ("time", "t_out", "rh_out", "i_glob", "wind", "t_sky", "rain")),
-                   source=wx.source, latitude=wx.latitude)
-    c0 = float(integrate.vapour_concentration(wx.t_out[0], wx.rh_out[0]))
-    state = State(wx.t_out[0], wx.t_out[0], wx.t_out[0] + 1.0, t_ground, c0)
-    traj = integrate.run(p, _substep_inputs(p, spin, substeps, t_ground, 0.0),
-                         PhysicsDrivers.neutral((n_spin - 1) * substeps), state, step, substeps)
-    state = State(traj.t_a[-1], traj.t_c[-1], traj.t_f[-1], traj.t_d[-1], traj.c_a[-1])
-    roof0, side0 = traj.vent_roof[-1], traj.vent_side[-1]
-
+    state, roof0, side0 = _spin_up(p, wx, substeps, t_ground, step)
     inputs = _substep_inputs(p, wx, substeps, t_ground, 0.0)
     traj = integrate.run(p, inputs, _drivers(effect_list, wx, substeps, p.volume), state, step,
                          substeps, roof0, side0)

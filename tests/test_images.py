@@ -246,6 +246,17 @@ def _line_starting(proc: Popen[str], prefix: str, timeout: float = 120) -> str:
     return ""
 
 
+def _send_one_record(sock: socket.socket, host: str, port: int, key: bytes) -> None:
+    """Kit 7's first signed record to the ingest at ``host:port``; asserts it is acknowledged
+    as stored."""
+    rec = protocol.Record(7, 0, 0, 60_000, 0, 60.0, (21.5, 60.0, 15.0, 70.0, 300.0, 2.0, 0),
+                          (0,) * 7)
+    sock.settimeout(60)
+    sock.sendto(protocol.encode_record(rec, key), (host, port))
+    ack = protocol.decode_ack(sock.recv(64), key)
+    assert (ack.device_id, ack.seq, ack.status) == (7, 0, protocol.ACK_STORED)
+
+
 def test_installed_wheel_stores_a_record_through_the_shipped_ingest_unit(
         installed: Installed, bundles: Path, tmp_path: Path) -> None:
     key = secrets.token_bytes(32)
@@ -255,12 +266,7 @@ def test_installed_wheel_stores_a_record_through_the_shipped_ingest_unit(
         line = _first_line(proc)
         assert line.startswith("serra-ingest listening udp"), line
         host, port = line.split()[-1].rsplit(":", 1)
-        rec = protocol.Record(7, 0, 0, 60_000, 0, 60.0, (21.5, 60.0, 15.0, 70.0, 300.0, 2.0, 0),
-                              (0,) * 7)
-        sock.settimeout(60)
-        sock.sendto(protocol.encode_record(rec, key), (host, int(port)))
-        ack = protocol.decode_ack(sock.recv(64), key)
-        assert (ack.device_id, ack.seq, ack.status) == (7, 0, protocol.ACK_STORED)
+        _send_one_record(sock, host, int(port), key)
     with sqlite3.connect(tmp_path / "serra.db") as db:
         assert db.execute("SELECT count(*) FROM samples").fetchone()[0] == 1
 
@@ -284,12 +290,7 @@ def test_installed_wheel_runs_the_shipped_gateway_unit_from_its_default_config(
         words = line.split()
         host, port = words[words.index("udp") + 1].rsplit(":", 1)
         assert words[words.index("zenoh") + 1].startswith("tcp/127.0.0.1:")
-        rec = protocol.Record(7, 0, 0, 60_000, 0, 60.0, (21.5, 60.0, 15.0, 70.0, 300.0, 2.0, 0),
-                              (0,) * 7)
-        sock.settimeout(60)
-        sock.sendto(protocol.encode_record(rec, key), (host, int(port)))
-        ack = protocol.decode_ack(sock.recv(64), key)
-        assert (ack.device_id, ack.seq, ack.status) == (7, 0, protocol.ACK_STORED)
+        _send_one_record(sock, host, int(port), key)
         r = installed.run("-m", "gateway", "status", "--db", str(tmp_path / "serra.db"), "--once")
         assert "farm demo-farm · greenhouse north (1/1)" in r.stdout, r.stdout + r.stderr
         assert "   7  north in+out" in r.stdout and "\x1b" not in r.stdout

@@ -153,30 +153,52 @@ def write_router_toml(path: Path, name: str, pki: Pki, *, listen: Iterable[str] 
     return path
 
 
-class RouterProc:
+class _PipedProc:
+    """A subprocess whose stdout+stderr lines are kept in ``lines`` and written to ``log`` by a
+    reader thread."""
+
+    log: Path
+
+    def __init__(self) -> None:
+        self.proc: subprocess.Popen[str] | None = None
+        self.lines: list[str] = []
+        self._reader: threading.Thread | None = None
+
+    def _spawn(self, argv: list[str], env: dict[str, str]) -> None:
+        self.proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                                     stderr=subprocess.STDOUT, text=True, errors="replace")
+        self._reader = threading.Thread(target=pump_lines, args=(self.proc, self.log, self.lines),
+                                        daemon=True)
+        self._reader.start()
+
+    def _finish(self) -> int:
+        """After the process ended: its exit status, the reader joined, the pipe closed."""
+        assert self.proc is not None
+        rc = self.proc.returncode
+        if self._reader is not None:
+            self._reader.join(10)
+        if self.proc.stdout is not None:
+            self.proc.stdout.close()
+        self.proc = None
+        return rc
+
+
+class RouterProc(_PipedProc):
     """``python -m gateway router --config FILE`` in a subprocess; always stopped on exit."""
 
     def __init__(self, config: Path, log: Path | None = None) -> None:
+        super().__init__()
         self.config = config
         self.log = log or config.with_suffix(".log")
-        self.proc: subprocess.Popen[str] | None = None
-        self.lines: list[str] = []
         self.endpoints: list[str] = []
         self.zid = ""
-        self._reader: threading.Thread | None = None
 
     def start(self, timeout: float = DEADLINE) -> RouterProc:
         env = dict(os.environ, PYTHONUNBUFFERED="1", NO_COLOR="1")
         env.pop("RUST_LOG", None)
-        self.lines = []
+        self.lines = []  # this run's (the log file keeps earlier runs')
         # Zenoh's log goes to stdout (tracing's default writer), Serra's to stderr: keep both.
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "gateway", "router", "--config", str(self.config)],
-            cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-            errors="replace")
-        self._reader = threading.Thread(target=pump_lines, args=(self.proc, self.log, self.lines),
-                                        daemon=True)
-        self._reader.start()
+        self._spawn([sys.executable, "-m", "gateway", "router", "--config", str(self.config)], env)
         ready = wait_until(lambda: self._ready() or self._died(), timeout, f"{self.config.name} ready")
         if ready == "died":
             self._finish()
@@ -224,16 +246,6 @@ class RouterProc:
             self.proc.kill()
             self.proc.wait()
         self._finish()
-
-    def _finish(self) -> int:
-        assert self.proc is not None
-        rc = self.proc.returncode
-        if self._reader is not None:
-            self._reader.join(10)
-        if self.proc.stdout is not None:
-            self.proc.stdout.close()
-        self.proc = None
-        return rc
 
     def __enter__(self) -> RouterProc:
         return self.start()
@@ -284,23 +296,17 @@ class Inbox:
         return payload in self.payloads()
 
 
-class LineProc:
+class LineProc(_PipedProc):
     """A command in a subprocess whose output is kept (and written to `log`); :meth:`start`
     waits for a line starting with `ready`. Stopped with SIGTERM (a hang is a failure)."""
 
     def __init__(self, argv: list[str], ready: str, log: Path, env: dict[str, str] | None = None) -> None:
+        super().__init__()
         self.argv, self.ready, self.log = argv, ready, log
         self.env = dict(os.environ, PYTHONUNBUFFERED="1", NO_COLOR="1", **(env or {}))
-        self.proc: subprocess.Popen[str] | None = None
-        self.lines: list[str] = []
-        self._reader: threading.Thread | None = None
 
     def start(self, timeout: float = DEADLINE) -> LineProc:
-        self.proc = subprocess.Popen(self.argv, cwd=ROOT, env=self.env, stdout=subprocess.PIPE,
-                                     stderr=subprocess.STDOUT, text=True, errors="replace")
-        self._reader = threading.Thread(target=pump_lines, args=(self.proc, self.log, self.lines),
-                                        daemon=True)
-        self._reader.start()
+        self._spawn(self.argv, self.env)
         found = wait_until(lambda: self.line(self.ready) or (self.proc is not None and self.proc.poll()
                                                              is not None and "died"),
                            timeout, f"{self.argv[3:5]} ready")
@@ -319,13 +325,7 @@ class LineProc:
         if self.proc is None:
             return 0
         signal_and_wait(self.proc, sig, timeout, " ".join(self.argv[1:5]))
-        rc = self.proc.returncode
-        if self._reader is not None:
-            self._reader.join(10)
-        if self.proc.stdout is not None:
-            self.proc.stdout.close()
-        self.proc = None
-        return rc
+        return self._finish()
 
     def __enter__(self) -> LineProc:
         return self.start()

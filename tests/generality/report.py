@@ -45,16 +45,20 @@ def _effects_table(rows: list[dict]) -> list[str]:
     return out
 
 
-def _free_table(rows: list[dict]) -> list[str]:
-    out = ["| window | finding (false alarm) | base held-out free-run MAE [K] | persistence "
-           "free-run MAE [K] | residual flagged unexplained |", "| --- | --- | --- | --- | --- |"]
+def _free_table(rows: list[dict], was: dict[str, float | None] | None = None) -> list[str]:
+    """Effect-free windows; ``was``: the base's held-out error per window in an earlier run."""
+    extra = " base MAE before [K] |" if was else ""
+    out = ["| window | finding (false alarm) | base held-out free-run MAE [K] |" + extra
+           + " persistence free-run MAE [K] | residual flagged unexplained |",
+           "| --- " * (5 + bool(was)) + "|"]
     for r in sorted(rows, key=lambda r: r["case"]["window"]):
         if "error" in r:
-            out.append(f"| {r['case']['window']} | error: {r['error'][:60]} | | | |")
+            out.append(f"| {r['case']['window']} | error: {r['error'][:60]} | | | |" + (" |" if was else ""))
             continue
         f = ", ".join(f"`{x['effect']}` from {x['start']}" for x in r["findings"]) or "none"
-        out.append(f"| {r['case']['window']} | {f} | {_f(r['before'])} | {_f(r['persistence'])} | "
-                   f"{'yes' if r['unexplained'] else 'no'} |")
+        then = f" {_f(was.get(r['case']['window']))} |" if was else ""
+        out.append(f"| {r['case']['window']} | {f} | {_f(r['before'])} |{then} "
+                   f"{_f(r['persistence'])} | {'yes' if r['unexplained'] else 'no'} |")
     return out
 
 
@@ -90,29 +94,52 @@ def _summary(rows: list[dict]) -> list[str]:
 
 
 def _forecast_table(rows: list[dict]) -> list[str]:
-    out = ["| generator | window | h [min] | adaptive | RLS ARX | persistence | adaptive, outlook "
-           "| ARX, outlook | ≥ 30 % and < ARX (measured) | ≥ 20 % (outlook) |",
-           "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    """MAE per horizon; the goals (tests/generality/forecasts.py ``goals``) marked for
+    ``corrected``, the forecast the gateway publishes (rows of older runs without it: –)."""
+    from tests.generality.forecasts import goals  # imports this module's users: not at load
+
+    cols = ("persistence", "arx", "adaptive", "corrected", "arx_outlook", "adaptive_outlook",
+            "corrected_outlook")
+    mark = {True: "✓", False: "✗", None: ""}
+    out = ["| generator | window | h [min] | persistence | RLS ARX | adaptive | corrected "
+           "| ARX, outlook | adaptive, outlook | corrected, outlook | ≥ 30 % and < ARX (corrected, "
+           "measured) | ≥ 20 % (corrected, outlook) |",
+           "| --- " * 12 + "|"]
     for r in sorted(rows, key=lambda r: (GENERATORS.index(r["case"]["generator"]),
                                          MAIN_WINDOWS.index(r["case"]["window"]))):
         g, w = r["case"]["generator"], r["case"]["window"]
         if "error" in r:
-            out.append(f"| {g} | {w} | error: {r['error'][:60]} | | | | | | | |")
+            out.append(f"| {g} | {w} | error: {r['error'][:60]} |" + " |" * 9)
             continue
         for h, m in r["horizons"].items():
-            mae = {k: v["mae"] for k, v in m.items() if v}
-            p = mae.get("persistence")
-            skill = p and mae.get("adaptive") is not None and mae["adaptive"] <= 0.7 * p \
-                and mae["adaptive"] < mae.get("arx", float("inf"))
-            live = "" if h == "15" else ("✓" if p and mae.get("adaptive_outlook", 9e9) <= 0.8 * p else "✗")
-            out.append(f"| {g} | {w} | {h} | {_f(mae.get('adaptive'))} | {_f(mae.get('arx'))} | "
-                       f"{_f(p)} | {_f(mae.get('adaptive_outlook'))} | {_f(mae.get('arx_outlook'))} | "
-                       f"{'✓' if skill else '✗'} | {live} |")
+            cells = [_f(m[k]["mae"] if m.get(k) else None) for k in cols]
+            measured, outlook = goals(m, "corrected", int(h)) if m.get("corrected") else (None, None)
+            out.append(f"| {g} | {w} | {h} | " + " | ".join(cells)
+                       + f" | {mark[measured]} | {mark[outlook]} |")
     return out
 
 
-def markdown(results: list[dict], meta: dict) -> str:
-    """The whole section, from the cases' results and the run's facts."""
+def _before_lines(before: dict | None) -> list[str]:
+    """The summary of an earlier run (``docs/generality-before.json``) in the same layout."""
+    if not before:
+        return []
+    meta, groups = before["meta"], defaultdict(list)
+    for r in before["results"]:
+        if r["case"]["task"] == "diagnose":
+            groups[r["case"]["generator"]].append(r)
+    lines = ["", f"Before (the same suite on commit {meta['commit']}, {meta['when']}: the "
+             "diagnosis and base model before issue 10's items 1, 2 and 5; "
+             "`docs/generality-before.json`):", "",
+             "| generator | autumn kinds | winter kinds | summer kinds | effect-free windows quiet "
+             "| outside library unexplained (effect-free flagged too) | mean base / persistence "
+             "free-run MAE, effect-free [K] |",
+             "| --- | --- | --- | --- | --- | --- | --- |"]
+    return lines + [_summary_row(g, groups[g]) for g in GENERATORS if groups[g]]
+
+
+def markdown(results: list[dict], meta: dict, before: dict | None = None) -> str:
+    """The whole section, from the cases' results and the run's facts; ``before``: an earlier
+    run's results file, whose summary and base errors are shown beside."""
     groups: dict[tuple[str, str], list[dict]] = defaultdict(list)
     for r in results:
         c = r["case"]
@@ -137,13 +164,18 @@ def markdown(results: list[dict], meta: dict) -> str:
              "| --- | --- | --- | --- | --- | --- | --- |"]
     for g in GENERATORS:
         lines.append(_summary_row(g, groups[(g, "effects")] + groups[(g, "free")]))
+    lines += _before_lines(before)
     lines.append("")
+    base_before = {(r["case"]["generator"], r["case"]["window"]): r.get("before")
+                   for r in (before or {}).get("results", [])
+                   if r["case"]["task"] == "diagnose" and r["case"]["kind"] == "none"}
     for g in GENERATORS:
         held = g in HELD_OUT
         lines += [f"### {g}{' (HELD OUT: never tuned on, reported apart)' if held else ''}", ""]
         lines += _summary(groups[(g, "effects")] + groups[(g, "free")]) + [""]
         lines += _effects_table(groups[(g, "effects")]) + [""]
-        lines += ["Effect-free windows:", ""] + _free_table(groups[(g, "free")]) + [""]
+        was = {w: v for (gen, w), v in base_before.items() if gen == g}
+        lines += ["Effect-free windows:", ""] + _free_table(groups[(g, "free")], was) + [""]
     lines += ["### Forecasts (replay, prototype model)", "",
               "Held-out-style figures: every forecast from day 2 on (day 1 is the estimator's warm-up), "
               "MAE [K] of T_in at 15/30/60 min; with the weather later measured (model skill) and "

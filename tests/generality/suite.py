@@ -32,6 +32,7 @@ from tests.generality.report import MAIN_WINDOWS, markdown, update_docs  # noqa:
 
 RESULTS = ROOT / "bench" / "results" / "generality.json"
 DOCS = ROOT / "docs" / "effects.md"
+BEFORE = ROOT / "docs" / "generality-before.json"
 
 
 ALL_KINDS = ("none", *KINDS, *OUTSIDE)
@@ -128,9 +129,14 @@ def main(argv: list[str] | None = None) -> int:
     out.write_text(json.dumps({"meta": meta, "results": results}, indent=1) + "\n", encoding="utf-8")
     print(f"wrote {out} in {minutes:.1f} min", flush=True)
     if not a.no_docs:
-        update_docs(DOCS, markdown(results, meta))
+        update_docs(DOCS, markdown(results, meta, _before()))
         print(f"updated {DOCS.relative_to(ROOT)}", flush=True)
     return 0
+
+
+def _before() -> dict | None:
+    """The run before issue 10's base and judge work, shown beside (docs/generality-before.json)."""
+    return json.loads(BEFORE.read_text(encoding="utf-8")) if BEFORE.exists() else None
 
 
 def _combine(files: list[Path], out: Path, docs: bool) -> int:
@@ -151,7 +157,7 @@ def _combine(files: list[Path], out: Path, docs: bool) -> int:
     out.write_text(json.dumps({"meta": meta, "results": results}, indent=1) + "\n", encoding="utf-8")
     print(f"wrote {out} ({len(results)} cases)", flush=True)
     if docs:
-        update_docs(DOCS, markdown(results, meta))
+        update_docs(DOCS, markdown(results, meta, _before()))
         print(f"updated {DOCS.relative_to(ROOT)}", flush=True)
     return 0
 

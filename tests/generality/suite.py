@@ -147,7 +147,7 @@ def _combine(files: list[Path], out: Path, docs: bool) -> int:
         data = json.loads(f.read_text(encoding="utf-8"))
         minutes += data["meta"].get("minutes", 0.0)
         runs += data["meta"].get("runs") or [{"minutes": data["meta"].get("minutes", 0.0),
-                                               "jobs": data["meta"].get("jobs", 1)}]
+                                               "jobs": data["meta"].get("jobs") or 1}]
         for r in data["results"]:
             by_case[Case(**r["case"])] = r
     results = list(by_case.values())

@@ -18,7 +18,7 @@ def test_parameters_units_bounds_and_the_sunlit_search():
     assert (c_vc.name, c_vc.unit.split()[0], c_vc.lower, c_vc.upper) == ("c_vc", "s-1", 0.0, 1e-3)
     assert (t_vc.name, t_vc.unit, t_vc.lower, t_vc.upper) == ("t_vc", "°C", 15.0, 35.0)
     assert c_vc.active.name == t_vc.active.name == "sunlit"
-    assert term.requires == ("t_out",)
+    assert term.requires == ("t_out", "i_glob")
 
 
 def test_soft_excess_is_a_smooth_max_and_its_derivative_the_logistic():
@@ -35,7 +35,7 @@ def test_known_value_well_above_the_setpoint_is_leakage_scaled_by_the_excess():
     """3 K above T_vc = 25 °C (σ ≈ 3 K), 5 K above T_out: Q = −C_vc ρ 3 K 5 K, the same as the
     leakage term (III.19) with C_loss = 3 K × C_vc."""
     rho, c_vc = 1.2, 2e-4
-    x = {"t_out": np.array([23.0])}
+    x = {"t_out": np.array([23.0]), "i_glob": np.array([400.0])}
     p = {"c_vc": np.array([[c_vc]]), "t_vc": np.array([[25.0]])}
     q = ControlledVentilation(rho).flux(p, x, np.array([[28.0]]), 0)
     expected = -c_vc * rho * float(soft_excess(np.array(3.0))) * 5.0
@@ -45,12 +45,14 @@ def test_known_value_well_above_the_setpoint_is_leakage_scaled_by_the_excess():
     np.testing.assert_allclose(q, leak, rtol=1e-3)
     below = ControlledVentilation(rho).flux(p, x, np.array([[20.0]]), 0)  # 5 K under: closed
     assert abs(float(below[0, 0])) < 1e-5 * abs(expected)
+    night = {"t_out": x["t_out"], "i_glob": np.array([0.0])}  # no sun: the leakage's alone
+    assert float(ControlledVentilation(rho).flux(p, night, np.array([[28.0]]), 0)[0, 0]) == 0.0
 
 
 def test_slope_is_minus_the_derivative_of_the_flux():
     rng = np.random.default_rng(3)
     term = ControlledVentilation(1.2)
-    x = {"t_out": rng.uniform(10.0, 30.0, 200)}
+    x = {"t_out": rng.uniform(10.0, 30.0, 200), "i_glob": rng.choice([0.0, 300.0], 200)}
     p = {"c_vc": rng.uniform(0.0, 1e-3, (4, 1)), "t_vc": rng.uniform(15.0, 35.0, (4, 1))}
     state = rng.uniform(10.0, 40.0, (4, 200))
     t = slice(0, 200)
@@ -82,15 +84,18 @@ def test_prototype_with_the_term_has_six_parameters_and_zero_gain_changes_nothin
     np.testing.assert_allclose(got, ref, rtol=0, atol=1e-9)
 
 
-def test_a_low_setpoint_cools_a_warm_forecast_toward_the_outside(with_term, prototype_gh):
+def test_a_low_setpoint_cools_a_warm_sunlit_forecast_toward_the_outside(with_term, prototype_gh):
     model, x = with_term
     theta = model.defaults(prototype_gh)
     starts = np.arange(0, 1200, 7)
-    warm = x["t_in"][starts] > x["t_out"][starts] + 1.0
-    assert warm.sum() > 10
+    sunlit = np.array([np.all(x["i_glob"][s:s + 31] > 5.0) for s in starts])
+    night = np.array([np.all(x["i_glob"][s:s + 31] <= 5.0) for s in starts])
+    warm = (x["t_in"][starts] > x["t_out"][starts] + 1.0) & sunlit
+    assert warm.sum() > 10 and night.sum() > 10
     runs = []
     for c_vc in (0.0, 5e-4):
         theta[model.index("c_vc")], theta[model.index("t_vc")] = c_vc, 15.0
         runs.append(model.forecast(np.repeat(theta[None, :], len(starts), 0), x, prototype_gh, 60.0,
                                    starts, 30))
     assert np.all(runs[1][warm] < runs[0][warm])
+    np.testing.assert_array_equal(runs[1][night], runs[0][night])  # the vents act by day only

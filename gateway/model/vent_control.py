@@ -9,24 +9,28 @@ must follow every controller move by adapting, one step behind, and a forecast h
 start's value while the air it forecasts warms. This term makes the added exchange a function
 of the state the forecast itself predicts:
 
-    Q_vc = −C_vc ρ_a σ(T_in − T_vc) (T_in − T_out)                      (III.19 form)
-    σ(z) = w ln(1 + e^{z / w}),   w = ``SMOOTH_K``
+    Q_vc = −C_vc ρ_a δ_sun σ(T_in − T_vc) (T_in − T_out)                 (III.19 form)
+    σ(z) = w ln(1 + e^{z / w}),   w = ``SMOOTH_K``,   δ_sun = [I_glob > 5 W m-2]
 
 σ is a smooth max(0, z) [K] (the band's lower edge rounded over ``w``, so the flux and its
-slope are continuous for the exponential step), C_vc [s-1 K-1] the air changes per second per
-kelvin above the setpoint and T_vc [°C] the setpoint; in the prototype's lumped units
-(III.14: fluxes divided by C_a), as ``AirLeakage``. Both are estimated online with the others
-(searched while the sun is up: a controller vents by day; at night the house is below its
-setpoint and neither is seen). The exact slope for the exponential step is
+slope are continuous in the state for the exponential step), C_vc [s-1 K-1] the air changes
+per second per kelvin above the setpoint and T_vc [°C] the day's ventilation setpoint; in the
+prototype's lumped units (III.14: fluxes divided by C_a), as ``AirLeakage``. Both are
+estimated online with the others while the sun is up (``SUNLIT``, §IV.2.1.2's activity rule),
+and the term acts only then (δ_sun): a controller vents the sun's heat by day on a day setpoint,
+and at night, where neither parameter is seen, the night's exchange is the leakage's. (Acting
+at night with the day's setpoint, the first trial, over-cooled every summer night: the setpoint
+the day's fit settles on, 16-20 °C, is below a summer night's air; docs/effects.md.) The exact
+slope for the exponential step is
 
-    k = −∂Q_vc/∂T_in = C_vc ρ_a [σ(z) + σ'(z) (T_in − T_out)],   σ'(z) = 1 / (1 + e^{−z / w}).
+    k = −∂Q_vc/∂T_in = C_vc ρ_a δ_sun [σ(z) + σ'(z) (T_in − T_out)],   σ'(z) = 1 / (1 + e^{−z/w}).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from gateway.model.terms import SUNLIT, FluxTerm, Index, Parameter
+from gateway.model.terms import SUN_THRESHOLD, SUNLIT, FluxTerm, Index, Parameter
 
 SMOOTH_K = 0.5
 """[K] width w over which σ rounds the setpoint's corner."""
@@ -45,12 +49,12 @@ def soft_step(z: np.ndarray, w: float = SMOOTH_K) -> np.ndarray:
 
 
 class ControlledVentilation(FluxTerm):
-    """Vent air exchange rising above a setpoint: −C_vc ρ_a σ(T_in − T_vc) (T_in − T_out)."""
+    """Vent air exchange rising above a day setpoint: −C_vc ρ_a δ_sun σ(T_in − T_vc) (T_in − T_out)."""
 
     name = "q_vent_control"
     equation = "III.19 form, σ a smooth max(0, T_in − T_vc)"
     description = "air exchange of vents a controller opens above T_vc (unseen by the kit)"
-    requires = ("t_out",)
+    requires = ("t_out", "i_glob")
     parameters = (
         Parameter("c_vc", "s-1 K-1 (air changes per second per K above T_vc)", 0.0, 1e-3, 1e-4,
                   0.10, SUNLIT, "controlled vent exchange per kelvin above the setpoint"),
@@ -61,14 +65,18 @@ class ControlledVentilation(FluxTerm):
     def __init__(self, rho: float = 1.205) -> None:
         self.rho = rho  # gamma_0 [kg m-3], table 2
 
+    def _gain(self, p, x, t: Index):
+        """C_vc ρ_a δ_sun [s-1 K-1 kg m-3]."""
+        return p["c_vc"] * (self.rho * (x["i_glob"][t] > SUN_THRESHOLD))
+
     def coefficients(self, p, x, t_in, t: Index):
-        s = p["c_vc"] * self.rho * soft_excess(t_in - p["t_vc"])
+        s = self._gain(p, x, t) * soft_excess(t_in - p["t_vc"])
         return s * x["t_out"][t], s
 
     def linearised(self, p, x, t_in, t: Index):
         """Also the exact slope k (module docstring): the exchange grows with T_in."""
         t_out = x["t_out"][t]
         z = t_in - p["t_vc"]
-        c = p["c_vc"] * self.rho
+        c = self._gain(p, x, t)
         s = c * soft_excess(z)
         return s * t_out, s, s + c * soft_step(z) * (t_in - t_out)

@@ -1,7 +1,7 @@
 """Study: does an unseen vent controller explain the forecast errors? Tuning windows only.
 
 The kept replays of ``tests/generality/forecasts.py --keep DIR`` (refsim and twonode: the
-held-out generator's are never read) are scored with the current code, then four checks
+held-out generator's are never read) are scored with the current code, then five checks
 of issue 10's idea that a vent controller proportional on T_in above a setpoint, which the kit
 does not see, is what the 15-30-min forecasts miss:
 
@@ -21,6 +21,7 @@ does not see, is what the 15-30-min forecasts miss:
    drivers and four lags of T_in: how far a linear post-processing could go.
 4. ``cost``: the estimator's wall time per update with and without the term
    (gateway/model/vent_control.py), stepped in turn on refsim summer's first two days.
+5. ``noise``: whether the start state (the DHT22's noise) or the model errs (``noise``'s doc).
 
     nice -n 5 .venv/bin/python tests/generality/vent_control_study.py out/fc [--checks ...]
 """
@@ -195,7 +196,31 @@ def cost(_kept, rows: int = 576, rounds: int = 3) -> None:
               f"mean {np.mean(v):.2f} ms | p95 {np.percentile(v, 95):.2f} ms |")
 
 
-CHECKS = {"residuals": residuals, "oracle": oracle, "bound": bound, "cost": cost}
+def noise(kept) -> None:
+    """Is the start state the problem (the DHT22's noise) or the model? Per 3-hour block of the
+    UTC day: the one-step residual's mean |e| and lag-1 autocorrelation (white sensor noise
+    gives −0.5, a model error that persists gives > 0) and the reading's white-noise level from
+    its second differences, sd(Δ²T) / √6 (the DHT22 with its 0.1-K step: ≈ 0.09 K)."""
+    print("| window | " + " | ".join(f"{a:02d}-{a + 3:02d} h" for a in range(0, 24, 3)) + " |")
+    print("| --- " * 9 + "|")
+    for stem, res in kept:
+        y, hour = res.measured, correction.hour_of_day(res.time)
+        e = y - res.adaptive
+        d2 = np.full_like(y, np.nan)
+        d2[1:-1] = y[2:] - 2.0 * y[1:-1] + y[:-2]
+        after = np.arange(len(y)) >= int(round(WARMUP / res.dt))
+        cells = []
+        for a in range(0, 24, 3):
+            m = after & (hour >= a) & (hour < a + 3)
+            em = np.where(m, e, np.nan)
+            ok = np.isfinite(em[1:]) & np.isfinite(em[:-1])
+            rho = float(np.corrcoef(em[1:][ok], em[:-1][ok])[0, 1])
+            sd = float(np.nanstd(np.where(m, d2, np.nan))) / np.sqrt(6.0)
+            cells.append(f"{np.nanmean(np.abs(em)):.2f} / {rho:+.2f} / {sd:.2f}")
+        print(f"| {stem} | " + " | ".join(cells) + " |")
+
+
+CHECKS = {"residuals": residuals, "oracle": oracle, "bound": bound, "cost": cost, "noise": noise}
 
 
 def main(argv: list[str] | None = None) -> int:

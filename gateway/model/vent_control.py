@@ -39,8 +39,8 @@ SMOOTH_K = 0.5
 def soft_excess(z: np.ndarray, w: float = SMOOTH_K) -> np.ndarray:
     """σ(z) = w ln(1 + e^{z/w}) [K]: ≈ max(0, z) beyond a few w, w ln 2 at z = 0 (NaN, a
     missing reading, stays NaN)."""
-    with np.errstate(invalid="ignore"):
-        return w * np.logaddexp(0.0, np.asarray(z, dtype=float) / w)
+    z = np.asarray(z, dtype=float)
+    return np.maximum(z, 0.0) + w * np.log1p(np.exp(-np.abs(z) / w))  # = w ln(1 + e^{z/w})
 
 
 def soft_step(z: np.ndarray, w: float = SMOOTH_K) -> np.ndarray:
@@ -65,18 +65,33 @@ class ControlledVentilation(FluxTerm):
     def __init__(self, rho: float = 1.205) -> None:
         self.rho = rho  # gamma_0 [kg m-3], table 2
 
-    def _gain(self, p, x, t: Index):
-        """C_vc ρ_a δ_sun [s-1 K-1 kg m-3]."""
-        return p["c_vc"] * (self.rho * (x["i_glob"][t] > SUN_THRESHOLD))
+    derives = ("_q_vent_control.sun",)
+
+    def derive(self, x) -> dict[str, np.ndarray]:
+        """ρ_a δ_sun over the series (``Model.prepare`` adds it once)."""
+        return {"_q_vent_control.sun": self.rho * (np.asarray(x["i_glob"]) > SUN_THRESHOLD)}
+
+    def _gain(self, p, x, t: Index) -> np.ndarray | None:
+        """C_vc ρ_a δ_sun [s-1 K-1 kg m-3]; None when no sample at ``t`` is sunlit (the flux is
+        then 0 and the state's functions need not be evaluated: the night's steps cost nothing)."""
+        sun = self.derived(x, "_q_vent_control.sun", t)
+        if sun is None:
+            sun = self.rho * (np.asarray(x["i_glob"][t]) > SUN_THRESHOLD)
+        return p["c_vc"] * sun if sun.any() else None
 
     def coefficients(self, p, x, t_in, t: Index):
-        s = self._gain(p, x, t) * soft_excess(t_in - p["t_vc"])
+        c = self._gain(p, x, t)
+        if c is None:
+            return 0.0, 0.0
+        s = c * soft_excess(t_in - p["t_vc"])
         return s * x["t_out"][t], s
 
     def linearised(self, p, x, t_in, t: Index):
         """Also the exact slope k (module docstring): the exchange grows with T_in."""
+        c = self._gain(p, x, t)
+        if c is None:
+            return 0.0, 0.0, 0.0
         t_out = x["t_out"][t]
         z = t_in - p["t_vc"]
-        c = self._gain(p, x, t)
         s = c * soft_excess(z)
         return s * t_out, s, s + c * soft_step(z) * (t_in - t_out)

@@ -130,7 +130,9 @@ def rescore(folder: Path) -> list[dict]:
         res = pickle.loads(f.read_bytes())
         t0 = time.perf_counter()
         score_forecasts(res, steps_of(HORIZONS, res.dt))
-        results.append({"case": asdict(Case("forecast", generator, window)), **forecast_report(res),
+        vented = any(t.name == "q_vent_control" for t in res.model.terms)
+        case = Case("forecast", generator, window, model="prototype+vent_control" if vented else "prototype")
+        results.append({"case": asdict(case), **forecast_report(res),
                         "seconds": time.perf_counter() - t0})
     return results
 

@@ -30,3 +30,21 @@ def test_goals_and_the_per_window_summary():
     assert cells[3] == "1 / 2 (held out 0 / 1): refsim winter"  # measured-weather goal
     assert cells[4] == "1 / 2 (held out 0 / 1): refsim winter"  # outlook goal
     assert "vanthoor (held out) | summer | 60" in markdown(results)
+
+
+def test_compare_marks_better_worse_and_the_goal(tmp_path):
+    import json
+
+    from tests.generality.compare_forecasts import table
+
+    before = {"persistence": 1.0, "arx": 0.8, "corrected": 0.75, "adaptive": 0.5}
+    after = {**before, "corrected": 0.6, "adaptive": 0.6}
+    paths = []
+    for name, mae in (("a", before), ("b", after)):
+        p = tmp_path / f"{name}.json"
+        p.write_text(json.dumps({"results": [_case("refsim", "summer", mae)]}), encoding="utf-8")
+        paths.append(str(p))
+    rows = [r for r in table(*paths, ["adaptive", "corrected"]).splitlines() if r.startswith("| refsim")]
+    assert len(rows) == 3
+    assert rows[0] == ("| refsim summer | 15 | 1.000 | 0.800 | 0.500 → 0.600 ⬆ | 0.750 → 0.600 ⬇ "
+                       "| ✗ → ✓ |")

@@ -26,6 +26,16 @@ def prototype(weather_minutes, prototype_gh):
     return model, prepare_drivers(series, prototype_gh), prototype_gh
 
 
+@pytest.fixture(scope="module")
+def prototype_vc(weather_minutes, prototype_gh):
+    """The prototype with controller-moved vents (gateway/model/vent_control.py)."""
+    from gateway.model.prototype import build_prototype
+
+    model = build_prototype(prototype_gh, vent_control=True)
+    series = almeria_like_series(weather_minutes, days=2)
+    return model, prepare_drivers(series, prototype_gh), prototype_gh
+
+
 def random_population(model, gh, n, seed=0):
     lo, hi = model.bounds(gh)
     return lo + np.random.default_rng(seed).random((n, len(lo))) * (hi - lo)
@@ -43,7 +53,7 @@ def test_almeria_has_the_ten_parameters_of_table_13(almeria):
         assert (lo[j], hi[j]) == (a, b)
 
 
-@pytest.mark.parametrize("which", ["almeria", "prototype"])
+@pytest.mark.parametrize("which", ["almeria", "prototype", "prototype_vc"])
 def test_population_evaluation_equals_one_candidate_at_a_time(which, request):
     model, x, gh = request.getfixturevalue(which)
     theta = random_population(model, gh, 7)
@@ -91,7 +101,7 @@ def _rk4_between_samples(model, p, x, state, t, c, dt, n=100):
     return state
 
 
-@pytest.mark.parametrize("which", ["almeria", "prototype"])
+@pytest.mark.parametrize("which", ["almeria", "prototype", "prototype_vc"])
 def test_step_follows_the_balance_with_drivers_moving_within_the_step(which, request):
     """The default step (first-order hold, re-linearised, gateway/model/step.py) against a fine
     RK4 of the balance whose drivers move linearly from one sample to the next and whose h_i,
@@ -181,7 +191,7 @@ def test_free_run_is_stable_for_15_days_at_every_corner_of_the_box(weather_minut
     assert model.capacity(almeria_gh) / hi[model.index("c_cnd_cnv")] < 60.0
 
 
-@pytest.mark.parametrize("which", ["almeria", "prototype"])
+@pytest.mark.parametrize("which", ["almeria", "prototype", "prototype_vc"])
 def test_each_terms_slope_is_minus_the_derivative_of_its_flux(which, request):
     """FluxTerm.linearised: k = -dQ/dT_in (central differences), for a population over a day."""
     model, x, gh = request.getfixturevalue(which)

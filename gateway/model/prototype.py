@@ -15,6 +15,7 @@ import numpy as np
 from gateway.greenhouse import Greenhouse
 from gateway.model.model import Model
 from gateway.model.terms import ALWAYS, SUNLIT, FluxTerm, Index, Parameter
+from gateway.model.vent_control import ControlledVentilation
 
 # Variation ratios for online use: the thesis gives none for this model (table 12 is for the
 # Almería model); 10 % follows its "fast" class for convective and loss coefficients.
@@ -111,13 +112,19 @@ def prototype_capacity(gh: Greenhouse) -> float:
     return gh.air_density * gh.volume / gh.floor_area
 
 
-def build_prototype(gh: Greenhouse | None = None) -> Model:
-    """The four-term model of III.14–III.22 (table 2 constants from ``gh``)."""
+def build_prototype(gh: Greenhouse | None = None, vent_control: bool = False) -> Model:
+    """The four-term model of III.14–III.22 (table 2 constants from ``gh``); ``vent_control``
+    adds the air exchange of controller-moved vents (gateway/model/vent_control.py, two more
+    parameters; a study option, not the shipped model: docs/effects.md, forecasts)."""
     rho = 1.205 if gh is None else gh.air_density
+    terms: tuple[FluxTerm, ...] = (SolarGain(), CoverConvection(), AirLeakage(rho), SkyRadiation())
+    if vent_control:
+        terms += (ControlledVentilation(rho),)
     return Model(
         name="prototype",
-        terms=(SolarGain(), CoverConvection(), AirLeakage(rho), SkyRadiation()),
+        terms=terms,
         capacity=prototype_capacity,
-        description="four-parameter grey-box model of the low-cost kit (III.14–III.22)",
+        description="four-parameter grey-box model of the low-cost kit (III.14–III.22)"
+        + (" with controller-moved vents" if vent_control else ""),
         capacity_equation="III.14",
     )

@@ -60,6 +60,8 @@ class Case:
     window: str
     kind: str = "none"
     seed: int = 1
+    model: str = MODEL
+    """``prototype``, or ``prototype+vent_control`` (gateway/model/vent_control.py added)."""
 
     @property
     def label(self) -> str:
@@ -72,7 +74,12 @@ def _series(case: Case, tmp: Path):
 
     data = generate(case.generator, window(case.window), case.kind, case.seed)
     gh = data.greenhouse()
-    model = build_model(MODEL, gh)
+    if case.model == f"{MODEL}+vent_control":
+        from gateway.model.prototype import build_prototype
+
+        model = build_prototype(gh, vent_control=True)
+    else:
+        model = build_model(case.model, gh)
     path = tmp / "kit.csv"
     data.write_csv(path)
     return data, gh, model, load_series(str(path), step=ROW_S, required=model.requires)

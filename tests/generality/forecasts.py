@@ -9,6 +9,7 @@ docs/online-estimator.md ("Forecasts on greenhouses we did not build").
 
     nice -n 5 .venv/bin/python tests/generality/forecasts.py [--jobs 2]
         [--generators refsim,twonode,vanthoor] [--windows autumn,winter,summer] [--keep DIR]
+        [--model prototype+vent_control]
     .venv/bin/python tests/generality/forecasts.py --rescore DIR   # the forecasts again, no replay
 """
 
@@ -129,7 +130,9 @@ def rescore(folder: Path) -> list[dict]:
         res = pickle.loads(f.read_bytes())
         t0 = time.perf_counter()
         score_forecasts(res, steps_of(HORIZONS, res.dt))
-        results.append({"case": asdict(Case("forecast", generator, window)), **forecast_report(res),
+        vented = any(t.name == "q_vent_control" for t in res.model.terms)
+        case = Case("forecast", generator, window, model="prototype+vent_control" if vented else "prototype")
+        results.append({"case": asdict(case), **forecast_report(res),
                         "seconds": time.perf_counter() - t0})
     return results
 
@@ -139,6 +142,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2, help="parallel processes (2)")
     ap.add_argument("--generators", default=",".join(GENERATORS))
     ap.add_argument("--windows", default=",".join(MAIN_WINDOWS))
+    ap.add_argument("--model", default="prototype", choices=("prototype", "prototype+vent_control"),
+                    help="the replayed model (prototype; +vent_control: gateway/model/vent_control.py)")
     ap.add_argument("--json", default=str(RESULTS), help=f"results file ({RESULTS.relative_to(ROOT)})")
     ap.add_argument("--keep", metavar="DIR", help="also pickle each replay into DIR (to study the "
                     "forecasts without replaying again)")
@@ -151,7 +156,7 @@ def main(argv: list[str] | None = None) -> int:
     wins = [w for w in a.windows.split(",") if w]
     if bad := [w for w in wins if w not in MAIN_WINDOWS]:
         ap.error(f"unknown window(s) {bad}; known: {', '.join(MAIN_WINDOWS)}")
-    cases = [Case("forecast", g, w) for g in gens for w in wins]
+    cases = [Case("forecast", g, w, model=a.model) for g in gens for w in wins]
     t0 = time.perf_counter()
     if a.rescore:
         results = [r for r in rescore(Path(a.rescore))

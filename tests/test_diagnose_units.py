@@ -271,3 +271,27 @@ def test_signature_of_a_short_held_out_part_says_no_nan():
           "acf_1h": 0.7, "acf_1d": np.nan, "change_points": {}}
     text = res.describe(an, np.array(["2020-01-01T00:00"], dtype="datetime64[s]"), 0)
     assert "nan" not in text and "autocorrelation 0.70 at 1 h" in text
+
+
+def test_vents_opened_above_a_setpoint_are_kept_in_the_base():
+    """Data from the structured prototype + vents a controller opens above 24 °C (hot sunny
+    days, T_in well above it): the base structure keeps the vent controller part, which cuts the
+    inner validation error, and finds the setpoint; a house without one does not keep it."""
+    from gateway.diagnose.base import calibrate_base
+    from gateway.model.vent_control import ControlledVentilation
+
+    gh, _, m = _proto()
+    s = _series(n=2016, step=300)  # 7 days
+    s.columns["t_out"] = s.columns["t_out"] + 14.0  # a summer: 19-29 °C outside
+    x = drivers(s, gh)
+    vented = m.with_terms(ControlledVentilation(gh.air_density))
+    truth = vented.defaults(gh)
+    truth[vented.index("c_vc")], truth[vented.index("t_vc")] = 4e-4, 24.0
+    for model, theta, want in ((vented, truth, True), (m, m.defaults(gh), False)):
+        x["t_in"] = model.free_run(theta[None], x, gh, 300.0)[0]
+        got, th, log = calibrate_base(m, gh, x, 300.0, 1344, 72, 0, lambda msg: None)
+        (vc,) = [e for e in log if e["structure"] == "vent controller"]
+        assert vc["kept"] is want, log
+        if want:
+            assert vc["validation_mse"] < 0.5 * log[0]["validation_mse"]
+            assert abs(th[got.index("t_vc")] - 24.0) < 1.0

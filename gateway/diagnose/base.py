@@ -2,7 +2,8 @@
 structure").
 
 The thesis model + an effective heat capacity (+ a long-wave sky loss where it has none) is
-fitted first; then the optional parts (a radiative sky loss where the model has only its own,
+fitted first; then the optional parts (vents a controller opens above a setpoint, where the
+model has an air-exchange term; a radiative sky loss where the model has only its own,
 wind-scaled one; a heat store; a constant sensor offset) are tried in turn from the fitted base,
 and each is kept only if the base extrapolates better: fitted on the first part of C, judged on
 its last part (an inner validation split, not in-sample BIC alone). RSBA explores,
@@ -21,6 +22,7 @@ from gateway.diagnose.fit import Shooting, fit_lm, fit_swarm, radiation_fit, win
 from gateway.diagnose.structure import STORE, SensorBias, SkyLoss, Structured, model_unit, structure
 from gateway.greenhouse import Greenhouse
 from gateway.model.model import Model
+from gateway.model.vent_control import ControlledVentilation
 
 BASE_ITERATIONS = 80
 OPTION_ITERATIONS = 40
@@ -77,6 +79,12 @@ def options(model: Structured, gh: Greenhouse) -> list[tuple[str, Callable[[Stru
         # constant reading error (docs/effects.md, "Base structure").
         out.insert(0, ("long-wave sky loss",
                        lambda m: m.with_terms(SkyLoss(model_unit(m, gh)))))
+    if any(t.name == "q_loss" for t in model.terms) and not any(
+            t.name == ControlledVentilation.name for t in model.terms):
+        # vents a climate computer opens above a setpoint, unseen by the kit: the summer
+        # balance's largest unmodelled flux (docs/effects.md, "Base structure")
+        out.insert(0, ("vent controller",
+                       lambda m: m.with_terms(ControlledVentilation(gh.air_density))))
     return out
 
 

@@ -82,7 +82,8 @@ def options(model: Structured, gh: Greenhouse) -> list[tuple[str, Callable[[Stru
     if any(t.name == "q_loss" for t in model.terms) and not any(
             t.name == ControlledVentilation.name for t in model.terms):
         # vents a climate computer opens above a setpoint, unseen by the kit: the summer
-        # balance's largest unmodelled flux (docs/effects.md, "Base structure")
+        # balance's largest unmodelled flux (docs/effects.md, "Base structure"). Only beside
+        # the prototype's q_loss (III.19), whose lumped units (III.14) the term shares.
         out.insert(0, ("vent controller",
                        lambda m: m.with_terms(ControlledVentilation(gh.air_density))))
     return out

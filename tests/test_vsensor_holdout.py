@@ -81,3 +81,25 @@ def test_a_fold_fits_on_the_other_groups_and_scores_the_whole_held_out_files(tmp
     with pytest.raises(ValueError, match="needs files inside and outside"):
         hg.run_fold("almeria-summer", [segs[0]], gh, "almeria", 0, 0.9, (), lambda *a: None)
 
+
+
+def test_score_gives_the_held_out_figures_of_each_sensor(capsys):
+    """``score``: written sensors side by side on cached replays, as ``train --test`` scores."""
+    from gateway.vsensor.batch import baseline_paths
+    from training.vsensor.cli import main
+    from training.vsensor.dataset import build_segment
+    from training.vsensor.heldout import score_segment
+
+    gh = load_greenhouse(vd.GREENHOUSE)
+    model = vd.tiny_model()
+    arx = baseline_paths(model)["linear_arx"]
+    sets = [a for k, v in vd.TINY.items() for n, x in v.items() for a in ("--set", f"{k}.{n}={x}")]
+    assert main(["score", "--sensor", str(model), str(arx), "--data", str(vd.test_file()),
+                 "--greenhouse", vd.GREENHOUSE, "--model", "almeria", "--cache",
+                 str(vd.workdir() / "cache"), *sets, "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)["test-grower"]
+    seg = build_segment(vd.test_file(), gh, "almeria", vd.workdir() / "cache", vd.TINY)
+    want = score_segment(seg, {"pca_narx": model, "linear_arx": arx}, gh, "almeria")
+    assert got[str(model)]["flow"]["mae"] == pytest.approx(want["pca_narx"]["flow"]["mae"])
+    assert got[str(arx)]["flow_error_pct"] == pytest.approx(want["linear_arx"]["flow_error_pct"])
+    assert got[str(model)]["flow"]["mae"] != got[str(arx)]["flow"]["mae"]

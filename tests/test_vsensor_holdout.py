@@ -74,10 +74,14 @@ def test_a_fold_fits_on_the_other_groups_and_scores_the_whole_held_out_files(tmp
         assert s["pct_range"] == pytest.approx(100 * mae / np.ptp(ref[ok]), rel=1e-12)
         assert folds["almeria-summer"][key]["all"]["mae"] == s["mae"]
     pct = {g: f["own"]["all"]["pct_range"] for g, f in folds.items()}
+    mae = {g: f["own"]["all"]["mae"] for g, f in folds.items()}
     own = got["own_feedback"]
     assert got["headline"] == "own_feedback"
     assert own["grower_pct"] == pytest.approx(pct["almeria-summer"])
-    assert own["criterion"] == pytest.approx((pct["almeria-summer"] + pct["bleiswijk-autumn"]) / 2)
+    assert own["controller_mae"] == pytest.approx(mae["bleiswijk-autumn"])
+    assert own["criterion"] == pytest.approx((mae["almeria-summer"] + mae["bleiswijk-autumn"]) / 2)
+    assert own["criterion_pct"] == pytest.approx(
+        (pct["almeria-summer"] + pct["bleiswijk-autumn"]) / 2)
     with pytest.raises(ValueError, match="needs files inside and outside"):
         hg.run_fold("almeria-summer", [segs[0]], gh, "almeria", 0, 0.9, (), lambda *a: None)
 

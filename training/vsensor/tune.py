@@ -9,6 +9,7 @@ on the last 25 % of every file: overall, per file, over the grower's files (stem
 of an earlier pass); ``--log FILE`` appends the summary as one JSON line. For an ensemble it
 also scores the same members each fed its own past outputs (``own_feedback``: K loops averaged,
 ``fit.simulate_own_feedback``; ``--own-feedback`` makes it the figure, as train would).
+``--holdout-groups``: leave one site x season out instead (training/vsensor/holdout_groups.py).
 """
 
 from __future__ import annotations

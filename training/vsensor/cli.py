@@ -8,6 +8,8 @@
   (what ``train`` fits first, nothing written; training/vsensor/tune.py).
 - ``errors --sensor MODEL.onnx --data FILE...``: where a model's closed-loop validation error
   comes from (by file, wind, vents, hour, flow level, |ΔT|; training/vsensor/errors.py).
+- ``score --sensor MODEL.onnx... --data FILE...``: written sensors side by side on held-out
+  files (cached replays; the figures of ``python -m gateway vsensor``).
 - ``reference --data FILE... --greenhouse G --model KIND``: the explicit flow (the target)
   beside the simulator's truth, and what its peaks are made of (training/vsensor/reference.py).
 """
@@ -82,7 +84,36 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the written sensor to study (e.g. gateway/vsensor/models/almeria.onnx)")
     e.add_argument("--only", metavar="TEXT", help="the breakdowns over files whose name has TEXT")
     e.set_defaults(func=_errors)
+    s = sub.add_parser("score", help="written sensors side by side on held-out files (cached)",
+                       description="Run every MODEL in closed loop over each file (the gateway's "
+                       "VentSensor, minute by minute, first hour left out) against the explicit flow "
+                       "of the file's cached replays: the figures of python -m gateway vsensor and "
+                       "of train --test, without replaying a file twice.")
+    _data_args(s)
+    s.add_argument("--sensor", dest="onnx", nargs="+", required=True, metavar="MODEL.onnx",
+                   help="the written sensors to score")
+    s.add_argument("--json", action="store_true", help="print the scores as JSON")
+    s.set_defaults(func=_score)
     return parser
+
+
+def _score(args: argparse.Namespace) -> int:
+    import json
+
+    from training.vsensor.dataset import build_segment
+    from training.vsensor.heldout import score_segment, table
+
+    gh = load_greenhouse(args.greenhouse)
+    models = {str(p): Path(p) for p in args.onnx}
+    scores = {Path(p).stem: score_segment(build_segment(p, gh, args.model, args.cache,
+                                                        overrides(args.set) or None, args.seed),
+                                          models, gh, args.model) for p in args.data}
+    if args.json:
+        print(json.dumps({f: {m: {k: s[k] for k in ("flow", "q_vent", "flow_error_pct")}
+                              for m, s in per.items()} for f, per in scores.items()}, indent=1))
+    else:
+        print(table(scores), end="")
+    return 0
 
 
 def overrides(items: list[str]) -> dict[str, dict[str, float]]:
@@ -98,9 +129,9 @@ def overrides(items: list[str]) -> dict[str, dict[str, float]]:
 
 
 def _corpus(args: argparse.Namespace) -> int:
-    from training.vsensor.corpus import OTHER, TEST, TRAIN, write_corpus
+    from training.vsensor.corpus import FRESH, OTHER, TEST, TRAIN, write_corpus
 
-    runs = tuple(r for r in TRAIN + TEST + OTHER if args.only is None or r.name in args.only)
+    runs = tuple(r for r in TRAIN + TEST + FRESH + OTHER if args.only is None or r.name in args.only)
     t0 = time.perf_counter()
     for path in write_corpus(Path(args.out), runs):
         print(f"wrote {path}")

@@ -59,6 +59,12 @@ TEST = (
     Run("biskra-spring-grower", "sim", "biskra", "2019-04-10", 5, "grower", 21),
     Run("biskra-spring-controller", "sim", "biskra", "2019-04-20", 5, "controller", 22),
 )
+FRESH = (
+    Run("almeria-spring-grower", "sim", "almeria", "2020-04-25", 5, "grower", 24),
+    Run("biskra-autumn-grower", "sim", "biskra", "2019-10-20", 5, "grower", 25),
+)
+"""Second held-out set (seventh pass): a season never trained on at a training site, and
+another season at the test site; no setting was chosen with them (``out/fresh``)."""
 OTHER = (
     Run("other-house-spring", "sim", "almeria", "2020-04-15", 3, "controller", 31),
 )
@@ -105,10 +111,11 @@ def generate(run: Run, path: Path) -> Path:
     return path
 
 
-def write_corpus(out: Path, runs: tuple[Run, ...] = TRAIN + TEST + OTHER) -> list[Path]:
-    """Every run of ``runs`` under ``out/train``, ``out/test`` or ``out/other``."""
+def write_corpus(out: Path, runs: tuple[Run, ...] = TRAIN + TEST + FRESH + OTHER) -> list[Path]:
+    """Every run of ``runs`` under ``out/train``, ``out/test``, ``out/fresh`` or ``out/other``."""
     paths = []
     for run in runs:
-        part = "test" if run in TEST else "other" if run in OTHER else "train"
+        part = ("test" if run in TEST else "fresh" if run in FRESH else "other" if run in OTHER
+                else "train")
         paths.append(generate(run, out / part / f"{run.name}.csv"))
     return paths

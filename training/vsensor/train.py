@@ -114,10 +114,22 @@ def prepare(paths: list[str], gh: Greenhouse, kind: str, cache, overrides, seed:
                                       progress=lambda done: progress(advance=0, info=f"row {done}"),
                                       extra=extra))
         progress(advance=1)
-    seconds = time.perf_counter() - t0
+    return prepare_segments(segments, gh, kind, seed, pca_variance, extra,
+                            time.perf_counter() - t0)
+
+
+def upper_limits(segments: list[Segment], gh: Greenhouse, kind: str) -> list[np.ndarray]:
+    """The physical upper flow limit of every segment's minutes (``FlowLimits.upper``)."""
     limits = flow_limits(gh, kind)
-    upper = [limits.upper(s.x["t_in"] - s.x["t_out"], s.x["t_out"], s.x["wind"]) for s in segments]
-    split = fit.make_split(segments, upper)
+    return [limits.upper(s.x["t_in"] - s.x["t_out"], s.x["t_out"], s.x["wind"]) for s in segments]
+
+
+def prepare_segments(segments: list[Segment], gh: Greenhouse, kind: str, seed: int,
+                     pca_variance: float, extra: tuple[str, ...] = (),
+                     seconds: float = 0.0) -> Prepared:
+    """Split built segments, standardise and PCA their training rows (``prepare`` without the
+    replays: a held-out-group fold refits these on its own training files)."""
+    split = fit.make_split(segments, upper_limits(segments, gh, kind))
     names = [f.name for f in features(kind, extra)]
     mean, std = fit.scaler(split)
     z = (np.concatenate([i for i, _ in split.part("train")]) - mean) / std

@@ -9,6 +9,7 @@ on the last 25 % of every file: overall, per file, over the grower's files (stem
 of an earlier pass); ``--log FILE`` appends the summary as one JSON line. For an ensemble it
 also scores the same members each fed its own past outputs (``own_feedback``: K loops averaged,
 ``fit.simulate_own_feedback``; ``--own-feedback`` makes it the figure, as train would).
+``--holdout-groups``: leave one site x season out instead (training/vsensor/holdout_groups.py).
 """
 
 from __future__ import annotations
@@ -32,6 +33,10 @@ def add_tune_parser(sub: argparse._SubParsersAction, data_args) -> None:
                    help="also report the MAE over these files' validation quarters")
     p.add_argument("--label", default="", help="a name for the setting in the log")
     p.add_argument("--log", metavar="FILE", help="append the summary as one JSON line")
+    p.add_argument("--holdout-groups", nargs="*", default=None, metavar="GROUP",
+                   help="leave one site x season out instead (training/vsensor/holdout_groups.py): "
+                   "for each group (all, or the ones named) fit on the other groups' files and "
+                   "score the whole held-out files")
     p.set_defaults(func=run)
 
 
@@ -63,6 +68,8 @@ def run(args: argparse.Namespace) -> int:
     hidden = tuple(int(v) for v in args.hidden.split(","))
     net_seed = args.seed if args.net_seed is None else args.net_seed
     seeds = [net_seed + j for j in range(args.ensemble)]
+    if args.holdout_groups is not None:
+        return run_groups(args, gh, hidden, seeds)
     t0 = time.perf_counter()
     with threadpool_limits(1):
         prep = prepare(args.data, gh, args.model, args.cache, overrides(args.set) or None,
@@ -80,11 +87,7 @@ def run(args: argparse.Namespace) -> int:
                if len(seeds) > 1 else None)
     summary = {"label": args.label, "components": int(prep.loadings.shape[1]),
                "variance": float(np.sum(prep.share[: prep.loadings.shape[1]])),
-               "settings": {k: getattr(args, k) for k in ("hidden", "epochs", "rounds", "round_lr",
-                            "pca_variance", "ensemble", "feedback", "feedback_noise",
-                                                 "high_flow_weight", "target", "extra_features",
-                                                 "own_feedback")}
-               | {"net_seed": net_seed},
+               "settings": _settings(args, net_seed),
                "mae": m["mae"], "mae_pct_range": m["mae_pct_range"], "range": m["range"],
                "by_file": {k: v["mae"] for k, v in m["by_file"].items()},
                "groups": groups(m["by_file"], args.subset),
@@ -97,7 +100,61 @@ def run(args: argparse.Namespace) -> int:
                or [lg["closed_loop_val_mae"] for lg in log.get("members", [log])],
                "seconds": round(time.perf_counter() - t0, 1)}
     print(json.dumps(summary, indent=1))
-    if args.log:
-        with Path(args.log).open("a", encoding="utf-8") as f:
+    _append(args.log, summary)
+    return 0
+
+
+def _settings(args: argparse.Namespace, net_seed: int) -> dict:
+    return {k: getattr(args, k) for k in ("hidden", "epochs", "rounds", "round_lr", "pca_variance",
+                                          "ensemble", "feedback", "feedback_noise",
+                                          "high_flow_weight", "target", "extra_features",
+                                          "own_feedback")} | {"net_seed": net_seed}
+
+
+def _append(log: str | None, summary: dict) -> None:
+    if log:
+        with Path(log).open("a", encoding="utf-8") as f:
             f.write(json.dumps(summary) + "\n")
+
+
+def run_groups(args: argparse.Namespace, gh, hidden: tuple[int, ...], seeds: list[int]) -> int:
+    """``--holdout-groups``: one fold per site x season group (holdout_groups.py)."""
+    from threadpoolctl import threadpool_limits
+
+    from training.vsensor import fit
+    from training.vsensor import holdout_groups as hg
+    from training.vsensor.cli import overrides
+    from training.vsensor.train import prepare
+
+    extra = tuple(args.extra_features)
+    opts = fit.RowOptions(args.feedback_noise, args.high_flow_weight, args.target)
+
+    def fitter(split, mean, std, loadings):
+        return fit.fit_ensemble("pca_narx", split, mean, std, loadings, seeds, hidden, args.epochs,
+                                args.rounds, min(30, args.epochs), round_lr=args.round_lr,
+                                opts=opts, feedback=args.feedback)[0]
+
+    t0 = time.perf_counter()
+    folds = []
+    with threadpool_limits(1):
+        segments = prepare(args.data, gh, args.model, args.cache, overrides(args.set) or None,
+                           args.seed, args.pca_variance, lambda **k: None, extra).segments
+        groups = hg.file_groups([Path(s.source).stem for s in segments])
+        for g in args.holdout_groups or list(groups):
+            if g not in groups:
+                raise ValueError(f"--holdout-groups {g}: not one of {', '.join(groups)}")
+            folds.append(hg.run_fold(g, segments, gh, args.model, args.seed, args.pca_variance,
+                                     extra, fitter))
+            f = folds[-1]
+            print(f"fold {g}: {f.scores['all'].mae:.3f} m3 s-1 "
+                  f"(own feedback {f.own['all'].mae:.3f}) in {f.seconds:.0f} s" if f.own else
+                  f"fold {g}: {f.scores['all'].mae:.3f} m3 s-1 in {f.seconds:.0f} s", flush=True)
+    own = args.own_feedback and len(seeds) > 1
+    print(hg.describe(folds, own))
+    summary = {"label": args.label, "holdout_groups": True, "settings": _settings(args, seeds[0]),
+               "headline": "own_feedback" if own else "ensemble",
+               "summary": hg.summarise(folds), "own_feedback": hg.summarise(folds, True)
+               if len(seeds) > 1 else None, "folds": [hg.as_dict(f) for f in folds],
+               "seconds": round(time.perf_counter() - t0, 1)}
+    _append(args.log, summary)
     return 0

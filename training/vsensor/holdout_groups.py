@@ -1,0 +1,181 @@
+"""Leave one site and season out: a setting judged on houses, sites and seasons it never saw.
+
+``tune --holdout-groups`` groups the training files by site × season from their names
+(``almeria-early-winter-grower`` → ``almeria-winter``; every ``twonode-…`` file → ``twonode``;
+the vents' owner, ``grower`` or ``controller``, and ``early-``/``late-`` do not split a group).
+For each group (a fold) the PCA-NARX is fitted as ``train`` would fit it on **the other
+groups' files** (their own 75/25 split steers the early stopping and the closed-loop rounds;
+standardisation and PCA refitted on them), then run in closed loop over **the whole of every
+held-out file** (from its first minute, scored after the first hour, as the gateway scores a
+file) against the explicit flow. Per fold: MAE and % of range over all its files, over its
+grower's files and its controller's files apart (range: of those files' explicit flow).
+
+The selection figure (docs/vsensor.md, "Seventh pass") is ``criterion``: the mean over the
+folds of the grower's files' MAE, and the same over the controller's files, averaged: the
+goal's two kinds of vents weighted alike. (``criterion_pct``, the same on % of range, was the
+rule first written down: three held-out controller files barely ventilate, so their % of range
+is large for a tiny error.)
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gateway.greenhouse import Greenhouse
+from training.vsensor import fit
+from training.vsensor.dataset import Segment
+from training.vsensor.narx import Narx
+
+SEASONS = ("winter", "spring", "summer", "autumn")
+Fitter = Callable[[fit.Split, np.ndarray, np.ndarray, np.ndarray], Narx]
+"""(split, mean, std, loadings) → the fitted PCA-NARX (what ``tune`` fits, fixed settings)."""
+
+
+def group_of(stem: str) -> str:
+    """Site × season of a corpus file name (``twonode`` files: one group of their own)."""
+    parts = stem.split("-")
+    if parts[0] == "twonode":
+        return "twonode"
+    season = next((p for p in parts[1:] if p in SEASONS), None)
+    return f"{parts[0]}-{season}" if season else parts[0]
+
+
+def vents_of(stem: str) -> str:
+    return "grower" if "grower" in stem else "controller"
+
+
+def file_groups(stems: list[str]) -> dict[str, list[str]]:
+    """Group → its stems, groups in the order of their first file."""
+    out: dict[str, list[str]] = {}
+    for s in stems:
+        out.setdefault(group_of(s), []).append(s)
+    return out
+
+
+@dataclass
+class Score:
+    """Closed-loop flow error over some files' scored minutes."""
+
+    mae: float  # [m3 s-1]
+    pct_range: float  # MAE as % of the explicit flow's range over those minutes
+    n: int
+    range: tuple[float, float]
+
+
+def score(refs: list[np.ndarray], ests: list[np.ndarray]) -> Score | None:
+    """Pooled MAE and % of range of ``ests`` against ``refs`` (NaN references left out)."""
+    if not refs:
+        return None
+    ref, est = np.concatenate(refs), np.concatenate(ests)
+    ok = np.isfinite(ref)
+    if not ok.any():
+        return None
+    mae = float(np.mean(np.abs(est[ok] - ref[ok])))
+    lo, hi = float(ref[ok].min()), float(ref[ok].max())
+    return Score(mae, 100.0 * mae / (hi - lo) if hi > lo else float("nan"), int(ok.sum()), (lo, hi))
+
+
+def score_files(segments: list[Segment], sims: list[np.ndarray]) -> dict[str, Score | None]:
+    """``all``, ``grower`` and ``controller`` (by the file names) scores of whole files."""
+    stems = [Path(s.source).stem for s in segments]
+    out = {}
+    for key, keep in (("all", lambda v: True), ("grower", lambda v: v == "grower"),
+                      ("controller", lambda v: v == "controller")):
+        idx = [i for i, st in enumerate(stems) if keep(vents_of(st))]
+        out[key] = score([segments[i].flow for i in idx], [sims[i] for i in idx])
+    return out
+
+
+@dataclass
+class Fold:
+    group: str
+    held_out: list[str]  # stems
+    trained_on: list[str]
+    components: int
+    scores: dict[str, Score | None]  # all / grower / controller, the members on the ensemble's past
+    own: dict[str, Score | None] | None  # the same members each on its own past (K > 1)
+    by_file: dict[str, float]  # held-out stem → MAE (ensemble's past)
+    seconds: float
+
+
+def run_fold(group: str, segments: list[Segment], gh: Greenhouse, kind: str, seed: int,
+             pca_variance: float, extra: tuple[str, ...], fitter: Fitter) -> Fold:
+    """Fit on the files outside ``group`` and score the whole files inside it."""
+    from training.vsensor.train import prepare_segments, upper_limits
+
+    t0 = time.perf_counter()
+    inside = [s for s in segments if group_of(Path(s.source).stem) == group]
+    outside = [s for s in segments if group_of(Path(s.source).stem) != group]
+    if not inside or not outside:
+        raise ValueError(f"group {group!r}: needs files inside and outside it")
+    prep = prepare_segments(outside, gh, kind, seed, pca_variance, extra)
+    net = fitter(prep.split, prep.mean, prep.std, prep.loadings)
+    held = fit.Split(inside, upper_limits(inside, gh, kind), [0] * len(inside))
+    shared = fit.simulate(_shared(net), held)
+    own = fit.simulate_own_feedback(net, held) if len(net.members) > 1 else None
+    stems = [Path(s.source).stem for s in inside]
+    by_file = {st: score([s.flow], [y]).mae for st, s, y in zip(stems, inside, shared, strict=True)}
+    return Fold(group, stems, [Path(s.source).stem for s in outside], int(prep.loadings.shape[1]),
+                score_files(inside, shared), None if own is None else score_files(inside, own),
+                by_file, time.perf_counter() - t0)
+
+
+def _shared(net: Narx) -> Narx:
+    import dataclasses
+
+    return dataclasses.replace(net, own_feedback=False)
+
+
+def _mean(values: list[float]) -> float | None:
+    return float(np.mean(values)) if values else None
+
+
+def summarise(folds: list[Fold], own: bool = False) -> dict:
+    """Means over the folds (grower and controller apart) and the selection ``criterion``;
+    ``own``: the figures of the members each on its own past."""
+    def pick(f: Fold) -> dict[str, Score | None]:
+        return f.own if own and f.own is not None else f.scores
+
+    out: dict[str, float | None] = {}
+    for key in ("all", "grower", "controller"):
+        got = [pick(f)[key] for f in folds if pick(f)[key] is not None]
+        out[f"{key}_mae"] = _mean([s.mae for s in got])
+        out[f"{key}_pct"] = _mean([s.pct_range for s in got])
+    for name, unit in (("criterion", "mae"), ("criterion_pct", "pct")):
+        g, c = out[f"grower_{unit}"], out[f"controller_{unit}"]
+        out[name] = None if g is None or c is None else (g + c) / 2
+    return out
+
+
+def as_dict(fold: Fold) -> dict:
+    return asdict(fold)
+
+
+def describe(folds: list[Fold], own: bool) -> str:
+    """A Markdown table: one row per fold (MAE and % of range; grower and controller apart)."""
+    def cell(s: Score | None) -> str:
+        return "—" if s is None else f"{s.mae:.3f} ({s.pct_range:.2f} %)"
+
+    lines = ["| held-out group (files) | all | grower's files | controller's files |",
+             "| --- | --- | --- | --- |"]
+    for f in folds:
+        sc = f.own if own and f.own is not None else f.scores
+        lines.append(f"| {f.group} ({len(f.held_out)}) | {cell(sc['all'])} | "
+                     f"{cell(sc['grower'])} | {cell(sc['controller'])} |")
+    m = summarise(folds, own)
+
+    def mean_cell(key: str) -> str:
+        mae, pct = m[f"{key}_mae"], m[f"{key}_pct"]
+        return "—" if mae is None else f"{mae:.3f} ({pct:.2f} %)"
+
+    lines.append(f"| mean over folds | {mean_cell('all')} | {mean_cell('grower')} | "
+                 f"{mean_cell('controller')} |")
+    crit, pct = m["criterion"], m["criterion_pct"]
+    lines.append("\ncriterion (mean of the grower's and the controller's mean MAE): "
+                 + ("—" if crit is None else f"{crit:.3f} m3 s-1 (on % of range: {pct:.2f} %)"))
+    return "\n".join(lines)

@@ -51,9 +51,17 @@ def model_card(out: Path, meta: dict, metrics: dict, t18: dict, circle: dict, na
                nets: dict, rep_dir: Path, _pkg: str, heldout: str | None = None,
                held_files: tuple[str, ...] = ()) -> str:
     """The Markdown text of the card."""
+    rel = rep_dir.as_posix() if not rep_dir.is_absolute() else rep_dir.name
+    lines = (_inputs_and_structure(out, meta, names, nets)
+             + _validation(out, meta, metrics, heldout, held_files)
+             + _data(meta, t18, circle, names, rel))
+    return "\n".join(lines)
+
+
+def _inputs_and_structure(out: Path, meta: dict, names: list[str], nets: dict) -> list[str]:
+    """Title, the inputs in their order, delays and the graph's structure."""
     pca = meta["pca"]
     gh = meta["greenhouse"]
-    rel = rep_dir.as_posix() if not rep_dir.is_absolute() else rep_dir.name
     lines = [
         f"# Virtual ventilation sensor `{out.name}` (PCA-NARX, thesis §IV.3)",
         "",
@@ -97,6 +105,14 @@ def model_card(out: Path, meta: dict, metrics: dict, t18: dict, circle: dict, na
         f"interface: `{out.stem}.narx_no_pca.onnx` (same network on the standardised inputs, no "
         f"PCA) and `{out.stem}.linear_arx.onnx` (linear ARX on the same inputs and delays).",
         "",
+    ]
+    return lines
+
+
+def _validation(out: Path, meta: dict, metrics: dict, heldout: str | None,
+                held_files: tuple[str, ...]) -> list[str]:
+    """Closed-loop validation, the training settings and command, the held-out files."""
+    lines = [
         "## Validation (closed loop, the last quarter of every training file)",
         "",
         "| network | MAE [m3 s-1] | RMSE | MaxAE | R² | MAE % of range |",
@@ -133,7 +149,13 @@ def model_card(out: Path, meta: dict, metrics: dict, t18: dict, circle: dict, na
     else:
         lines += ["Figures on a site and season training never saw are in the README and "
                   "docs/vsensor.md.", ""]
-    lines += [
+    return lines
+
+
+def _data(meta: dict, t18: dict, circle: dict, names: list[str], rel: str) -> list[str]:
+    """The training files, the data analysis (correlation circle, table 18) and the limits."""
+    gh = meta["greenhouse"]
+    lines = [
         "## Training data",
         "",
         f"Greenhouse signature (another house is flagged, not trusted): {gh['signature']}.",
@@ -177,4 +199,4 @@ def model_card(out: Path, meta: dict, metrics: dict, t18: dict, circle: dict, na
         "maximum of the house at that moment].",
         "",
     ]
-    return "\n".join(lines)
+    return lines

@@ -137,6 +137,57 @@ def prepare_segments(segments: list[Segment], gh: Greenhouse, kind: str, seed: i
     return Prepared(segments, split, names, mean, std, loadings, share, seconds)
 
 
+def _metadata(kind: str, extra: tuple[str, ...], prep, nets: dict, gh: Greenhouse, overrides,
+              seed: int, settings: dict, pca_info: dict, metrics: dict) -> dict:
+    """The ONNX metadata the three written models share (docs/vsensor.md, "Training")."""
+    segments = prep.segments
+    ranges, input_mean = _ranges(prep.split, prep.names)
+    flows = np.concatenate([s.flow for s in segments])
+    return {
+        "model_kind": kind,
+        "features": [{"name": f.name, "unit": f.unit, "meaning": f.meaning, "tau_s": f.tau}
+                     for f in features(kind, extra)],
+        "input_delays": list(INPUT_DELAYS), "output_delays": list(OUTPUT_DELAYS), "step_s": STEP_S,
+        "training_ranges": ranges, "input_mean": input_mean,
+        "target": "explicit ventilation flow G [m3 s-1] of the adaptive model with the vent signal "
+                  "(III.31; III.32 inverted)",
+        "flow_range": [float(np.nanmin(flows)), float(np.nanmax(flows))],
+        "y0": nets["pca_narx"].y0,
+        "greenhouse": {"name": gh.name, "signature": greenhouse_signature(gh)},
+        "data_fingerprint": fingerprint(segments, kind, extra),
+        "sources": [{"file": Path(s.source).name, "sha256": s.sha256, "rows": len(s.flow)} for s in segments],
+        "online_overrides": overrides or {}, "seed": seed, "code_probe": code_probe(kind, gh),
+        "training_settings": settings,
+        "version": _version(), "pca": pca_info,
+        "metrics": metrics,
+    }
+
+
+def _write_models(nets: dict, n_inputs: int, base_meta: dict, out: Path) -> dict[str, Path]:
+    """The PCA-NARX at ``out``, the two baselines beside it (``<stem>.<network>.onnx``)."""
+    written = {}
+    for name, net in nets.items():
+        path = out if name == "pca_narx" else out.with_name(f"{out.stem}.{name}.onnx")
+        meta = {**base_meta, "network": name, "hidden_layers": list(net.hidden), "y0": net.y0,
+                **({"feedback_histories": net.histories} if net.histories > 1 else {})}
+        write_model(net, n_inputs, meta, path)
+        written[name] = path
+    return written
+
+
+def _score_heldout(paths: list[str], written: dict[str, Path], gh: Greenhouse, kind: str, cache,
+                   overrides, seed: int, extra: tuple[str, ...], progress) -> dict[str, dict]:
+    """``train --test``: each file scored closed loop with the written models (file stem →
+    network → score)."""
+    held = {}
+    for p in paths:
+        progress(description=f"held out {Path(p).name}")
+        seg = build_segment(p, gh, kind, cache, overrides, seed, extra=extra)
+        held[Path(p).stem] = heldout.score_segment(seg, written, gh, kind)
+        progress(advance=1)
+    return held
+
+
 def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: str | Path | None,
           overrides=None, seed: int = 0, hidden=fit.HIDDEN, epochs: int = 100, rounds: int = 6,
           progress: Callable[..., None] | None = None, report_dir: str | Path | None = None,
@@ -192,55 +243,28 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
     metrics, sims = {}, {}
     for name, net in nets.items():
         metrics[name], sims[name] = validation_metrics(net, split)
-    ranges, input_mean = _ranges(split, names)
     pca_info = {"components": kept, "variance_share": [float(v) for v in share[:kept]],
                 "variance_total": float(np.sum(share[:kept])), "all_shares": [float(v) for v in share]}
-    base_meta = {
-        "model_kind": kind,
-        "features": [{"name": f.name, "unit": f.unit, "meaning": f.meaning, "tau_s": f.tau}
-                     for f in features(kind, extra)],
-        "input_delays": list(INPUT_DELAYS), "output_delays": list(OUTPUT_DELAYS), "step_s": STEP_S,
-        "training_ranges": ranges, "input_mean": input_mean,
-        "target": "explicit ventilation flow G [m3 s-1] of the adaptive model with the vent signal "
-                  "(III.31; III.32 inverted)",
-        "flow_range": [float(np.nanmin(np.concatenate([s.flow for s in segments]))),
-                       float(np.nanmax(np.concatenate([s.flow for s in segments])))],
-        "y0": nets["pca_narx"].y0,
-        "greenhouse": {"name": gh.name, "signature": greenhouse_signature(gh)},
-        "data_fingerprint": fingerprint(segments, kind, extra),
-        "sources": [{"file": Path(s.source).name, "sha256": s.sha256, "rows": len(s.flow)} for s in segments],
-        "online_overrides": overrides or {}, "seed": seed, "code_probe": code_probe(kind, gh),
-        "training_settings": {"hidden": list(hidden), "epochs": epochs, "rounds": rounds,
-                              "round_lr": round_lr, "pca_variance": pca_variance,
-                              **({"ensemble": ensemble, "net_seed": net_seed}
-                                 if ensemble > 1 or net_seed != seed else {}),
-                              **({"feedback": feedback} if feedback != "member" else {}),
-                              **opts.as_settings(),
-                              **({"extra_features": list(extra)} if extra else {}),
-                              **({"own_feedback": True} if own_feedback and ensemble > 1 else {})},
-        "version": _version(), "pca": pca_info,
-        "metrics": {"validation_closed_loop": metrics,
-                    "training_log": {k: v for k, v in logs.items()}},
-    }
-    written = {}
-    for name, net in nets.items():
-        path = out if name == "pca_narx" else out.with_name(f"{out.stem}.{name}.onnx")
-        meta = {**base_meta, "network": name, "hidden_layers": list(net.hidden), "y0": net.y0,
-                **({"feedback_histories": net.histories} if net.histories > 1 else {})}
-        write_model(net, len(names), meta, path)
-        written[name] = path
+    settings = {"hidden": list(hidden), "epochs": epochs, "rounds": rounds,
+                "round_lr": round_lr, "pca_variance": pca_variance,
+                **({"ensemble": ensemble, "net_seed": net_seed}
+                   if ensemble > 1 or net_seed != seed else {}),
+                **({"feedback": feedback} if feedback != "member" else {}),
+                **opts.as_settings(),
+                **({"extra_features": list(extra)} if extra else {}),
+                **({"own_feedback": True} if own_feedback and ensemble > 1 else {})}
+    base_meta = _metadata(kind, extra, prep, nets, gh, overrides, seed, settings, pca_info,
+                          {"validation_closed_loop": metrics,
+                           "training_log": {k: v for k, v in logs.items()}})
+    written = _write_models(nets, len(names), base_meta, out)
     rep_dir = Path(report_dir) if report_dir else out.with_name(f"{out.stem}.report")
     rep_dir.mkdir(parents=True, exist_ok=True)
     circle = report.correlation_circle(segments, names, rep_dir / "correlation_circle.png")
     report.variance_plot(share, kept, rep_dir / "pca_variance.png")
     report.validation_plot(segments, sims, split.cut, rep_dir / "validation.png")
     t18 = report.table18(segments, names)
-    held = {}
-    for p in test_paths or []:
-        progress(description=f"held out {Path(p).name}")
-        seg = build_segment(p, gh, kind, cache, overrides, seed, extra=extra)
-        held[Path(p).stem] = heldout.score_segment(seg, written, gh, kind)
-        progress(advance=1)
+    held = _score_heldout(test_paths or [], written, gh, kind, cache, overrides, seed, extra,
+                          progress)
     seconds["total"] = time.perf_counter() - t0
     card = out.with_suffix(".md")
     card.write_text(model_card(out, base_meta, metrics, t18, circle, names, nets, rep_dir, gateway.__name__,

@@ -14,7 +14,6 @@ of the six windows ``corrected`` meets the issue-10 goals (``combined``'s in bra
 from __future__ import annotations
 
 import argparse
-import pickle
 import sys
 from pathlib import Path
 
@@ -26,22 +25,9 @@ if str(ROOT) not in sys.path:
 
 from gateway.estimate import correction  # noqa: E402
 from gateway.estimate import replay as rp  # noqa: E402
-from tests.generality.generators import HELD_OUT  # noqa: E402
-from tests.generality.outlook_variants import forecasts_by_steps  # noqa: E402
+from tests.generality.outlook_variants import forecasts_by_steps, tuning_replays  # noqa: E402
 
 MARKED = ("combined", "corrected")
-
-
-def _rescored(folder: Path) -> list:
-    """The tuning generators' kept replays, scored with the current code."""
-    out = []
-    for f in sorted(folder.glob("*.pkl")):
-        if f.stem.split("-", 1)[0] in HELD_OUT:
-            continue
-        res = pickle.loads(f.read_bytes())
-        rp.score_forecasts(res, rp.steps_of(rp.HORIZONS, res.dt))
-        out.append(res)
-    return out
 
 
 def _corrected(res, mask: np.ndarray, memory_s: float, ridge: float) -> None:
@@ -98,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("kept", help="the directory of tests/generality/forecasts.py --keep")
     a = ap.parse_args(argv)
-    replays = _rescored(Path(a.kept))
+    replays = [res for _, res in tuning_replays(a.kept)]
     print(f"{len(replays)} tuning windows\n")
     print("| variant | corrected / combined, measured | same, outlook | measured goal (combined) "
           "| outlook goal (combined) |\n| --- | --- | --- | --- | --- |")

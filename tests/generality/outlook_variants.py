@@ -212,3 +212,22 @@ def correct_with(res, extra: Mapping[int, np.ndarray], suffix: str) -> None:
         correction.features, correction.FEATURES = base_features, base_names  # type: ignore[assignment]
     for minutes, f in res.horizons.items():
         f[f"corrected{suffix}"] = out[int(round(minutes * 60.0 / res.dt))][starts[minutes]]
+
+
+def tuning_replays(folder) -> list:
+    """(file stem, replay) of the tuning generators' replays kept in ``folder`` (``forecasts.py
+    --keep``), forecasts scored with the current code; the held-out generator's are skipped."""
+    import pickle
+    from pathlib import Path
+
+    from gateway.estimate import replay as rp
+    from tests.generality.generators import HELD_OUT
+
+    out = []
+    for f in sorted(Path(folder).glob("*.pkl")):
+        if f.stem.split("-", 1)[0] in HELD_OUT:
+            continue
+        res = pickle.loads(f.read_bytes())
+        rp.score_forecasts(res, rp.steps_of(rp.HORIZONS, res.dt))
+        out.append((f.stem, res))
+    return out

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import argparse
 import itertools
-import pickle
 import sys
 from pathlib import Path
 
@@ -43,24 +42,13 @@ if str(ROOT) not in sys.path:
 from gateway.estimate import correction  # noqa: E402
 from gateway.estimate import replay as rp  # noqa: E402
 from gateway.model.vent_control import soft_excess  # noqa: E402
-from tests.generality.generators import HELD_OUT  # noqa: E402
+from tests.generality.outlook_variants import tuning_replays  # noqa: E402
 
 WARMUP = 86400.0
 """[s] day 1 is the estimator's warm-up, as in the suite."""
 SETPOINTS = np.arange(16.0, 31.0, 2.0)
 GAINS = (2e-5, 5e-5, 1e-4, 2e-4)
 """[s-1 K-1] of the oracle grid."""
-
-
-def _kept(folder: Path) -> list[tuple[str, rp.ReplayResult]]:
-    out = []
-    for f in sorted(folder.glob("*.pkl")):
-        if f.stem.split("-", 1)[0] in HELD_OUT:
-            continue
-        res = pickle.loads(f.read_bytes())
-        rp.score_forecasts(res, rp.steps_of(rp.HORIZONS, res.dt))
-        out.append((f.stem, res))
-    return out
 
 
 def _starts(res, minutes: int) -> tuple[np.ndarray, np.ndarray]:
@@ -228,7 +216,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("kept", help="the directory of tests/generality/forecasts.py --keep")
     ap.add_argument("--checks", default=",".join(CHECKS), help=f"of {', '.join(CHECKS)}")
     a = ap.parse_args(argv)
-    kept = _kept(Path(a.kept))
+    kept = tuning_replays(a.kept)
     for name in a.checks.split(","):
         print(f"\n{name} ({len(kept)} tuning windows)\n")
         CHECKS[name](kept)

@@ -46,6 +46,7 @@ def group_of(stem: str) -> str:
 
 
 def vents_of(stem: str) -> str:
+    """``grower`` (vents moved by hand) or ``controller``, from a corpus file name."""
     return "grower" if "grower" in stem else "controller"
 
 

@@ -46,7 +46,9 @@ def groups(by_file: dict[str, dict], subset: list[str]) -> dict[str, float | Non
         n = sum(by_file[s]["n"] for s in stems)
         return sum(by_file[s]["mae"] * by_file[s]["n"] for s in stems) / n if n else None
 
-    grower = [s for s in by_file if "grower" in s]
+    from training.vsensor.holdout_groups import vents_of
+
+    grower = [s for s in by_file if vents_of(s) == "grower"]
     out = {"grower": mae(grower), "controller": mae([s for s in by_file if s not in grower])}
     if subset:
         sub = [s for s in by_file if s in subset]

@@ -30,7 +30,7 @@ if str(ROOT) not in sys.path:
 
 from tests.generality.cases import Case, run  # noqa: E402
 from tests.generality.generators import GENERATORS, HELD_OUT  # noqa: E402
-from tests.generality.report import MAIN_WINDOWS  # noqa: E402
+from tests.generality.report import MAIN_WINDOWS, goals  # noqa: E402
 from tests.generality.suite import _commit, _init_worker  # noqa: E402
 
 RESULTS = ROOT / "bench" / "results" / "forecasts.json"
@@ -44,16 +44,6 @@ COLUMNS = (("persistence", "persistence"), ("arx", "ARX"), ("adaptive", "adaptiv
 
 NAMES = ("adaptive", "adaptive_kf", "combined", "corrected")
 """The forecasts whose goals are marked (each with its ``_outlook`` twin)."""
-
-
-def goals(h: dict[str, dict], name: str, minutes: int) -> tuple[bool, bool | None]:
-    """(measured-weather goal, outlook goal or None at 15 min) of issue 10 for forecast
-    ``name`` at one horizon: ≥ 30 % better than persistence and better than the ARX; with the
-    outlook ≥ 20 % better than persistence at 30 and 60 min."""
-    p = h["persistence"]["mae"]
-    measured = h[name]["mae"] <= 0.7 * p and h[name]["mae"] < h["arx"]["mae"]
-    outlook = None if minutes < 30 else h[f"{name}_outlook"]["mae"] <= 0.8 * p
-    return bool(measured), outlook
 
 
 def markdown(results: list[dict]) -> str:

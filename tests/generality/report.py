@@ -93,11 +93,19 @@ def _summary(rows: list[dict]) -> list[str]:
     return lines
 
 
-def _forecast_table(rows: list[dict]) -> list[str]:
-    """MAE per horizon; the goals (tests/generality/forecasts.py ``goals``) marked for
-    ``corrected``, the forecast the gateway publishes (rows of older runs without it: –)."""
-    from tests.generality.forecasts import goals  # imports this module's users: not at load
+def goals(h: dict[str, dict], name: str, minutes: int) -> tuple[bool, bool | None]:
+    """(measured-weather goal, outlook goal or None at 15 min) of issue 10 for forecast
+    ``name`` at one horizon: ≥ 30 % better than persistence and better than the ARX; with the
+    outlook ≥ 20 % better than persistence at 30 and 60 min."""
+    p = h["persistence"]["mae"]
+    measured = h[name]["mae"] <= 0.7 * p and h[name]["mae"] < h["arx"]["mae"]
+    outlook = None if minutes < 30 else h[f"{name}_outlook"]["mae"] <= 0.8 * p
+    return bool(measured), outlook
 
+
+def _forecast_table(rows: list[dict]) -> list[str]:
+    """MAE per horizon; the goals (:func:`goals`) marked for
+    ``corrected``, the forecast the gateway publishes (rows of older runs without it: –)."""
     cols = ("persistence", "arx", "adaptive", "corrected", "arx_outlook", "adaptive_outlook",
             "corrected_outlook")
     mark = {True: "✓", False: "✗", None: ""}

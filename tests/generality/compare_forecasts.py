@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from tests.generality.forecasts import goals  # noqa: E402
+from tests.generality.report import goals  # noqa: E402
 
 MARK = {True: "✓", False: "✗"}
 

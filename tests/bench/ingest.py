@@ -332,6 +332,28 @@ HEAP_CMD = ("micropython -X heapsize=96K -c 'import main; main.main()' with "
             "MICROPYPATH=tests/mcu_fakes:<mcu compiled by mpy-cross>:.frozen")
 
 
+def _compile_firmware(mpy_cross: str, src_root: Path, mpydir: Path) -> list[str]:
+    """Every firmware module compiled to .mpy under `mpydir`; returns their dotted names."""
+    modules = []
+    for src in src_root.rglob("*.py"):
+        if "typings_esp32" in src.parts:
+            continue
+        out = mpydir / src.relative_to(src_root).with_suffix(".mpy")
+        out.parent.mkdir(parents=True, exist_ok=True)
+        subprocess.run([str(mpy_cross), "-o", str(out), str(src)], check=True)
+        modules.append(".".join(src.relative_to(src_root).with_suffix("").parts))
+    return modules
+
+
+def _imported_heap(exe: str, tmpd: Path, env: dict[str, str], imports: str) -> int:
+    """gc.mem_alloc() [bytes] after importing `imports` alone and collecting (96 KB heap)."""
+    probe = tmpd / "probe.py"
+    probe.write_text(f"import gc\nimport {imports}\ngc.collect()\nprint(gc.mem_alloc())\n")
+    out = subprocess.run([exe, "-X", "heapsize=96K", str(probe)], cwd=tmpd, env=env,
+                         capture_output=True, text=True, check=True).stdout
+    return int(out.split()[-1])
+
+
 def bench_heap() -> dict[str, Any]:
     """Firmware modules compiled with mpy-cross, run from .mpy as on a board's filesystem.
 
@@ -358,30 +380,17 @@ def bench_heap() -> dict[str, Any]:
     with tempfile.TemporaryDirectory() as tmp:
         tmpd = Path(tmp)
         mpydir = tmpd / "mpy"
-        modules = []
-        for src in MCU.rglob("*.py"):
-            if "typings_esp32" in src.parts:
-                continue
-            out = mpydir / src.relative_to(MCU).with_suffix(".mpy")
-            out.parent.mkdir(parents=True, exist_ok=True)
-            subprocess.run([str(mpy_cross), "-o", str(out), str(src)], check=True)
-            modules.append(".".join(src.relative_to(MCU).with_suffix("").parts))
+        modules = _compile_firmware(mpy_cross, MCU, mpydir)
         cfg = json.loads((MCU / "config.example.json").read_text())
         cfg.update({"period_s": 0.1, "sample_ms": 20, "ack_timeout_ms": 200,
                     "gateway": {"host": "127.0.0.1", "port": 9}})  # discard port: no acks
         (tmpd / "config.json").write_text(json.dumps(cfg))
         # What the code of the UDP path and the fakes take when only imported.
         udp_path = [m for m in ("wire", "ring", "sensors", "link", "main") if m in modules]
-        probe = tmpd / "probe.py"
-        probe.write_text("import gc\nimport machine, dht, network, socket\n"
-                         f"import {', '.join(udp_path)}\ngc.collect()\nprint(gc.mem_alloc())\n")
         env = dict(os.environ, MICROPYPATH=f"{FAKES}:{mpydir}:.frozen")
-        code = int(subprocess.run([exe, "-X", "heapsize=96K", str(probe)], cwd=tmpd, env=env,
-                                  capture_output=True, text=True, check=True).stdout.split()[-1])
-        probe.write_text("import gc\nimport machine, dht, network, socket\ngc.collect()\n"
-                         "print(gc.mem_alloc())\n")
-        fakes = int(subprocess.run([exe, "-X", "heapsize=96K", str(probe)], cwd=tmpd, env=env,
-                                   capture_output=True, text=True, check=True).stdout.split()[-1])
+        fake_mods = "machine, dht, network, socket"
+        code = _imported_heap(exe, tmpd, env, f"{fake_mods}\nimport {', '.join(udp_path)}")
+        fakes = _imported_heap(exe, tmpd, env, fake_mods)
         # 160 records with no gateway answering: the ring fills, every record is resent.
         full = _mpy_heap("96K", tmpd, mpydir, records=160)
         runs = {}

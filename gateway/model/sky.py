@@ -23,7 +23,7 @@ the same value live as in a replay). Before the first daylight, and when the sit
 ``DEFAULT_CLOUD``, and the humidity still sets the clear-sky part.
 
 Checked against the measured apparent sky temperature of the Bleiswijk file (51 days of a
-pyrgeometer-derived tSky, tests/test_sky.py): RMSE 6.8 K, bias +0.6 K, against 14.9 K and
+pyrgeometer-derived tSky, tests/test_sky.py): RMSE 6.1 K, bias +1.3 K, against 14.9 K and
 −13.8 K for III.13 (docs/effects.md, "Sky temperature").
 
 References

@@ -173,14 +173,10 @@ class NaturalVentilation(FluxTerm):
         return self._buoyancy_wind(x, t) if b is None else (b, x["_q_vent.w"][t])
 
     def _buoyancy_wind(self, x, t: Index) -> tuple[np.ndarray, np.ndarray]:
-        """The buoyancy coefficient B = A_eff² 2 g h / T_out [m6 s-2 K-1] and the wind term
-        W = ((A_r + A_s)/2)² u² [m6 s-2] of III.31: drivers only, so computed before any
-        array of candidates."""
-        a_r, a_s = x["a_roof"][t], x["a_side"][t]
-        norm = np.sqrt(a_r * a_r + a_s * a_s)
-        a_eff = np.where(norm > 0, a_r * a_s / np.where(norm > 0, norm, 1.0), 0.0)
-        b = a_eff**2 * (2.0 * psy.GRAVITY * self.height) / (x["t_out"][t] + psy.KELVIN)
-        return b, ((a_r + a_s) / 2.0) ** 2 * x["wind"][t] ** 2
+        """III.31's drivers B and W (:func:`kittas_drivers`) at ``t``: drivers only, so computed
+        before any array of candidates."""
+        return kittas_drivers(x["a_roof"][t], x["a_side"][t], self.height, x["t_out"][t],
+                              x["wind"][t])
 
     @staticmethod
     def _still(b) -> bool:
@@ -212,6 +208,32 @@ class NaturalVentilation(FluxTerm):
         # root = 0 only where buoyancy = 0 (closed vents): the extra slope is 0 there
         extra = (0.5 * self.rho_cp_a) * p["c_ven_d"] * buoyancy / np.maximum(root, 1e-300)
         return s * t_out, s, s + extra
+
+
+def kittas_drivers(a_roof, a_side, height: float, t_out, wind) -> tuple[np.ndarray, np.ndarray]:
+    """The buoyancy coefficient B = A_eff² 2 g h / T_out [m6 s-2 K-1] (A_eff = A_r A_s /
+    sqrt(A_r² + A_s²)) and the wind term W = ((A_r + A_s)/2)² u² [m6 s-2] of III.31, so that
+    G = C_d sqrt(B |T_in − T_out| + C_w W) + G_leak. Areas [m2], height [m], T_out [°C],
+    u [m s-1]."""
+    a_r, a_s = np.asarray(a_roof, dtype=float), np.asarray(a_side, dtype=float)
+    norm = np.sqrt(a_r * a_r + a_s * a_s)
+    a_eff = np.where(norm > 0, a_r * a_s / np.where(norm > 0, norm, 1.0), 0.0)
+    b = a_eff**2 * (2.0 * psy.GRAVITY * height) / (np.asarray(t_out) + psy.KELVIN)
+    return b, ((a_r + a_s) / 2.0) ** 2 * np.asarray(wind) ** 2
+
+
+def ventilation_driver(gh: Greenhouse, dt_in_out, t_out, wind) -> np.ndarray:
+    """The ventilation driver D = sqrt(B |T_in − T_out| + C_w W) [m3 s-1] of III.31 through the
+    house's fully open vents, with the published wind coefficient C_w (0.09): the flow per unit
+    discharge coefficient, without leakage (G = C_d D + G_leak there). ΔT [K], T_out [°C],
+    u [m s-1]. The virtual sensor's opening target is G / D (docs/vsensor.md, eighth pass)."""
+    from gateway.model.drivers import roof_vent_area, side_vent_area
+
+    full = np.array(100.0)
+    b, w = kittas_drivers(roof_vent_area(gh.vents, full), side_vent_area(gh.vents, full),
+                          gh.vents.height_difference, t_out, wind)
+    c_w = next(p.default for p in NaturalVentilation.parameters if p.name == "c_ven_w")
+    return np.sqrt(b * np.abs(np.asarray(dt_in_out, dtype=float)) + c_w * w)
 
 
 def almeria_capacity(gh: Greenhouse) -> float:

@@ -40,6 +40,10 @@ from gateway.vsensor.features import (
 )
 
 FORMAT = "serra-vsensor/1"
+TARGET_KINDS = ("flow", "opening")
+"""What the graph's network predicts (metadata ``target_kind``, absent: ``flow``); either way the
+graph takes past flows and gives a flow. ``opening``: G / D, the graph computing the ventilation
+driver D from its inputs with the constants of ``opening_driver`` (docs/vsensor.md)."""
 RANGE_MARGIN = 0.02
 """An input counts as outside the training range beyond min − 2 % or max + 2 % of its span."""
 
@@ -155,6 +159,34 @@ def check_model(info: ModelInfo, kind: str, n_graph_features: int | None = None)
     if n_graph_features is not None and n_graph_features != len(code):
         raise ModelMismatch(
             f"{where}: the graph takes {n_graph_features} inputs, the metadata names {len(code)}")
+    check_target(info)
+
+
+def check_target(info: ModelInfo, gh: Greenhouse | None = None) -> None:
+    """Raise :class:`ModelMismatch` for a target kind this code does not serve, or an opening
+    model whose driver is not the model layer's (``ventilation_driver``) for ``gh``, the house
+    it was trained on (checked when ``gh`` is that house: a changed III.31 needs a retrain)."""
+    kind = info.meta.get("target_kind", "flow")
+    if kind not in TARGET_KINDS:
+        raise ModelMismatch(f"{info.path}: target kind {kind!r}, this code serves {TARGET_KINDS}")
+    if kind == "flow":
+        return
+    drv = info.meta.get("opening_driver")
+    if not isinstance(drv, dict) or not all(k in drv for k in ("b", "w", "floor", "t_out_ref_c",
+                                                               "floor_wind_m_s")):
+        raise ModelMismatch(f"{info.path}: an opening model without its driver's constants")
+    if gh is None:
+        return
+    from gateway.model.almeria import ventilation_driver
+
+    t_ref = float(drv["t_out_ref_c"])
+    code = {"b": float(ventilation_driver(gh, 1.0, t_ref, 0.0)) ** 2,
+            "w": float(ventilation_driver(gh, 0.0, t_ref, 1.0)) ** 2,
+            "floor": float(ventilation_driver(gh, 0.0, t_ref, float(drv["floor_wind_m_s"])))}
+    for k, v in code.items():
+        if not math.isclose(float(drv[k]), v, rel_tol=1e-6):
+            raise ModelMismatch(f"{info.path}: opening driver {k} {drv[k]} but the model layer "
+                                f"gives {v:.6g} for this house: retrain")
 
 
 class VentSensor:
@@ -179,6 +211,8 @@ class VentSensor:
         self.gh, self.kind = gh, model_kind
         trained = self.info.greenhouse.get("signature", {})
         self.mismatch = signature_mismatch(trained, greenhouse_signature(gh))
+        if trained == greenhouse_signature(gh):  # the house it was trained on: the code's driver
+            check_target(self.info, gh)
         self.limits = flow_limits(gh, model_kind)
         self.rho_cp_a = rho_cp_per_area(gh)
         self.extra = extras_of(model_kind, self.info.names)

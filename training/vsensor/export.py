@@ -8,7 +8,11 @@ members share the pre-processing; an ONNX ``Mean`` averages their outputs. A net
 a transformed flow (√G, log(1 + G): ``Narx.target``) has the transform on ``y_past`` and its
 inverse on the output in the graph, so the interface stays flows in, flow out. An ensemble whose
 members each hear their own past (``Narx.own_feedback``) takes ``y_past`` (N, K, 5) and gives
-``flow`` (N, K), one flow per member: the runtime clips each and averages them.
+``flow`` (N, K), one flow per member: the runtime clips each and averages them. A network on
+the effective opening (``Narx.target`` "opening", eighth pass) computes the ventilation driver
+D = max(sqrt(b |ΔT| + w u²), floor) from ``u``'s wind and T_in − T_out at every delay
+(``narx.Driver``, constants from the model layer), divides the past flows by D(k−1 … k−5) and
+multiplies its output by D(k).
 
 ``metadata_props`` carry everything the runtime checks and a reader needs: the feature names,
 order, units and filter time constants, the delays, the model kind the fluxes come from, the
@@ -26,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from gateway.vsensor.features import INPUT_DELAYS, OUTPUT_DELAYS
-from training.vsensor.narx import Narx
+from training.vsensor.narx import DT_IN_OUT, WIND, Narx
 
 OPSET = 17
 IR_VERSION = 8
@@ -45,6 +49,8 @@ def _y_transform(net: Narx, src: str, pre: str) -> list:
 
     if net.target == "identity":
         return []
+    if net.target == "opening":  # past flows → past openings G / D
+        return [helper.make_node("Div", [src, "d_past"], [f"{pre}y_t"], name=f"{pre}y_opening")]
     nodes = [helper.make_node("Relu", [src], [f"{pre}y_pos"], name=f"{pre}y_nonneg")]
     if net.target == "sqrt":
         return nodes + [helper.make_node("Sqrt", [f"{pre}y_pos"], [f"{pre}y_t"], name=f"{pre}y_sqrt")]
@@ -61,6 +67,35 @@ def _y_input(net: Narx, src: str, pre: str) -> list:
             helper.make_node("Div", [f"{pre}y_c", "y_std"], [f"{pre}y_s"], name=f"{pre}y_reduce"),
             helper.make_node("Concat", ["z_flat", f"{pre}y_s"], [f"{pre}h0"], axis=1,
                              name=f"{pre}narx_input")]
+
+
+def _driver(net: Narx) -> tuple[list, list]:
+    """(initialisers, nodes) of the ventilation driver D (N, 6) from ``u``, sliced into
+    ``d_now`` (N, 1), the delay 0, and ``d_past`` (N, 5), the delays 1–5."""
+    from onnx import TensorProto, helper
+
+    dr, d_in = net.driver, len(INPUT_DELAYS)
+    inits = [_const("drv_b", np.array([dr.b])), _const("drv_w", np.array([dr.w])),
+             _const("drv_floor", np.array([dr.floor])),
+             helper.make_tensor("drv_wind", TensorProto.INT64, [], [WIND]),
+             helper.make_tensor("drv_dt", TensorProto.INT64, [], [DT_IN_OUT]),
+             helper.make_tensor("drv_axis", TensorProto.INT64, [1], [1]),
+             helper.make_tensor("drv_0", TensorProto.INT64, [1], [0]),
+             helper.make_tensor("drv_1", TensorProto.INT64, [1], [1]),
+             helper.make_tensor("drv_end", TensorProto.INT64, [1], [d_in])]
+    n = helper.make_node
+    nodes = [n("Gather", ["u", "drv_wind"], ["drv_u"], axis=2, name="driver_wind"),
+             n("Gather", ["u", "drv_dt"], ["drv_dt_v"], axis=2, name="driver_dt"),
+             n("Mul", ["drv_u", "drv_u"], ["drv_u2"], name="driver_wind_sq"),
+             n("Mul", ["drv_u2", "drv_w"], ["drv_wt"], name="driver_wind_term"),
+             n("Abs", ["drv_dt_v"], ["drv_adt"], name="driver_abs_dt"),
+             n("Mul", ["drv_adt", "drv_b"], ["drv_bt"], name="driver_buoyancy_term"),
+             n("Add", ["drv_bt", "drv_wt"], ["drv_sum"], name="driver_sum"),
+             n("Sqrt", ["drv_sum"], ["drv_root"], name="driver_root"),
+             n("Max", ["drv_root", "drv_floor"], ["d_all"], name="driver_floor"),
+             n("Slice", ["d_all", "drv_0", "drv_1", "drv_axis"], ["d_now"], name="driver_now"),
+             n("Slice", ["d_all", "drv_1", "drv_end", "drv_axis"], ["d_past"], name="driver_past")]
+    return inits, nodes
 
 
 def build_graph(net: Narx, n_features: int):
@@ -83,8 +118,12 @@ def build_graph(net: Narx, n_features: int):
         nodes.append(helper.make_node("MatMul", ["z", "pca"], ["pcs"], name="pca"))
         z = "pcs"
     k_h = net.histories  # K > 1: every member on its own past outputs, y_past (N, K, 5)
-    if net.target != "identity":
+    if net.target in ("sqrt", "log1p"):
         inits.append(_const("one", np.array([1.0])))
+    if net.target == "opening":
+        d_inits, d_nodes = _driver(net)
+        inits += d_inits
+        nodes += d_nodes
     if k_h == 1:
         nodes += _y_transform(net, "y_past", "")
         nodes += [
@@ -133,6 +172,8 @@ def build_graph(net: Narx, n_features: int):
     elif net.target == "log1p":  # e^v − 1
         nodes += [helper.make_node("Exp", ["v"], ["v_exp"], name="v_exp"),
                   helper.make_node("Sub", ["v_exp", "one"], ["flow"], name="v_minus_one")]
+    elif net.target == "opening":  # opening × D(k): (N, K) × (N, 1)
+        nodes.append(helper.make_node("Mul", ["v", "d_now"], ["flow"], name="v_times_driver"))
     y_shape = ["N", d_out] if k_h == 1 else ["N", k_h, d_out]
     graph = helper.make_graph(
         nodes, f"serra_vsensor_{net.name}",

@@ -20,7 +20,7 @@ import numpy as np
 from gateway.vsensor.features import OUTPUT_DELAYS
 from gateway.vsensor.loop import closed_loop, fill_missing
 from training.vsensor.dataset import Segment
-from training.vsensor.narx import TARGETS, Layer, Narx, lag_rows, to_target
+from training.vsensor.narx import TARGETS, Driver, Layer, Narx, lag_rows, to_target
 
 TRAIN_SHARE = 0.75
 MIN_VARIANCE = 0.90
@@ -71,13 +71,27 @@ def pca(z: np.ndarray, seed: int, min_share: float = MIN_VARIANCE) -> tuple[np.n
 
 
 def rows(net: Narx, data: list[tuple[np.ndarray, np.ndarray]], lags: list[np.ndarray] | None = None):
-    """Stacked series-parallel rows (H, target) of ``data`` for ``net``'s pre-processing."""
+    """Stacked series-parallel rows (H, target) of ``data`` for ``net``'s pre-processing (the
+    ``opening`` target: the driver rides along as a last column, so its rows are the same)."""
     hs, ts = [], []
+    opening = net.target == "opening"
     for i, (u, y) in enumerate(data):
-        z, yp, t = lag_rows(net.reduce(u), y, None if lags is None else lags[i])
-        hs.append(net.head(z, yp))
-        ts.append((to_target(t, net.target) - net.y_mean) / net.y_std)
+        z = net.reduce(u)
+        if opening:
+            z = np.concatenate([z, net.driver.of(u)[:, None]], axis=1)
+        z, yp, t = lag_rows(z, y, None if lags is None else lags[i])
+        d = z[:, :, -1] if opening else None  # (N, 6): the driver at k, k-1 … k-5
+        if opening:
+            z = z[:, :, :-1]
+        hs.append(net.head(z, yp, None if d is None else d[:, 1:]))
+        ts.append((to_target(t, net.target, None if d is None else d[:, 0]) - net.y_mean) / net.y_std)
     return np.concatenate(hs), np.concatenate(ts)
+
+
+def train_targets(data: list[tuple[np.ndarray, np.ndarray]], opts: RowOptions) -> np.ndarray:
+    """Every training minute's target in the network's space (for its median and spread)."""
+    return np.concatenate([to_target(y, opts.target, None if opts.driver is None else opts.driver.of(u))
+                           for u, y in data])
 
 
 def simulate(net: Narx, split: Split) -> list[np.ndarray]:
@@ -127,11 +141,14 @@ class RowOptions:
 
     noise_sigma: float = 0.0  # see feedback_noise
     high_weight: float = 1.0  # loss weight of the rows above HIGH_FLOW_QUANTILE (the peaks)
-    target: str = "identity"  # narx.TARGETS: the flow, √G or log(1 + G) learnt and fed back
+    target: str = "identity"  # narx.TARGETS: the flow, √G, log(1 + G) or G / D learnt and fed back
+    driver: Driver | None = None  # the ``opening`` target's D (narx.Driver.of_greenhouse)
 
     def __post_init__(self) -> None:
         if self.target not in TARGETS:
             raise ValueError(f"target {self.target!r}: one of {TARGETS}")
+        if (self.target == "opening") != (self.driver is not None):
+            raise ValueError("the opening target needs its driver, and only it takes one")
 
     def as_settings(self) -> dict[str, float | str]:
         """The non-default options, for the model's training settings."""
@@ -143,6 +160,13 @@ class RowOptions:
         if self.high_weight != 1.0:
             out["high_flow_weight"] = self.high_weight
         return out
+
+
+def row_options(noise_sigma: float, high_weight: float, target: str, gh) -> RowOptions:
+    """The command line's :class:`RowOptions`; the ``opening`` target's driver from the
+    greenhouse ``gh`` (narx.Driver.of_greenhouse)."""
+    return RowOptions(noise_sigma, high_weight, target,
+                      Driver.of_greenhouse(gh) if target == "opening" else None)
 
 
 def row_weights(t: np.ndarray, threshold: float, high_weight: float) -> np.ndarray | None:
@@ -215,9 +239,11 @@ def start_member(name: str, split: Split, mean, std, projection, seed: int, hidd
     from sklearn.neural_network import MLPRegressor
 
     progress = progress or (lambda **k: None)
-    y_train = to_target(np.concatenate([y for _, y in split.part("train")]), opts.target)
+    y_train = train_targets(split.part("train"), opts)
+    flows = np.concatenate([y for _, y in split.part("train")])
     net = Narx(name, mean, std, projection, float(np.nanmedian(y_train)),
-               float(np.nanstd(y_train)) or 1.0, target=opts.target)
+               float(np.nanstd(y_train)) or 1.0, target=opts.target, driver=opts.driver,
+               flow_median=float(np.nanmedian(flows)) if opts.driver is not None else float("nan"))
     h, t = rows(net, split.part("train"))
     hv, tv = rows(net, split.part("validation"))
     noise = feedback_noise(opts.noise_sigma, -net.y_mean / net.y_std, np.random.default_rng(seed))
@@ -285,8 +311,7 @@ def _joint(name: str, split: Split, mean, std, projection, seeds: list[int], hid
     ms = [start_member(name, split, mean, std, projection, s, hidden, epochs, progress,
                        round_lr, opts) for s in seeds]
     stacks = [m.net.layers for m in ms]
-    ens = Narx(name, mean, std, projection, ms[0].net.y_mean, ms[0].net.y_std, stacks[0],
-               members=list(stacks), target=opts.target)
+    ens = dataclasses.replace(ms[0].net, layers=stacks[0], members=list(stacks))
     log = {"seeds": list(seeds), "feedback": "ensemble",
            "members": [m.log for m in ms], "ensemble_round_val_mae": [validation_mae(ens, split)]}
     best = (log["ensemble_round_val_mae"][0], list(stacks))
@@ -305,8 +330,7 @@ def _joint(name: str, split: Split, mean, std, projection, seeds: list[int], hid
     ens.layers = best[1][0]
     log["member_val_mae"], log["ensemble_val_mae_by_size"] = [], []
     for k in range(1, len(seeds) + 1):
-        one = Narx(name, mean, std, projection, ens.y_mean, ens.y_std, best[1][k - 1],
-                   target=opts.target)
+        one = dataclasses.replace(ens, layers=best[1][k - 1], members=[])
         log["member_val_mae"].append(validation_mae(one, split))
         ens.members = best[1][:k]
         log["ensemble_val_mae_by_size"].append(validation_mae(ens, split))

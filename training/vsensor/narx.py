@@ -8,7 +8,10 @@ so that one forward pass (numpy here, ONNX at run time: training/vsensor/export.
     y   = T⁻¹(layers(h) * y_std + y_mean)       (tanh hidden layers, linear output)
 
 T is the target transform (``target``: none, √G or log(1 + G)); y_mean and y_std are those of
-T(G) over the training rows.
+T(G) over the training rows. The ``opening`` target (eighth pass) divides every flow by the
+ventilation driver D of the same minute (:class:`Driver`, from the inputs' wind and
+T_in − T_out): the network learns and hears effective openings G / D, and its output is
+multiplied back by D(k), so flows still go in and come out.
 
 An ensemble (``members``: several layer stacks fitted from different seeds on the same rows)
 shares the pre-processing and averages the stacks' outputs; in closed loop every member hears
@@ -25,15 +28,58 @@ import numpy as np
 from gateway.vsensor.features import INPUT_DELAYS, OUTPUT_DELAYS
 
 ACTIVATIONS = ("tanh", "identity")
-TARGETS = ("identity", "sqrt", "log1p")
+TARGETS = ("identity", "sqrt", "log1p", "opening")
 """What the network learns and feeds back: the flow itself, its square root or log(1 + G)
-(a compressed target; the graph applies it to ``y_past`` and inverts it on the output)."""
+(a compressed target; the graph applies it to ``y_past`` and inverts it on the output), or the
+effective opening G / D (:class:`Driver`)."""
+WIND, DT_IN_OUT = 0, 1
+"""Columns of the inputs the driver reads (features.py: ``wind`` filtered, ``dt_in_out``)."""
+T_OUT_REF = 20.0
+"""[°C] The outside temperature in the driver's buoyancy term B = A_eff² 2 g h / T_out: fixed,
+because the graph's inputs carry T_in − T_out but not T_out (1/T_out moves D by ±2.5 % over
+0–35 °C)."""
+FLOOR_WIND = 0.25
+"""[m s-1] The driver's floor is D at this wind and ΔT = 0 (5.5 m3 s-1 for the Almería house):
+it bounds the opening where the air is still and the inside at the outside temperature."""
 
 
-def to_target(y: np.ndarray, target: str) -> np.ndarray:
-    """Flows [m3 s-1] → the network's target space (negative flows count as 0)."""
+@dataclass(frozen=True)
+class Driver:
+    """The ventilation driver D = max(sqrt(b |ΔT| + w u²), floor) [m3 s-1] of the inputs' wind u
+    (filtered) and ΔT = T_in − T_out: ``gateway.model.almeria.ventilation_driver`` at T_out =
+    T_OUT_REF, its two constants (b = D² at 1 K and no wind, w = D² at 1 m s-1 and ΔT 0) taken
+    from that function, so III.31 is written once (the graph computes the same expression)."""
+
+    b: float  # [m6 s-2 K-1]
+    w: float  # [m4]: D² [m6 s-2] per u² [m2 s-2]
+    floor: float  # [m3 s-1]
+    t_out_ref: float = T_OUT_REF
+
+    @classmethod
+    def of_greenhouse(cls, gh) -> Driver:
+        from gateway.model.almeria import ventilation_driver
+
+        d = [float(ventilation_driver(gh, dt, T_OUT_REF, u)) for dt, u in ((1.0, 0.0), (0.0, 1.0),
+                                                                          (0.0, FLOOR_WIND))]
+        return cls(d[0] ** 2, d[1] ** 2, d[2])
+
+    def of(self, u: np.ndarray) -> np.ndarray:
+        """D for inputs u (..., F) → (...)."""
+        root = np.sqrt(self.b * np.abs(u[..., DT_IN_OUT]) + self.w * u[..., WIND] ** 2)
+        return np.maximum(root, self.floor)
+
+    def as_meta(self) -> dict[str, float]:
+        return {"b": self.b, "w": self.w, "floor": self.floor, "t_out_ref_c": self.t_out_ref,
+                "floor_wind_m_s": FLOOR_WIND}
+
+
+def to_target(y: np.ndarray, target: str, d: np.ndarray | None = None) -> np.ndarray:
+    """Flows [m3 s-1] → the network's target space (negative flows count as 0; ``opening``:
+    G / D with ``d`` the driver of the same minutes)."""
     if target == "identity":
         return y
+    if target == "opening":
+        return y / d
     if target == "sqrt":
         return np.sqrt(np.maximum(y, 0.0))
     if target == "log1p":
@@ -41,10 +87,13 @@ def to_target(y: np.ndarray, target: str) -> np.ndarray:
     raise ValueError(f"target {target!r}: one of {TARGETS}")
 
 
-def from_target(v: np.ndarray, target: str) -> np.ndarray:
-    """The network's target space → flows [m3 s-1] (sqrt: max(v, 0)²; log1p: e^v − 1)."""
+def from_target(v: np.ndarray, target: str, d: np.ndarray | None = None) -> np.ndarray:
+    """The network's target space → flows [m3 s-1] (sqrt: max(v, 0)²; log1p: e^v − 1;
+    opening: v D)."""
     if target == "identity":
         return v
+    if target == "opening":
+        return v * d
     if target == "sqrt":
         return np.maximum(v, 0.0) ** 2
     if target == "log1p":
@@ -74,6 +123,8 @@ class Narx:
     members: list[list[Layer]] = field(default_factory=list)  # ensemble stacks; empty: ``layers``
     target: str = "identity"  # TARGETS: y_mean, y_std and the layers' output are in this space
     own_feedback: bool = False  # an ensemble's members each hear their own past (K histories)
+    driver: Driver | None = None  # the ``opening`` target's D
+    flow_median: float = float("nan")  # ``opening``: the training flows' median (y0)
 
     @property
     def histories(self) -> int:
@@ -83,6 +134,8 @@ class Narx:
     @property
     def y0(self) -> float:
         """The past flows before the first step [m3 s-1]: the training median."""
+        if self.target == "opening":
+            return self.flow_median
         return float(from_target(np.asarray(self.y_mean), self.target))
 
     @property
@@ -104,9 +157,11 @@ class Narx:
         z = (inputs - self.mean) / self.std
         return z if self.projection is None else z @ self.projection
 
-    def head(self, z_lags: np.ndarray, y_past: np.ndarray) -> np.ndarray:
-        """The network's input row: (N, D, m) reduced inputs and (N, 5) past flows → (N, D m + 5)."""
-        ys = (to_target(y_past, self.target) - self.y_mean) / self.y_std
+    def head(self, z_lags: np.ndarray, y_past: np.ndarray, d_past: np.ndarray | None = None
+             ) -> np.ndarray:
+        """The network's input row: (N, D, m) reduced inputs and (N, 5) past flows (``opening``:
+        with their drivers ``d_past`` (N, 5)) → (N, D m + 5)."""
+        ys = (to_target(y_past, self.target, d_past) - self.y_mean) / self.y_std
         return np.concatenate([z_lags.reshape(len(z_lags), -1), ys], axis=1)
 
     def forward(self, h: np.ndarray) -> np.ndarray:
@@ -122,12 +177,16 @@ class Narx:
         feedback (``histories`` K > 1) y_past is (N, K, 5), member j's own past at [:, j], and
         the result each member's flow (N, K)."""
         z = self.reduce(u)
+        d = self.driver.of(u) if self.target == "opening" else None  # (N, 6): k, k-1 … k-5
+        d_past = None if d is None else d[:, 1:]
         if self.histories > 1:
-            v = np.column_stack([_run(stack, self.head(z, y_past[:, j]))
+            v = np.column_stack([_run(stack, self.head(z, y_past[:, j], d_past))
                                  for j, stack in enumerate(self.stacks)])
+            d_now = None if d is None else d[:, :1]
         else:
-            v = self.forward(self.head(z, y_past))
-        return from_target(v * self.y_std + self.y_mean, self.target)
+            v = self.forward(self.head(z, y_past, d_past))
+            d_now = None if d is None else d[:, 0]
+        return from_target(v * self.y_std + self.y_mean, self.target, d_now)
 
 
 def _run(stack: list[Layer], h: np.ndarray) -> np.ndarray:

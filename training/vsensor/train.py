@@ -169,7 +169,9 @@ def _write_models(nets: dict, n_inputs: int, base_meta: dict, out: Path) -> dict
     for name, net in nets.items():
         path = out if name == "pca_narx" else out.with_name(f"{out.stem}.{name}.onnx")
         meta = {**base_meta, "network": name, "hidden_layers": list(net.hidden), "y0": net.y0,
-                **({"feedback_histories": net.histories} if net.histories > 1 else {})}
+                **({"feedback_histories": net.histories} if net.histories > 1 else {}),
+                **({"target_kind": "opening", "opening_driver": net.driver.as_meta()}
+                   if net.target == "opening" else {})}
         write_model(net, n_inputs, meta, path)
         written[name] = path
     return written
@@ -207,9 +209,10 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
     , ``feedback_noise`` and ``high_flow_weight``: the closed-loop rounds on each member's or the
     ensemble's feedback, the noise on the past outputs of the training rows and the loss weight
     of the rows above the targets' 90th percentile (fit.fit_ensemble, fit.RowOptions); ``target``
-    the flow, √G or log(1 + G) as what the NARX networks learn and feed back (narx.TARGETS; the
-    linear ARX stays on the flow); ``extra_features``: derived inputs after the base ones
-    (features.EXTRAS; the runtime computes what the model's metadata names); ``own_feedback``:
+    the flow, √G, log(1 + G) or the effective opening G / D as what the NARX networks learn and
+    feed back (narx.TARGETS; the linear ARX stays on the flow); ``extra_features``: derived
+    inputs after the base ones (features.EXTRAS; the runtime computes what the model's metadata
+    names); ``own_feedback``:
     deployed, every member of an ensemble hears its own past outputs (K output histories in the
     graph and the runtime) instead of the ensemble's; the fit is the same."""
     if not fit.MIN_VARIANCE <= pca_variance <= 1.0:
@@ -218,7 +221,7 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
         raise ValueError(f"ensemble {ensemble}: at least one network")
     net_seed = seed if net_seed is None else net_seed
     seeds = [net_seed + j for j in range(ensemble)]
-    opts = fit.RowOptions(feedback_noise, high_flow_weight, target)
+    opts = fit.row_options(feedback_noise, high_flow_weight, target, gh)
     progress = progress or (lambda **k: None)
     out = Path(out)
     t0 = time.perf_counter()

@@ -57,9 +57,11 @@ def add_fit_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--high-flow-weight", type=float, default=1.0, metavar="W",
                    help="loss weight of the training rows whose target is above the targets' 90th "
                    "percentile, the others 1 (default 1: unweighted)")
-    p.add_argument("--target", choices=("identity", "sqrt", "log1p"), default="identity",
+    p.add_argument("--target", choices=("identity", "sqrt", "log1p", "opening"), default="identity",
                    help="what the NARX networks learn and feed back: the flow (default), its square "
-                   "root or log(1 + flow); the graph inverts it (flows in, flow out)")
+                   "root, log(1 + flow) or the effective opening flow / D (D: the ventilation "
+                   "driver of III.31 from wind and T_in - T_out); the graph inverts it (flows in, "
+                   "flow out)")
     p.add_argument("--extra-features", nargs="+", default=[], metavar="NAME",
                    choices=("dvp_in_out", "wind_dt"),
                    help="derived inputs after the base ones (gateway.vsensor.features.EXTRAS; "

@@ -80,8 +80,8 @@ def run(args: argparse.Namespace) -> int:
         net, log = fit.fit_ensemble("pca_narx", prep.split, prep.mean, prep.std, prep.loadings,
                                     seeds, hidden, args.epochs, args.rounds, min(30, args.epochs),
                                     round_lr=args.round_lr,
-                                    opts=fit.RowOptions(args.feedback_noise, args.high_flow_weight,
-                                                        args.target),
+                                    opts=fit.row_options(args.feedback_noise, args.high_flow_weight,
+                                                         args.target, gh),
                                     feedback=args.feedback)
         net.own_feedback = args.own_feedback and len(seeds) > 1
         m, _ = validation_metrics(net, prep.split)
@@ -129,7 +129,7 @@ def run_groups(args: argparse.Namespace, gh, hidden: tuple[int, ...], seeds: lis
     from training.vsensor.train import prepare
 
     extra = tuple(args.extra_features)
-    opts = fit.RowOptions(args.feedback_noise, args.high_flow_weight, args.target)
+    opts = fit.row_options(args.feedback_noise, args.high_flow_weight, args.target, gh)
 
     def fitter(split, mean, std, loadings):
         return fit.fit_ensemble("pca_narx", split, mean, std, loadings, seeds, hidden, args.epochs,

@@ -210,8 +210,10 @@ def _scan(shoot: Shooting, theta: np.ndarray, e: Effect, last: float,
     times that fit equally well (SSE within one effective sample's share: a likelihood ratio of
     e) the latest is taken: "no change until the data shows it", so a judged block between two
     pieces of fit data is never predicted with a guessed effect; else the best one (the reported
-    start). An effect whose second output fixes its start (a transmission change on the measured
-    inside radiation) takes τ and amplitude from there."""
+    start). Starts are compared on the temperature's SSE with the second output's ΔBIC at each
+    start added (``Scan.score``): where the temperature leaves the start open, the output that
+    shows the change places it. An effect whose second output fixes its start (a transmission
+    change on the measured inside radiation) takes τ and amplitude from there."""
     m = shoot.model
     if e.evidence.fits_start(m, shoot.x):
         first = 0.0 if e.from_start else COARSE_TAU_S

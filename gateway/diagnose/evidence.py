@@ -31,5 +31,13 @@ class Evidence:
         """ΔBIC of the effect (τ, amplitude) on this output over ``segments`` (0: silent)."""
         return 0.0
 
+    def profile(self, model: Model, x: dict[str, np.ndarray], theta: np.ndarray,
+                segments: list[tuple[int, int]], taus: np.ndarray, amps: np.ndarray) -> np.ndarray:
+        """:meth:`delta_bic` for every (τ, amplitude) of a τ scan: the second output's share of
+        the scan's profile, so a start the temperature leaves open is placed where this output
+        shows the change."""
+        return np.array([self.delta_bic(model, x, theta, segments, float(t), float(a))
+                         for t, a in zip(taus, amps, strict=True)])
+
 
 NONE = Evidence()

@@ -8,7 +8,7 @@ Python iteration per step of the horizon serves the whole population.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -126,8 +126,6 @@ def fit_swarm(
         theta[:, free_idx] = u
         return shoot.mse(theta)
 
-    from dataclasses import replace
-
     st = replace(ALMERIA_OFFLINE, iterations=iterations)
     res = bat(cost, lower[free_idx], upper[free_idx], st, "rsba", np.random.default_rng(seed),
               x0=theta0[free_idx])
@@ -210,24 +208,32 @@ class Scan:
     sse: np.ndarray
     n: int
     pick: int | None = None
-    """Chosen index when it is not simply the lowest SSE (see ``latest_of_best``)."""
+    """Chosen index when it is not simply the lowest score (see ``latest_of_best``)."""
+    score: np.ndarray | None = None
+    """What the start is chosen on: the SSE, or the SSE times exp(ΔBIC_2 / n_e) when a second
+    output speaks (ΔBIC_2 its ΔBIC at each τ, n_e the temperature's effective samples: the
+    sum of both ΔBIC, bic.py, ordered as an SSE); None: the SSE."""
+
+    @property
+    def scores(self) -> np.ndarray:
+        return self.sse if self.score is None else self.score
 
     @property
     def best(self) -> int:
-        return int(np.argmin(self.sse)) if self.pick is None else self.pick
+        return int(np.argmin(self.scores)) if self.pick is None else self.pick
 
     def latest_of_best(self, rel: float) -> Scan:
-        """The latest τ of the contiguous run of τ (in time order) around the best whose SSE
-        is within ``rel`` × the best SSE of it. Start times between two pieces of fit data (a held-out
-        block, a night for a solar effect) fit equally well; the latest one says "no change
-        until the data shows it", and keeps a judged block free of a guessed effect."""
+        """The latest τ of the contiguous run of τ (in time order) around the best whose score
+        is within ``rel`` × the best score of it. Start times between two pieces of fit data (a
+        held-out block, a night for a solar effect) fit equally well; the latest one says "no
+        change until the data shows it", and keeps a judged block free of a guessed effect."""
         order = np.argsort(self.taus)
-        sse = self.sse[order]
-        i = int(np.argmin(sse))
-        limit = sse[i] * (1.0 + rel)
-        while i + 1 < len(sse) and sse[i + 1] <= limit:
+        score = self.scores[order]
+        i = int(np.argmin(score))
+        limit = score[i] * (1.0 + rel)
+        while i + 1 < len(score) and score[i + 1] <= limit:
             i += 1
-        return Scan(self.effect, self.taus, self.amps, self.sse, self.n, int(order[i]))
+        return replace(self, pick=int(order[i]))
 
 
 def scan_tau(

@@ -92,24 +92,34 @@ def exchange_step_bic(x: dict[str, np.ndarray], segments: list[tuple[int, int]],
     """(ΔBIC, c) of a downward step at τ [s] of the night-time vapour exchange fraction f in
     (1) (module docstring): negative ΔBIC = the humidity shows more air exchange from τ.
     (0, nan) when the humidity readings or the night hours on either side of τ are too few."""
+    dbic, c = exchange_step_profile(x, segments, np.array([tau]))
+    return float(dbic[0]), float(c[0])
+
+
+def exchange_step_profile(x: dict[str, np.ndarray], segments: list[tuple[int, int]],
+                          taus: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`exchange_step_bic` for every τ of ``taus`` (the night hours read once)."""
+    taus = np.asarray(taus, dtype=float)
+    out, coefs = np.zeros(len(taus)), np.full(len(taus), np.nan)
     nh = night_hours(x, segments)
     if nh is None:
-        return 0.0, float("nan")
-    after = nh["t"] >= tau
-    if after.sum() < MIN_HOURS or (~after).sum() < MIN_HOURS:
-        return 0.0, float("nan")
+        return out, coefs
     y, d = nh["excess"], nh["drive"]
     cols = [np.ones_like(y), d]
     if np.ptp(nh["wind"]) > 0:
         cols.append(d * nh["wind"])
     x0 = np.column_stack(cols)
-    x1 = np.column_stack(cols + [d * after])
     sse0 = _lstsq(x0, y)[1]
-    coef, sse1 = _lstsq(x1, y)
     n = _effective(nh["t"])
-    if coef[-1] >= 0.0:  # exchange did not rise: the constrained step is c = 0
-        return delta_bic(sse0, sse0, n, 1), float(coef[-1])
-    return delta_bic(sse1, sse0, n, 1), float(coef[-1])
+    for i, tau in enumerate(taus):
+        after = nh["t"] >= tau
+        if after.sum() < MIN_HOURS or (~after).sum() < MIN_HOURS:
+            continue
+        coef, sse1 = _lstsq(np.column_stack(cols + [d * after]), y)
+        coefs[i] = coef[-1]
+        # exchange did not rise: the constrained step is c = 0
+        out[i] = delta_bic(sse0 if coef[-1] >= 0.0 else sse1, sse0, n, 1)
+    return out, coefs
 
 
 def _lstsq(a: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
@@ -131,6 +141,10 @@ class HumidityEvidence(Evidence):
     starting inside the data predicts a change (n = 0 predicts none)."""
 
     def delta_bic(self, model, x, theta, segments, tau, amp) -> float:
-        if amp <= 0.0 or tau <= 0.0:
-            return 0.0
-        return exchange_step_bic(x, segments, tau)[0]
+        return float(self.profile(model, x, theta, segments, np.array([tau]), np.array([amp]))[0])
+
+    def profile(self, model, x, theta, segments, taus, amps) -> np.ndarray:
+        speaks = (np.asarray(amps) > 0.0) & (np.asarray(taus) > 0.0)
+        if not speaks.any():
+            return np.zeros(len(taus))
+        return np.where(speaks, exchange_step_profile(x, segments, taus)[0], 0.0)

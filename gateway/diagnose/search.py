@@ -18,6 +18,7 @@ this loop never asks an effect's name.
 from __future__ import annotations
 
 import time as _time
+from dataclasses import replace
 
 import numpy as np
 
@@ -209,8 +210,10 @@ def _scan(shoot: Shooting, theta: np.ndarray, e: Effect, last: float,
     times that fit equally well (SSE within one effective sample's share: a likelihood ratio of
     e) the latest is taken: "no change until the data shows it", so a judged block between two
     pieces of fit data is never predicted with a guessed effect; else the best one (the reported
-    start). An effect whose second output fixes its start (a transmission change on the measured
-    inside radiation) takes τ and amplitude from there."""
+    start). Starts are compared on the temperature's SSE with the second output's ΔBIC at each
+    start added (``Scan.score``): where the temperature leaves the start open, the output that
+    shows the change places it. An effect whose second output fixes its start (a transmission
+    change on the measured inside radiation) takes τ and amplitude from there."""
     m = shoot.model
     if e.evidence.fits_start(m, shoot.x):
         first = 0.0 if e.from_start else COARSE_TAU_S
@@ -221,8 +224,11 @@ def _scan(shoot: Shooting, theta: np.ndarray, e: Effect, last: float,
         return Scan(e, np.array([tau]), np.array([th[m.index(e.amp_name)]]), sse, npair)
     sse0, npair = shoot.sse(theta[None, :])
     rel = 1.0 / max(npair * shoot.dt / EFFECTIVE_S, 1.0)
+    n_e = effective_samples(npair, shoot.dt)
 
     def pick(sc: Scan) -> Scan:
+        ev = e.evidence.profile(m, shoot.x, theta, segments, sc.taus, sc.amps)
+        sc = replace(sc, score=sc.sse * np.exp(ev / n_e))  # second output's ΔBIC added (bic.py)
         return sc.latest_of_best(rel) if latest else sc
 
     grid = _tau_grid(e, last)
@@ -234,7 +240,7 @@ def _scan(shoot: Shooting, theta: np.ndarray, e: Effect, last: float,
     fine_taus = np.unique(np.clip(t_best + np.linspace(-1, 1, 37) * COARSE_TAU_S, lo,
                                   max(last, lo)))
     fine = pick(scan_tau(shoot, theta, e, fine_taus, float(sse0[0])))
-    return fine if fine.sse[fine.best] <= coarse.sse[coarse.best] * (1.0 + rel) else coarse
+    return fine if fine.scores[fine.best] <= coarse.scores[coarse.best] * (1.0 + rel) else coarse
 
 
 def _evidence(e: Effect, model, x, theta, segments, sc: Scan) -> float:

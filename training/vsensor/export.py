@@ -142,6 +142,27 @@ def build_graph(net: Narx, n_features: int):
             nodes += _y_transform(net, f"{pre}y_past", pre)
             nodes += _y_input(net, f"{pre}y_past" if net.target == "identity" else f"{pre}y_t", pre)
             heads.append(f"{pre}h0")
+    h = _networks(net, heads, inits, nodes)
+    nodes += _to_flow(net, h)
+    y_shape = ["N", d_out] if k_h == 1 else ["N", k_h, d_out]
+    graph = helper.make_graph(
+        nodes, f"serra_vsensor_{net.name}",
+        [helper.make_tensor_value_info("u", TensorProto.FLOAT, ["N", d_in, n_features]),
+         helper.make_tensor_value_info("y_past", TensorProto.FLOAT, y_shape)],
+        [helper.make_tensor_value_info("flow", TensorProto.FLOAT, ["N", k_h])],
+        initializer=inits,
+    )
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)],
+                              producer_name="serra training.vsensor", producer_version="1")
+    model.ir_version = IR_VERSION
+    return model
+
+
+def _networks(net: Narx, heads: list[str], inits: list, nodes: list) -> str:
+    """Append every member's layers (from its input ``heads[j]``) to ``inits``/``nodes``;
+    returns the name of the scaled output: the members' mean, or all of them (own feedback)."""
+    from onnx import helper
+
     outs = []
     for j, stack in enumerate(net.stacks):
         pre = "" if len(net.stacks) == 1 else f"m{j}_"
@@ -155,13 +176,20 @@ def build_graph(net: Narx, n_features: int):
                 nodes.append(helper.make_node("Tanh", [out], [nxt], name=f"{pre}tanh{i}"))
             h = nxt
         outs.append(h)
-    if k_h > 1:  # own feedback: every member's flow (the runtime clips and averages them)
+    if net.histories > 1:  # own feedback: every member's flow (the runtime clips and averages)
         nodes.append(helper.make_node("Concat", outs, ["h_all"], axis=1, name="members_out"))
-        h = "h_all"
-    elif len(outs) > 1:  # the ensemble: the members' mean
+        return "h_all"
+    if len(outs) > 1:  # the ensemble: the members' mean
         nodes.append(helper.make_node("Mean", outs, ["h_mean"], name="ensemble_mean"))
-        h = "h_mean"
-    nodes += [
+        return "h_mean"
+    return outs[0]
+
+
+def _to_flow(net: Narx, h: str) -> list:
+    """Nodes from the scaled output ``h`` to ``flow`` [m3 s-1]: unscale, then undo the target."""
+    from onnx import helper
+
+    nodes = [
         helper.make_node("Mul", [h, "y_std"], ["y_scaled"], name="y_unscale"),
         helper.make_node("Add", ["y_scaled", "y_mean"],
                          ["flow" if net.target == "identity" else "v"], name="y_uncentre"),
@@ -174,18 +202,7 @@ def build_graph(net: Narx, n_features: int):
                   helper.make_node("Sub", ["v_exp", "one"], ["flow"], name="v_minus_one")]
     elif net.target == "opening":  # opening × D(k): (N, K) × (N, 1)
         nodes.append(helper.make_node("Mul", ["v", "d_now"], ["flow"], name="v_times_driver"))
-    y_shape = ["N", d_out] if k_h == 1 else ["N", k_h, d_out]
-    graph = helper.make_graph(
-        nodes, f"serra_vsensor_{net.name}",
-        [helper.make_tensor_value_info("u", TensorProto.FLOAT, ["N", d_in, n_features]),
-         helper.make_tensor_value_info("y_past", TensorProto.FLOAT, y_shape)],
-        [helper.make_tensor_value_info("flow", TensorProto.FLOAT, ["N", k_h])],
-        initializer=inits,
-    )
-    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)],
-                              producer_name="serra training.vsensor", producer_version="1")
-    model.ir_version = IR_VERSION
-    return model
+    return nodes
 
 
 def write_model(net: Narx, n_features: int, meta: Mapping[str, Any], path: str | Path) -> bytes:

@@ -185,11 +185,14 @@ def flow_from_heat_loss(q_vent: np.ndarray, dt_in_out: np.ndarray, gh: Greenhous
 class FlowLimits:
     """The flow's physical range for one greenhouse: the Kittas flow (III.31) through fully open
     vents with the hard upper bounds of C_d and C_w (table 13 box, docs/model-notes.md §3), plus the
-    largest leakage the model allows. Lower limit 0: a flow is never negative."""
+    largest leakage the model allows. Lower limit 0: a flow is never negative.
 
-    a_roof: float  # [m2] roof opening at 100 %
-    a_side: float  # [m2] side opening at 100 %
-    height: float  # [m] between vent centres
+    G_max = C_d sqrt(k_buoy |ΔT| / T_out + C_w k_wind u²) + G_leak, with the drivers' constants
+    taken from the model layer (``gateway.model.almeria.kittas_drivers``: B = k_buoy / T_out [K],
+    W = k_wind u²)."""
+
+    k_buoy: float  # [m6 s-2] A_eff² 2 g h: III.31's buoyancy coefficient times T_out [K]
+    k_wind: float  # [m4] ((A_r + A_s) / 2)²: III.31's wind term per u²
     cd: float
     cw: float
     leak: float  # [m3 s-1]
@@ -197,27 +200,19 @@ class FlowLimits:
     def upper(self, dt_in_out: np.ndarray | float, t_out: np.ndarray | float,
               wind: np.ndarray | float) -> np.ndarray:
         """Largest possible flow [m3 s-1] now (a non-finite input gives the no-wind, 30 K value)."""
-        a_r, a_s = self.a_roof, self.a_side
-        norm = math.hypot(a_r, a_s)
-        a_eff = a_r * a_s / norm if norm > 0 else 0.0
         dt = _finite(np.abs(np.asarray(dt_in_out, dtype=float)), 30.0)
         tk = _finite(np.asarray(t_out, dtype=float), 0.0) + psy.KELVIN
         u = _finite(np.asarray(wind, dtype=float), 0.0)
-        buoy = a_eff**2 * 2.0 * psy.GRAVITY * self.height * dt / np.maximum(tk, 200.0)
-        wind_term = ((a_r + a_s) / 2.0) ** 2 * self.cw * u * u
-        return self.cd * np.sqrt(buoy + wind_term) + self.leak
-
+        buoy = self.k_buoy * dt / np.maximum(tk, 200.0)
+        return self.cd * np.sqrt(buoy + self.k_wind * self.cw * u * u) + self.leak
 
     def upper_now(self, dt_in_out: float, t_out: float, wind: float) -> float:
         """:meth:`upper` for one step in plain floats (the live path: no numpy call per step)."""
-        a_r, a_s = self.a_roof, self.a_side
-        norm = math.hypot(a_r, a_s)
-        a_eff = a_r * a_s / norm if norm > 0 else 0.0
         dt = abs(dt_in_out) if math.isfinite(dt_in_out) else 30.0
         tk = (t_out if math.isfinite(t_out) else 0.0) + psy.KELVIN
         u = wind if math.isfinite(wind) else 0.0
-        buoy = a_eff**2 * 2.0 * psy.GRAVITY * self.height * dt / max(tk, 200.0)
-        return self.cd * math.sqrt(buoy + ((a_r + a_s) / 2.0) ** 2 * self.cw * u * u) + self.leak
+        buoy = self.k_buoy * dt / max(tk, 200.0)
+        return self.cd * math.sqrt(buoy + self.k_wind * self.cw * u * u) + self.leak
 
 
 def _finite(x: np.ndarray, default: float) -> np.ndarray:
@@ -227,6 +222,7 @@ def _finite(x: np.ndarray, default: float) -> np.ndarray:
 def flow_limits(gh: Greenhouse, kind: str) -> FlowLimits:
     """Physical flow range of ``gh`` for fluxes of the ``kind`` model."""
     from gateway.model import build_model
+    from gateway.model.almeria import kittas_drivers
     from gateway.model.drivers import roof_vent_area, side_vent_area
 
     upper = dict(zip(*_names_upper(build_model("almeria", gh), gh), strict=True))
@@ -236,12 +232,11 @@ def flow_limits(gh: Greenhouse, kind: str) -> FlowLimits:
         leak = dict(zip(names, hi, strict=True))["c_loss"] * gh.volume  # ACH/3600 × V
     else:
         leak = upper["c_loss"]
-    return FlowLimits(
-        a_roof=float(roof_vent_area(gh.vents, np.array(100.0))),
-        a_side=float(side_vent_area(gh.vents, np.array(100.0))),
-        height=gh.vents.height_difference, cd=upper["c_ven_d"], cw=upper["c_ven_w"],
-        leak=float(leak),
-    )
+    full = np.array(100.0)
+    b, w = kittas_drivers(roof_vent_area(gh.vents, full), side_vent_area(gh.vents, full),
+                          gh.vents.height_difference, 0.0, 1.0)  # B at 0 °C, W at 1 m s-1
+    return FlowLimits(k_buoy=float(b) * psy.KELVIN, k_wind=float(w), cd=upper["c_ven_d"],
+                      cw=upper["c_ven_w"], leak=float(leak))
 
 
 def _names_upper(model, gh: Greenhouse) -> tuple[list[str], list[float]]:

@@ -11,6 +11,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -190,6 +191,19 @@ def _score_heldout(paths: list[str], written: dict[str, Path], gh: Greenhouse, k
     return held
 
 
+def _optional_settings(ensemble: int, net_seed: int, seed: int, feedback: str,
+                       opts: fit.RowOptions, extra: tuple[str, ...],
+                       own_feedback: bool) -> dict[str, Any]:
+    """The metadata's settings that are written only when they differ from the defaults (so a
+    default model's bytes do not change when an option is added)."""
+    return {**({"ensemble": ensemble, "net_seed": net_seed}
+               if ensemble > 1 or net_seed != seed else {}),
+            **({"feedback": feedback} if feedback != "member" else {}),
+            **opts.as_settings(),
+            **({"extra_features": list(extra)} if extra else {}),
+            **({"own_feedback": True} if own_feedback and ensemble > 1 else {})}
+
+
 def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: str | Path | None,
           overrides=None, seed: int = 0, hidden=fit.HIDDEN, epochs: int = 100, rounds: int = 6,
           progress: Callable[..., None] | None = None, report_dir: str | Path | None = None,
@@ -250,12 +264,8 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
                 "variance_total": float(np.sum(share[:kept])), "all_shares": [float(v) for v in share]}
     settings = {"hidden": list(hidden), "epochs": epochs, "rounds": rounds,
                 "round_lr": round_lr, "pca_variance": pca_variance,
-                **({"ensemble": ensemble, "net_seed": net_seed}
-                   if ensemble > 1 or net_seed != seed else {}),
-                **({"feedback": feedback} if feedback != "member" else {}),
-                **opts.as_settings(),
-                **({"extra_features": list(extra)} if extra else {}),
-                **({"own_feedback": True} if own_feedback and ensemble > 1 else {})}
+                **_optional_settings(ensemble, net_seed, seed, feedback, opts, extra,
+                                     own_feedback)}
     base_meta = _metadata(kind, extra, prep, nets, gh, overrides, seed, settings, pca_info,
                           {"validation_closed_loop": metrics,
                            "training_log": {k: v for k, v in logs.items()}})

@@ -236,6 +236,15 @@ def ventilation_driver(gh: Greenhouse, dt_in_out, t_out, wind) -> np.ndarray:
     return np.sqrt(b * np.abs(np.asarray(dt_in_out, dtype=float)) + c_w * w)
 
 
+def driver_constants(gh: Greenhouse, t_out_ref: float, floor_wind: float) -> tuple[float, float, float]:
+    """(b, w, floor) of :func:`ventilation_driver` at T_out = ``t_out_ref`` [°C]: b = D² at 1 K
+    and no wind [m6 s-2 K-1], w = D² at 1 m s-1 and ΔT 0 [m4], floor = D at ``floor_wind``
+    [m s-1] and ΔT 0 [m3 s-1] (the virtual sensor's opening target: D = sqrt(b|ΔT| + w u²))."""
+    d = [float(ventilation_driver(gh, dt, t_out_ref, u))
+         for dt, u in ((1.0, 0.0), (0.0, 1.0), (0.0, floor_wind))]
+    return d[0] ** 2, d[1] ** 2, d[2]
+
+
 def almeria_capacity(gh: Greenhouse) -> float:
     """C_ter = c_p rho V / A [J m-2 K-1] (III.24)."""
     return psy.CP_AIR * gh.air_density * gh.volume / gh.floor_area

@@ -177,12 +177,11 @@ def check_target(info: ModelInfo, gh: Greenhouse | None = None) -> None:
         raise ModelMismatch(f"{info.path}: an opening model without its driver's constants")
     if gh is None:
         return
-    from gateway.model.almeria import ventilation_driver
+    from gateway.model.almeria import driver_constants
 
-    t_ref = float(drv["t_out_ref_c"])
-    code = {"b": float(ventilation_driver(gh, 1.0, t_ref, 0.0)) ** 2,
-            "w": float(ventilation_driver(gh, 0.0, t_ref, 1.0)) ** 2,
-            "floor": float(ventilation_driver(gh, 0.0, t_ref, float(drv["floor_wind_m_s"])))}
+    code = dict(zip(("b", "w", "floor"), driver_constants(gh, float(drv["t_out_ref_c"]),
+                                                          float(drv["floor_wind_m_s"])),
+                    strict=True))
     for k, v in code.items():
         if not math.isclose(float(drv[k]), v, rel_tol=1e-6):
             raise ModelMismatch(f"{info.path}: opening driver {k} {drv[k]} but the model layer "

@@ -57,11 +57,9 @@ class Driver:
 
     @classmethod
     def of_greenhouse(cls, gh) -> Driver:
-        from gateway.model.almeria import ventilation_driver
+        from gateway.model.almeria import driver_constants
 
-        d = [float(ventilation_driver(gh, dt, T_OUT_REF, u)) for dt, u in ((1.0, 0.0), (0.0, 1.0),
-                                                                          (0.0, FLOOR_WIND))]
-        return cls(d[0] ** 2, d[1] ** 2, d[2])
+        return cls(*driver_constants(gh, T_OUT_REF, FLOOR_WIND))
 
     def of(self, u: np.ndarray) -> np.ndarray:
         """D for inputs u (..., F) → (...)."""

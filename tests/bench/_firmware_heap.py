@@ -13,11 +13,11 @@ from typing import Any
 
 
 def _mpy_heap(heap: str, workdir: Path, mpydir: Path, records: int = 60) -> dict[str, Any]:
-    from tests.mcu_fakes.hostenv import FAKES, micropython
+    from tests.mcu_fakes.hostenv import FAKE_PATH, micropython
 
     exe = micropython()
     assert exe
-    env = dict(os.environ, MICROPYPATH=f"{FAKES}:{mpydir}:.frozen")
+    env = dict(os.environ, MICROPYPATH=f"{FAKE_PATH}:{mpydir}:.frozen")
     for f in workdir.glob("boot.cnt*"):
         f.unlink()
     proc = subprocess.Popen([exe, "-X", f"heapsize={heap}", "-c", "import main; main.main()"],
@@ -44,7 +44,7 @@ def _mpy_heap(heap: str, workdir: Path, mpydir: Path, records: int = 60) -> dict
 
 
 HEAP_CMD = ("micropython -X heapsize=96K -c 'import main; main.main()' with "
-            "MICROPYPATH=tests/mcu_fakes:<mcu compiled by mpy-cross>:.frozen")
+            "MICROPYPATH=tests/mcu_fakes:training/kitsim/fakes_common:<mcu compiled by mpy-cross>:.frozen")
 
 
 def _compile_firmware(mpy_cross: str, src_root: Path, mpydir: Path) -> list[str]:
@@ -84,7 +84,7 @@ def bench_heap() -> dict[str, Any]:
     """
     import json
 
-    from tests.mcu_fakes.hostenv import FAKES, MCU, micropython, tool
+    from tests.mcu_fakes.hostenv import FAKE_PATH, MCU, micropython, tool
 
     exe = micropython()
     if exe is None:
@@ -102,7 +102,7 @@ def bench_heap() -> dict[str, Any]:
         (tmpd / "config.json").write_text(json.dumps(cfg))
         # What the code of the UDP path and the fakes take when only imported.
         udp_path = [m for m in ("wire", "ring", "sensors", "link", "main") if m in modules]
-        env = dict(os.environ, MICROPYPATH=f"{FAKES}:{mpydir}:.frozen")
+        env = dict(os.environ, MICROPYPATH=f"{FAKE_PATH}:{mpydir}:.frozen")
         fake_mods = "machine, dht, network, socket"
         code = _imported_heap(exe, tmpd, env, f"{fake_mods}\nimport {', '.join(udp_path)}")
         fakes = _imported_heap(exe, tmpd, env, fake_mods)

@@ -372,3 +372,14 @@ def test_humidity_dates_more_air_exchange_that_the_temperature_leaves_open():
         sc = _scan(shoot, base, e, 4.0 * 86400, [(0, n)], latest=latest)
         assert abs(sc.taus[sc.best] - tau) <= 3 * 3600.0, (latest, sc.taus[sc.best] / 3600)
         assert sc.amps[sc.best] == pytest.approx(3.0, rel=0.1)
+
+
+def test_structure_detail_lists_every_part():
+    """The structure log's detail names each part the structure has, the vent controller too."""
+    from gateway.diagnose.base import structure_detail
+    from gateway.model.vent_control import ControlledVentilation
+
+    gh, _, m = _proto()
+    assert structure_detail(m) == "effective heat capacity m_cap"
+    vented = m.with_terms(ControlledVentilation(gh.air_density))
+    assert structure_detail(vented) == "effective heat capacity m_cap, vent controller (c_vc, t_vc)"

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.mcu_fakes.hostenv import MCU, ROOT, micropython, run_mpy, tool
+from tests.mcu_fakes.hostenv import MCU, ROOT, micropython, mpy_env, run_mpy, tool
 
 FIRMWARE = sorted(p for p in MCU.rglob("*.py") if "typings_esp32" not in p.parts)
 STUBS = MCU / "typings_esp32"
@@ -260,3 +260,22 @@ def test_firmware_cobs_matches_gateway_framing(tmp_path: Path) -> None:
         assert bytes.fromhex(enc) == cobs_encode(case) + b"\0"
         assert ok == "True"
     assert lines[-1] == "bad -1 -1"
+
+
+@pytest.mark.skipif(micropython() is None, reason="micropython not installed")
+@pytest.mark.parametrize("fakes", ["firmware tests", "simulated kit"])
+def test_fake_watchdog_and_reset_end_the_board_with_their_status(fakes: str) -> None:
+    """The one copy of the fake watchdog and reset (training/kitsim/fakes_common), through each
+    fake `machine`: a watchdog fed in time lets the board run, one not fed within its timeout
+    (here a negative one: always late) ends it with status 75, ``machine.reset()`` with 76."""
+    from training.kitsim.kit import FAKES, FAKES_COMMON
+
+    env = mpy_env()
+    if fakes == "simulated kit":
+        env["MICROPYPATH"] = f"{FAKES}:{FAKES_COMMON}:{MCU}:.frozen"
+    for code, status, said in (
+            ("machine.WDT(timeout=60000).feed(); machine.WDT(timeout=-1).feed()", 75, "FAKE WDT"),
+            ("machine.reset()", 76, "FAKE machine.reset()")):
+        r = subprocess.run([str(micropython()), "-c", f"import machine\n{code}\nprint('ran on')"],
+                           env=env, capture_output=True, text=True, timeout=30)
+        assert (r.returncode, said in r.stdout, "ran on" in r.stdout) == (status, True, False), r

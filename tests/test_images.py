@@ -36,7 +36,7 @@ import pytest
 
 from gateway import protocol
 from gateway.store.keys import write_keys
-from tests.mcu_fakes.hostenv import FAKES, MCU, ROOT, micropython
+from tests.mcu_fakes.hostenv import FAKE_PATH, MCU, ROOT, micropython
 from tests.test_layering import imported_modules
 
 _spec = importlib.util.spec_from_file_location("serra_images_build", ROOT / "images" / "build.py")
@@ -376,7 +376,7 @@ def _run_bundle(fw: Path, code: str) -> subprocess.CompletedProcess[str]:
     """MicroPython with only the bundle (and the fake hardware modules) on its path."""
     exe = micropython()
     assert exe
-    env = dict(os.environ, MICROPYPATH=f"{FAKES}:{fw}:.frozen")
+    env = dict(os.environ, MICROPYPATH=f"{FAKE_PATH}:{fw}:.frozen")
     return subprocess.run([exe, "-X", "heapsize=96K", "-c", code], cwd=fw, env=env,
                           capture_output=True, text=True, timeout=60)
 

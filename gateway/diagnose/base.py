@@ -157,7 +157,10 @@ def _validation(model: Structured, theta: np.ndarray, x: dict, gh: Greenhouse, d
 
 
 def structure_detail(model: Structured) -> str:
+    """The base structure's parts, for the structure log (effective heat capacity first)."""
     parts = ["effective heat capacity m_cap"]
+    if any(t.name == ControlledVentilation.name for t in model.terms):
+        parts.append("vent controller (c_vc, t_vc)")
     if any(t.name == "q_lw_sky" for t in model.terms):
         parts.append("long-wave sky loss c_lw_sky")
     if any(t.name == WindLeakage.name for t in model.terms):

@@ -18,7 +18,7 @@ this loop never asks an effect's name.
 from __future__ import annotations
 
 import time as _time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -68,67 +68,113 @@ def diagnose(
     _check_length(series, s, n, horizon)  # before drivers(): it needs a first row
     x = drivers(coarse, gh)
     duration = float(x["_index"][-1])
-    blocks = jd.heldout_blocks(s, n, dt)
-    folds = jd.folds_of(blocks)
-    fit_sets = [[(0, s)] + folds[1 - j] for j in (0, 1)]  # fold j is judged on folds[j]
-
+    held = _Heldout.of(s, n, dt)
     model0, theta, structure_log = calibrate_base(base, gh, x, dt, s, horizon, seed, say)
-    base_theta = theta.copy()
-    model, effects = model0, []
-    thetas = [theta.copy(), theta.copy()]  # per fold
-    theta_all = theta.copy()
-    current_pred = jd.heldout(model, thetas, x, gh, dt, folds, s, n)
-    findings: list[Finding] = []
-    rejected: list[dict] = []
-    trials: list[dict] = []
     ctx = _Context(x, gh, dt, duration, horizon, s)
-
+    state = _Search(ctx, model0, theta, held)
     for rnd in range(1, MAX_EFFECTS + 1):
-        candidates = [e for e in library if e not in effects]
-        if not candidates:
+        if not _search_round(ctx, state, library, rnd, series, seed, say):
             break
-        say(f"round {rnd}: ranking {len(candidates)} candidate effects")
-        ranked = _rank(ctx, model0, model, theta_all, effects, candidates, [(0, n)])
-        # the reference: the model so far, refitted on each fold's fit set as a candidate is
-        ref = [_refit(ctx, model, thetas[j], fit_sets[j]) for j in (0, 1)]
-        ref_pred = jd.heldout(model, ref, x, gh, dt, folds, s, n)
-        passed = []
-        for scan_all, dbic_all in ranked[:TRIES_PER_ROUND]:
-            if dbic_all >= 0:
-                break
-            e = scan_all.effect
-            say(f"round {rnd}: trying {e.name}")
-            new_model = compose(model0, effects + [e], gh, duration)
-            fitted = [_fit_effect(ctx, new_model, model, thetas[j], e, fit_sets[j], seed + 17 * j)
-                      for j in (0, 1)]
-            new_thetas = [f[0] for f in fitted]
-            pred = jd.heldout(new_model, new_thetas, x, gh, dt, folds, s, n)
-            starts = [float(th[new_model.index(e.tau_name)]) for th in new_thetas]
-            verdict = jd.judge(current_pred, ref_pred, pred, x["t_in"], blocks, s, dt, starts,
-                               ctx.last)
-            verdict.delta_bic = [float(f[1]) for f in fitted]  # second output included
-            trials.append({"round": rnd, "effect": e.name, "ok": verdict.ok,
-                           "delta_bic": verdict.delta_bic, **verdict.stats})
-            if max(verdict.delta_bic) < 0 and verdict.ok:
-                passed.append((e, new_model, new_thetas, pred, verdict))
-            else:
-                rejected.append({"effect": e.name, "reason": verdict.why,
-                                 "delta_bic": verdict.delta_bic})
-        if not passed:
-            break
-        e, new_model, new_thetas, pred, verdict = _pick(passed, x["t_in"], s, dt, rejected)
-        th_all, dbic_full = _fit_effect(ctx, new_model, model, theta_all, e, [(0, n)], seed + 101,
-                                        latest=False)
-        findings.append(make_finding(e, new_model, th_all, series, current_pred, verdict,
-                                     dbic_full, x, s))
-        effects.append(e)
-        model, thetas, theta_all, current_pred = new_model, new_thetas, th_all, pred
-        say(f"kept {e.name}: {findings[-1].summary}")
-
-    d = _report(series, gh, model0, base_theta, model, thetas, theta_all, findings, rejected,
-                structure_log, k, s, n, blocks, folds, duration, t_start)
-    d.trials = trials
+    d = _report(series, gh, model0, theta, state.model, state.thetas, state.theta_all,
+                state.findings, state.rejected, structure_log, k, s, n, held.blocks, held.folds,
+                duration, t_start)
+    d.trials = state.trials
     return d
+
+
+@dataclass
+class _Heldout:
+    """The held-out part [s, n) cut into blocks dealt into two folds, and each fold's fit set:
+    the calibration part plus the other fold (fold j is judged on ``folds[j]``)."""
+
+    n: int
+    blocks: list[tuple[int, int]]
+    folds: list[list[tuple[int, int]]]
+    fit_sets: list[list[tuple[int, int]]]
+
+    @classmethod
+    def of(cls, s: int, n: int, dt: float) -> _Heldout:
+        blocks = jd.heldout_blocks(s, n, dt)
+        folds = jd.folds_of(blocks)
+        return cls(n, blocks, folds, [[(0, s)] + folds[1 - j] for j in (0, 1)])
+
+
+class _Search:
+    """The loop's state: the base, the model so far (the base + the effects kept), its
+    parameters per fold and on all data, its held-out prediction, and what was tried."""
+
+    def __init__(self, ctx: _Context, model0: Model, theta: np.ndarray, held: _Heldout) -> None:
+        self.model0, self.model, self.held = model0, model0, held
+        self.effects: list[Effect] = []
+        self.thetas = [theta.copy(), theta.copy()]  # per fold
+        self.theta_all = theta.copy()
+        self.current_pred = self.heldout(ctx, model0, self.thetas)
+        self.findings: list[Finding] = []
+        self.rejected: list[dict] = []
+        self.trials: list[dict] = []
+
+    def heldout(self, ctx: _Context, model: Model, thetas: list[np.ndarray]) -> dict:
+        """Cross-fitted held-out predictions of ``model`` (judge.heldout)."""
+        return jd.heldout(model, thetas, ctx.x, ctx.gh, ctx.dt, self.held.folds, ctx.split,
+                          self.held.n)
+
+
+def _search_round(ctx: _Context, st: _Search, library: tuple[Effect, ...], rnd: int,
+                  series: Series, seed: int, say: Progress) -> bool:
+    """One round of the add-best-effect loop: rank the effects not yet kept, try the best ones
+    against the model so far refitted the same way, keep the one with the most evidence of
+    those the judge passes. False when no candidate is left or none passes."""
+    candidates = [e for e in library if e not in st.effects]
+    if not candidates:
+        return False
+    say(f"round {rnd}: ranking {len(candidates)} candidate effects")
+    n = st.held.n
+    ranked = _rank(ctx, st.model0, st.model, st.theta_all, st.effects, candidates, [(0, n)])
+    # the reference: the model so far, refitted on each fold's fit set as a candidate is
+    ref = [_refit(ctx, st.model, st.thetas[j], st.held.fit_sets[j]) for j in (0, 1)]
+    ref_pred = st.heldout(ctx, st.model, ref)
+    passed = []
+    for scan_all, dbic_all in ranked[:TRIES_PER_ROUND]:
+        if dbic_all >= 0:
+            break
+        tried = _try_candidate(ctx, st, scan_all.effect, ref_pred, rnd, seed, say)
+        if tried is not None:
+            passed.append(tried)
+    if not passed:
+        return False
+    e, new_model, new_thetas, pred, verdict = _pick(passed, ctx.x["t_in"], ctx.split, ctx.dt,
+                                                    st.rejected)
+    th_all, dbic_full = _fit_effect(ctx, new_model, st.model, st.theta_all, e, [(0, n)],
+                                    seed + 101, latest=False)
+    st.findings.append(make_finding(e, new_model, th_all, series, st.current_pred, verdict,
+                                    dbic_full, ctx.x, ctx.split))
+    st.effects.append(e)
+    st.model, st.thetas, st.theta_all, st.current_pred = new_model, new_thetas, th_all, pred
+    say(f"kept {e.name}: {st.findings[-1].summary}")
+    return True
+
+
+def _try_candidate(ctx: _Context, st: _Search, e: Effect, ref_pred: dict, rnd: int, seed: int,
+                   say: Progress) -> tuple | None:
+    """Candidate ``e`` added to the model so far, fitted per fold and judged on the held-out
+    folds against ``ref_pred``: (effect, model, per-fold parameters, prediction, verdict) when
+    it passes, else None (logged in ``st.rejected``); every trial is logged in ``st.trials``."""
+    say(f"round {rnd}: trying {e.name}")
+    new_model = compose(st.model0, st.effects + [e], ctx.gh, ctx.duration)
+    fitted = [_fit_effect(ctx, new_model, st.model, st.thetas[j], e, st.held.fit_sets[j],
+                          seed + 17 * j) for j in (0, 1)]
+    new_thetas = [f[0] for f in fitted]
+    pred = st.heldout(ctx, new_model, new_thetas)
+    starts = [float(th[new_model.index(e.tau_name)]) for th in new_thetas]
+    verdict = jd.judge(st.current_pred, ref_pred, pred, ctx.x["t_in"], st.held.blocks,
+                       ctx.split, ctx.dt, starts, ctx.last)
+    verdict.delta_bic = [float(f[1]) for f in fitted]  # second output included
+    st.trials.append({"round": rnd, "effect": e.name, "ok": verdict.ok,
+                      "delta_bic": verdict.delta_bic, **verdict.stats})
+    if max(verdict.delta_bic) < 0 and verdict.ok:
+        return e, new_model, new_thetas, pred, verdict
+    st.rejected.append({"effect": e.name, "reason": verdict.why, "delta_bic": verdict.delta_bic})
+    return None
 
 
 def _check_length(series: Series, s: int, n: int, horizon: int) -> None:

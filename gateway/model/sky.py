@@ -115,9 +115,19 @@ def cloud_fraction(time: np.ndarray, i_glob: ArrayLike, site: tuple[float, float
     """Cloud fraction [-] at each sample, causal: from the clear-sky index of the last
     ``WINDOW_S`` of strong-sun samples, held through the night (module docstring).
     ``DEFAULT_CLOUD`` everywhere when ``site`` is None. ``step`` [s] is the sampling period."""
+    return carried_cloud(time, i_glob, site, step)[0]
+
+
+def carried_cloud(time: np.ndarray, i_glob: ArrayLike, site: tuple[float, float] | None,
+                  step: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(cloud fraction c, relaxation weight r, prior c_p) at each sample: between daytime
+    readings c = c_p + (c_last − c_p) e^(−Δt/RELAX_S), so r = 1 − e^(−Δt/RELAX_S) is the share
+    of the prior in c (0 where the cloud is read, 1 before the first reading and without a
+    site, where c_p = c = ``DEFAULT_CLOUD``). A level fitted in place of the prior enters as
+    c + r (level − c_p) (gateway/diagnose/night_sky.py)."""
     n = len(time)
     if site is None:
-        return np.full(n, DEFAULT_CLOUD)
+        return np.full(n, DEFAULT_CLOUD), np.ones(n), np.full(n, DEFAULT_CLOUD)
     i = np.asarray(i_glob, dtype=float)
     clear = clear_sky(time, *site)
     strong = (clear >= STRONG_CLEAR) & np.isfinite(i)
@@ -143,7 +153,9 @@ def cloud_fraction(time: np.ndarray, i_glob: ArrayLike, site: tuple[float, float
     j = np.maximum(idx, 0)
     decay = np.exp(-(t - t[j]) / RELAX_S)
     held = prior[j] + (c[j] - prior[j]) * decay
-    return np.where(idx >= 0, held, DEFAULT_CLOUD)
+    seen = idx >= 0
+    return (np.where(seen, held, DEFAULT_CLOUD), np.where(seen, 1.0 - decay, 1.0),
+            np.where(seen, prior[j], DEFAULT_CLOUD))
 
 
 class CloudTracker:

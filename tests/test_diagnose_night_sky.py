@@ -1,0 +1,80 @@
+"""The night sky level of the diagnosis's base (gateway/diagnose/night_sky.py, issue 10)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gateway.diagnose.base import fit
+from gateway.diagnose.fit import Shooting, drivers, window_starts
+from gateway.diagnose.night_sky import LEVEL, PRIOR, RELAX, NightSky
+from gateway.diagnose.structure import SkyLoss, model_unit
+from tests.test_diagnose_units import _proto, _series
+
+
+def test_level_at_the_prior_is_the_kits_sky_and_days_are_left_alone():
+    """With the level equal to the kit's prior the sky is the kit's (sky.py); by day, where the
+    cloud is read (r = 0), any level leaves it alone."""
+    gh, _, _ = _proto()
+    x = drivers(_series(n=2016, step=300), gh)
+    ns, t = NightSky(), slice(None)
+    np.testing.assert_allclose(ns.t_sky({LEVEL.name: x[PRIOR][None, :]}, x, t)[0], x["t_sky"],
+                               atol=1e-9)
+    clear = ns.t_sky({LEVEL.name: np.zeros((1, 1))}, x, t)[0]
+    read = x[RELAX] == 0.0
+    assert read.any() and (~read).any()
+    np.testing.assert_allclose(clear[read], x["t_sky"][read], atol=1e-9)
+    assert np.all(clear[~read] <= x["t_sky"][~read] + 1e-9)
+
+
+def _clear_nights(gh, m):
+    """7 days of dull days (the kit reads cloud ≈ 0.9 and carries it into the night) and clear
+    nights (true night cloud 0.05), from a house losing c_lw_sky = 5 W m-2 K-1 to the sky:
+    (drivers with the kit's sky and the simulated T_in, the model, the true parameters)."""
+    s = _series(n=2016, step=300)  # 7 days
+    s.columns["t_out"] = s.columns["t_out"] - 6.0  # 4-14 °C outside
+    s.columns["i_glob"] = 0.3 * s.columns["i_glob"]
+    x = drivers(s, gh)
+    assert x["cloud"][x[RELAX] > 0.5].mean() > 0.8  # the kit's night: overcast
+    plain = m.with_terms(SkyLoss(model_unit(m, gh)))
+    truth = plain.defaults(gh)
+    truth[plain.index("c_lw_sky")] = 5.0
+    true_x = dict(x)
+    true_x["t_sky"] = NightSky().t_sky({LEVEL.name: np.array([[0.05]])}, x, slice(None))[0]
+    x["t_in"] = plain.free_run(truth[None], true_x, gh, 300.0)[0]
+    return x, plain, truth
+
+
+def test_clear_nights_read_as_overcast_do_not_distort_the_sky_loss():
+    """On :func:`_clear_nights`, fitted on the kit's sky, the loss rate c_lw_sky / m_cap (the
+    identifiable quantity: fluxes and capacity scale together) is far from the truth; with the
+    night level as a base parameter the level and the rate come back."""
+    gh, _, m = _proto()
+    x, plain, truth = _clear_nights(gh, m)
+    starts = window_starts([(0, 2016)], 72, skip=72)
+    rate = {}
+    for model in (plain, plain.with_night_sky()):
+        th0 = model.defaults(gh)
+        th0[: len(truth)] = truth
+        th0[model.index("c_lw_sky")] = 2.0
+        th = fit(model, th0, Shooting(model, x, gh, 300.0, starts, 72), gh, 40, 0)
+        rate[model.night_sky is not None] = th[model.index("c_lw_sky")] / th[model.index("m_cap")]
+        if model.night_sky is not None:
+            assert abs(th[model.index(LEVEL.name)] - 0.05) < 0.05
+    assert abs(rate[False] - 5.0) > 2.0, rate  # the misread nights distort the plain fit
+    assert abs(rate[True] - 5.0) < 0.75, rate
+
+
+def test_the_base_calibration_fits_the_night_level(monkeypatch):
+    """With ``base.NIGHT_SKY_IN_BASE`` (off in the shipped choice, docs/effects.md "Base
+    structure"), ``base.calibrate_base`` carries the level and finds the clear nights the kit
+    read as overcast; without it the base has no level."""
+    from gateway.diagnose import base
+
+    gh, _, m = _proto()
+    x, _, _ = _clear_nights(gh, m)
+    got, _, _ = base.calibrate_base(m, gh, x, 300.0, 1344, 72, 0, lambda msg: None)
+    assert got.night_sky is None and LEVEL.name not in got.names
+    monkeypatch.setattr(base, "NIGHT_SKY_IN_BASE", True)
+    got, th, _ = base.calibrate_base(m, gh, x, 300.0, 1344, 72, 0, lambda msg: None)
+    assert got.night_sky is not None
+    assert th[got.index(LEVEL.name)] < 0.3

@@ -38,7 +38,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from gateway.diagnose.night_sky import NightSky
+from gateway.diagnose.night_sky import LEVEL, NightSky
 from gateway.greenhouse import Greenhouse
 from gateway.model import psychrometrics as psy
 from gateway.model import step as stepping
@@ -195,15 +195,15 @@ class Structured(Model):
         return q
 
     # -- one step of the two nodes ------------------------------------------------------------
-    def _inputs(self, p, x, t: Index):
+    def _inputs(self, p, x, t: Index, t_sky: np.ndarray | None = None):
         """The drivers as the terms should see them at ``t``: when a sensor term is an
         electronic offset of the temperature reading only (``electronic``), the inside vapour
         pressure computed from that reading and the RH (drivers.py, III.4) is recomputed
         from the corrected temperature; with a fitted night sky (night_sky.py), the sky
-        temperature is the one of the fitted level."""
+        temperature is the one of the fitted level (``t_sky`` when the caller computed it)."""
         overrides = {}
         if self.night_sky is not None:
-            overrides["t_sky"] = _Same(self.night_sky.t_sky(p, x, t))
+            overrides["t_sky"] = _Same(self.night_sky.t_sky(p, x, t) if t_sky is None else t_sky)
         elec = [sn for sn in self.sensors if getattr(sn, "electronic", False)]
         if elec and "rh_in" in x:
             off = 0.0
@@ -212,11 +212,13 @@ class Structured(Model):
             overrides["p_w_in"] = _Same(psy.vapour_pressure(x["t_in"][t] - off, x["rh_in"][t]))
         return _Override(x, overrides) if overrides else x
 
-    def advance(self, q, x, ta, ts, t: Index, c0: float, unit: float, dt: float):
+    def advance(self, q, x, ta, ts, t: Index, c0: float, unit: float, dt: float,
+                t_sky: np.ndarray | None = None):
         """Air (exponential step, store frozen), then store (exponential step, new air): the
         model layer's step (gateway/model/step.py) with the zero-order hold that the coarsened
-        inputs are built for (fit.coarsen: block means of the inputs over each step)."""
-        x = self._inputs(q, x, t)
+        inputs are built for (fit.coarsen: block means of the inputs over each step).
+        ``t_sky``: the fitted night sky's temperature at ``t`` if already computed."""
+        x = self._inputs(q, x, t, t_sky)
         g_sum, s_sum = 0.0, 0.0
         for term in self.terms:
             g, s = term.coefficients(q, x, ta, t)
@@ -292,12 +294,27 @@ class Structured(Model):
         ts = None
         if self.store:
             ts = self.observer(p, x, dt)[:, starts].reshape(-1, 1)
+        sky = self._sky_windows(p, x, starts, horizon)
         out = np.empty((n_p * n, horizon))
         for k in range(horizon):
             q = self._at(rows, x, t0 + k)
-            ta, ts = self.advance(q, x, ta, ts, t0 + k, c0, unit, dt)
+            ta, ts = self.advance(q, x, ta, ts, t0 + k, c0, unit, dt,
+                                  None if sky is None else sky[:, k : k + 1])
             out[:, k] = self.reading(rows, x, ta, t0 + k + 1)[:, 0]
         return out.reshape(n_p, n, horizon)
+
+    def _sky_windows(self, p, x, starts: np.ndarray, horizon: int) -> np.ndarray | None:
+        """The fitted night sky's temperature at steps 0..H-1 of every window, for every
+        candidate: (P·N, H), rows ordered as ``shoot``'s (candidate-major). Computed once per
+        call, not once per step: the inputs are gathered per window (N, H), not per row, and
+        the level is a base parameter no modulation changes. None without a night sky."""
+        if self.night_sky is None:
+            return None
+        assert not any(LEVEL.name in m.targets for m in self.modulations)
+        level = {LEVEL.name: p[LEVEL.name][:, :, None]}  # (P, 1, 1)
+        t = starts[:, None] + np.arange(horizon)[None, :]  # (N, H)
+        sky = self.night_sky.t_sky(level, x, t)  # (P, N, H)
+        return sky.reshape(-1, horizon)
 
     def one_step(self, theta, x, gh, dt):
         """(P, T): element t predicts the reading at t from the reading at t-1 (store from the

@@ -78,3 +78,20 @@ def test_the_base_calibration_fits_the_night_level(monkeypatch):
     got, th, _ = base.calibrate_base(m, gh, x, 300.0, 1344, 72, 0, lambda msg: None)
     assert got.night_sky is not None
     assert th[got.index(LEVEL.name)] < 0.3
+
+
+def test_shooting_sees_the_same_sky_as_the_step_by_step_run():
+    """``shoot`` computes the fitted sky once for all windows (structure._sky_windows); its runs
+    are the free runs that compute it step by step, for every candidate level and window."""
+    gh, _, m = _proto()
+    x, plain, truth = _clear_nights(gh, m)
+    model = plain.with_night_sky()
+    theta = np.repeat(model.defaults(gh)[None, :], 3, axis=0)
+    theta[:, : len(truth)] = truth
+    theta[:, model.index(LEVEL.name)] = [0.0, 0.4, 1.0]
+    starts, h = np.array([100, 700, 1500]), 72
+    got = model.shoot(theta, x, gh, 300.0, starts, h)
+    for i, s0 in enumerate(starts):
+        run = model.free_run(theta, x, gh, 300.0, start=s0, stop=s0 + h + 1)
+        np.testing.assert_array_equal(got[:, i, :], run[:, 1:])
+    assert np.ptp(got[:, :, -1], axis=0).max() > 0.1  # the level matters on these nights

@@ -86,9 +86,9 @@ def test_shooting_sees_the_same_sky_as_the_step_by_step_run():
     gh, _, m = _proto()
     x, plain, truth = _clear_nights(gh, m)
     model = plain.with_night_sky()
-    theta = np.repeat(model.defaults(gh)[None, :], 3, axis=0)
+    theta = np.repeat(model.defaults(gh)[None, :], 4, axis=0)
     theta[:, : len(truth)] = truth
-    theta[:, model.index(LEVEL.name)] = [0.0, 0.4, 1.0]
+    theta[:, model.index(LEVEL.name)] = [0.4, 0.0, 1.0, 0.4]  # one level twice
     starts, h = np.array([100, 700, 1500]), 72
     got = model.shoot(theta, x, gh, 300.0, starts, h)
     for i, s0 in enumerate(starts):

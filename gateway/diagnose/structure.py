@@ -306,15 +306,16 @@ class Structured(Model):
     def _sky_windows(self, p, x, starts: np.ndarray, horizon: int) -> np.ndarray | None:
         """The fitted night sky's temperature at steps 0..H-1 of every window, for every
         candidate: (P·N, H), rows ordered as ``shoot``'s (candidate-major). Computed once per
-        call, not once per step: the inputs are gathered per window (N, H), not per row, and
-        the level is a base parameter no modulation changes. None without a night sky."""
+        call, not once per step, and once per distinct level (a τ scan's candidates share
+        one): the inputs are gathered per window (N, H), not per row, and the level is a base
+        parameter no modulation changes. None without a night sky."""
         if self.night_sky is None:
             return None
         assert not any(LEVEL.name in m.targets for m in self.modulations)
-        level = {LEVEL.name: p[LEVEL.name][:, :, None]}  # (P, 1, 1)
+        levels, which = np.unique(p[LEVEL.name][:, 0], return_inverse=True)
         t = starts[:, None] + np.arange(horizon)[None, :]  # (N, H)
-        sky = self.night_sky.t_sky(level, x, t)  # (P, N, H)
-        return sky.reshape(-1, horizon)
+        sky = self.night_sky.t_sky({LEVEL.name: levels[:, None, None]}, x, t)  # (U, N, H)
+        return sky[which.ravel()].reshape(-1, horizon)
 
     def one_step(self, theta, x, gh, dt):
         """(P, T): element t predicts the reading at t from the reading at t-1 (store from the

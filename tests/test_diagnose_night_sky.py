@@ -86,6 +86,7 @@ def test_shooting_sees_the_same_sky_as_the_step_by_step_run():
     gh, _, m = _proto()
     x, plain, truth = _clear_nights(gh, m)
     model = plain.with_night_sky()
+    assert model.names[:-1] == plain.names  # the level last
     theta = np.repeat(model.defaults(gh)[None, :], 4, axis=0)
     theta[:, : len(truth)] = truth
     theta[:, model.index(LEVEL.name)] = [0.4, 0.0, 1.0, 0.4]  # one level twice
@@ -94,4 +95,11 @@ def test_shooting_sees_the_same_sky_as_the_step_by_step_run():
     for i, s0 in enumerate(starts):
         run = model.free_run(theta, x, gh, 300.0, start=s0, stop=s0 + h + 1)
         np.testing.assert_array_equal(got[:, i, :], run[:, 1:])
+    for row in theta:  # the plain model driven by each level's sky
+        sky_x = dict(x)
+        sky_x["t_sky"] = NightSky().t_sky({LEVEL.name: row[model.index(LEVEL.name)]}, x,
+                                          slice(None))
+        ref = plain.free_run(row[None, : len(plain.names)], sky_x, gh, 300.0)[0]
+        np.testing.assert_allclose(model.free_run(row[None], x, gh, 300.0)[0], ref,
+                                   rtol=0, atol=1e-12)
     assert np.ptp(got[:, :, -1], axis=0).max() > 0.1  # the level matters on these nights

@@ -354,8 +354,13 @@ class Structured(Model):
 
         ta, ts = restart(start)
         out[:, 0] = meas[start]
+        sky = None  # the fitted night sky's temperature at every step, computed once
+        if self.night_sky is not None:
+            assert not any(LEVEL.name in m.targets for m in self.modulations)
+            sky = self.night_sky.t_sky(p, x, slice(start, stop - 1))  # (P, stop-1-start)
         for k, t in enumerate(range(start, stop - 1), start=1):
-            ta, ts = self.advance(self._at(p, x, t), x, ta, ts, t, c0, unit, dt)
+            ta, ts = self.advance(self._at(p, x, t), x, ta, ts, t, c0, unit, dt,
+                                  None if sky is None else sky[:, k - 1 : k])
             out[:, k] = self.reading(p, x, ta, t + 1)[:, 0]
             if restart_after_gaps and np.isnan(ta[0, 0]):
                 ta, ts = restart(t + 1)

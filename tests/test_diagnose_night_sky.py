@@ -103,3 +103,22 @@ def test_shooting_sees_the_same_sky_as_the_step_by_step_run():
         np.testing.assert_allclose(model.free_run(row[None], x, gh, 300.0)[0], ref,
                                    rtol=0, atol=1e-12)
     assert np.ptp(got[:, :, -1], axis=0).max() > 0.1  # the level matters on these nights
+
+
+def test_the_guard_narrows_the_levels_box_around_the_kits_prior(monkeypatch):
+    """``base.NIGHT_SKY_WIDTH`` (None in the shipped choice: the whole 0..1) fits the level
+    within ± the width of its start, the kit's mean prior, clipped to 0..1; the level's
+    default stays inside its box."""
+    from gateway.diagnose import base
+
+    gh, _, m = _proto()
+    assert base.night_bounds(0.7) == (0.0, 1.0)
+    monkeypatch.setattr(base, "NIGHT_SKY_WIDTH", 0.2)
+    np.testing.assert_allclose(base.night_bounds(0.9), (0.7, 1.0))
+    for prior in (0.05, 0.3, 0.95):  # the default 0.6 is outside the first and last box
+        model = base.structure(m, gh, store=False).with_night_sky(*base.night_bounds(prior))
+        lower, upper = model.bounds(gh)
+        j = model.index(LEVEL.name)
+        np.testing.assert_allclose((lower[j], upper[j]),
+                                   (max(prior - 0.2, 0.0), min(prior + 0.2, 1.0)))
+        assert lower[j] <= model.defaults(gh)[j] <= upper[j]

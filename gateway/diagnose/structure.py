@@ -177,9 +177,9 @@ class Structured(Model):
     def with_modulation(self, m: Modulation) -> Structured:
         return replace(self, modulations=self.modulations + (m,), extra=self.extra + m.parameters)
 
-    def with_night_sky(self) -> Structured:
-        """The night sky level fitted as a base parameter (night_sky.py)."""
-        ns = NightSky()
+    def with_night_sky(self, lower: float = LEVEL.lower, upper: float = LEVEL.upper) -> Structured:
+        """The night sky level fitted as a base parameter (night_sky.py), within the bounds."""
+        ns = NightSky(lower, upper)
         return replace(self, night_sky=ns, extra=self.extra + ns.parameters)
 
     # -- parameters at a time ------------------------------------------------------------------

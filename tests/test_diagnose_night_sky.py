@@ -78,3 +78,47 @@ def test_the_base_calibration_fits_the_night_level(monkeypatch):
     got, th, _ = base.calibrate_base(m, gh, x, 300.0, 1344, 72, 0, lambda msg: None)
     assert got.night_sky is not None
     assert th[got.index(LEVEL.name)] < 0.3
+
+
+def test_shooting_sees_the_same_sky_as_the_step_by_step_run():
+    """``shoot`` computes the fitted sky once for all windows (structure._sky_windows); its runs
+    are the free runs that compute it step by step, for every candidate level and window."""
+    gh, _, m = _proto()
+    x, plain, truth = _clear_nights(gh, m)
+    model = plain.with_night_sky()
+    assert model.names[:-1] == plain.names  # the level last
+    theta = np.repeat(model.defaults(gh)[None, :], 4, axis=0)
+    theta[:, : len(truth)] = truth
+    theta[:, model.index(LEVEL.name)] = [0.4, 0.0, 1.0, 0.4]  # one level twice
+    starts, h = np.array([100, 700, 1500]), 72
+    got = model.shoot(theta, x, gh, 300.0, starts, h)
+    for i, s0 in enumerate(starts):
+        run = model.free_run(theta, x, gh, 300.0, start=s0, stop=s0 + h + 1)
+        np.testing.assert_array_equal(got[:, i, :], run[:, 1:])
+    for row in theta:  # the plain model driven by each level's sky
+        sky_x = dict(x)
+        sky_x["t_sky"] = NightSky().t_sky({LEVEL.name: row[model.index(LEVEL.name)]}, x,
+                                          slice(None))
+        ref = plain.free_run(row[None, : len(plain.names)], sky_x, gh, 300.0)[0]
+        np.testing.assert_allclose(model.free_run(row[None], x, gh, 300.0)[0], ref,
+                                   rtol=0, atol=1e-12)
+    assert np.ptp(got[:, :, -1], axis=0).max() > 0.1  # the level matters on these nights
+
+
+def test_the_guard_narrows_the_levels_box_around_the_kits_prior(monkeypatch):
+    """``base.NIGHT_SKY_WIDTH`` (None in the shipped choice: the whole 0..1) fits the level
+    within ± the width of its start, the kit's mean prior, clipped to 0..1; the level's
+    default stays inside its box."""
+    from gateway.diagnose import base
+
+    gh, _, m = _proto()
+    assert base.night_bounds(0.7) == (0.0, 1.0)
+    monkeypatch.setattr(base, "NIGHT_SKY_WIDTH", 0.2)
+    np.testing.assert_allclose(base.night_bounds(0.9), (0.7, 1.0))
+    for prior in (0.05, 0.3, 0.95):  # the default 0.6 is outside the first and last box
+        model = base.structure(m, gh, store=False).with_night_sky(*base.night_bounds(prior))
+        lower, upper = model.bounds(gh)
+        j = model.index(LEVEL.name)
+        np.testing.assert_allclose((lower[j], upper[j]),
+                                   (max(prior - 0.2, 0.0), min(prior + 0.2, 1.0)))
+        assert lower[j] <= model.defaults(gh)[j] <= upper[j]

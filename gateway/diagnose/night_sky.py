@@ -24,6 +24,7 @@ against each night's misread. By day, where the cloud is read, nothing changes.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
 
 import numpy as np
 
@@ -60,7 +61,11 @@ class NightSky:
 
     name = "night_sky"
     equation = "sky.py, prior replaced by a fitted level"
-    parameters = (LEVEL,)
+
+    def __init__(self, lower: float = LEVEL.lower, upper: float = LEVEL.upper) -> None:
+        """``lower``/``upper``: the level's bounds (base.NIGHT_SKY_WIDTH narrows them)."""
+        default = min(max(LEVEL.default, lower), upper)
+        self.parameters = (replace(LEVEL, lower=lower, upper=upper, default=default),)
 
     def t_sky(self, p: Mapping[str, np.ndarray], x: Mapping[str, np.ndarray], t: Index) -> np.ndarray:
         """Sky temperature [°C] (module docstring); broadcasts candidates against time."""

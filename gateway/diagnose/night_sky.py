@@ -69,7 +69,5 @@ class NightSky:
 
     def t_sky(self, p: Mapping[str, np.ndarray], x: Mapping[str, np.ndarray], t: Index) -> np.ndarray:
         """Sky temperature [°C] (module docstring); broadcasts candidates against time."""
-        c = np.clip(x["cloud"][t] + x[RELAX][t] * (p[LEVEL.name] - x[PRIOR][t]), 0.0, 1.0)
-        eps_c = x[EPS_CLEAR][t]
-        eps = (1.0 - sky.CLOUD_EMISSIVITY * c) * eps_c + sky.CLOUD_EMISSIVITY * c
-        return eps**0.25 * (x["t_out"][t] + psy.KELVIN) - psy.KELVIN
+        c = x["cloud"][t] + x[RELAX][t] * (p[LEVEL.name] - x[PRIOR][t])
+        return sky.radiative_temperature(x["t_out"][t], sky.sky_emissivity(x[EPS_CLEAR][t], c))

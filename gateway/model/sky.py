@@ -101,8 +101,14 @@ def sky_temperature(t_out: ArrayLike, rh_out: ArrayLike | None, cloud: ArrayLike
     (None or NaN: Swinbank's clear sky) and cloud fraction [-]."""
     t_out = np.asarray(t_out, dtype=float)
     e = None if rh_out is None else psy.vapour_pressure(t_out, rh_out)
-    eps = sky_emissivity(clear_sky_emissivity(t_out, e), cloud)
-    return eps**0.25 * (t_out + psy.KELVIN) - psy.KELVIN
+    return radiative_temperature(t_out, sky_emissivity(clear_sky_emissivity(t_out, e), cloud))
+
+
+def radiative_temperature(t_out: ArrayLike, eps: ArrayLike) -> np.ndarray:
+    """Apparent sky temperature [°C] of a sky of emissivity ``eps`` [-] over air at ``t_out``
+    [°C]: σ T_sky⁴ = ε σ T_out⁴."""
+    return np.asarray(eps, dtype=float)**0.25 * (np.asarray(t_out, dtype=float) + psy.KELVIN) \
+        - psy.KELVIN
 
 
 def clear_sky(time: np.ndarray, latitude: float, longitude: float) -> np.ndarray:

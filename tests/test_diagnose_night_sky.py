@@ -81,7 +81,7 @@ def test_the_base_calibration_fits_the_night_level(monkeypatch):
 
 
 def test_shooting_sees_the_same_sky_as_the_step_by_step_run():
-    """``shoot`` computes the fitted sky once for all windows (structure._sky_windows); its runs
+    """``shoot`` computes the fitted sky once for all windows (recomputed.windows); its runs
     are the free runs that compute it step by step, for every candidate level and window."""
     gh, _, m = _proto()
     x, plain, truth = _clear_nights(gh, m)

@@ -105,11 +105,21 @@ def windows(night_sky: NightSky | None, sensors: Sequence[SensorTerm],
     return out
 
 
+def check_unmodulated(modulations: Sequence[Modulation], names: Sequence[str]) -> None:
+    """Raise ValueError when a modulation changes one of the parameters ``names``: the
+    drivers read from them are computed once per run, from the unmodulated values."""
+    for m in modulations:
+        for nm in names:
+            if nm in m.targets:
+                raise ValueError(f"modulation {m.name!r} changes the parameter {nm!r}, which the "
+                                 "drivers computed once per run read unmodulated (recomputed.py)")
+
+
 def per_distinct(modulations: Sequence[Modulation], p, names: list[str], horizon: int,
                  f: Callable[[dict[str, np.ndarray]], np.ndarray]) -> np.ndarray:
     """``f`` of the parameters ``names`` (P, 1) evaluated once per distinct row: ``f``
     takes them as (U, 1, 1) and gives (U, N, H); returned as (P·N, H)."""
-    assert not any(nm in m.targets for m in modulations for nm in names)
+    check_unmodulated(modulations, names)
     rows, which = np.unique(np.column_stack([p[nm][:, 0] for nm in names]), axis=0,
                             return_inverse=True)
     got = f({nm: rows[:, j, None, None] for j, nm in enumerate(names)})  # (U, N, H)

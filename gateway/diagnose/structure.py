@@ -302,7 +302,7 @@ class Structured(Model):
         out[:, 0] = meas[start]
         sky = None  # the fitted night sky's temperature at every step, computed once
         if self.night_sky is not None:
-            assert not any(LEVEL.name in m.targets for m in self.modulations)
+            recomputed.check_unmodulated(self.modulations, [LEVEL.name])
             sky = self.night_sky.t_sky(p, x, slice(start, stop - 1))  # (P, stop-1-start)
         for k, t in enumerate(range(start, stop - 1), start=1):
             ta, ts = self.advance(self._at(p, x, t), x, ta, ts, t, c0, unit, dt,

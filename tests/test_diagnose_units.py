@@ -383,3 +383,5 @@ def test_structure_detail_lists_every_part():
     assert structure_detail(m) == "effective heat capacity m_cap"
     vented = m.with_terms(ControlledVentilation(gh.air_density))
     assert structure_detail(vented) == "effective heat capacity m_cap, vent controller (c_vc, t_vc)"
+    assert structure_detail(m.with_night_sky()) == (
+        "effective heat capacity m_cap, night sky level c_sky_night")

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from gateway.diagnose.base import fit
 from gateway.diagnose.fit import Shooting, drivers, window_starts
 from gateway.diagnose.night_sky import LEVEL, PRIOR, RELAX, NightSky
-from gateway.diagnose.structure import SkyLoss, model_unit
+from gateway.diagnose.structure import Modulation, SensorBias, SkyLoss, model_unit
+from gateway.model.terms import ALWAYS, Parameter
 from tests.test_diagnose_units import _proto, _series
 
 
@@ -81,7 +83,7 @@ def test_the_base_calibration_fits_the_night_level(monkeypatch):
 
 
 def test_shooting_sees_the_same_sky_as_the_step_by_step_run():
-    """``shoot`` computes the fitted sky once for all windows (structure._sky_windows); its runs
+    """``shoot`` computes the fitted sky once for all windows (recomputed.windows); its runs
     are the free runs that compute it step by step, for every candidate level and window."""
     gh, _, m = _proto()
     x, plain, truth = _clear_nights(gh, m)
@@ -122,3 +124,22 @@ def test_the_guard_narrows_the_levels_box_around_the_kits_prior(monkeypatch):
         np.testing.assert_allclose((lower[j], upper[j]),
                                    (max(prior - 0.2, 0.0), min(prior + 0.2, 1.0)))
         assert lower[j] <= model.defaults(gh)[j] <= upper[j]
+
+
+@pytest.mark.parametrize("name", [LEVEL.name, "b_sensor"])
+def test_a_modulation_of_a_parameter_read_once_per_run_is_refused(name):
+    """The fitted sky and the vapour pressure behind an electronic offset are computed once
+    per run from the unmodulated parameters: a modulation of those parameters is an error
+    naming both, in the free run and in shooting (not an assert, gone under ``python -O``)."""
+    gh, _, m = _proto()
+    x = drivers(_series(n=600, step=300), gh)
+    amp = Parameter("a_bad", "-", -1.0, 1.0, 0.0, None, ALWAYS, "relative change")
+    tau = Parameter("tau_bad", "s", 0.0, 1e6, 0.0, None, ALWAYS, "start")
+    model = m.with_night_sky().with_sensors(SensorBias())
+    model = model.with_modulation(Modulation("bad", (name,), amp, tau, 0.0))
+    theta = model.defaults(gh)[None, :]
+    with pytest.raises(ValueError, match=f"'bad' changes the parameter '{name}'"):
+        model.shoot(theta, x, gh, 300.0, np.array([10, 200]), 12)
+    if name == LEVEL.name:  # the free run precomputes the sky only
+        with pytest.raises(ValueError, match=f"'bad' changes the parameter '{name}'"):
+            model.free_run(theta, x, gh, 300.0)

@@ -206,6 +206,8 @@ def structure_detail(model: Structured) -> str:
         parts.append("vent controller (c_vc, t_vc)")
     if any(t.name == "q_lw_sky" for t in model.terms):
         parts.append("long-wave sky loss c_lw_sky")
+    if model.night_sky is not None:
+        parts.append(f"night sky level {night_sky.LEVEL.name}")
     if any(t.name == WindLeakage.name for t in model.terms):
         parts.append("wind leakage c_wl")
     if model.store:

@@ -105,6 +105,15 @@ class _Candidate:
     verdict: jd.Verdict
 
 
+@dataclass(frozen=True)
+class _EffectFit:
+    """A candidate effect fitted on some segments (``_fit_effect``): its parameters and the
+    BIC change against the model without it (plus the second output's evidence)."""
+
+    theta: np.ndarray
+    delta_bic: float
+
+
 @dataclass
 class _Heldout:
     """The held-out part [s, n) cut into blocks dealt into two folds, and each fold's fit set:
@@ -171,12 +180,12 @@ def _search_round(ctx: _Context, st: _Search, library: tuple[Effect, ...], rnd: 
         return False
     best = _pick(passed, ctx.x["t_in"], ctx.split, ctx.dt, st.rejected)
     e = best.effect
-    th_all, dbic_full = _fit_effect(ctx, best.model, st.model, st.theta_all, e, [(0, n)],
-                                    seed + 101, latest=False)
-    st.findings.append(make_finding(e, best.model, th_all, series, st.current_pred,
-                                    best.verdict, dbic_full, ctx.x, ctx.split))
+    full = _fit_effect(ctx, best.model, st.model, st.theta_all, e, [(0, n)], seed + 101,
+                       latest=False)
+    st.findings.append(make_finding(e, best.model, full.theta, series, st.current_pred,
+                                    best.verdict, full.delta_bic, ctx.x, ctx.split))
     st.effects.append(e)
-    st.model, st.thetas, st.theta_all = best.model, best.thetas, th_all
+    st.model, st.thetas, st.theta_all = best.model, best.thetas, full.theta
     st.current_pred = best.pred
     say(f"kept {e.name}: {st.findings[-1].summary}")
     return True
@@ -191,12 +200,12 @@ def _try_candidate(ctx: _Context, st: _Search, e: Effect, ref_pred: dict, rnd: i
     new_model = compose(st.model0, st.effects + [e], ctx.gh, ctx.duration)
     fitted = [_fit_effect(ctx, new_model, st.model, st.thetas[j], e, st.held.fit_sets[j],
                           seed + 17 * j) for j in (0, 1)]
-    new_thetas = [th for th, _ in fitted]
+    new_thetas = [f.theta for f in fitted]
     pred = st.heldout(ctx, new_model, new_thetas)
     starts = [float(th[new_model.index(e.tau_name)]) for th in new_thetas]
     verdict = jd.judge(st.current_pred, ref_pred, pred, ctx.x["t_in"], st.held.blocks,
                        ctx.split, ctx.dt, starts, ctx.last)
-    verdict.delta_bic = [float(dbic) for _, dbic in fitted]  # second output included
+    verdict.delta_bic = [float(f.delta_bic) for f in fitted]  # second output included
     st.trials.append({"round": rnd, "effect": e.name, "ok": verdict.ok,
                       "delta_bic": verdict.delta_bic, **verdict.stats})
     if max(verdict.delta_bic) < 0 and verdict.ok:
@@ -349,7 +358,7 @@ def _refit(ctx: _Context, model: Model, theta: np.ndarray, segments) -> np.ndarr
 
 
 def _fit_effect(ctx: _Context, new_model, old_model, theta_old, e: Effect, segments, seed,
-                latest: bool = True):
+                latest: bool = True) -> _EffectFit:
     """τ scan (``_scan``) then a joint refit (base parameters + amplitude, τ held) on
     ``segments``, alternated ``TAU_ROUNDS`` times while the SSE falls.
 
@@ -380,4 +389,4 @@ def _fit_effect(ctx: _Context, new_model, old_model, theta_old, e: Effect, segme
         th = trial.copy()
         th[ja] = e.neutral  # the next scan starts from the refitted base without the effect
     dbic = delta_bic(best_sse, float(sse_old[0]), effective_samples(npair, ctx.dt), 2)
-    return best, dbic + _evidence(e, new_model, ctx.x, best, segments, sc_best)
+    return _EffectFit(best, dbic + _evidence(e, new_model, ctx.x, best, segments, sc_best))

@@ -38,6 +38,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from gateway.diagnose import recomputed
 from gateway.diagnose.night_sky import LEVEL, NightSky
 from gateway.greenhouse import Greenhouse
 from gateway.model import psychrometrics as psy
@@ -132,35 +133,6 @@ def _filled(v: np.ndarray) -> np.ndarray:
     return np.interp(idx, idx[ok], v[ok])
 
 
-class _Same:
-    """Indexes to the same value whatever the index (one step's recomputed driver)."""
-
-    def __init__(self, value: np.ndarray) -> None:
-        self.value = value
-
-    def __getitem__(self, t: Index) -> np.ndarray:
-        return self.value
-
-
-class _Override(Mapping):
-    """The drivers with some entries replaced."""
-
-    def __init__(self, base: Mapping, overrides: dict) -> None:
-        self.base, self.overrides = base, overrides
-
-    def __getitem__(self, key: str):
-        return self.overrides[key] if key in self.overrides else self.base[key]
-
-    def __iter__(self):
-        return iter(self.base)
-
-    def __len__(self) -> int:
-        return len(self.base)
-
-    def __contains__(self, key: object) -> bool:
-        return key in self.base
-
-
 @dataclass(frozen=True)
 class Structured(Model):
     """A base model with an effective capacity, optionally a heat store, and modulations.
@@ -195,32 +167,9 @@ class Structured(Model):
         return q
 
     # -- one step of the two nodes ------------------------------------------------------------
-    def _electronic(self) -> list[SensorTerm]:
-        return [sn for sn in self.sensors if getattr(sn, "electronic", False)]
-
-    def _vapour_in(self, p, x, t: Index) -> np.ndarray:
-        """Inside vapour pressure from the reading corrected by the electronic offsets (III.4)."""
-        off = 0.0
-        for sn in self._electronic():
-            off = off + sn.offset(p, x, t)
-        return psy.vapour_pressure(x["t_in"][t] - off, x["rh_in"][t])
-
     def _inputs(self, p, x, t: Index, given: Mapping[str, np.ndarray] | None = None):
-        """The drivers as the terms should see them at ``t``: when a sensor term is an
-        electronic offset of the temperature reading only (``electronic``), the inside vapour
-        pressure computed from that reading and the RH (drivers.py, III.4) is recomputed
-        from the corrected temperature; with a fitted night sky (night_sky.py), the sky
-        temperature is the one of the fitted level. ``given``: those of them the caller
-        already computed at ``t`` (``p_w_in``, ``t_sky``)."""
-        given = given or {}
-        overrides = {}
-        if self.night_sky is not None:
-            sky = given["t_sky"] if "t_sky" in given else self.night_sky.t_sky(p, x, t)
-            overrides["t_sky"] = _Same(sky)
-        if self._electronic() and "rh_in" in x:
-            pw = given["p_w_in"] if "p_w_in" in given else self._vapour_in(p, x, t)
-            overrides["p_w_in"] = _Same(pw)
-        return _Override(x, overrides) if overrides else x
+        """The drivers as the terms see them at ``t`` (recomputed.inputs)."""
+        return recomputed.inputs(self.night_sky, self.sensors, p, x, t, given)
 
     def advance(self, q, x, ta, ts, t: Index, c0: float, unit: float, dt: float,
                 given: Mapping[str, np.ndarray] | None = None):
@@ -304,7 +253,8 @@ class Structured(Model):
         ts = None
         if self.store:
             ts = self.observer(p, x, dt)[:, starts].reshape(-1, 1)
-        pre = self._windows(p, x, starts, horizon)
+        pre = recomputed.windows(self.night_sky, self.sensors, self.modulations, p, x, starts,
+                                 horizon)
         out = np.empty((n_p * n, horizon))
         for k in range(horizon):
             q = self._at(rows, x, t0 + k)
@@ -312,33 +262,6 @@ class Structured(Model):
                                   {name: v[:, k : k + 1] for name, v in pre.items()})
             out[:, k] = self.reading(rows, x, ta, t0 + k + 1)[:, 0]
         return out.reshape(n_p, n, horizon)
-
-    def _windows(self, p, x, starts: np.ndarray, horizon: int) -> dict[str, np.ndarray]:
-        """The drivers ``_inputs`` recomputes per candidate (the fitted night sky's
-        temperature, the vapour pressure behind electronic offsets) at steps 0..H-1 of every
-        window: (P·N, H) each, rows ordered as ``shoot``'s (candidate-major). Computed once per
-        call, not once per step, and once per distinct value of the parameters they read (a τ
-        scan's candidates share them): the inputs are gathered per window (N, H), not per
-        row; no modulation changes these parameters."""
-        t = starts[:, None] + np.arange(horizon)[None, :]  # (N, H)
-        out = {}
-        if self.night_sky is not None:
-            out["t_sky"] = self._per_distinct(p, [LEVEL.name], horizon,
-                                              lambda q: self.night_sky.t_sky(q, x, t))
-        if self._electronic() and "rh_in" in x:
-            names = [q.name for sn in self._electronic() for q in sn.parameters]
-            out["p_w_in"] = self._per_distinct(p, names, horizon,
-                                               lambda q: self._vapour_in(q, x, t))
-        return out
-
-    def _per_distinct(self, p, names: list[str], horizon: int, f) -> np.ndarray:
-        """``f`` of the parameters ``names`` (P, 1) evaluated once per distinct row: ``f``
-        takes them as (U, 1, 1) and gives (U, N, H); returned as (P·N, H)."""
-        assert not any(nm in m.targets for m in self.modulations for nm in names)
-        rows, which = np.unique(np.column_stack([p[nm][:, 0] for nm in names]), axis=0,
-                                return_inverse=True)
-        got = f({nm: rows[:, j, None, None] for j, nm in enumerate(names)})  # (U, N, H)
-        return got[which.ravel()].reshape(-1, horizon)
 
     def one_step(self, theta, x, gh, dt):
         """(P, T): element t predicts the reading at t from the reading at t-1 (store from the
@@ -379,7 +302,7 @@ class Structured(Model):
         out[:, 0] = meas[start]
         sky = None  # the fitted night sky's temperature at every step, computed once
         if self.night_sky is not None:
-            assert not any(LEVEL.name in m.targets for m in self.modulations)
+            recomputed.check_unmodulated(self.modulations, [LEVEL.name])
             sky = self.night_sky.t_sky(p, x, slice(start, stop - 1))  # (P, stop-1-start)
         for k, t in enumerate(range(start, stop - 1), start=1):
             ta, ts = self.advance(self._at(p, x, t), x, ta, ts, t, c0, unit, dt,

@@ -11,6 +11,7 @@ wall clock also counts the other processes' turns.
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 import time
@@ -52,8 +53,20 @@ def run() -> dict:
     return out
 
 
-if __name__ == "__main__":
+def main(argv: list[str] | None = None) -> int:
+    """Parse the command line (``--help`` only), run the bench, write and print its JSON."""
+    parser = argparse.ArgumentParser(
+        prog="tests/bench/diagnose.py", description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=f"Takes no other arguments; writes {RESULTS / 'diagnose.json'} and prints the "
+               "cases. Also run by `make bench` (tests/bench/run.py).")
+    parser.parse_args(argv)
     result = run()
     RESULTS.mkdir(parents=True, exist_ok=True)
     (RESULTS / "diagnose.json").write_text(json.dumps(result, indent=2), encoding="utf-8")
     print(json.dumps(result["cases"], indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -93,7 +93,7 @@ def joint_profile(label: str, effect: str) -> tuple[list[tuple[float, float, flo
         trial = fit_lm(shoot, trial, free_parameters(new), lo, hi, search.REFIT_LM_ITERATIONS)
         sse = float(shoot.sse(trial[None])[0][0])
         out.append(((tau - truth) / DAY, delta_bic(sse, float(sse0[0]), ne, 2), float(trial[ja])))
-    fitted, _ = search._fit_effect(ctx, new, model0, theta, e, [(0, n)], 101, latest=False)
+    fitted = search._fit_effect(ctx, new, model0, theta, e, [(0, n)], 101, latest=False).theta
     return out, (float(fitted[jt]) - truth) / DAY
 
 
@@ -131,7 +131,7 @@ def synthetic_drift_start(bump: float, seed: int = 3) -> float:
     x["t_in"] = (m.free_run(truth[None], x, gh, dt)[0] + rng.normal(0, 0.08, n)
                  - bump * np.exp(-0.5 * ((day - 5.0) / 0.6) ** 2))
     ctx = search._Context(x, gh, dt, float(x["_index"][-1]), 72, n // 2)
-    fitted, _ = search._fit_effect(ctx, m, m0, m0.defaults(gh), e, [(0, n)], 0, latest=False)
+    fitted = search._fit_effect(ctx, m, m0, m0.defaults(gh), e, [(0, n)], 0, latest=False).theta
     return (float(fitted[m.index(e.tau_name)]) - tau) / 3600.0
 
 

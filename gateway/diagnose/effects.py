@@ -252,8 +252,10 @@ HEAT_STORE = Effect(
 """The added heat store (heat_store.py), beside ``thermal_mass`` (a capacity factor): it names
 the same kind of change (docs/effects.md, "An added heat store")."""
 OFFER_HEAT_STORE = False
-"""Whether LIBRARY holds ``HEAT_STORE``. Off: measured on the tuning generators against the rule
-declared before (docs/effects.md, "An added heat store"); the effect stays available."""
+"""Whether LIBRARY holds ``HEAT_STORE`` (read at import; at run time pass
+``library=LIBRARY + (HEAT_STORE,)`` to ``diagnose``). Off: on the tuning generators it gained no
+``thermal_mass`` case, changed no verdict and cost × 1.16 CPU, against the rule declared before
+(docs/effects.md, "An added heat store"); the effect stays available."""
 if OFFER_HEAT_STORE:
     LIBRARY = LIBRARY + (HEAT_STORE,)
 EFFECTS = {e.name: e for e in (*LIBRARY, HEAT_STORE)}

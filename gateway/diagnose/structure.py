@@ -234,7 +234,8 @@ class Structured(Model):
 
     def advance(self, q, x, ta, ts, t: Index, c0: float, unit: float, dt: float,
                 given: Mapping[str, np.ndarray] | None = None):
-        """Air (exponential step, store frozen), then store (exponential step, new air): the
+        """Air (exponential step, stores frozen), then the store(s) (exponential steps, new
+        air; ``ts`` is the pair (base store, added store) when there is an added one): the
         model layer's step (gateway/model/step.py) with the zero-order hold that the coarsened
         inputs are built for (fit.coarsen: block means of the inputs over each step).
         ``given``: drivers at ``t`` the caller already computed (``_inputs``)."""

@@ -25,7 +25,7 @@ EQUIVALENT = {
     "cover_transmission": {"solar_gain_change"},
     "extra_leakage": {"extra_ventilation"},
     "heater": {"heat_source", "night_heat_source"},
-    "thermal_mass": {"thermal_mass"},
+    "thermal_mass": {"thermal_mass", "heat_store_added"},
     "sensor_radiation_bias": {"sensor_radiation_bias"},
     "sensor_drift": {"sensor_drift"},
 }

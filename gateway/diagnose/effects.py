@@ -8,7 +8,10 @@ it acts (τ = 0: it was there before the data began). Four kinds:
 - ``modulation``: a relative change of base parameters (cover transmission, heat capacity), see
   :class:`gateway.diagnose.structure.Modulation`;
 - ``sensor``: an observation error (a :class:`SensorTerm`): the heat balance is unchanged, the
-  reading is not.
+  reading is not;
+- ``store``: a heat store added from τ and coupled to the air, a state of its own
+  (:class:`gateway.diagnose.heat_store.AddedStore`; its coupling is a third parameter, refitted
+  with the base).
 
 Effects are *changes* on top of the structurally calibrated base (structure.py): the base
 already has an effective heat capacity, so ``thermal_mass`` can only start inside the data.
@@ -25,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gateway.diagnose.evidence import NONE, Evidence
+from gateway.diagnose.heat_store import AddedStore
 from gateway.diagnose.humidity import HumidityEvidence
 from gateway.diagnose.radiation import RadiationEvidence
 from gateway.diagnose.structure import (
@@ -116,7 +120,7 @@ class Drift(SensorTerm):
 
 
 # -- the library -----------------------------------------------------------------------------
-Part = FluxTerm | Modulation | SensorTerm
+Part = FluxTerm | Modulation | SensorTerm | AddedStore
 Make = Callable[["Effect", Structured, Greenhouse, Parameter, Parameter], Part]
 
 
@@ -126,7 +130,7 @@ class Effect:
     model (``make``) and what a second output says about it (``evidence``)."""
 
     name: str
-    kind: str  # "flux" | "modulation" | "sensor"
+    kind: str  # "flux" | "modulation" | "sensor" | "store"
     meaning: str
     signature: str
     amp_name: str
@@ -170,6 +174,10 @@ def _solar(e: Effect, model: Structured, gh: Greenhouse, amp: Parameter, tau: Pa
 
 def _capacity(e: Effect, model: Structured, gh: Greenhouse, amp: Parameter, tau: Parameter) -> Part:
     return Modulation(e.name, ("m_cap",), amp, tau, e.neutral)
+
+
+def _store(e: Effect, model: Structured, gh: Greenhouse, amp: Parameter, tau: Parameter) -> Part:
+    return AddedStore(e.name, amp, tau)
 
 
 def _exchange(e: Effect, model: Structured, gh: Greenhouse, amp: Parameter, tau: Parameter) -> Part:
@@ -233,11 +241,28 @@ LIBRARY: tuple[Effect, ...] = (
            "a_drift", "K d-1", -3.0, 3.0, 0.0, lambda a: f"sensor drifts {a:+.3g} K per day",
            _drift, from_start=False),
 )
-EFFECTS = {e.name: e for e in LIBRARY}
+HEAT_STORE = Effect(
+    "heat_store_added", "store",
+    "a heat store added and coupled to the air (water barrels or tanks, a concrete floor or "
+    "wall): C_w dT_w/dt = h_w (T_in - T_w), filled at the air's temperature",
+    "damped daily swing with a lag of hours: residual opposite to dT/dt, smoothed",
+    "c_added", "J m-2 K-1", 0.0, 4e5, 0.0,
+    lambda a: f"heat store of {a / 1e3:.3g} kJ m-2 K-1 added (≈ {a / 4186:.2g} kg m-2 of water)",
+    _store, from_start=False)
+"""The added heat store (heat_store.py), beside ``thermal_mass`` (a capacity factor): it names
+the same kind of change (docs/effects.md, "An added heat store")."""
+OFFER_HEAT_STORE = False
+"""Whether LIBRARY holds ``HEAT_STORE`` (read at import; at run time pass
+``library=LIBRARY + (HEAT_STORE,)`` to ``diagnose``). Off: on the tuning generators it gained no
+``thermal_mass`` case, changed no verdict and cost × 1.16 CPU, against the rule declared before
+(docs/effects.md, "An added heat store"); the effect stays available."""
+if OFFER_HEAT_STORE:
+    LIBRARY = LIBRARY + (HEAT_STORE,)
+EFFECTS = {e.name: e for e in (*LIBRARY, HEAT_STORE)}
 
 
 def compose(base: Structured, effects: list[Effect], gh: Greenhouse, duration: float) -> Structured:
-    """Base model plus effect terms: flux terms, modulations, sensor terms."""
+    """Base model plus effect terms: flux terms, modulations, added stores, sensor terms."""
     model = base
     for e in effects:
         part = e.build(base, gh, duration)
@@ -245,6 +270,8 @@ def compose(base: Structured, effects: list[Effect], gh: Greenhouse, duration: f
             model = model.with_terms(part)
         elif e.kind == "modulation":
             model = model.with_modulation(part)
+        elif e.kind == "store":
+            model = model.with_store(part)
         else:
             model = model.with_sensors(part)
     return model

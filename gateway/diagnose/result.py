@@ -93,7 +93,8 @@ def make_finding(e: Effect, model: Model, theta: np.ndarray, series: Series, pre
 
 def traces(findings: list[Finding], model: Structured, theta: np.ndarray, x, gh: Greenhouse,
            duration: float) -> None:
-    """Each finding over the record: flux (physical W m-2), factor (-) or sensor offset (K)."""
+    """Each finding over the record: flux (physical W m-2; an added store's exchange with the
+    air), factor (-) or sensor offset (K)."""
     n = len(x["t_in"])
     idx = slice(0, n)
     p = {k: v[:, 0] for k, v in model.columns(theta[None, :]).items()}
@@ -106,6 +107,9 @@ def traces(findings: list[Finding], model: Structured, theta: np.ndarray, x, gh:
         elif f.effect.kind == "modulation":
             f.trace = np.broadcast_to(part.factor(p, x, idx), (n,)).copy()
             f.trace_unit = "factor"
+        elif f.effect.kind == "store":
+            f.trace = part.flux(model, theta, x, float(x["_index"][1] - x["_index"][0]))
+            f.trace_unit = "W m-2"
         else:
             f.trace = fluxes[part.name] / model_unit(model, gh)
             f.trace_unit = "W m-2"

@@ -388,5 +388,6 @@ def _fit_effect(ctx: _Context, new_model, old_model, theta_old, e: Effect, segme
         best, best_sse, sc_best = trial, sse, sc
         th = trial.copy()
         th[ja] = e.neutral  # the next scan starts from the refitted base without the effect
-    dbic = delta_bic(best_sse, float(sse_old[0]), effective_samples(npair, ctx.dt), 2)
+    k = len(new_model.names) - len(old_model.names)  # amplitude, start (+ an added store's h)
+    dbic = delta_bic(best_sse, float(sse_old[0]), effective_samples(npair, ctx.dt), k)
     return _EffectFit(best, dbic + _evidence(e, new_model, ctx.x, best, segments, sc_best))

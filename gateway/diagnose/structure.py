@@ -35,6 +35,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -45,6 +46,9 @@ from gateway.model import psychrometrics as psy
 from gateway.model import step as stepping
 from gateway.model.model import Model
 from gateway.model.terms import ALWAYS, FluxTerm, Index, Parameter, SensorTerm
+
+if TYPE_CHECKING:
+    from gateway.diagnose.heat_store import AddedStore
 
 INDEX = "_index"
 """Driver holding the absolute sample index (float), so τ survives slicing of the drivers."""
@@ -144,10 +148,16 @@ class Structured(Model):
     store: bool = False
     modulations: tuple[Modulation, ...] = ()
     night_sky: NightSky | None = None
+    added: AddedStore | None = None
+    """A heat store added from τ (heat_store.py): a third state, its own observer."""
 
     # -- building ----------------------------------------------------------------------------
     def with_modulation(self, m: Modulation) -> Structured:
         return replace(self, modulations=self.modulations + (m,), extra=self.extra + m.parameters)
+
+    def with_store(self, store: AddedStore) -> Structured:
+        """This model plus an added heat store (heat_store.py)."""
+        return replace(self, added=store, extra=self.extra + store.parameters)
 
     def with_night_sky(self, lower: float = LEVEL.lower, upper: float = LEVEL.upper) -> Structured:
         """The night sky level fitted as a base parameter (night_sky.py), within the bounds."""
@@ -173,7 +183,8 @@ class Structured(Model):
 
     def advance(self, q, x, ta, ts, t: Index, c0: float, unit: float, dt: float,
                 given: Mapping[str, np.ndarray] | None = None):
-        """Air (exponential step, store frozen), then store (exponential step, new air): the
+        """Air (exponential step, stores frozen), then the store(s) (exponential steps, new
+        air; ``ts`` is the pair (base store, added store) when there is an added one): the
         model layer's step (gateway/model/step.py) with the zero-order hold that the coarsened
         inputs are built for (fit.coarsen: block means of the inputs over each step).
         ``given``: drivers at ``t`` the caller already computed (``_inputs``)."""
@@ -182,18 +193,36 @@ class Structured(Model):
         for term in self.terms:
             g, s = term.coefficients(q, x, ta, t)
             g_sum, s_sum = g_sum + g, s_sum + s
+        tw = None
+        if self.added is not None:  # states (base store, added store)
+            ts, tw = ts
+            g, s = self.added.coefficients(q, x, tw, t, dt, unit)
+            g_sum, s_sum = g_sum + g, s_sum + s
         if self.store:
             h = unit * q["h_store"]
             g_sum, s_sum = g_sum + h * ts, s_sum + h
         c = c0 * q["m_cap"]
         ta_new = stepping.advance(ta, g_sum - s_sum * ta, s_sum, dt / c)
+        if tw is not None:
+            tw = self.added.step(q, x, tw, ta_new, t, dt)
         if not self.store:
-            return ta_new, ts
+            return ta_new, (ts if tw is None else (ts, tw))
         s_st = q["h_store"] + q["k_store"]
         g_st = q["a_store"] * x["i_glob"][t] + q["h_store"] * ta_new + q["k_store"] * x["t_out"][t]
         cs = q["c_store"]
         ts_new = stepping.advance(ts, g_st - s_st * ts, s_st, dt / cs)
-        return ta_new, ts_new
+        return ta_new, (ts_new if tw is None else (ts_new, tw))
+
+    def _observed(self, p, x, dt: float) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """The slow states (P, T) from their observers: base store, added store (or None)."""
+        return (self.observer(p, x, dt) if self.store else None,
+                self.added.observer(self, p, x, dt) if self.added is not None else None)
+
+    def _slow_at(self, obs, idx, column: bool = False):
+        """The slow states at ``idx`` as ``advance`` takes them (``column``: as (P·N, 1))."""
+        at = [None if o is None else (o[:, idx].reshape(-1, 1) if column else o[:, idx])
+              for o in obs]
+        return at[0] if self.added is None else (at[0], at[1])
 
     # -- the store observer -------------------------------------------------------------------
     def observer(self, p: Mapping[str, np.ndarray], x, dt: float) -> np.ndarray:
@@ -250,9 +279,7 @@ class Structured(Model):
         rows = {k: np.repeat(v, n, axis=0) for k, v in p.items()}
         t0 = np.tile(starts, n_p)[:, None]
         ta = self.true_state(rows, x, x["t_in"][t0], t0)
-        ts = None
-        if self.store:
-            ts = self.observer(p, x, dt)[:, starts].reshape(-1, 1)
+        ts = self._slow_at(self._observed(p, x, dt), starts, column=True)
         pre = recomputed.windows(self.night_sky, self.sensors, self.modulations, p, x, starts,
                                  horizon)
         out = np.empty((n_p * n, horizon))
@@ -270,14 +297,14 @@ class Structured(Model):
         p = self.columns(theta)
         n = len(x["t_in"])
         c0, unit = self.capacity(gh), model_unit(self, gh)
-        obs_ts = self.observer(p, x, dt) if self.store else None
+        obs = self._observed(p, x, dt)
         out = np.full((theta.shape[0], n), np.nan)
         block = max(16, 16384 // theta.shape[0])
         for a in range(0, n - 1, block):
             b = min(a + block, n - 1)
             t = slice(a, b)
             ta = self.true_state(p, x, x["t_in"][None, a:b], t)
-            ts = obs_ts[:, a:b] if self.store else None
+            ts = self._slow_at(obs, t)
             new, _ = self.advance(self._at(p, x, t), x, ta, ts, t, c0, unit, dt)
             out[:, a + 1 : b + 1] = self.reading(p, x, new, slice(a + 1, b + 1))
         return out
@@ -290,13 +317,13 @@ class Structured(Model):
         meas = x["t_in"]
         stop = len(meas) if stop is None else stop
         c0, unit = self.capacity(gh), model_unit(self, gh)
-        obs_ts = self.observer(p, x, dt) if self.store else None
+        obs = self._observed(p, x, dt)
         n_p = theta.shape[0]
         out = np.full((n_p, stop - start), np.nan)
 
         def restart(t: int):
             ta = self.true_state(p, x, np.full((n_p, 1), meas[t]), t)
-            return ta, (obs_ts[:, t : t + 1] if self.store else None)
+            return ta, self._slow_at(obs, slice(t, t + 1))
 
         ta, ts = restart(start)
         out[:, 0] = meas[start]

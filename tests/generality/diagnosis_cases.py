@@ -40,7 +40,7 @@ EXPECTED = {
     "solar": {"solar_gain_change"},
     "ventilation": {"extra_ventilation"},
     "heat": {"heat_source", "night_heat_source"},
-    "mass": {"thermal_mass"},
+    "mass": {"thermal_mass", "heat_store_added"},
     "sun_sensor": {"sensor_radiation_bias"},
     "drift": {"sensor_drift"},
 }

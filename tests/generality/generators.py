@@ -42,7 +42,7 @@ EXPECTED = {
     "ventilation": {"extra_ventilation"},
     "heater": {"heat_source", "night_heat_source"},
     "night_heater": {"heat_source", "night_heat_source"},
-    "thermal_mass": {"thermal_mass"},
+    "thermal_mass": {"thermal_mass", "heat_store_added"},
     "sun_sensor": {"sensor_radiation_bias"},
     "drift": {"sensor_drift"},
 }

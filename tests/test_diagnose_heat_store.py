@@ -40,13 +40,20 @@ def _models(store: bool):
     return gh, m0
 
 
-@pytest.mark.parametrize("store", [False, True])
-def test_zero_store_is_the_base_model_exactly(store):
+def _on_a_sine(store: bool):
+    """3 days of drivers whose reading is a sine plus noise, the base (with or without its own
+    store) and the base plus the added store: (gh, base, model, drivers, rows)."""
     gh, m0 = _models(store)
     s, rng = _data(days=3)
     x = drivers(s, gh)
-    x["t_in"] = 14 + 4 * np.sin(np.arange(len(s)) / 40.0) + rng.normal(0, 0.1, len(s))
-    m = compose(m0, [E], gh, float(x["_index"][-1]))
+    n = len(s)
+    x["t_in"] = 14 + 4 * np.sin(np.arange(n) / 40.0) + rng.normal(0, 0.1, n)
+    return gh, m0, compose(m0, [E], gh, float(x["_index"][-1])), x, n
+
+
+@pytest.mark.parametrize("store", [False, True])
+def test_zero_store_is_the_base_model_exactly(store):
+    gh, m0, m, x, _ = _on_a_sine(store)
     th0 = m0.defaults(gh)
     th = m.defaults(gh)  # c_added = 0 (neutral)
     th[m.index(E.tau_name)] = 0.8 * DAY
@@ -60,12 +67,7 @@ def test_zero_store_is_the_base_model_exactly(store):
 
 def test_store_observer_is_the_steps_recursion_on_the_reading():
     """Observer rows (different C_w, h_w, τ) = the store's own step driven by the reading."""
-    gh, m0 = _models(False)
-    s, rng = _data(days=3)
-    x = drivers(s, gh)
-    n = len(s)
-    x["t_in"] = 14 + 4 * np.sin(np.arange(n) / 40.0) + rng.normal(0, 0.1, n)
-    m = compose(m0, [E], gh, float(x["_index"][-1]))
+    gh, m0, m, x, n = _on_a_sine(False)
     rows = np.repeat(m.defaults(gh)[None], 3, axis=0)
     rows[:, m.index(E.amp_name)] = [2e4, 1.6e5, 4e5]
     rows[:, m.index("t_added")] = [2000.0, 8 * 3600.0, 700.0]
@@ -110,12 +112,7 @@ def test_diagnosis_names_an_added_store_on_model_made_data():
 
 def test_runs_with_a_store_agree():
     """shoot from a start = free run from it, with the store on before and after the start."""
-    gh, m0 = _models(True)
-    s, rng = _data(days=3)
-    x = drivers(s, gh)
-    n = len(s)
-    x["t_in"] = 14 + 4 * np.sin(np.arange(n) / 40.0) + rng.normal(0, 0.1, n)
-    m = compose(m0, [E], gh, float(x["_index"][-1]))
+    gh, m0, m, x, n = _on_a_sine(True)
     rows = np.repeat(m.defaults(gh)[None], 2, axis=0)
     rows[:, m.index("h_store")] = 3.0
     rows[:, m.index(E.amp_name)] = [6e4, 2e5]

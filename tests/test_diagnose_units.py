@@ -169,6 +169,38 @@ def test_vents_opened_above_a_setpoint_are_kept_in_the_base():
             assert abs(th[got.index("t_vc")] - 24.0) < 1.0
 
 
+def test_wide_vent_box_lets_the_base_follow_a_summer_house_vents(monkeypatch):
+    """A summer house whose vents exchange ~5 air changes an hour per kelvin above the setpoint
+    (C_vc = 5e-3 m s-1 K-1, data from the structured prototype): with ``base.WIDE_VENT_BOX``
+    the vent controller part's rate C_vc / m_cap is fitted near the truth inside its physical
+    box; with the term's own box (1e-3, and m_cap ≥ 1) it sits on that bound and the base
+    extrapolates worse (docs/effects.md, "The summer base (issue 10)")."""
+    from gateway.diagnose import base
+    from gateway.model.vent_control import ControlledVentilation
+
+    gh, _, m = _proto()
+    s = _series(n=2016, step=300)  # 7 days
+    s.columns["t_out"] = s.columns["t_out"] + 14.0  # a summer: 19-29 °C outside
+    x = drivers(s, gh)
+    vented = m.with_terms(ControlledVentilation(gh.air_density, base.VENT_BOX_UPPER))
+    truth = vented.defaults(gh)
+    truth[vented.index("c_vc")], truth[vented.index("t_vc")] = 5e-3, 24.0
+    x["t_in"] = vented.free_run(truth[None], x, gh, 300.0)[0]
+    fits = {}
+    for wide in (False, True):
+        monkeypatch.setattr(base, "WIDE_VENT_BOX", wide)
+        got, th, log = base.calibrate_base(m, gh, x, 300.0, 1344, 72, 0, lambda msg: None)
+        (vc,) = [e for e in log if e["structure"] == "vent controller"]
+        assert vc["kept"], log
+        # the lumped coefficients are divided by m_cap: only C_vc / m_cap is identified
+        rate = th[got.index("c_vc")] / th[got.index("m_cap")]
+        fits[wide] = (rate, got.bounds(gh)[1][got.index("c_vc")], vc, th[got.index("t_vc")])
+    assert fits[False][1] == 1e-3 and fits[False][0] > 0.99e-3  # pinned: box and m_cap ≥ 1
+    assert fits[True][1] == base.VENT_BOX_UPPER
+    assert abs(fits[True][0] - 5e-3) < 0.5e-3 and abs(fits[True][3] - 24.0) < 0.5
+    assert fits[True][2]["validation_mse"] < 0.5 * fits[False][2]["validation_mse"]
+
+
 def test_leakage_growing_with_the_wind_is_kept_in_the_base(monkeypatch):
     """With the wind leakage offered (``base.OFFER_WIND_LEAKAGE``; off in the shipped choice,
     docs/effects.md "Base structure"), data from the structured prototype whose leakage grows

@@ -28,6 +28,8 @@ slope for the exponential step is
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from gateway.model.terms import SUN_THRESHOLD, SUNLIT, FluxTerm, Index, Parameter
@@ -62,8 +64,11 @@ class ControlledVentilation(FluxTerm):
                   "the controller's ventilation setpoint"),
     )
 
-    def __init__(self, rho: float = 1.205) -> None:
+    def __init__(self, rho: float = 1.205, c_vc_max: float | None = None) -> None:
         self.rho = rho  # gamma_0 [kg m-3], table 2
+        if c_vc_max is not None:  # another box for C_vc (the diagnosis's WIDE_VENT_BOX)
+            c_vc, t_vc = type(self).parameters
+            self.parameters = (replace(c_vc, upper=c_vc_max), t_vc)
 
     derives = ("_q_vent_control.sun",)
 

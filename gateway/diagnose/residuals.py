@@ -320,10 +320,10 @@ def unexplained(an_after: dict, calib_r: np.ndarray, time: np.ndarray, a: int,
     calib_mae = float(np.nanmean(np.abs(calib_r)))
     ratio = an_after["mae"] / calib_mae if calib_mae > 0 else float("inf")
     sig = describe(an_after, time[a:], a) + f"; held-out/in-sample MAE ratio {ratio:.2f}"
-    sharp, j = (0.0, 0) if r_after is None else sharp_hours(time[a:], r_after,
-                                                          time[: len(calib_r)], calib_r)
     if UNEXPLAINED_TEST and r_after is not None:
         return _tested(sig, time, a, len(calib_r), calib_r, r_after)
+    sharp, j = (0.0, 0) if r_after is None else sharp_hours(time[a:], r_after,
+                                                          time[: len(calib_r)], calib_r)
     flagged = abs(sharp) > HOUR_SHIFT_K
     if flagged:
         sig += (f"; a sharp time-of-day feature {sharp:+.2f} K at {j // 2:02d}:{30 * (j % 2):02d} "

@@ -9,7 +9,7 @@ import numpy as np
 from gateway.diagnose import residuals as res
 from gateway.diagnose.effects import Effect
 from gateway.diagnose.judge import Verdict
-from gateway.diagnose.structure import Structured, model_unit
+from gateway.diagnose.structure import INDEX, Structured, model_unit
 from gateway.greenhouse import Greenhouse
 from gateway.model.model import Model
 from gateway.series import Series
@@ -108,7 +108,7 @@ def traces(findings: list[Finding], model: Structured, theta: np.ndarray, x, gh:
             f.trace = np.broadcast_to(part.factor(p, x, idx), (n,)).copy()
             f.trace_unit = "factor"
         elif f.effect.kind == "store":
-            f.trace = part.flux(model, theta, x, float(x["_index"][1] - x["_index"][0]))
+            f.trace = part.flux(model, theta, x, float(x[INDEX][1] - x[INDEX][0]))
             f.trace_unit = "W m-2"
         else:
             f.trace = fluxes[part.name] / model_unit(model, gh)

@@ -51,7 +51,8 @@ if TYPE_CHECKING:
     from gateway.diagnose.heat_store import AddedStore
 
 INDEX = "_index"
-"""Driver holding the absolute sample index (float), so τ survives slicing of the drivers."""
+"""Driver holding each sample's time [s since the first sample] (fit.drivers), so τ survives
+slicing of the drivers."""
 
 CAPACITY = Parameter("m_cap", "-", 1.0, 12.0, 1.0, None, ALWAYS,
                      "effective heat capacity of the air node / air alone (fast mass: crop, frame)")

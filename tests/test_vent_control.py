@@ -15,7 +15,7 @@ from gateway.model.vent_control import SMOOTH_K, ControlledVentilation, soft_exc
 def test_parameters_units_bounds_and_the_sunlit_search():
     term = ControlledVentilation()
     c_vc, t_vc = term.parameters
-    assert (c_vc.name, c_vc.unit.split()[0], c_vc.lower, c_vc.upper) == ("c_vc", "s-1", 0.0, 1e-3)
+    assert (c_vc.name, c_vc.unit.split()[0], c_vc.lower, c_vc.upper) == ("c_vc", "m", 0.0, 1e-3)
     assert (t_vc.name, t_vc.unit, t_vc.lower, t_vc.upper) == ("t_vc", "°C", 15.0, 35.0)
     assert c_vc.active.name == t_vc.active.name == "sunlit"
     assert term.requires == ("t_out", "i_glob")

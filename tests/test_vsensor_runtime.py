@@ -44,6 +44,24 @@ def novent(gh):
     return run_adaptive("almeria", series, gh, vents=False, overrides=vd.TINY)
 
 
+def test_prototype_leakage_flow_carries_the_leakage_heat_loss(gh):
+    """c_loss is a flow per floor area [m s-1] (III.14, III.19): the flow the sensor's range
+    counts for it, G = c_loss S_f, loses through III.32 (ρ c_p G ΔT / S_f) the heat the
+    model's leakage term loses (its lumped flux × C_a)."""
+    from gateway.model.prototype import AirLeakage
+    from gateway.model.psychrometrics import CP_AIR
+
+    proto = build_model("prototype", gh)
+    c_loss = float(proto.bounds(gh)[1][proto.index("c_loss")])
+    g = flow_limits(gh, "prototype").leak  # [m3 s-1]
+    x, t_in = {"t_out": np.array([5.0])}, np.array([[15.0]])
+    q_model = -AirLeakage(gh.air_density).flux({"c_loss": np.array([[c_loss]])}, x, t_in,
+                                                slice(0, 1))[0, 0] * CP_AIR
+    q_vent = gh.air_density * CP_AIR * g * 10.0 / gh.floor_area  # III.32
+    assert gh.volume / gh.floor_area > 1.5  # a house where × V and × S_f differ
+    np.testing.assert_allclose(q_vent, q_model, rtol=1e-12)
+
+
 def _with_meta(src: Path, dst: Path, **changes) -> Path:
     model = onnx.load(str(src))
     for p in model.metadata_props:

@@ -13,7 +13,7 @@ from gateway.model.wind_leakage import C_WL_MAX, WindLeakage
 def test_parameter_unit_bounds_and_the_always_active_search():
     term = WindLeakage()
     (c_wl,) = term.parameters
-    assert (c_wl.name, c_wl.unit.split()[0], c_wl.lower, c_wl.upper) == ("c_wl", "m-1", 0.0, C_WL_MAX)
+    assert (c_wl.name, c_wl.unit.split()[0], c_wl.lower, c_wl.upper) == ("c_wl", "-", 0.0, C_WL_MAX)
     assert c_wl.active.name == "always"
     assert term.requires == ("t_out", "wind")
     assert term.linear_in_parameters and not term.state_dependent
@@ -23,7 +23,7 @@ def test_parameter_unit_bounds_and_the_always_active_search():
 
 
 def test_known_value_is_the_constant_leakage_at_rate_c_wl_u():
-    """u = 4 m s-1, C_wl = 1e-4 m-1: the III.19 leakage with C_loss = 4e-4 s-1; no wind, no flux."""
+    """u = 4 m s-1, C_wl = 1e-4: the III.19 leakage with C_loss = 4e-4 m s-1; no wind, no flux."""
     rho = 1.2
     x = {"t_out": np.array([5.0, 5.0]), "wind": np.array([4.0, 0.0])}
     t_in = np.array([[15.0, 15.0]])

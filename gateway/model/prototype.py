@@ -78,8 +78,8 @@ class AirLeakage(FluxTerm):
     requires = ("t_out",)
 
     parameters = (
-        Parameter("c_loss", "s-1 (ACH/3600)", 0.0, 2e-3, 2.556947e-4, _R_FAST, ALWAYS,
-                  "air changes per second ACH/3600"),
+        Parameter("c_loss", "m s-1 (ACH V / (3600 S_f))", 0.0, 2e-3, 2.556947e-4, _R_FAST,
+                  ALWAYS, "leakage air flow per floor area (III.20 prints ACH/3600 [s-1])"),
     )
 
     def __init__(self, rho: float = 1.205) -> None:
@@ -105,6 +105,12 @@ class SkyRadiation(FluxTerm):
     def coefficients(self, p, x, t_in, t: Index):
         s = p["c_thermal"] * x["h_o"][t]
         return s * x["t_sky"][t], s
+
+
+def leakage_flow(c_loss, gh: Greenhouse):
+    """The leakage's air flow G [m3 s-1] = C_loss S_f: III.14 divides the balance by S_f, so
+    C_loss [m s-1] is a flow per floor area (docs/model.md, "Units")."""
+    return c_loss * gh.floor_area
 
 
 def prototype_capacity(gh: Greenhouse) -> float:

@@ -12,16 +12,16 @@ of the state the forecast itself predicts:
     Q_vc = −C_vc ρ_a δ_sun σ(T_in − T_vc) (T_in − T_out)                 (III.19 form)
     σ(z) = w ln(1 + e^{z / w}),   w = ``SMOOTH_K``,   δ_sun = [I_glob > 5 W m-2]
 
-σ is a smooth max(0, z) [K] (the band's lower edge rounded over ``w``, so the flux and its
-slope are continuous in the state for the exponential step), C_vc [s-1 K-1] the air changes
-per second per kelvin above the setpoint and T_vc [°C] the day's ventilation setpoint; in the
-prototype's lumped units (III.14: fluxes divided by C_a), as ``AirLeakage``. Both are
-estimated online with the others while the sun is up (``SUNLIT``, §IV.2.1.2's activity rule),
-and the term acts only then (δ_sun): a controller vents the sun's heat by day on a day setpoint,
-and at night, where neither parameter is seen, the night's exchange is the leakage's. (Acting
-at night with the day's setpoint, the first trial, over-cooled every summer night: the setpoint
-the day's fit settles on, 16-20 °C, is below a summer night's air; docs/effects.md.) The exact
-slope for the exponential step is
+σ is a smooth max(0, z) [K] (the band's lower edge rounded over ``w``, so the flux and its slope
+are continuous in the state for the exponential step), C_vc [m s-1 K-1] the exchanged flow per
+floor area per kelvin above the setpoint (÷ V/S_f: air changes per second) and T_vc [°C] the
+day's ventilation setpoint; in the prototype's lumped units (III.14: fluxes divided by C_a), as
+``AirLeakage``. Both are estimated online with the others while the sun is up (``SUNLIT``,
+§IV.2.1.2's activity rule), and the term acts only then (δ_sun): a controller vents the sun's
+heat by day on a day setpoint, and at night, where neither parameter is seen, the night's
+exchange is the leakage's. (Acting at night with the day's setpoint, the first trial,
+over-cooled every summer night: the setpoint the day's fit settles on, 16-20 °C, is below a
+summer night's air; docs/effects.md.) The exact slope for the exponential step is
 
     k = −∂Q_vc/∂T_in = C_vc ρ_a δ_sun [σ(z) + σ'(z) (T_in − T_out)],   σ'(z) = 1 / (1 + e^{−z/w}).
 """
@@ -58,7 +58,7 @@ class ControlledVentilation(FluxTerm):
     description = "air exchange of vents a controller opens above T_vc (unseen by the kit)"
     requires = ("t_out", "i_glob")
     parameters = (
-        Parameter("c_vc", "s-1 K-1 (air changes per second per K above T_vc)", 0.0, 1e-3, 1e-4,
+        Parameter("c_vc", "m s-1 K-1 (flow per floor area per K above T_vc)", 0.0, 1e-3, 1e-4,
                   0.10, SUNLIT, "controlled vent exchange per kelvin above the setpoint"),
         Parameter("t_vc", "°C", 15.0, 35.0, 25.0, 0.02, SUNLIT,
                   "the controller's ventilation setpoint"),
@@ -77,7 +77,7 @@ class ControlledVentilation(FluxTerm):
         return {"_q_vent_control.sun": self.rho * (np.asarray(x["i_glob"]) > SUN_THRESHOLD)}
 
     def _gain(self, p, x, t: Index) -> np.ndarray | None:
-        """C_vc ρ_a δ_sun [s-1 K-1 kg m-3]; None when no sample at ``t`` is sunlit (the flux is
+        """C_vc ρ_a δ_sun [kg m-2 s-1 K-1]; None when no sample at ``t`` is sunlit (the flux is
         then 0 and the state's functions need not be evaluated: the night's steps cost nothing)."""
         sun = self.derived(x, "_q_vent_control.sun", t)
         if sun is None:

@@ -27,6 +27,7 @@ from gateway.greenhouse import Greenhouse
 from gateway.model import build_model
 from gateway.model.almeria import NaturalVentilation
 from gateway.model.model import Model
+from gateway.model.prototype import leakage_flow
 from gateway.series import Series
 
 VENT_COLUMNS = ("vent_roof", "vent_side")
@@ -123,8 +124,8 @@ def run_adaptive(
         term = next(t for t in model.terms if t.name == "q_vent")
         p = {n: theta_f[:, j] for j, n in enumerate(model.names)}
         flow = np.asarray(term.flow(p, x, t_in, slice(0, len(t_in))), dtype=float)
-        if kind == "prototype":  # the prototype's leakage: c_loss [s-1] × V
-            flow = flow + p["c_loss"] * gh.volume
+        if kind == "prototype":  # the prototype's leakage adds to the vents' flow
+            flow = flow + leakage_flow(p["c_loss"], gh)
         flow = np.where(ok & np.isfinite(t_in), flow, np.nan)
     ms = result.step_ms[np.isfinite(result.step_ms)]
     return AdaptiveRun(series.time, x, fluxes, theta, list(model.names), flow,

@@ -224,12 +224,13 @@ def flow_limits(gh: Greenhouse, kind: str) -> FlowLimits:
     from gateway.model import build_model
     from gateway.model.almeria import kittas_drivers
     from gateway.model.drivers import roof_vent_area, side_vent_area
+    from gateway.model.prototype import leakage_flow
 
     upper = dict(zip(*_names_upper(build_model("almeria", gh), gh), strict=True))
     if kind == "prototype":
         proto = build_model("prototype", gh)
         names, hi = _names_upper(proto, gh)
-        leak = dict(zip(names, hi, strict=True))["c_loss"] * gh.volume  # ACH/3600 × V
+        leak = leakage_flow(dict(zip(names, hi, strict=True))["c_loss"], gh)
     else:
         leak = upper["c_loss"]
     full = np.array(100.0)

@@ -55,7 +55,8 @@ def with_(path: str, value, base: dict | None = None) -> dict:
     ("greenhouse.0.inside", KeyError, "greenhouse[1].inside: missing (required)"),
     ("greenhouse.0.inside", "7", "greenhouse[1].inside: must be a whole number, got '7'"),
     ("greenhouse.0.name", "history", "greenhouse[1].name: 'history' is not usable"),
-    ("greenhouse.0.model", "tomato", "greenhouse[1].model: 'tomato' is not one of prototype, almeria"),
+    ("greenhouse.0.model", "tomato",
+     "greenhouse[1].model: 'tomato' is not one of prototype, prototype+vent_control, almeria"),
     ("greenhouse.0.outlook", "crystal-ball", "greenhouse[1].outlook: unknown weather outlook"),
     ("greenhouse.0.greenhouse", "nowhere.toml", "greenhouse[1].greenhouse: "),
     ("greenhouse.0.vents", 3, "greenhouse[1].vents: unknown key"),
@@ -115,6 +116,21 @@ def test_what_the_config_names_is_checked_before_start(tmp_path: Path) -> None:
     check(with_("gateway.keys", "missing.txt"), "gateway.keys: cannot read")
     (res,) = prepare(parse_config(GOOD, "gw.toml", tmp_path))
     assert res.model.name == "prototype" and res.theta0 is None
+
+
+def test_the_vented_prototype_is_a_model_a_greenhouse_can_name(tmp_path: Path) -> None:
+    """``prototype+vent_control``: six parameters; a virtual sensor trained on another model kind
+    is refused, naming the key."""
+    from gateway.vsensor.models import __file__ as models_init
+
+    write_keys(tmp_path / "keys.txt", {7: KEY})
+    vented = with_("greenhouse.0.model", "prototype+vent_control")
+    (res,) = prepare(parse_config(vented, "gw.toml", tmp_path))
+    assert res.model.name == "prototype+vent_control"
+    assert res.model.names[-2:] == ["c_vc", "t_vc"] and len(res.model.names) == 6
+    shipped = Path(models_init).with_name("almeria.onnx")
+    with pytest.raises(ConfigError, match=r"greenhouse\[1\]\.vsensor: .*prototype\+vent_control"):
+        prepare(parse_config(with_("greenhouse.0.vsensor", str(shipped), vented), "gw.toml", tmp_path))
 
 
 def test_cli_says_one_line_and_check_validates(tmp_path: Path, capsys) -> None:

@@ -105,6 +105,23 @@ def test_cli_json_csv_and_plot(files, capsys):
     assert png.stat().st_size > 20_000
 
 
+def test_cli_replays_the_vented_prototype(files, capsys):
+    """``--model prototype+vent_control``: the two vent-controller parameters are estimated
+    and written beside the prototype's four."""
+    d, data, _ = files
+    out = d / "vented.csv"
+    code = main(["replay", "--data", str(data), "--greenhouse", "almeria-palmerillas",
+                 "--model", "prototype+vent_control", "--json", "--out", str(out),
+                 "--set", "t_in.iterations=3", "--set", "t_in.bats=8"])
+    assert code == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["model"] == "prototype+vent_control" and rep["samples"] == 240
+    with out.open() as handle:
+        row = next(csv.DictReader(handle))
+    for col in ("c_solar", "c_loss", "c_vc", "t_vc", "q_vent_control"):
+        assert col in row
+
+
 def test_cli_human_output_without_calibration(files, capsys):
     d, data, _ = files
     code = main(["replay", "--data", str(data), "--greenhouse", "almeria-palmerillas", "--model", "almeria",

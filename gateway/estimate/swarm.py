@@ -236,7 +236,7 @@ def make_algorithm(name: str, model_name: str = "prototype", iterations: int | N
         raise ValueError(f"unknown algorithm '{name}' (choose from {', '.join(ALGORITHMS)})")
     if name == "riwpso":
         st: PSOSettings | BatSettings = PSOSettings()
-    elif model_name == "prototype":
+    elif model_name.startswith("prototype"):  # with or without the vent controller's term
         st = BatSettings()
     else:
         st = ALMERIA_OFFLINE

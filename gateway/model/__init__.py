@@ -5,15 +5,19 @@ from __future__ import annotations
 from gateway.greenhouse import Greenhouse, GreenhouseError
 from gateway.model.model import Model
 
-MODEL_NAMES = ("prototype", "almeria")
+VENTED_PROTOTYPE = "prototype+vent_control"
+"""The prototype with the air exchange of controller-moved vents the kit does not see
+(gateway/model/vent_control.py): for a house whose climate computer opens the vents."""
+MODEL_NAMES = ("prototype", VENTED_PROTOTYPE, "almeria")
 
 
 def build_model(name: str, gh: Greenhouse) -> Model:
-    """``prototype`` (III.14–III.22) or ``almeria`` (III.23–III.35) for greenhouse ``gh``."""
-    if name == "prototype":
+    """``prototype`` (III.14–III.22), ``prototype+vent_control`` (the same with two more
+    parameters for unseen controller-moved vents) or ``almeria`` (III.23–III.35) for ``gh``."""
+    if name in ("prototype", VENTED_PROTOTYPE):
         from gateway.model.prototype import build_prototype
 
-        return build_prototype(gh)
+        return build_prototype(gh, vent_control=name == VENTED_PROTOTYPE)
     if name == "almeria":
         from gateway.model.almeria import build_almeria
 

@@ -74,12 +74,7 @@ def _series(case: Case, tmp: Path):
 
     data = generate(case.generator, window(case.window), case.kind, case.seed)
     gh = data.greenhouse()
-    if case.model == f"{MODEL}+vent_control":
-        from gateway.model.prototype import build_prototype
-
-        model = build_prototype(gh, vent_control=True)
-    else:
-        model = build_model(case.model, gh)
+    model = build_model(case.model, gh)
     path = tmp / "kit.csv"
     data.write_csv(path)
     return data, gh, model, load_series(str(path), step=ROW_S, required=model.requires)

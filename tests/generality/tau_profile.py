@@ -8,6 +8,13 @@ Never the held-out generator.
 
     python tests/generality/tau_profile.py twonode/autumn/drift [--effect sensor_drift]
     python tests/generality/tau_profile.py --synthetic   # the same search on model-made data
+    python tests/generality/tau_profile.py --inject twonode/autumn/none  # a ramp added
+
+``--inject``: the case is an effect-free window; a 0.5 K d-1 ramp is added to its reading from
+``INJECT_DAYS`` (as the suite's drift: the reading only) and the start the search finds is
+printed, with the base refitted (as reported) and held as calibrated on C (the first τ scan):
+the method's share of a start error (calibration part overlapping the change, the refit, the
+grid) against the base's (docs/effects.md, "The drift's start (issue 10, third look)").
 
 ``--synthetic``: 8 days made by the structured prototype itself (so the base is right) with a
 0.5 K d-1 drift from day 3.4, plus a slow base error after the start (a 2-day Gaussian bump of
@@ -34,11 +41,15 @@ from tests.generality.generators import CHANGE_DAY, EXPECTED, HELD_OUT  # noqa: 
 DAY = 86400.0
 PROFILE_STEP_S = 6 * 3600.0
 PROFILE_SPAN_S = 3 * DAY
+INJECT_DAYS = (CHANGE_DAY - 2.0, CHANGE_DAY, CHANGE_DAY + 2.0)
+"""``--inject``: ramp starts inside C, at the suite's change day (0.6 d before C ends), and
+wholly inside the held-out half."""
 
 
-def _setup(label: str) -> tuple:
+def _setup(label: str, ramp: tuple[float, float] | None = None) -> tuple:
     """(search context, greenhouse, calibrated base, its parameters, samples) of one case, as
-    ``diagnose`` builds them (split 0.5, seed 0)."""
+    ``diagnose`` builds them (split 0.5, seed 0); ``ramp`` (start day, rate [K d-1]) is added
+    to the inside reading first (the suite's drift: the reading only, RH untouched)."""
     from gateway.diagnose import search
     from gateway.diagnose.base import calibrate_base
     from gateway.diagnose.fit import HORIZON_S, coarsen, drivers
@@ -48,6 +59,10 @@ def _setup(label: str) -> tuple:
         raise SystemExit(f"{g} is held out: not a dev generator")
     with tempfile.TemporaryDirectory() as tmp:
         _, gh, model, series = _series(Case("diagnose", g, w, k), Path(tmp))
+    if ramp is not None:
+        sec = (series.time - series.time[0]).astype("timedelta64[s]").astype(float)
+        series.columns["t_in"] = (series.columns["t_in"]
+                                  + ramp[1] * np.maximum(sec - ramp[0] * DAY, 0.0) / DAY)
     coarse = coarsen(series, max(int(search.FIT_STEP_S // series.step), 1))
     n, dt = len(coarse), coarse.step
     s, horizon = int(round(0.5 * n)), max(int(round(HORIZON_S / dt)), 2)
@@ -97,11 +112,32 @@ def joint_profile(label: str, effect: str) -> tuple[list[tuple[float, float, flo
     return out, (float(fitted[jt]) - truth) / DAY
 
 
-def synthetic_drift_start(bump: float, seed: int = 3) -> float:
-    """Reported start − truth [h] of a 0.5 K d-1 drift from day 3.4 on 8 days of 5-minute data
-    made by the structured prototype at its default parameters (day-to-day weather from
+def injected_drift_start(label: str, day: float, rate: float = 0.5) -> tuple[float, ...]:
+    """A ``rate`` K d-1 ramp from ``day`` added to the reading of ``label`` (an effect-free dev
+    window): (start − truth [h], rate found) of the search's fit on all the data
+    (``search._fit_effect``, the reported start), then the same of the first τ scan alone (the
+    base held as calibrated on C). Where the ramp starts and whether the base is refitted are
+    what move the start if the method, not the base's error, misplaces it."""
+    from gateway.diagnose import search
+    from gateway.diagnose.base import carry
+    from gateway.diagnose.effects import EFFECTS, compose
+
+    ctx, gh, m0, th0, n = _setup(label, (day, rate))
+    e = EFFECTS["sensor_drift"]
+    m = compose(m0, [e], gh, ctx.duration)
+    jt, ja = m.index(e.tau_name), m.index(e.amp_name)
+    th = search._fit_effect(ctx, m, m0, th0, e, [(0, n)], 101, latest=False).theta
+    sc = search._scan(ctx.shooting(m, [(0, n)]), carry(th0, m0, m, gh), e, ctx.last, [(0, n)],
+                      latest=False)
+    return ((th[jt] - day * DAY) / 3600.0, float(th[ja]),
+            (sc.taus[sc.best] - day * DAY) / 3600.0, float(sc.amps[sc.best]))
+
+
+def synthetic_drift_start(bump: float, seed: int = 3, start_day: float = 3.4) -> float:
+    """Reported start − truth [h] of a 0.5 K d-1 drift from ``start_day`` on 8 days of 5-minute
+    data made by the structured prototype at its default parameters (day-to-day weather from
     ``seed``, reading noise 0.08 K), the reading lowered by a Gaussian bump of ``bump`` K
-    (σ 0.6 d) centred on day 5.0, searched as ``diagnose`` does (split 0.5, base held at the
+    (σ 0.6 d) centred 1.6 d after the start, searched as ``diagnose`` does (split 0.5, base held at the
     truth before the search)."""
     from gateway.diagnose import search
     from gateway.diagnose.effects import EFFECTS, compose
@@ -126,10 +162,10 @@ def synthetic_drift_start(bump: float, seed: int = 3) -> float:
     x = drivers(series, gh)
     e = EFFECTS["sensor_drift"]
     m = compose(m0, [e], gh, float(x["_index"][-1]))
-    truth, tau = m.defaults(gh), 3.4 * DAY
+    truth, tau = m.defaults(gh), start_day * DAY
     truth[m.index(e.amp_name)], truth[m.index(e.tau_name)] = 0.5, tau
     x["t_in"] = (m.free_run(truth[None], x, gh, dt)[0] + rng.normal(0, 0.08, n)
-                 - bump * np.exp(-0.5 * ((day - 5.0) / 0.6) ** 2))
+                 - bump * np.exp(-0.5 * ((day - start_day - 1.6) / 0.6) ** 2))
     ctx = search._Context(x, gh, dt, float(x["_index"][-1]), 72, n // 2)
     fitted = search._fit_effect(ctx, m, m0, m0.defaults(gh), e, [(0, n)], 0, latest=False).theta
     return (float(fitted[m.index(e.tau_name)]) - tau) / 3600.0
@@ -140,11 +176,25 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("case", nargs="?", help="generator/window/kind")
     ap.add_argument("--effect", help="library effect (default: the one that names the kind)")
     ap.add_argument("--synthetic", action="store_true", help="model-made data (docstring)")
+    ap.add_argument("--inject", action="store_true",
+                    help="case = an effect-free window: a 0.5 K d-1 ramp added from days "
+                         f"{INJECT_DAYS} (docstring)")
     a = ap.parse_args(argv)
+    if a.inject and a.case:
+        print("ramp from day | start − truth [h], rate [K d-1]: search (base refitted) | "
+              "first scan (base held)")
+        for day in INJECT_DAYS:
+            err, rate, err0, rate0 = injected_drift_start(a.case, day)
+            print(f"  {day:4.1f} | {err:+6.1f} h {rate:.3f} | {err0:+6.1f} h {rate0:.3f}",
+                  flush=True)
+        return 0
     if a.synthetic:
         print("base error bump [K] (reading lowered) | drift start found − truth [h]")
         for bump in (0.0, 0.3, -0.3, 0.6, -0.6, 0.9, -0.9):
             print(f"  {bump:+.1f} | {synthetic_drift_start(bump):+.1f}")
+        print("drift start day (calibration part ends at day 4) | start found − truth [h]")
+        for day in (1.4, 3.4, 5.4):
+            print(f"  {day:.1f} | {synthetic_drift_start(0.0, start_day=day):+.1f}")
         return 0
     if not a.case:
         ap.error("a case is required (or --synthetic)")

@@ -44,9 +44,9 @@ def _test(t: np.ndarray, r: np.ndarray, a: int, x: dict[str, np.ndarray]) -> dtm
 
 
 def test_size_with_state_bins():
-    """No change: ≤ α of the seeds flagged up to scatter (one-off 100 seeds: 3 of 100 with
-    equal noise, 7 of 100 with a held-out noise 0.5 K against 0.3 K; asserted on 60 seeds,
-    ≤ 7 = 60 × 0.05 + 2.3 s.d.)."""
+    """No change: ≤ α of the seeds flagged up to scatter (100 seeds, out/generality/cs/
+    synthetic_rates.py: 3 of 100 with equal noise, 8 of 100 with a held-out noise 0.5 K against
+    0.3 K; asserted on 60 seeds, ≤ 7 = 60 × 0.05 + 2.3 s.d.)."""
     flags = sum(_test(*_synth(seed)).p < res.UNEXPLAINED_ALPHA for seed in range(60))
     assert flags <= 7
 

@@ -8,12 +8,16 @@ coefficients of a rolling least-squares fit of the residual on (1, I_glob, ΔT).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from itertools import combinations
-from math import comb
-
 import numpy as np
 
+from gateway.diagnose.day_test import (  # noqa: F401  (re-exported: residuals is the API)
+    PERM_MAX,
+    STATE_LABEL,
+    UNEXPLAINED_ALPHA,
+    DayTest,
+    controller_state,
+    day_test,
+)
 from gateway.model import psychrometrics as psy
 
 LAGS_MIN = (30, 60, 120)
@@ -34,11 +38,10 @@ UNEXPLAINED_TEST = False
 """Issue 10: flag on ``day_test`` (days as units, family-wise level ``UNEXPLAINED_ALPHA``)
 instead of the MAE ratio and the ``HOUR_SHIFT_K`` threshold. Read at call time. Off: the lead
 decides after the held-out check."""
-UNEXPLAINED_ALPHA = 0.05
-"""Family-wise false-flag rate of ``day_test`` over all half-hour bins."""
-PERM_MAX = 4000
-"""Day splits of ``day_test``'s null: all of them when there are at most this many, else this
-many drawn (fixed seed, so the diagnosis stays deterministic)."""
+UNEXPLAINED_STATE = False
+"""Issue 10: under ``UNEXPLAINED_TEST``, ``day_test`` also compares the days by bins of the
+plant's own state (``controller_state``: a controller acting on temperature, not the clock),
+under the same day-swap null. Read at call time. Off: the lead decides."""
 
 
 def hour_profile(time: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -78,95 +81,6 @@ def sharp_hours(time_h: np.ndarray, r_h: np.ndarray, time_c: np.ndarray,
         return 0.0, 0
     j = int(np.nanargmax(np.abs(sharp)))
     return float(sharp[j]), j
-
-
-@dataclass
-class DayTest:
-    """``day_test``'s result: family-wise p, the largest |Welch t| and the half-hour bins
-    (after midnight UTC) whose |t| exceeds the null's 1 − α quantile, with the held-out minus
-    calibration mean sharp residual there [K]; days in each part."""
-    p: float
-    t_max: float
-    bins: list[int]
-    diff: list[float]
-    n_held: int
-    n_calib: int
-
-
-def _day_units(time: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """Per UTC day, the half-hour means of ``r`` minus their own circular running median over
-    ±2 h (the smooth daily course a weather regime moves), NaN where empty; (days, bins). Days
-    with less than half the bins are left out."""
-    sec = time.astype("datetime64[s]").astype(np.int64)
-    day = sec // 86400
-    nb = int(86400 // BIN_S)
-    ok = np.isfinite(r)
-    _, unit = np.unique(day, return_inverse=True)
-    cell = unit * nb + (sec % 86400) // int(BIN_S)
-    size = (int(unit.max()) + 1) * nb if len(unit) else 0
-    tot = np.bincount(cell[ok], weights=r[ok], minlength=size).reshape(-1, nb)
-    cnt = np.bincount(cell[ok], minlength=size).reshape(-1, nb)
-    m = np.where(cnt > 0, tot / np.maximum(cnt, 1), np.nan)
-    w = int(round(2 * 3600 / BIN_S))
-    idx = (np.arange(nb)[:, None] + np.arange(-w, w + 1)[None, :]) % nb
-    with np.errstate(all="ignore"):
-        hp = m - np.nanmedian(m[:, idx], axis=2)
-    return hp[np.isfinite(hp).sum(axis=1) >= nb // 2]
-
-
-def _welch_t(assign: np.ndarray, v: np.ndarray, fin: np.ndarray) -> np.ndarray:
-    """Welch t per bin (held-out minus calibration) for each row of the 0/1 day assignment
-    ``assign`` (splits, days) of the day-unit values ``v`` (zeros where missing, ``fin`` 0/1)."""
-    def moments(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        n, s, q = a @ fin, a @ v, a @ (v * v)
-        mean = s / np.maximum(n, 1)
-        var = (q - n * mean**2) / np.maximum(n - 1, 1)
-        return n, mean, var
-    n1, m1, v1 = moments(assign)
-    n0, m0, v0 = moments(1.0 - assign)
-    with np.errstate(all="ignore"):
-        t = (m1 - m0) / np.sqrt(v1 / n1 + v0 / n0)
-    return np.where((n1 >= 2) & (n0 >= 2) & np.isfinite(t), t, 0.0)
-
-
-def day_test(time_h: np.ndarray, r_h: np.ndarray, time_c: np.ndarray,
-             r_c: np.ndarray, alpha: float | None = None) -> DayTest:
-    """Has the held-out residual ``r_h`` a time-of-day feature the calibration part's ``r_c``
-    has not, beyond what days differ by? Days are the units: each day's half-hour profile minus
-    its own running median over ±2 h (``_day_units``: a level shift or a smooth change of the
-    daily course cancels), Welch t per bin between the two parts' days, max |t| over the bins
-    against its null from swapping whole days between the parts (all splits or ``PERM_MAX``).
-    The family-wise false-flag rate over the bins is α by construction when days are
-    exchangeable; it does not depend on the size of the residual."""
-    alpha = UNEXPLAINED_ALPHA if alpha is None else alpha
-    uh, uc = _day_units(time_h, r_h), _day_units(time_c, r_c)
-    nh, nc = len(uh), len(uc)
-    if nh < 2 or nc < 2:
-        return DayTest(1.0, 0.0, [], [], nh, nc)
-    u = np.vstack([uh, uc])
-    fin = np.isfinite(u).astype(float)
-    v = np.where(fin > 0, u, 0.0)
-    nd = nh + nc
-    obs = np.zeros((1, nd))
-    obs[0, :nh] = 1.0
-    t_obs = _welch_t(obs, v, fin)[0]
-    n_splits = comb(nd, nh)
-    if n_splits <= PERM_MAX:
-        assign = np.zeros((n_splits, nd))
-        for i, c in enumerate(combinations(range(nd), nh)):
-            assign[i, list(c)] = 1.0
-    else:
-        rng = np.random.default_rng(0)
-        assign = (np.argsort(rng.random((PERM_MAX, nd)), axis=1) < nh).astype(float)
-        assign = np.vstack([obs, assign])
-    null = np.abs(_welch_t(assign, v, fin)).max(axis=1)
-    t_max = float(np.abs(t_obs).max())
-    p = float(np.mean(null >= t_max - 1e-12))
-    crit = float(np.quantile(null, 1.0 - alpha))
-    bins = [int(j) for j in np.flatnonzero(np.abs(t_obs) > crit)]
-    with np.errstate(all="ignore"):
-        d = np.nanmean(uh, axis=0) - np.nanmean(uc, axis=0)
-    return DayTest(p, t_max, bins, [float(d[j]) for j in bins], nh, nc)
 
 
 def regressors(x: dict[str, np.ndarray], a: int, b: int, dt: float) -> dict[str, np.ndarray]:
@@ -307,21 +221,23 @@ def describe(an: dict, time: np.ndarray, a: int) -> str:
 
 
 def unexplained(an_after: dict, calib_r: np.ndarray, time: np.ndarray, a: int,
-                r_after: np.ndarray | None = None) -> tuple[bool, str]:
+                r_after: np.ndarray | None = None,
+                x: dict[str, np.ndarray] | None = None) -> tuple[bool, str]:
     """Does the held-out residual still carry structure the model lacks?
 
     Yes when its free-run MAE exceeds ``UNEXPLAINED_RATIO`` × the in-sample one on the
     calibration part (rows [0, a), residual ``calib_r``), or when its day profile has a sharp
     feature the calibration part's has not (``sharp_hours`` > ``HOUR_SHIFT_K``; needs the
-    held-out residual ``r_after``). Rolling-fit coefficient shifts (t ≥ ``CHANGE_T``) are part
-    of the signature, not of the flag: the weather moves them too. The signature says what it
-    looks like.
+    held-out residual ``r_after``). Under ``UNEXPLAINED_TEST`` the flag is ``day_test``
+    instead (with ``UNEXPLAINED_STATE`` also over the state bins of the drivers ``x``).
+    Rolling-fit coefficient shifts (t ≥ ``CHANGE_T``) are part of the signature, not of the
+    flag: the weather moves them too. The signature says what it looks like.
     """
     calib_mae = float(np.nanmean(np.abs(calib_r)))
     ratio = an_after["mae"] / calib_mae if calib_mae > 0 else float("inf")
     sig = describe(an_after, time[a:], a) + f"; held-out/in-sample MAE ratio {ratio:.2f}"
     if UNEXPLAINED_TEST and r_after is not None:
-        return _tested(sig, time, a, len(calib_r), calib_r, r_after)
+        return _tested(sig, time, a, calib_r, r_after, x if UNEXPLAINED_STATE else None)
     sharp, j = (0.0, 0) if r_after is None else sharp_hours(time[a:], r_after,
                                                           time[: len(calib_r)], calib_r)
     flagged = abs(sharp) > HOUR_SHIFT_K
@@ -331,18 +247,32 @@ def unexplained(an_after: dict, calib_r: np.ndarray, time: np.ndarray, a: int,
     return bool(ratio > UNEXPLAINED_RATIO or flagged), sig
 
 
-def _tested(sig: str, time: np.ndarray, a: int, nc: int, calib_r: np.ndarray,
-            r_after: np.ndarray) -> tuple[bool, str]:
+def _tested(sig: str, time: np.ndarray, a: int, calib_r: np.ndarray, r_after: np.ndarray,
+            x: dict[str, np.ndarray] | None) -> tuple[bool, str]:
     """``unexplained`` under ``UNEXPLAINED_TEST``: the flag is ``day_test`` at
-    ``UNEXPLAINED_ALPHA``; the MAE ratio stays in the signature only."""
-    dt_ = day_test(time[a:], r_after, time[:nc], calib_r)
+    ``UNEXPLAINED_ALPHA`` (state bins too when ``x`` is given); the MAE ratio stays in the
+    signature only."""
+    nc = len(calib_r)
+    states = ({}, {}) if x is None else (controller_state(x, a, r_after),
+                                        controller_state(x, 0, calib_r))
+    dt_ = day_test(time[a:], r_after, time[:nc], calib_r,
+                   state_h=states[0] or None, state_c=states[1] or None)
     flagged = dt_.p < UNEXPLAINED_ALPHA
-    if flagged:
-        hours = ", ".join(f"{j // 2:02d}:{30 * (j % 2):02d} ({d:+.2f} K)"
-                          for j, d in zip(dt_.bins, dt_.diff, strict=True))
-        sig += (f"; a time-of-day feature the calibration days have not at {hours} UTC "
-                f"(max |Welch t| {dt_.t_max:.1f} over {dt_.n_held}/{dt_.n_calib} days, "
-                f"day-swap p = {dt_.p:.3f}; a scheduled action?)")
-    else:
-        sig += f"; no time-of-day feature beyond day-to-day scatter (day-swap p = {dt_.p:.2f})"
-    return flagged, sig
+    what = "time-of-day" if x is None else "time-of-day or plant-state"
+    if not flagged:
+        return flagged, sig + (f"; no {what} feature beyond day-to-day scatter "
+                               f"(day-swap p = {dt_.p:.2f})")
+    found = []
+    if dt_.bins:
+        found.append("at " + ", ".join(f"{j // 2:02d}:{30 * (j % 2):02d} ({d:+.2f} K)"
+                                       for j, d in zip(dt_.bins, dt_.diff, strict=True)) + " UTC")
+    if dt_.state:
+        found.append("in " + ", ".join(f"{STATE_LABEL[b.name][0]} {b.lo:.3g}–{b.hi:.3g} "
+                                       f"{STATE_LABEL[b.name][1]} ({b.diff:+.2f} K)"
+                                       for b in dt_.state))
+    why = "a scheduled action?" if not dt_.state else (
+        "a controller acting on the plant's state?" if not dt_.bins
+        else "a scheduled action or a controller?")
+    return flagged, sig + (f"; a {what} feature the calibration days have not "
+                           f"{' and '.join(found)} (max |Welch t| {dt_.t_max:.1f} over "
+                           f"{dt_.n_held}/{dt_.n_calib} days, day-swap p = {dt_.p:.3f}; {why})")

@@ -256,7 +256,7 @@ def _report(series: Series, ctx: _Context, k: int, base: _Fit, st: _Search) -> D
     an_after = res.analyse(series.time[sf:], meas[sf:] - after_f["free_run"], xf, sf, dtf)
     calib_r = jd.calibration_free_run(final.model, final.theta_all, xf, gh, dtf, sf)
     unexplained, signature = res.unexplained(an_after, calib_r, series.time, sf,
-                                             meas[sf:] - after_f["free_run"])
+                                             meas[sf:] - after_f["free_run"], xf)
     return Diagnosis(
         model=final.model, theta=final.theta_all, base_model=base.model,
         base_theta=base.theta_all, findings=st.findings, rejected=st.rejected,

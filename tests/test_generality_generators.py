@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.generality.cases import verdict
+from tests.generality.cases import MIN_VISIBLE_K, verdict, visible_change
 from tests.generality.generators import KIT, generate
 from tests.generality.windows import bleiswijk_window
 
@@ -52,3 +52,17 @@ def test_verdicts():
     assert verdict("none", {**found, "findings": []})["ok"]
     assert verdict("misting", {**found, "unexplained": True})["ok"]
     assert verdict("drift", {**found, "findings": [{"effect": "sensor_drift"}], "p_value": None})["ok"]
+    quiet = {**found, "findings": [], "visible_k": 0.0}  # a change the reading does not show
+    assert verdict("controller", quiet) == {"invisible": True, "false_alarm": False, "ok": True}
+    assert verdict("controller", {**found, "visible_k": 0.01})["false_alarm"]
+    assert not verdict("controller", {**quiet, "visible_k": 0.3})["ok"]  # shown, not flagged
+
+
+def test_a_change_the_reading_does_not_show_is_measured_as_such(window):
+    """The reference simulator's vent cap binds only when the vents open wide: on two autumn
+    days it moves the reading by less than MIN_VISIBLE_K; the heater by more than 1 K."""
+    without = generate("refsim", window, "none").columns["t_in"]
+    capped = visible_change(generate("refsim", window, "controller", change_day=1.4), without)
+    heater = visible_change(generate("refsim", window, "heater", change_day=1.4), without)
+    assert heater > 1.0
+    assert capped < MIN_VISIBLE_K

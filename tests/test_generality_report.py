@@ -38,3 +38,23 @@ def test_the_earlier_run_stands_beside_and_the_published_forecast_is_marked() ->
     assert row == "| refsim | winter | 60 | 1.000 | 0.800 | 0.900 | 0.600 | 0.900 | 0.900 | 0.750 | ✓ | ✓ |"
     assert next(x for x in lines if x.startswith("| refsim | winter | 15 |")).endswith("| ✓ |  |")
     assert "Before (" not in markdown(after, META)  # no earlier run: no such table
+
+
+def _change(kind: str, ok: bool, invisible: bool = False, unexplained: bool = False) -> dict:
+    verdict = {"ok": ok, **({"invisible": True, "false_alarm": not ok} if invisible else {})}
+    return {"case": {"task": "diagnose", "generator": "refsim", "window": "winter", "kind": kind},
+            "findings": [], "verdict": verdict, "unexplained": unexplained, "before": 0.5,
+            "after": 0.5, "persistence": 2.0, "visible_k": 0.0 if invisible else 0.4}
+
+
+def test_a_change_the_data_does_not_show_is_counted_apart() -> None:
+    """An invisible kind leaves the kinds' count (x/5), an invisible controller the outside
+    library's, and the table says why."""
+    rows = [_change("ventilation", True, invisible=True), _change("heater", True),
+            _change("night_heater", True), _change("controller", True, invisible=True),
+            _change("misting", True, unexplained=True), _free("winter", 0.5, False)]
+    text = markdown(rows, META)
+    assert ("| refsim | 0/6 | 1/5 | 0/6 | 1 of 1 | 1 of 1 + 1 without a visible change, 1 quiet "
+            "(0 of 1) |") in text
+    assert "- winter: 1 of 5 effect kinds pass: heater (ventilation: no visible change)" in text
+    assert "| winter | controller (no visible change: 0.00 K) | none |" in text

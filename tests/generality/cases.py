@@ -13,6 +13,7 @@ import re
 import tempfile
 import time
 from dataclasses import asdict, dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +25,11 @@ MODEL = "prototype"
 START_TOLERANCE_H = 12.0
 MIN_CUT = 0.20
 ALPHA = 0.05
+MIN_VISIBLE_K = 0.05
+"""[K] Below this mean |change| of the kit's t_in reading after the start (against the same
+window and seed without the change: half the DHT22's 0.1 K step), the injected change left the
+reading as it was (a controller whose vents never reach their cap in winter), so no method
+could see it: the case is judged as effect-free data (quiet passes, a finding is a false alarm)."""
 PIECE_S = 6 * 3600.0
 """Held-out pieces of the case's own significance test (free-run residuals decorrelate within
 hours, as the diagnosis's judge assumes)."""
@@ -103,6 +109,25 @@ def run(case: Case, keep: str | None = None) -> dict:
     return out
 
 
+@lru_cache(maxsize=2)
+def _reading_without_change(generator: str, window_name: str, seed: int) -> np.ndarray:
+    return generate(generator, window(window_name), "none", seed).columns["t_in"]
+
+
+def visible_change(data, without_change: np.ndarray) -> float:
+    """Mean |Δ t_in reading| [K] after the change's start of ``data`` against
+    ``without_change``, the reading of the same window, seed and sensor noise without it."""
+    after = data.time >= data.start
+    return float(np.nanmean(np.abs(data.columns["t_in"][after] - without_change[after])))
+
+
+def case_visible_change(case: Case, data) -> float | None:
+    """:func:`visible_change` of a suite case (None for effect-free data)."""
+    if data.start is None:
+        return None
+    return visible_change(data, _reading_without_change(case.generator, case.window, case.seed))
+
+
 def _diagnose(case: Case, data, gh, model, series) -> dict:
     from gateway.diagnose import diagnose, to_json
 
@@ -126,6 +151,7 @@ def _diagnose(case: Case, data, gh, model, series) -> dict:
         res["start_error_h"] = float(lag / np.timedelta64(1, "h"))
     else:
         res["start_error_h"] = None
+    res["visible_k"] = case_visible_change(case, data)
     res["verdict"] = verdict(case.kind, res)
     return res
 
@@ -135,6 +161,8 @@ def verdict(kind: str, r: dict) -> dict:
     first = r["findings"][0]["effect"] if r["findings"] else None
     if kind == "none":
         return {"false_alarm": first is not None, "ok": first is None}
+    if r.get("visible_k") is not None and r["visible_k"] < MIN_VISIBLE_K:
+        return {"invisible": True, "false_alarm": first is not None, "ok": first is None}
     if kind not in EXPECTED:  # outside the library: to be reported unexplained
         return {"ok": bool(r["unexplained"]), "named": first}
     named = first in EXPECTED[kind]

@@ -10,14 +10,14 @@ from gateway.diagnose.fit import Shooting, drivers, window_starts
 from gateway.diagnose.night_sky import LEVEL, PRIOR, RELAX, NightSky
 from gateway.diagnose.structure import Modulation, SensorBias, SkyLoss, model_unit
 from gateway.model.terms import ALWAYS, Parameter
-from tests.test_diagnose_units import _proto, _series
+from tests.diagnose_data import prototype_bases, sine_series
 
 
 def test_level_at_the_prior_is_the_kits_sky_and_days_are_left_alone():
     """With the level equal to the kit's prior the sky is the kit's (sky.py); by day, where the
     cloud is read (r = 0), any level leaves it alone."""
-    gh, _, _ = _proto()
-    x = drivers(_series(n=2016, step=300), gh)
+    gh, _, _ = prototype_bases()
+    x = drivers(sine_series(n=2016, step=300), gh)
     ns, t = NightSky(), slice(None)
     np.testing.assert_allclose(ns.t_sky({LEVEL.name: x[PRIOR][None, :]}, x, t)[0], x["t_sky"],
                                atol=1e-9)
@@ -32,7 +32,7 @@ def _clear_nights(gh, m):
     """7 days of dull days (the kit reads cloud ≈ 0.9 and carries it into the night) and clear
     nights (true night cloud 0.05), from a house losing c_lw_sky = 5 W m-2 K-1 to the sky:
     (drivers with the kit's sky and the simulated T_in, the model, the true parameters)."""
-    s = _series(n=2016, step=300)  # 7 days
+    s = sine_series(n=2016, step=300)  # 7 days
     s.columns["t_out"] = s.columns["t_out"] - 6.0  # 4-14 °C outside
     s.columns["i_glob"] = 0.3 * s.columns["i_glob"]
     x = drivers(s, gh)
@@ -50,7 +50,7 @@ def test_clear_nights_read_as_overcast_do_not_distort_the_sky_loss():
     """On :func:`_clear_nights`, fitted on the kit's sky, the loss rate c_lw_sky / m_cap (the
     identifiable quantity: fluxes and capacity scale together) is far from the truth; with the
     night level as a base parameter the level and the rate come back."""
-    gh, _, m = _proto()
+    gh, _, m = prototype_bases()
     x, plain, truth = _clear_nights(gh, m)
     starts = window_starts([(0, 2016)], 72, skip=72)
     rate = {}
@@ -72,7 +72,7 @@ def test_the_base_calibration_fits_the_night_level(monkeypatch):
     read as overcast; without it the base has no level."""
     from gateway.diagnose import base
 
-    gh, _, m = _proto()
+    gh, _, m = prototype_bases()
     x, _, _ = _clear_nights(gh, m)
     got, _, _ = base.calibrate_base(m, gh, x, 300.0, 1344, 72, 0, lambda msg: None)
     assert got.night_sky is None and LEVEL.name not in got.names
@@ -85,7 +85,7 @@ def test_the_base_calibration_fits_the_night_level(monkeypatch):
 def test_shooting_sees_the_same_sky_as_the_step_by_step_run():
     """``shoot`` computes the fitted sky once for all windows (recomputed.windows); its runs
     are the free runs that compute it step by step, for every candidate level and window."""
-    gh, _, m = _proto()
+    gh, _, m = prototype_bases()
     x, plain, truth = _clear_nights(gh, m)
     model = plain.with_night_sky()
     assert model.names[:-1] == plain.names  # the level last
@@ -113,7 +113,7 @@ def test_the_guard_narrows_the_levels_box_around_the_kits_prior(monkeypatch):
     default stays inside its box."""
     from gateway.diagnose import base
 
-    gh, _, m = _proto()
+    gh, _, m = prototype_bases()
     assert base.night_bounds(0.7) == (0.0, 1.0)
     monkeypatch.setattr(base, "NIGHT_SKY_WIDTH", 0.2)
     np.testing.assert_allclose(base.night_bounds(0.9), (0.7, 1.0))
@@ -131,8 +131,8 @@ def test_a_modulation_of_a_parameter_read_once_per_run_is_refused(name):
     """The fitted sky and the vapour pressure behind an electronic offset are computed once
     per run from the unmodulated parameters: a modulation of those parameters is an error
     naming both, in the free run and in shooting (not an assert, gone under ``python -O``)."""
-    gh, _, m = _proto()
-    x = drivers(_series(n=600, step=300), gh)
+    gh, _, m = prototype_bases()
+    x = drivers(sine_series(n=600, step=300), gh)
     amp = Parameter("a_bad", "-", -1.0, 1.0, 0.0, None, ALWAYS, "relative change")
     tau = Parameter("tau_bad", "s", 0.0, 1e6, 0.0, None, ALWAYS, "start")
     model = m.with_night_sky().with_sensors(SensorBias())

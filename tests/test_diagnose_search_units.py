@@ -22,14 +22,14 @@ from gateway.diagnose.structure import structure
 from gateway.greenhouse import load_greenhouse
 from gateway.model import build_model
 from gateway.model import psychrometrics as psy
-from tests.test_diagnose_units import _proto, _series
+from tests.diagnose_data import prototype_bases, sine_series
 
 
 def test_scan_recovers_step_time_and_amplitude():
     """Data made by the model itself with a 40 % solar drop at 09:20 (in sunlight, where it is
     identifiable): the τ scan finds it."""
-    gh, base, m0 = _proto()
-    s = _series()
+    gh, base, m0 = prototype_bases()
+    s = sine_series()
     x = drivers(s, gh)
     e = EFFECTS["solar_gain_change"]
     m = compose(m0, [e], gh, x["_index"][-1])
@@ -46,8 +46,8 @@ def test_scan_recovers_step_time_and_amplitude():
 
 def test_levenberg_marquardt_recovers_base_parameters():
     """From the defaults, LM on multiple shooting recovers the parameters that made the data."""
-    gh, base, m = _proto(store=True)
-    s = _series(n=864, step=300)
+    gh, base, m = prototype_bases(store=True)
+    s = sine_series(n=864, step=300)
     x = drivers(s, gh)
     truth = m.defaults(gh)
     for name, v in (("c_cnv_cnd", 8e-4), ("c_solar", 1.2e-4), ("m_cap", 2.5), ("h_store", 4.0),
@@ -67,7 +67,7 @@ def test_levenberg_marquardt_recovers_base_parameters():
 def test_radiation_change_from_inside_radiation():
     gh = load_greenhouse("almeria-palmerillas")
     m = structure(build_model("almeria", gh), gh, store=False)
-    s = _series()
+    s = sine_series()
     x = drivers(s, gh)
     th = m.defaults(gh)
     c = th[m.index("c_tsw")]
@@ -81,7 +81,7 @@ def test_radiation_change_from_inside_radiation():
 
 
 def test_coarsen_keeps_state_samples_and_averages_inputs():
-    s = _series(n=600)
+    s = sine_series(n=600)
     c = coarsen(s, 5)
     assert len(c) == 120 and c.step == 300.0
     np.testing.assert_array_equal(c.columns["t_in"], s.columns["t_in"][::5])
@@ -188,9 +188,9 @@ def test_humidity_dates_more_air_exchange_that_the_temperature_leaves_open():
     good starts (the fold fits); before, that was the end of the still spell (+24 h)."""
     from gateway.diagnose.search import _scan
 
-    gh, _, m0 = _proto()
+    gh, _, m0 = prototype_bases()
     n, dt = 5 * 288, 300.0
-    s = _series(n=n, step=300)
+    s = sine_series(n=n, step=300)
     t = np.arange(n) * dt
     still = (t >= 1.5 * 86400) & (t < 3.0 * 86400)
     s.columns["t_out"] = np.where(still, 10.0, s.columns["t_out"])

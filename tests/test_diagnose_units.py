@@ -14,32 +14,14 @@ from gateway.diagnose.structure import STORE, structure
 from gateway.greenhouse import load_greenhouse
 from gateway.model import build_model
 from gateway.model import psychrometrics as psy
-from gateway.series import Series
-
-
-def _series(n=2880, step=60):
-    t = np.arange(n) * step
-    day = (t % 86400) / 86400
-    cols = {"t_out": 10 + 5 * np.sin(2 * np.pi * (day - 0.3)), "rh_out": np.full(n, 70.0),
-            "i_glob": np.maximum(0, 600 * np.sin(2 * np.pi * (day - 0.25))), "wind": np.full(n, 2.0),
-            "rh_in": np.full(n, 60.0), "t_in": np.full(n, 12.0)}
-    return Series((np.datetime64("2020-01-01T00:00:00") + t.astype("timedelta64[s]")), float(step), cols)
-
-
-def _proto(store=False):
-    """The prototype base, and its structured form; the base integrated as the structured form
-    is (the zero-order hold its coarsened inputs are built for, structure.Structured.advance)."""
-    gh = load_greenhouse("biskra-prototype")
-    m = structure(build_model("prototype", gh), gh, store)
-    base = replace(build_model("prototype", gh), integration=m.integration)
-    return gh, base, m
+from tests.diagnose_data import prototype_bases, sine_series
 
 
 def test_structured_base_at_neutral_values_is_the_thesis_model():
     """m_cap = 1, no store: the diagnosis's base runs exactly like gateway.model's (with the
     same integration)."""
-    gh, base, m = _proto()
-    s = _series()
+    gh, base, m = prototype_bases()
+    s = sine_series()
     x = drivers(s, gh)
     th = m.defaults(gh)
     np.testing.assert_allclose(m.free_run(th[None], x, gh, 60.0)[0],
@@ -50,8 +32,8 @@ def test_structured_base_at_neutral_values_is_the_thesis_model():
 
 def test_thermal_mass_effect_scales_capacity_from_its_start():
     """thermal_mass with factor 3 from τ: identical to a model of 3 × capacity after τ."""
-    gh, base, m0 = _proto()
-    s = _series()
+    gh, base, m0 = prototype_bases()
+    s = sine_series()
     x = drivers(s, gh)
     m = compose(m0, [EFFECTS["thermal_mass"]], gh, x["_index"][-1])
     th = m.defaults(gh)
@@ -67,8 +49,8 @@ def test_thermal_mass_effect_scales_capacity_from_its_start():
 
 
 def test_store_observer_matches_the_sequential_recursion():
-    gh, base, m = _proto(store=True)
-    s = _series(n=1500)
+    gh, base, m = prototype_bases(store=True)
+    s = sine_series(n=1500)
     x = drivers(s, gh)
     rng = np.random.default_rng(1)
     x["t_in"] = 15 + 5 * np.sin(np.arange(1500) / 200.0) + rng.normal(0, 0.1, 1500)
@@ -93,8 +75,8 @@ def test_store_observer_matches_the_sequential_recursion():
 
 def test_store_shifts_heat_into_the_night():
     """A store that absorbs sun by day keeps the night warmer than the same model without it."""
-    gh, base, m = _proto(store=True)
-    s = _series()
+    gh, base, m = prototype_bases(store=True)
+    s = sine_series()
     x = drivers(s, gh)
     th = m.defaults(gh)
     th[m.index("h_store")], th[m.index("a_store")], th[m.index("k_store")] = 5.0, 0.3, 0.0
@@ -107,8 +89,8 @@ def test_store_shifts_heat_into_the_night():
 
 
 def test_sensor_drift_changes_reading_not_state():
-    gh, base, m0 = _proto()
-    s = _series()
+    gh, base, m0 = prototype_bases()
+    s = sine_series()
     x = drivers(s, gh)
     m = compose(m0, [EFFECTS["sensor_drift"]], gh, x["_index"][-1])
     th = m.defaults(gh)
@@ -126,7 +108,7 @@ def test_electronic_offset_recomputes_the_vapour_pressure():
     gh = load_greenhouse("almeria-palmerillas")
     base = build_model("almeria", gh)
     m0 = structure(base, gh, store=False)
-    s = _series()
+    s = sine_series()
     s.columns["t_soil"] = np.full(len(s), 15.0)
     x = drivers(s, gh)
     m = compose(m0, [EFFECTS["sensor_drift"]], gh, x["_index"][-1])
@@ -152,8 +134,8 @@ def test_vents_opened_above_a_setpoint_are_kept_in_the_base():
     from gateway.diagnose.base import calibrate_base
     from gateway.model.vent_control import ControlledVentilation
 
-    gh, _, m = _proto()
-    s = _series(n=2016, step=300)  # 7 days
+    gh, _, m = prototype_bases()
+    s = sine_series(n=2016, step=300)  # 7 days
     s.columns["t_out"] = s.columns["t_out"] + 14.0  # a summer: 19-29 °C outside
     x = drivers(s, gh)
     vented = m.with_terms(ControlledVentilation(gh.air_density))
@@ -178,8 +160,8 @@ def test_wide_vent_box_lets_the_base_follow_a_summer_house_vents(monkeypatch):
     from gateway.diagnose import base
     from gateway.model.vent_control import ControlledVentilation
 
-    gh, _, m = _proto()
-    s = _series(n=2016, step=300)  # 7 days
+    gh, _, m = prototype_bases()
+    s = sine_series(n=2016, step=300)  # 7 days
     s.columns["t_out"] = s.columns["t_out"] + 14.0  # a summer: 19-29 °C outside
     x = drivers(s, gh)
     vented = m.with_terms(ControlledVentilation(gh.air_density, base.VENT_BOX_UPPER))
@@ -211,8 +193,8 @@ def test_leakage_growing_with_the_wind_is_kept_in_the_base(monkeypatch):
     from gateway.model.wind_leakage import WindLeakage
 
     monkeypatch.setattr(base, "OFFER_WIND_LEAKAGE", True)
-    gh, _, m = _proto()
-    s = _series(n=2016, step=300)  # 7 days
+    gh, _, m = prototype_bases()
+    s = sine_series(n=2016, step=300)  # 7 days
     day = np.arange(2016) // 288
     s.columns["wind"] = np.array([0.5, 6.0, 1.0, 7.0, 0.3, 5.0, 0.8])[day]
     s.columns["t_out"] = s.columns["t_out"] - 8.0  # 2-12 °C outside
@@ -234,7 +216,7 @@ def test_structure_detail_lists_every_part():
     from gateway.diagnose.base import structure_detail
     from gateway.model.vent_control import ControlledVentilation
 
-    gh, _, m = _proto()
+    gh, _, m = prototype_bases()
     assert structure_detail(m) == "effective heat capacity m_cap"
     vented = m.with_terms(ControlledVentilation(gh.air_density))
     assert structure_detail(vented) == "effective heat capacity m_cap, vent controller (c_vc, t_vc)"

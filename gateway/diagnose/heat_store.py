@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from gateway.diagnose.structure import INDEX, _filled, on
+from gateway.diagnose.structure import INDEX, gaps_bridged, on
 from gateway.model.terms import ALWAYS, Index, Parameter
 
 if TYPE_CHECKING:
@@ -98,7 +98,7 @@ class AddedStore:
         fake = dict(p) | {"c_store": c, "h_store": one, "k_store": 0 * one, "a_store": 0 * one}
         f = model.observer(fake, x, dt)  # (P, T)
         idx = slice(0, n)
-        ta = np.broadcast_to(model.true_state(p, x, _filled(x["t_in"])[None, :], idx), f.shape)
+        ta = np.broadcast_to(model.true_state(p, x, gaps_bridged(x["t_in"])[None, :], idx), f.shape)
         k = np.searchsorted(x[INDEX], p[self.tau.name][:, 0], side="left")  # (P,)
         kk = np.minimum(k, n - 1)[:, None]
         rows = np.arange(f.shape[0])[:, None]
@@ -113,6 +113,6 @@ class AddedStore:
         p = model.columns(np.atleast_2d(theta))
         n = len(x["t_in"])
         tw = self.observer(model, p, x, dt)
-        ta = model.true_state(p, x, _filled(x["t_in"])[None, :], slice(0, n))
+        ta = model.true_state(p, x, gaps_bridged(x["t_in"])[None, :], slice(0, n))
         g, s = self.coefficients(p, x, tw, slice(0, n), dt, 1.0)
         return (g - s * ta)[0]

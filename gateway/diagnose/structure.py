@@ -129,7 +129,7 @@ class Modulation:
         return 1.0 + (p[self.amp.name] - self.neutral) * on(p, x, t, self.tau.name)
 
 
-def _filled(v: np.ndarray) -> np.ndarray:
+def gaps_bridged(v: np.ndarray) -> np.ndarray:
     """Gaps bridged linearly (only to drive the store observer, never scored)."""
     ok = np.isfinite(v)
     if ok.all() or not ok.any():
@@ -235,14 +235,14 @@ class Structured(Model):
         n_p = next(iter(p.values())).shape[0]
         idx = slice(0, n)
         q = self._at(p, x, idx)
-        ta = self.true_state(p, x, _filled(x["t_in"])[None, :], idx)
+        ta = self.true_state(p, x, gaps_bridged(x["t_in"])[None, :], idx)
         ta = np.broadcast_to(ta, (n_p, n))
         # the store's step from t to t+1 sees the air at t+1 (as in ``advance``)
         ta = np.concatenate([ta[:, 1:], ta[:, -1:]], axis=1)
         h, k, cs = q["h_store"], q["k_store"], q["c_store"]
         s = np.maximum(h + k, 1e-9)
-        u = (q["a_store"] * _filled(x["i_glob"])[None, :] + h * ta
-             + k * _filled(x["t_out"])[None, :]) / s
+        u = (q["a_store"] * gaps_bridged(x["i_glob"])[None, :] + h * ta
+             + k * gaps_bridged(x["t_out"])[None, :]) / s
         u = np.broadcast_to(u, (n_p, n))
         rate = s * dt / cs  # -ln λ per sample (P, 1)
         lam = np.exp(-rate)

@@ -74,7 +74,8 @@ class Case:
         return f"{self.task} {self.generator}/{self.window}/{self.kind}"
 
 
-def _series(case: Case, tmp: Path):
+def case_series(case: Case, tmp: Path) -> tuple:
+    """(kit data, greenhouse, model, the series read back from the kit CSV written in ``tmp``)."""
     from gateway.model import build_model
     from gateway.series import load_series
 
@@ -95,7 +96,7 @@ def run(case: Case, keep: str | None = None) -> dict:
     out: dict = {"case": asdict(case)}
     try:
         with tempfile.TemporaryDirectory() as tmp:
-            data, gh, model, series = _series(case, Path(tmp))
+            data, gh, model, series = case_series(case, Path(tmp))
             out["size"] = data.size
             out["start"] = None if data.start is None else str(data.start) + "Z"
             if case.task == "diagnose":
@@ -145,7 +146,7 @@ def _diagnose(case: Case, data, gh, model, series) -> dict:
         "diagnosis_seconds": j.get("seconds"),
     }
     res["cut"] = (1.0 - res["after"] / res["before"]) if res["before"] else None
-    res["p_value"] = _own_significance(d)
+    res["p_value"] = own_significance(d)
     if first is not None and data.start is not None and first["start"]:
         lag = np.datetime64(first["start"].rstrip("Z"), "s") - data.start
         res["start_error_h"] = float(lag / np.timedelta64(1, "h"))
@@ -183,7 +184,7 @@ def _paired_t(evidence: str) -> float | None:
         return None
 
 
-def _own_significance(d) -> float | None:
+def own_significance(d) -> float | None:
     """One-sided sign-flip permutation p-value that the held-out free-run absolute error fell,
     over 6-hour pieces of the held-out part (independent of the diagnosis's own judge). Reads
     ``Diagnosis.split_index``, ``measured``, ``time`` and ``pred_before``/``pred_after``

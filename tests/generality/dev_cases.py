@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from tests.generality.cases import START_TOLERANCE_H, Case, _own_significance, _series  # noqa: E402
+from tests.generality.cases import START_TOLERANCE_H, Case, case_series, own_significance  # noqa: E402
 from tests.generality.generators import CHANGE_DAY, EXPECTED, HELD_OUT  # noqa: E402
 
 KINDS = ("transmission", "ventilation", "thermal_mass", "sun_sensor", "drift")
@@ -37,7 +37,7 @@ def run_case(label: str) -> dict:
         raise SystemExit(f"{g} is held out: not a dev generator")
     t0 = time.process_time()
     with tempfile.TemporaryDirectory() as tmp:
-        data, gh, model, series = _series(Case("diagnose", g, w, k), Path(tmp))
+        data, gh, model, series = case_series(Case("diagnose", g, w, k), Path(tmp))
         d = diagnose(series, gh, model)
     f = d.findings[0] if d.findings else None
     err = None
@@ -47,7 +47,7 @@ def run_case(label: str) -> dict:
     b, a = d.before["free_run"]["mae"], d.after["free_run"]["mae"]
     keys = ("round", "effect", "ok", "p", "cut", "cut_reference", "halves", "starts", "late")
     return {"case": label, "first": f.effect.name if f else None, "start_err_h": err,
-            "cut": 1.0 - a / b, "p_suite": _own_significance(d),
+            "cut": 1.0 - a / b, "p_suite": own_significance(d),
             "trials": [{key: t[key] for key in keys} for t in d.trials],
             "cpu_s": time.process_time() - t0}
 

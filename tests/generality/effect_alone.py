@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from tests.generality.cases import Case, _series  # noqa: E402
+from tests.generality.cases import Case, case_series  # noqa: E402
 from tests.generality.generators import HELD_OUT  # noqa: E402
 
 DEFAULT = [f"{g}/{w}/thermal_mass" for g in ("refsim", "twonode")
@@ -37,7 +37,7 @@ def judged(label: str, effect: str) -> list[str]:
     if g in HELD_OUT:
         raise SystemExit(f"{g} is held out: not a dev generator")
     with tempfile.TemporaryDirectory() as tmp:
-        data, gh, model, series = _series(Case("diagnose", g, w, k), Path(tmp))
+        data, gh, model, series = case_series(Case("diagnose", g, w, k), Path(tmp))
     d = diagnose(series, gh, model, library=(EFFECTS[effect],))
     truth = float((data.start - series.time[0]) / np.timedelta64(1, "s")) if data.start else None
     kept = [s["structure"] for s in d.structure if s["kept"] and s["structure"] != "base"]

@@ -31,7 +31,7 @@ if str(ROOT) not in sys.path:
 from tests.generality.cases import Case, run  # noqa: E402
 from tests.generality.generators import GENERATORS, HELD_OUT  # noqa: E402
 from tests.generality.report import MAIN_WINDOWS, goals  # noqa: E402
-from tests.generality.suite import _commit, _init_worker  # noqa: E402
+from tests.generality.suite import commit_id, init_worker  # noqa: E402
 
 RESULTS = ROOT / "bench" / "results" / "forecasts.json"
 COLUMNS = (("persistence", "persistence"), ("arx", "ARX"), ("adaptive", "adaptive"),
@@ -154,14 +154,14 @@ def main(argv: list[str] | None = None) -> int:
     else:
         print(f"forecast replays: {len(cases)} cases on {a.jobs} processes", flush=True)
         results = []
-        with mp.get_context("spawn").Pool(a.jobs, initializer=_init_worker) as pool:
+        with mp.get_context("spawn").Pool(a.jobs, initializer=init_worker) as pool:
             for i, r in enumerate(pool.imap_unordered(partial(run, keep=a.keep), cases), 1):
                 results.append(r)
                 print(f"[{i}/{len(cases)}] {Case(**r['case']).label} ({r['seconds']:.0f} s)",
                       flush=True)
     meta = {"command": "tests/generality/forecasts.py" + (" --rescore" if a.rescore else ""),
             "cases": len(results), "jobs": None if a.rescore else a.jobs,  # a rescore runs none
-            "minutes": (time.perf_counter() - t0) / 60.0, "commit": _commit(),
+            "minutes": (time.perf_counter() - t0) / 60.0, "commit": commit_id(),
             "when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
     out = Path(a.json)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -32,7 +32,7 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from tests.generality.cases import EXTRA_WINDOWS, Case, _series, window  # noqa: E402
+from tests.generality.cases import EXTRA_WINDOWS, Case, case_series, window  # noqa: E402
 from tests.generality.generators import HELD_OUT  # noqa: E402
 
 WINDOWS = ("autumn", "winter", "summer", *EXTRA_WINDOWS)
@@ -103,7 +103,7 @@ def base_run(generator: str, name: str, sky_of_generator: bool) -> tuple[float, 
     from gateway.diagnose import diagnose
 
     with tempfile.TemporaryDirectory() as tmp:
-        _, gh, model, series = _series(Case("diagnose", generator, name, "none"), Path(tmp))
+        _, gh, model, series = case_series(Case("diagnose", generator, name, "none"), Path(tmp))
         if sky_of_generator:
             with generator_sky(generator, window(name)):
                 d = diagnose(series, gh, model)

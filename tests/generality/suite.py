@@ -52,7 +52,7 @@ def all_cases(generators=GENERATORS, windows=MAIN_WINDOWS, only: str | None = No
     return cases
 
 
-def _init_worker() -> None:
+def init_worker() -> None:
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[var] = "1"
 
@@ -67,7 +67,7 @@ def _line(r: dict) -> str:
     return f"first {first}, MAE {r['before']:.3f} → {r['after']:.3f}, ok {r['verdict']['ok']}"
 
 
-def _commit() -> str:
+def commit_id() -> str:
     try:
         return subprocess.check_output(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
                                        text=True).strip()
@@ -105,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     results = []
     ctx = mp.get_context("spawn")  # a clean interpreter per worker: no state shared with the parent
-    with ctx.Pool(a.jobs, initializer=_init_worker, maxtasksperchild=4) as pool:
+    with ctx.Pool(a.jobs, initializer=init_worker, maxtasksperchild=4) as pool:
         for i, r in enumerate(pool.imap_unordered(run, cases), 1):
             results.append(r)
             spent = time.perf_counter() - t0
@@ -123,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
         minutes += old["meta"].get("minutes", 0.0)
     meta = {"command": "make bench-generality", "cases": len(results), "jobs": a.jobs,
             "minutes": minutes, "runs": [{"minutes": minutes, "jobs": a.jobs}],
-            "when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": _commit(),
+            "when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": commit_id(),
             "model": MODEL, "generators": list(gens)}
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"meta": meta, "results": results}, indent=1) + "\n", encoding="utf-8")

@@ -35,7 +35,7 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from tests.generality.cases import Case, _series  # noqa: E402
+from tests.generality.cases import Case, case_series  # noqa: E402
 from tests.generality.generators import CHANGE_DAY, EXPECTED, HELD_OUT  # noqa: E402
 
 DAY = 86400.0
@@ -58,7 +58,7 @@ def _setup(label: str, ramp: tuple[float, float] | None = None) -> tuple:
     if g in HELD_OUT:
         raise SystemExit(f"{g} is held out: not a dev generator")
     with tempfile.TemporaryDirectory() as tmp:
-        _, gh, model, series = _series(Case("diagnose", g, w, k), Path(tmp))
+        _, gh, model, series = case_series(Case("diagnose", g, w, k), Path(tmp))
     if ramp is not None:
         sec = (series.time - series.time[0]).astype("timedelta64[s]").astype(float)
         series.columns["t_in"] = (series.columns["t_in"]

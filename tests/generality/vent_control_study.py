@@ -164,10 +164,10 @@ def cost(_kept, rows: int = 576, rounds: int = 3) -> None:
 
     from gateway.estimate.online import OnlineEstimator
     from gateway.model.prototype import build_prototype
-    from tests.generality.cases import Case, _series
+    from tests.generality.cases import Case, case_series
 
     with tempfile.TemporaryDirectory() as tmp:
-        _, gh, _, series = _series(Case("forecast", "refsim", "summer"), Path(tmp))
+        _, gh, _, series = case_series(Case("forecast", "refsim", "summer"), Path(tmp))
     names = list(series.columns)
     samples = [{c: float(series.columns[c][t]) for c in names} for t in range(rows)]
     ms: dict[bool, list[float]] = {False: [], True: []}

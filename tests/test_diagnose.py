@@ -164,12 +164,24 @@ def test_cli_json_and_report(tmp_path, capsys):
                "--report", str(tmp_path / "rep")])
     assert rc == 0
     out = json.loads(capsys.readouterr().out)
+    assert "hint" in out
     assert out["findings"][0]["effect"] == "solar_gain_change"
     assert out["findings"][0]["params"]["d_solar"] < -0.3
     assert out["after"]["free_run"]["mae"] < out["before"]["free_run"]["mae"]
     for name in ("report.md", "residual.png", "hour_of_day.png", "effects.png"):
         assert (tmp_path / "rep" / name).stat().st_size > 0
     assert "solar gain fell" in (tmp_path / "rep" / "report.md").read_text(encoding="utf-8")
+
+
+def test_a_kept_vent_controller_points_the_live_estimator_to_the_vented_model():
+    from gateway.cli.diagnose import live_model_hint
+
+    log = [{"structure": "base", "kept": True}, {"structure": "vent controller", "kept": True}]
+    hint = live_model_hint("prototype", log)
+    assert hint is not None and "--model prototype+vent_control" in hint
+    assert live_model_hint("prototype+vent_control", log) is None  # already carries it
+    log[1]["kept"] = False
+    assert live_model_hint("prototype", log) is None
 
 
 def test_cli_bad_split(tmp_path, capsys):

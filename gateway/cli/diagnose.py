@@ -47,11 +47,29 @@ def run(args: argparse.Namespace) -> int:
 
         path = write_report(d, args.report, args.data)
         say(f"report written to {path}")
+    hint = live_model_hint(args.model, d.structure)
     if args.json:
-        dump_json(to_json(d))
+        dump_json({**to_json(d), "hint": hint})
     else:
         _print_human(d)
+        if hint:
+            sys.stdout.write(f"hint: {hint}\n")
     return 0
+
+
+def live_model_hint(model_name: str, structure: list[dict]) -> str | None:
+    """What the base's structure choice says for the online estimator: a kept vent controller
+    part (it extrapolated better on the inner validation split) means vents a climate computer
+    moves, which the prototype follows only a step behind and its forecasts not at all."""
+    from gateway.model import VENTED_PROTOTYPE
+
+    kept = any(st["structure"] == "vent controller" and st["kept"] for st in structure)
+    if model_name != "prototype" or not kept:
+        return None
+    return (f"the base kept the vent controller (vents a climate computer opens, unseen by the "
+            f"kit): replay and the live gateway carry it with --model {VENTED_PROTOTYPE} "
+            f"(model = \"{VENTED_PROTOTYPE}\" in gateway.toml; docs/effects.md, \"Forecasts: "
+            "the vent controller the kit does not see\")")
 
 
 def _print_human(d) -> None:

@@ -36,12 +36,17 @@ CHANGE_T = 4.0
 """Change-point statistic (two-segment t) above which a rolling coefficient has shifted."""
 UNEXPLAINED_TEST = False
 """Issue 10: flag on ``day_test`` (days as units, family-wise level ``UNEXPLAINED_ALPHA``)
-instead of the MAE ratio and the ``HOUR_SHIFT_K`` threshold. Read at call time. Off: the lead
-decides after the held-out check."""
+instead of the MAE ratio and the ``HOUR_SHIFT_K`` threshold. Read at call time. Off: with
+``base.WIDE_VENT_BOX`` on it flagged the tuning generators' misting in 5 of 6 and their other
+vent controller in none, where the default flag has 6 and 2, and three verdicts got worse
+(docs/effects.md, "A flag that does not need a bad base")."""
 UNEXPLAINED_STATE = False
 """Issue 10: under ``UNEXPLAINED_TEST``, ``day_test`` also compares the days by bins of the
 plant's own state (``controller_state``: a controller acting on temperature, not the clock),
-under the same day-swap null. Read at call time. Off: the lead decides."""
+under the same day-swap null. Read at call time. Off: with both on (and the wide vent box)
+changes outside the library were flagged in 6 of 12 (default 8), two verdicts got worse, and
+its one controller flag was a radiation band the effect-free window shows too (docs/effects.md,
+same section)."""
 
 
 def hour_profile(time: np.ndarray, r: np.ndarray) -> np.ndarray:

@@ -278,6 +278,7 @@ def judge(before: dict, reference: dict, after: dict, meas: np.ndarray, blocks: 
     if not after_tau.any():
         after_tau[:] = True
     post, post_ref = d_before[after_tau], d_ref[after_tau]
+    # whole days since the first row: the units of ``day_p``
     day = np.array([int(a * dt // 86400.0) for a in kept])[after_tau]
     half = len(post_ref) // 2
     p_pieces, p_days = paired_p(post), day_p(post, day)

@@ -29,10 +29,18 @@ MIN_REF_CUT = 0.10
 """Smallest relative cut against the reference (the base refitted on the same data without the
 effect): what a refit alone gives is weather, not the effect."""
 ALPHA = 0.05
+"""Level of the one-sided test of each judged candidate's held-out cut (``paired_p``)."""
 DETREND_MIN_PIECES = 16
 """From this many pieces (4 days of 6 h) ``paired_p`` reads their autocorrelation about a line
 in time, not about their mean."""
-"""Level of the one-sided test of each judged candidate's held-out cut (``paired_p``)."""
+DAY_TEST = False
+"""Judge significance on held-out *days* (``day_p``) instead of 6-h pieces (``paired_p``): the
+base's error is correlated over whole days and spells of days, which the pieces' lag-1
+autocorrelation understates (docs/effects.md, "False alarms: what the rule is built for").
+Both p-values are logged in the trials either way."""
+DAY_RHO = 0.5
+"""Day-to-day correlation of the held-out error that ``day_p`` is built for (AR(1) across days;
+not estimated per candidate: from 3 to 7 day means an estimate is noise, biased low)."""
 MIN_AFTER_S = 3 * 86400.0
 """An effect must leave at least this much data after its start [s] (at most half the held-out
 part, ``last_start``): a change on the data's last days cannot be told from a passing spell of
@@ -166,6 +174,35 @@ def paired_p(d: np.ndarray) -> float:
     return student_t_sf(t, max(n_eff - 1.0, 1.0))
 
 
+def day_p(d: np.ndarray, day: np.ndarray, rho: float | None = None) -> float:
+    """One-sided p-value of mean(d) > 0 with whole days as the units: the pieces' differences
+    ``d`` averaged per ``day`` label (any correlation within a day is then inside one unit),
+    and the day means taken as AR(1) across days with correlation ``rho`` (``DAY_RHO``).
+
+    A Student t on the day means whose variance is matched to that correlation (R_ij =
+    rho^|i-j|, M the centring matrix, K days): Var(mean) = sigma² 1'R1/K², and the sample sum
+    of squares has E[z'z] = sigma² tr(MR), so sigma² is read as z'z / tr(MR); degrees of
+    freedom tr(MR)²/tr(MRMR) (Satterthwaite). Exact in the first two moments on Gaussian day
+    means of that correlation, conservative for less. 1 with fewer than 3 days."""
+    rho = DAY_RHO if rho is None else rho
+    labels = np.unique(day)
+    if len(labels) < 3:
+        return 1.0
+    m = np.array([d[day == k].mean() for k in labels])
+    k = len(m)
+    lag = np.abs(np.subtract.outer(labels, labels)).astype(float)  # gaps count as days
+    R = rho**lag
+    MR = R - R.mean(axis=0, keepdims=True)
+    a = float(np.trace(MR))
+    z = m - m.mean()
+    ss = float(z @ z)
+    if ss == 0.0:
+        return 0.0 if m.mean() > 0 else 1.0
+    var_mean = ss / a * float(R.sum()) / k**2
+    df = a * a / float(np.sum(MR * MR.T))
+    return student_t_sf(float(m.mean() / np.sqrt(var_mean)), max(df, 1.0))
+
+
 def student_t_sf(t: float, df: float) -> float:
     """P(T > t) for Student's t with ``df`` degrees of freedom: ½ I_x(df/2, ½) with
     x = df/(df + t²) (regularised incomplete beta by its continued fraction, Numerical Recipes
@@ -236,13 +273,19 @@ def judge(before: dict, reference: dict, after: dict, meas: np.ndarray, blocks: 
     d_before = _piece_diffs(err["b"], err["a"], ok, cut, s)
     mae = {k: float(np.mean(v[ok])) for k, v in err.items()}
     tau = max(starts) if starts else 0.0
-    after_tau = np.array([a * dt >= tau for a, b in cut if ok[a - s : b - s].any()], dtype=bool)
+    kept = [a for a, b in cut if ok[a - s : b - s].any()]
+    after_tau = np.array([a * dt >= tau for a in kept], dtype=bool)
     if not after_tau.any():
         after_tau[:] = True
     post, post_ref = d_before[after_tau], d_ref[after_tau]
+    # whole days since the first row: the units of ``day_p``
+    day = np.array([int(a * dt // 86400.0) for a in kept])[after_tau]
     half = len(post_ref) // 2
+    p_pieces, p_days = paired_p(post), day_p(post, day)
     stats = {
-        "p": paired_p(post), "p_reference": paired_p(post_ref),
+        "p": p_days if DAY_TEST else p_pieces, "p_pieces": p_pieces, "p_days": p_days,
+        "day_means": [float(post[day == k].mean()) for k in np.unique(day)],
+        "p_reference": paired_p(post_ref),
         "halves": ([float(post_ref[:half].mean()), float(post_ref[half:].mean())]
                    if half else [0.0, 0.0]),
         "cut": 1.0 - mae["a"] / mae["b"] if mae["b"] > 0 else 0.0,
@@ -252,7 +295,7 @@ def judge(before: dict, reference: dict, after: dict, meas: np.ndarray, blocks: 
     good = decide(stats)
     why = (f"held-out free-run MAE {mae['b']:.3f} → {mae['a']:.3f} °C "
            f"({-100 * stats['cut']:+.0f} %, one-sided p = {stats['p']:.3f} over the "
-           f"{len(post)} pieces of {JUDGE_PIECE_S / 3600:g} h after its start; refitted without it "
+           f"{_units(len(post), len(stats['day_means']))} after its start; refitted without it "
            f"{mae['r']:.3f} °C: {-100 * stats['cut_reference']:+.0f} %)")
     if min(stats["halves"]) <= 0:
         why += "; not in both halves of the held-out data after its start (a spell)"
@@ -260,6 +303,11 @@ def judge(before: dict, reference: dict, after: dict, meas: np.ndarray, blocks: 
         why += "; starts too close to the end of the data to tell from a spell of weather"
     return Verdict(bool(good), why, mae["b"], mae["r"], mae["a"],
                    float(np.mean(err["a"][ok] ** 2)), stats["p"], ALPHA, stats=stats)
+
+
+def _units(n_pieces: int, n_days: int) -> str:
+    return (f"{n_days} days" if DAY_TEST
+            else f"{n_pieces} pieces of {JUDGE_PIECE_S / 3600:g} h")
 
 
 def _t(d: np.ndarray) -> float:

@@ -310,13 +310,6 @@ def _units(n_pieces: int, n_days: int) -> str:
             else f"{n_pieces} pieces of {JUDGE_PIECE_S / 3600:g} h")
 
 
-def _t(d: np.ndarray) -> float:
-    if len(d) < 2:
-        return 0.0
-    sd = float(np.std(d, ddof=1))
-    return float(np.mean(d) / (sd / np.sqrt(len(d)))) if sd > 0 else 0.0
-
-
 def decide(st: dict) -> bool:
     """The decision rule on the judge's statistics (docs/effects.md, "How the diagnosis
     decides")."""

@@ -73,7 +73,7 @@ def test_switch_off_is_the_unweighted_calibration(monkeypatch):
 def test_a_misread_night_pulls_the_weighted_fit_less():
     """One clear night the kit reads as overcast distorts the plain fit (the free run under
     the true sky drifts from the truth); weighted by the sky's spread the fit is pulled less.
-    The gain is small: the measured spread gives night weights only ~20 % below the day's
+    The gain is small (~7 %): the measured spread gives night weights only 12-33 % below the day's
     (docs/effects.md, "Weighting the base by the sky's spread")."""
     gh, x, true_x, plain, truth, th0 = _misread_night(1)
     starts = window_starts([(0, N)], H, skip=H)

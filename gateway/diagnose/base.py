@@ -69,7 +69,10 @@ SKY_WEIGHTS = False
 """Whether the base's calibration (base fit, optional parts, inner validation, final refit)
 weights each free-run residual by 1 / (σ_n² + σ_T²), σ_T the spread the kit's unseen sky gives
 T_in (gateway/diagnose/sky_weights.py), so misread nights cannot pull the parameters. The
-effect search and the judge stay unweighted (docs/effects.md, "Sky temperature and the site")."""
+effect search and the judge stay unweighted. Off: on the tuning generators the mean effect-free
+base error rose (refsim 0.856 → 0.868, twonode 0.668 → 0.712 K), the weights being too even
+(0.4–1.7; nights 0.67–0.88 × days) to discount a misread night (docs/effects.md, "Weighting the
+base by the sky's spread")."""
 STORE_START = {"c_store": 5e4, "h_store": 3.0, "k_store": 3.0, "a_store": 0.1}
 """Where the heat store's fit starts (a floor-like store: 5 cm of wet sand, h ≈ 3 W m-2 K-1)."""
 

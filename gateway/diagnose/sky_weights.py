@@ -19,7 +19,9 @@ model and parameters so that the yardstick is fixed for the whole calibration an
 misread nights cannot set their own weight; σ_n the base's error once the sky is known (the
 mean held-out MAE with the generators' own sky, 0.61 K, × √(π/2) for a Gaussian: 0.77 K).
 The weights are normalised to mean 1 over the comparable samples, so MSE values keep their
-scale in K².
+scale in K². Measured, not adopted (base.SKY_WEIGHTS off): σ_T is only 0.3–0.7 K, nights get
+0.67–0.88 × the days' weight, and the base's effect-free error rose on both tuning generators
+(docs/effects.md, "Weighting the base by the sky's spread").
 """
 
 from __future__ import annotations

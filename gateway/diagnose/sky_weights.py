@@ -4,10 +4,10 @@ The kit's sky temperature is an estimate (gateway/model/sky.py): against the mea
 the 51 Bleiswijk days its error spreads ± 4.58 K where the cloud is read from the daytime
 radiation (r = 0) and ± 6.38 K where it is carried and relaxed towards a prior (r > 0, the
 night; bias excluded, a constant the fit takes up; tests/generality/sky_study.py --night).
-A calibration night the kit misreads is
-not noise around the model, yet an unweighted fit treats its residual as such and distorts
-the parameters to explain it (the sky-loss coefficient grows over two clear nights read as
-overcast, docs/effects.md, "What the night sky the kit cannot see costs the base").
+A calibration night the kit misreads is not noise around the model, yet an unweighted fit
+treats its residual as such and distorts the parameters to explain it (the sky-loss
+coefficient grows over two clear nights read as overcast, docs/effects.md, "What the night
+sky the kit cannot see costs the base").
 
 Here the sky is an unknown with that spread: each free-run sample's residual gets the weight
 

@@ -1,10 +1,11 @@
-"""Issue 10: ``residuals.day_test`` and ``UNEXPLAINED_TEST``, a flag that does not need a bad
+"""Issue 10: ``day_test.day_test`` and ``UNEXPLAINED_TEST``, a flag that does not need a bad
 base. Synthetic residuals only: 14 days at 10 min, calibration the first 7."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from gateway.diagnose import day_test as dtest
 from gateway.diagnose import residuals as res
 
 DT = 600
@@ -43,8 +44,8 @@ def test_scheduled_dip_in_held_out_days_is_flagged_and_named():
     hits = 0
     for seed in range(10):
         t, r, a = _synth(seed, dip=0.5, sd=0.15)
-        d = res.day_test(t[a:], r[a:], t[:a], r[:a])
-        hits += d.p < res.UNEXPLAINED_ALPHA
+        d = dtest.day_test(t[a:], r[a:], t[:a], r[:a])
+        hits += d.p < dtest.UNEXPLAINED_ALPHA
         if d.bins:  # 12:00-13:30 UTC named, the strongest of them a dip there
             assert {24, 25} <= set(d.bins)
             assert 24 <= d.bins[int(np.argmin(d.diff))] <= 26 and min(d.diff) < -0.3
@@ -58,7 +59,7 @@ def test_size_regime_shift_and_wander_not_flagged():
     flags = 0
     for seed in range(100):
         t, r, a = _synth(seed)
-        flags += res.day_test(t[a:], r[a:], t[:a], r[:a]).p < res.UNEXPLAINED_ALPHA
+        flags += dtest.day_test(t[a:], r[a:], t[:a], r[:a]).p < dtest.UNEXPLAINED_ALPHA
     assert flags <= 10
 
 

@@ -10,14 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gateway.diagnose.day_test import (  # noqa: F401  (re-exported: residuals is the API)
-    PERM_MAX,
-    STATE_LABEL,
-    UNEXPLAINED_ALPHA,
-    DayTest,
-    controller_state,
-    day_test,
-)
+from gateway.diagnose.day_test import STATE_LABEL, UNEXPLAINED_ALPHA, controller_state, day_test
 from gateway.model import psychrometrics as psy
 
 LAGS_MIN = (30, 60, 120)

@@ -82,15 +82,26 @@ def _cells(day: np.ndarray, key: np.ndarray, r: np.ndarray, nb: int,
     return np.where(cnt >= min_n, tot / np.maximum(cnt, 1), np.nan)
 
 
-def _clock_units(day: np.ndarray, sec: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """Per day, the half-hour means minus their own circular running median over ±2 h (the
-    smooth daily course a weather regime moves); (days, bins)."""
-    nb = int(86400 // BIN_S)
-    m = _cells(day, (sec % 86400) // int(BIN_S), r, nb)
+def sharp_part(m: np.ndarray) -> np.ndarray:
+    """Day profiles ``m`` (..., clock bins of ``BIN_S``) minus their own circular running
+    median over ±2 h: what is left of the smooth daily course a weather regime moves."""
+    nb = m.shape[-1]
     w = int(round(2 * 3600 / BIN_S))
     idx = (np.arange(nb)[:, None] + np.arange(-w, w + 1)[None, :]) % nb
     with np.errstate(all="ignore"):
-        return m - np.nanmedian(m[:, idx], axis=2)
+        return m - np.nanmedian(m[..., idx], axis=-1)
+
+
+def clock_label(j: int) -> str:
+    """Clock bin ``j`` (half-hours after midnight UTC) as HH:MM."""
+    return f"{j // 2:02d}:{30 * (j % 2):02d}"
+
+
+def _clock_units(day: np.ndarray, sec: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Per day, the half-hour means minus their own circular running median over ±2 h
+    (``sharp_part``); (days, bins)."""
+    nb = int(86400 // BIN_S)
+    return sharp_part(_cells(day, (sec % 86400) // int(BIN_S), r, nb))
 
 
 def _state_units(day: np.ndarray, v: np.ndarray, edges: np.ndarray, r: np.ndarray,

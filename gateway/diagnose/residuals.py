@@ -10,7 +10,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from gateway.diagnose.day_test import STATE_LABEL, UNEXPLAINED_ALPHA, controller_state, day_test
+from gateway.diagnose.day_test import (
+    BIN_S,
+    STATE_LABEL,
+    UNEXPLAINED_ALPHA,
+    clock_label,
+    controller_state,
+    day_test,
+    sharp_part,
+)
 from gateway.model import psychrometrics as psy
 
 LAGS_MIN = (30, 60, 120)
@@ -23,8 +31,6 @@ HOUR_SHIFT_K = 0.6
 above the smooth daily course of that difference (``sharp_hours``), that is flagged [K]. A
 weather regime shifts the whole daily course of the residual smoothly; a scheduled action
 (misting, a controller switching) shows in one or two half-hours."""
-BIN_S = 1800.0
-"""Width of the time-of-day bins of ``sharp_hours`` [s]."""
 CHANGE_T = 4.0
 """Change-point statistic (two-segment t) above which a rolling coefficient has shifted."""
 UNEXPLAINED_TEST = False
@@ -68,13 +74,7 @@ def sharp_hours(time_h: np.ndarray, r_h: np.ndarray, time_c: np.ndarray,
     calibration part's ``r_c``: the half-hourly difference of their day profiles minus its own
     running median over ±2 h (the smooth daily course a weather regime gives). Returns the
     feature [K] and its bin (half-hours after midnight UTC)."""
-    diff = day_profile(time_h, r_h) - day_profile(time_c, r_c)
-    n = len(diff)
-    w = int(round(2 * 3600 / BIN_S))
-    idx = (np.arange(n)[:, None] + np.arange(-w, w + 1)[None, :]) % n
-    with np.errstate(all="ignore"):
-        smooth = np.nanmedian(diff[idx], axis=1)
-    sharp = diff - smooth
+    sharp = sharp_part(day_profile(time_h, r_h) - day_profile(time_c, r_c))
     if not np.isfinite(sharp).any():
         return 0.0, 0
     j = int(np.nanargmax(np.abs(sharp)))
@@ -240,7 +240,7 @@ def unexplained(an_after: dict, calib_r: np.ndarray, time: np.ndarray, a: int,
                                                           time[: len(calib_r)], calib_r)
     flagged = abs(sharp) > HOUR_SHIFT_K
     if flagged:
-        sig += (f"; a sharp time-of-day feature {sharp:+.2f} K at {j // 2:02d}:{30 * (j % 2):02d} "
+        sig += (f"; a sharp time-of-day feature {sharp:+.2f} K at {clock_label(j)} "
                 f"UTC that the calibration part has not (a scheduled action?)")
     return bool(ratio > UNEXPLAINED_RATIO or flagged), sig
 
@@ -262,7 +262,7 @@ def _tested(sig: str, time: np.ndarray, a: int, calib_r: np.ndarray, r_after: np
                                f"(day-swap p = {dt_.p:.2f})")
     found = []
     if dt_.bins:
-        found.append("at " + ", ".join(f"{j // 2:02d}:{30 * (j % 2):02d} ({d:+.2f} K)"
+        found.append("at " + ", ".join(f"{clock_label(j)} ({d:+.2f} K)"
                                        for j, d in zip(dt_.bins, dt_.diff, strict=True)) + " UTC")
     if dt_.state:
         found.append("in " + ", ".join(f"{STATE_LABEL[b.name][0]} {b.lo:.3g}–{b.hi:.3g} "

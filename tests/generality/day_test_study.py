@@ -6,13 +6,17 @@ dependence: the piece test's real size, and a test on days").
     python tests/generality/day_test_study.py null --out out/generality/jd/null_trials.jsonl
     python tests/generality/day_test_study.py cases refsim/autumn/ventilation ...
     python tests/generality/day_test_study.py rho out/generality/jd/null_trials.jsonl
+    python tests/generality/day_test_study.py short [--days 6 --at 3.6]   # ~10 min
 
 ``size``/``power``: ``judge.paired_p`` or ``judge.day_p`` on synthetic piece differences (a
 day effect, AR(1) across days, plus piece noise; seeded). ``null``: the dev suite's 20
 effect-free windows (refsim, twonode), every judged candidate with both p-values and its day
 means, and the base's held-out day means (one JSON line per window, then a summary). ``cases``:
 the same for named suite cases. ``rho``: ``day_p`` of the logged day means at several
-``DAY_RHO``. The judge's switch is as imported (off unless a sitecustomize sets it).
+``DAY_RHO``. ``short``: the 12 model-made cases of tests/test_diagnose.py (reference
+simulator, 6 effects x 2 models) at ``--days`` with the change at ``--at``, each diagnosed with
+the piece test and with the day test: what the day test costs on short records. Otherwise the
+judge's switch is as imported (off unless a sitecustomize sets it).
 """
 
 from __future__ import annotations
@@ -156,13 +160,50 @@ def rho(path: str) -> None:
                 print(f"{name:56s} " + " ".join(f"{p:8.3f}" for p in ps))
 
 
+def short(days: int, at: float) -> None:
+    """The unit tests' model-made cases at ``days`` days, change at ``at`` [d], both tests."""
+    import tests.test_diagnose as td
+    from gateway.diagnose import diagnose
+
+    td.DAYS = days
+    print(f"| case ({days} d, change at day {at:g}) | pieces: first finding, cut, p, start [h] "
+          f"| days: first finding, cut, p, start [h] |\n| --- | --- | --- |")
+    for plant in ("almeria", "prototype"):
+        for effect in td.SPECS:
+            cells = []
+            with tempfile.TemporaryDirectory() as tmp:
+                series, gh, model, t0 = td._data(Path(tmp), plant, effect, at=at)
+                for on in (False, True):
+                    jd.DAY_TEST = on
+                    cells.append(_short_cell(diagnose(series, gh, model), effect, t0))
+            print(f"| {effect}/{plant} | {cells[0]} | {cells[1]} |", flush=True)
+
+
+def _short_cell(d, effect: str, t0: str) -> str:
+    import tests.test_diagnose as td
+
+    if not d.findings:
+        best = min(d.rejected, key=lambda r: float(r["reason"].split("p = ")[1].split(" ")[0]),
+                   default=None) if d.rejected else None
+        return "none" + (f" (best rejected `{best['effect']}`: {best['reason'][:60]}…)"
+                         if best else "")
+    f = d.findings[0]
+    gain = 1.0 - d.after["free_run"]["mae"] / d.before["free_run"]["mae"]
+    lag = (np.datetime64(f.start.rstrip("Z")) - np.datetime64(t0)) / np.timedelta64(1, "h")
+    ok = "✓" if f.effect.name in td.EQUIVALENT[effect] else "✗"
+    pv = f.evidence.split("p = ")[1].split(" ")[0] if "p = " in f.evidence else "?"
+    return f"`{f.effect.name}` {ok}, {-100 * gain:.0f} %, p {pv}, {lag:+.1f}"
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("what", choices=["size", "power", "null", "cases", "rho"])
+    ap.add_argument("what", choices=["size", "power", "null", "cases", "rho", "short"])
     ap.add_argument("args", nargs="*", help="cases: suite case labels; rho: a JSONL file")
     ap.add_argument("--test", choices=["paired_p", "day_p"], default="paired_p")
     ap.add_argument("--draws", type=int, default=4000)
     ap.add_argument("--out", help="null/cases: write the JSON lines here")
+    ap.add_argument("--days", type=int, default=6, help="short: days of data (6: the tests')")
+    ap.add_argument("--at", type=float, default=3.6, help="short: the change's start [d]")
     a = ap.parse_args(argv)
     if a.what == "size":
         size(a.test, a.draws)
@@ -177,6 +218,8 @@ def main(argv: list[str] | None = None) -> int:
         for x in rows:
             for t in x["trials"]:
                 print(trial_line(x["case"], t))
+    elif a.what == "short":
+        short(a.days, a.at)
     else:
         rho(a.args[0])
     return 0

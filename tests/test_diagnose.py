@@ -164,7 +164,10 @@ def test_cli_json_and_report(tmp_path, capsys):
                "--report", str(tmp_path / "rep")])
     assert rc == 0
     out = json.loads(capsys.readouterr().out)
-    assert "hint" in out
+    from gateway.cli.diagnose import live_model_hint
+
+    # the JSON's hint is the one the reported base structure gives (a string or null)
+    assert out["hint"] == live_model_hint("prototype", out["base_structure"])
     assert out["findings"][0]["effect"] == "solar_gain_change"
     assert out["findings"][0]["params"]["d_solar"] < -0.3
     assert out["after"]["free_run"]["mae"] < out["before"]["free_run"]["mae"]

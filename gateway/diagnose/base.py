@@ -5,11 +5,10 @@ The thesis model + an effective heat capacity (+ a long-wave sky loss where it h
 night sky level, a site-level night cloud fraction, when ``NIGHT_SKY_IN_BASE``) is fitted
 first; then the optional parts (vents a controller opens above a setpoint, where the model
 has an air-exchange term; a radiative sky loss where the model has only its own, wind-scaled
-one; a leakage growing with the wind, when ``OFFER_WIND_LEAKAGE``; a heat store; a constant
-sensor offset) are tried in turn from the fitted base, and each is kept only if the base
-extrapolates better: fitted on the first part of C, judged on its last part (an inner
-validation split, not in-sample BIC alone). RSBA explores, Levenberg–Marquardt converges,
-both on multiple-shooting free runs (fit.py).
+one; a heat store; a constant sensor offset) are tried in turn from the fitted base, and each
+is kept only if the base extrapolates better: fitted on the first part of C, judged on its last
+part (an inner validation split, not in-sample BIC alone). RSBA explores, Levenberg–Marquardt
+converges, both on multiple-shooting free runs (fit.py).
 """
 
 from __future__ import annotations
@@ -26,7 +25,6 @@ from gateway.diagnose.structure import STORE, SensorBias, SkyLoss, Structured, m
 from gateway.greenhouse import Greenhouse
 from gateway.model.model import Model
 from gateway.model.vent_control import ControlledVentilation
-from gateway.model.wind_leakage import WindLeakage
 
 BASE_ITERATIONS = 80
 OPTION_ITERATIONS = 40
@@ -35,10 +33,6 @@ INNER_SPLIT = 2.0 / 3.0
 """Share of the calibration part the structure candidates are fitted on (the rest judges)."""
 MIN_VALIDATION_GAIN = 0.02
 """Relative cut of the inner validation MSE an optional part must bring to be kept."""
-OFFER_WIND_LEAKAGE = False
-"""Whether ``options`` offers the leakage growing with the wind (gateway/model/wind_leakage.py).
-Off: on the tuning generators it was kept in 2 of 20 effect-free windows and the mean held-out
-base error rose (docs/effects.md, "Base structure"); the term stays available."""
 NIGHT_SKY_IN_BASE = False
 """Whether the base carries the night sky level (gateway/diagnose/night_sky.py): the prior the
 kit's carried night cloud relaxes to replaced by a site-level cloud fraction fitted with the
@@ -120,13 +114,6 @@ def options(model: Structured, gh: Greenhouse) -> list[tuple[str, Callable[[Stru
         out.insert(0, ("vent controller",
                        lambda m: m.with_terms(ControlledVentilation(
                            gh.air_density, VENT_BOX_UPPER if WIDE_VENT_BOX else None))))
-    if OFFER_WIND_LEAKAGE and any(t.name == "q_loss" for t in model.terms) and not any(
-            t.name == WindLeakage.name for t in model.terms):
-        # leakage growing with the wind, c_loss staying as the exchange at zero wind; after the
-        # plain sky loss, which replaces the prototype's wind-scaled one (III.21, ∝ h_o), so
-        # the two wind dependences are not traded (docs/effects.md, "Base structure").
-        at = [lb for lb, _ in out].index("heat store")  # after the sky, before the store
-        out.insert(at, ("wind leakage", lambda m: m.with_terms(WindLeakage(gh.air_density))))
     if OFFER_NIGHT_SKY and model.night_sky is None:
         # the sky's night level with the loss to it: before the store and the offset, which
         # would otherwise take up the misread nights (docs/effects.md, "Base structure")
@@ -221,8 +208,6 @@ def structure_detail(model: Structured) -> str:
         parts.append("long-wave sky loss c_lw_sky")
     if model.night_sky is not None:
         parts.append(f"night sky level {night_sky.LEVEL.name}")
-    if any(t.name == WindLeakage.name for t in model.terms):
-        parts.append("wind leakage c_wl")
     if model.store:
         parts.append("heat store (c_store, h_store, k_store, a_store)")
     if any(sn.name == "e_sensor_bias" for sn in model.sensors):

@@ -183,34 +183,6 @@ def test_wide_vent_box_lets_the_base_follow_a_summer_house_vents(monkeypatch):
     assert fits[True][2]["validation_mse"] < 0.5 * fits[False][2]["validation_mse"]
 
 
-def test_leakage_growing_with_the_wind_is_kept_in_the_base(monkeypatch):
-    """With the wind leakage offered (``base.OFFER_WIND_LEAKAGE``; off in the shipped choice,
-    docs/effects.md "Base structure"), data from the structured prototype whose leakage grows
-    with the wind (calm and windy days in turn, a cold week so the air is well above the
-    outside): the base structure keeps the wind leakage part, which cuts the inner validation
-    error; a house whose leakage does not depend on the wind does not keep it."""
-    from gateway.diagnose import base
-    from gateway.model.wind_leakage import WindLeakage
-
-    monkeypatch.setattr(base, "OFFER_WIND_LEAKAGE", True)
-    gh, _, m = prototype_bases()
-    s = sine_series(n=2016, step=300)  # 7 days
-    day = np.arange(2016) // 288
-    s.columns["wind"] = np.array([0.5, 6.0, 1.0, 7.0, 0.3, 5.0, 0.8])[day]
-    s.columns["t_out"] = s.columns["t_out"] - 8.0  # 2-12 °C outside
-    x = drivers(s, gh)
-    leaky = m.with_terms(WindLeakage(gh.air_density))
-    truth = leaky.defaults(gh)
-    truth[leaky.index("c_wl")] = 3e-4
-    for model, theta, want in ((leaky, truth, True), (m, m.defaults(gh), False)):
-        x["t_in"] = model.free_run(theta[None], x, gh, 300.0)[0]
-        _, _, log = base.calibrate_base(m, gh, x, 300.0, 1344, 72, 0, lambda msg: None)
-        (wl,) = [e for e in log if e["structure"] == "wind leakage"]
-        assert wl["kept"] is want, log
-        if want:
-            assert wl["validation_mse"] < 0.5 * log[0]["validation_mse"]
-
-
 def test_structure_detail_lists_every_part():
     """The structure log's detail names each part the structure has, the vent controller too."""
     from gateway.diagnose.base import structure_detail

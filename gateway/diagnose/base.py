@@ -5,11 +5,10 @@ The thesis model + an effective heat capacity (+ a long-wave sky loss where it h
 night sky level, a site-level night cloud fraction, when ``NIGHT_SKY_IN_BASE``) is fitted
 first; then the optional parts (vents a controller opens above a setpoint, where the model
 has an air-exchange term; a radiative sky loss where the model has only its own, wind-scaled
-one; a leakage growing with the wind, when ``OFFER_WIND_LEAKAGE``; a heat store; a constant
-sensor offset) are tried in turn from the fitted base, and each is kept only if the base
-extrapolates better: fitted on the first part of C, judged on its last part (an inner
-validation split, not in-sample BIC alone). RSBA explores, Levenberg–Marquardt converges,
-both on multiple-shooting free runs (fit.py).
+one; a heat store; a constant sensor offset) are tried in turn from the fitted base, and each
+is kept only if the base extrapolates better: fitted on the first part of C, judged on its last
+part (an inner validation split, not in-sample BIC alone). RSBA explores, Levenberg–Marquardt
+converges, both on multiple-shooting free runs (fit.py).
 """
 
 from __future__ import annotations
@@ -22,12 +21,10 @@ import numpy as np
 from gateway.diagnose import night_sky
 from gateway.diagnose.bic import delta_bic, effective_samples
 from gateway.diagnose.fit import Shooting, fit_lm, fit_swarm, radiation_fit, window_starts
-from gateway.diagnose.sky_weights import sky_weights
 from gateway.diagnose.structure import STORE, SensorBias, SkyLoss, Structured, model_unit, structure
 from gateway.greenhouse import Greenhouse
 from gateway.model.model import Model
 from gateway.model.vent_control import ControlledVentilation
-from gateway.model.wind_leakage import WindLeakage
 
 BASE_ITERATIONS = 80
 OPTION_ITERATIONS = 40
@@ -36,10 +33,6 @@ INNER_SPLIT = 2.0 / 3.0
 """Share of the calibration part the structure candidates are fitted on (the rest judges)."""
 MIN_VALIDATION_GAIN = 0.02
 """Relative cut of the inner validation MSE an optional part must bring to be kept."""
-OFFER_WIND_LEAKAGE = False
-"""Whether ``options`` offers the leakage growing with the wind (gateway/model/wind_leakage.py).
-Off: on the tuning generators it was kept in 2 of 20 effect-free windows and the mean held-out
-base error rose (docs/effects.md, "Base structure"); the term stays available."""
 NIGHT_SKY_IN_BASE = False
 """Whether the base carries the night sky level (gateway/diagnose/night_sky.py): the prior the
 kit's carried night cloud relaxes to replaced by a site-level cloud fraction fitted with the
@@ -65,19 +58,10 @@ VENT_BOX_UPPER = 1e-2
 """[m s-1 K-1] C_vc's physical upper bound: a wide-open Mediterranean house exchanges ~40 h-1
 (Kittas et al. 1997; Boulard & Baille 1995), reached over a proportional band of ~4 K
 (Vanthoor 2011 §2.4) in a house ~3.6 m high: 40 h-1 × 3.6 m / 3600 s / 4 K = 1e-2."""
-SKY_WEIGHTS = False
-"""Whether the base's calibration (base fit, optional parts, inner validation, final refit)
-weights each free-run residual by 1 / (σ_n² + σ_T²), σ_T the spread the kit's unseen sky gives
-T_in (gateway/diagnose/sky_weights.py), so misread nights cannot pull the parameters. The
-effect search and the judge stay unweighted. Off: on the tuning generators the mean effect-free
-base error rose (refsim 0.856 → 0.868, twonode 0.668 → 0.712 K), the weights being too even
-(0.4–1.7; nights 0.67–0.88 × days) to discount a misread night (docs/effects.md, "Weighting the
-base by the sky's spread")."""
 STORE_START = {"c_store": 5e4, "h_store": 3.0, "k_store": 3.0, "a_store": 0.1}
 """Where the heat store's fit starts (a floor-like store: 5 cm of wet sand, h ≈ 3 W m-2 K-1)."""
 
 Progress = Callable[[str], None]
-Weigh = Callable[[np.ndarray], "np.ndarray | None"]
 
 
 def carry(theta: np.ndarray, old: Model, new: Model, gh: Greenhouse | None = None,
@@ -130,13 +114,6 @@ def options(model: Structured, gh: Greenhouse) -> list[tuple[str, Callable[[Stru
         out.insert(0, ("vent controller",
                        lambda m: m.with_terms(ControlledVentilation(
                            gh.air_density, VENT_BOX_UPPER if WIDE_VENT_BOX else None))))
-    if OFFER_WIND_LEAKAGE and any(t.name == "q_loss" for t in model.terms) and not any(
-            t.name == WindLeakage.name for t in model.terms):
-        # leakage growing with the wind, c_loss staying as the exchange at zero wind; after the
-        # plain sky loss, which replaces the prototype's wind-scaled one (III.21, ∝ h_o), so
-        # the two wind dependences are not traded (docs/effects.md, "Base structure").
-        at = [lb for lb, _ in out].index("heat store")  # after the sky, before the store
-        out.insert(at, ("wind leakage", lambda m: m.with_terms(WindLeakage(gh.air_density))))
     if OFFER_NIGHT_SKY and model.night_sky is None:
         # the sky's night level with the loss to it: before the store and the offset, which
         # would otherwise take up the misread nights (docs/effects.md, "Base structure")
@@ -184,24 +161,23 @@ def calibrate_base(base: Model, gh: Greenhouse, x: dict, dt: float, s: int, hori
     if model.night_sky is not None:
         theta[model.index(night_sky.LEVEL.name)] = start[night_sky.LEVEL.name]
     theta = radiation_fit(model, x, theta, (0, s))
-    weigh = weigher(model, theta, x, gh, dt, horizon)
     say("calibrating the base model (thesis terms + effective heat capacity)")
-    shoot = Shooting(model, x, gh, dt, starts, horizon, weigh(starts))
+    shoot = Shooting(model, x, gh, dt, starts, horizon)
     theta = fit(model, theta, shoot, gh, BASE_ITERATIONS, seed)
     sse, npair = shoot.sse(theta[None])
-    val = _validation(model, theta, x, gh, dt, val_starts, horizon, weigh)
+    val = _validation(model, theta, x, gh, dt, val_starts, horizon)
     log = [{"structure": "base", "detail": structure_detail(model), "kept": True,
             "mse": float(sse[0] / npair), "delta_bic": 0.0, "validation_mse": val}]
     for label, build in options(model, gh):
         new = build(model)
         say(f"calibrating the base model: trying a {label}")
         th = carry(theta, model, new, gh, start)
-        sh = Shooting(new, x, gh, dt, starts, horizon, shoot.weight)
+        sh = Shooting(new, x, gh, dt, starts, horizon)
         th = fit(new, th, sh, gh, OPTION_ITERATIONS, seed + 1)
         sse_new, _ = sh.sse(th[None])
         k_new = len(new.names) - len(model.names)
         dbic = delta_bic(float(sse_new[0]), float(sse[0]), effective_samples(npair, dt), k_new)
-        val_new = _validation(new, th, x, gh, dt, val_starts, horizon, weigh)
+        val_new = _validation(new, th, x, gh, dt, val_starts, horizon)
         kept = dbic < 0 and (not inner or val_new < (1.0 - MIN_VALIDATION_GAIN) * val)
         log.append({"structure": label, "detail": structure_detail(new), "kept": bool(kept),
                     "mse": float(sse_new[0] / npair), "delta_bic": dbic, "validation_mse": val_new})
@@ -210,28 +186,17 @@ def calibrate_base(base: Model, gh: Greenhouse, x: dict, dt: float, s: int, hori
     if inner:  # the chosen structure, refitted on all of C
         say("calibrating the base model: the chosen structure on the whole calibration part")
         whole = window_starts([(0, s)], horizon, skip=horizon)
-        shoot = Shooting(model, x, gh, dt, whole, horizon, weigh(whole))
+        shoot = Shooting(model, x, gh, dt, whole, horizon)
         theta = fit(model, theta, shoot, gh, 0, seed)
     return model, theta, log
 
 
-def weigher(model: Structured, theta: np.ndarray, x: dict, gh: Greenhouse, dt: float,
-            horizon: int) -> Weigh:
-    """Residual weights for a set of window starts: None (unweighted) unless ``SKY_WEIGHTS``.
-    Computed from the start model and parameters for every set, one yardstick for the whole
-    calibration: weights from a fitted model would let the misread nights set their own weight,
-    and the structures compared on the validation windows would each bring their own."""
-    if not SKY_WEIGHTS:
-        return lambda starts: None
-    return lambda starts: sky_weights(model, theta, x, gh, dt, starts, horizon)
-
-
 def _validation(model: Structured, theta: np.ndarray, x: dict, gh: Greenhouse, dt: float,
-                starts: np.ndarray, horizon: int, weigh: Weigh) -> float | None:
+                starts: np.ndarray, horizon: int) -> float | None:
     """Shooting MSE on the inner validation windows (None without them)."""
     if len(starts) == 0:
         return None
-    return float(Shooting(model, x, gh, dt, starts, horizon, weigh(starts)).mse(theta[None])[0])
+    return float(Shooting(model, x, gh, dt, starts, horizon).mse(theta[None])[0])
 
 
 def structure_detail(model: Structured) -> str:
@@ -243,8 +208,6 @@ def structure_detail(model: Structured) -> str:
         parts.append("long-wave sky loss c_lw_sky")
     if model.night_sky is not None:
         parts.append(f"night sky level {night_sky.LEVEL.name}")
-    if any(t.name == WindLeakage.name for t in model.terms):
-        parts.append("wind leakage c_wl")
     if model.store:
         parts.append("heat store (c_store, h_store, k_store, a_store)")
     if any(sn.name == "e_sensor_bias" for sn in model.sensors):

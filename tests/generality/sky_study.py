@@ -16,7 +16,6 @@ through the night. Two measurements:
     .venv/bin/python tests/generality/sky_study.py [--generators refsim,twonode] \\
         [--windows autumn,bleiswijk-10-29,...] [--kit-only]   # ~30 s per window and
                                                       # generator, one core
-    .venv/bin/python tests/generality/sky_study.py --weights     # base.SKY_WEIGHTS' weights
 """
 
 from __future__ import annotations
@@ -66,8 +65,8 @@ def night_table() -> None:
                     ("RH_out", w["rh_out"]), ("wind", w["wind"])):
         m = ok & np.isfinite(v)
         print(f"| {name} | {np.corrcoef(v[m], depression[m])[0, 1]:+.2f} |")
-    # the spread base.SKY_WEIGHTS gives the sky (gateway/diagnose/sky_weights.py): the kit's
-    # error where the cloud is read (r = 0) and where it is carried (r > 0), all rows
+    # the kit's sky error where the cloud is read (r = 0) and where it is carried (r > 0), all
+    # rows (the spread the base's sky weights used, removed after 8bdfc66; docs/effects.md)
     _, r, _ = sky.carried_cloud(t, np.maximum(w["i_glob"], 0.0), BLEISWIJK_SITE, 300.0)
     err_all = est - w["t_sky"]
     for label, m in (("read (r = 0)", r == 0.0), ("carried (r > 0)", r > 0.0)):
@@ -122,43 +121,12 @@ def base_run(generator: str, name: str, sky_of_generator: bool) -> tuple[float, 
     return float(np.nanmean(np.abs(r))), [f.effect.name for f in d.findings], kept
 
 
-def weights_table(gens: list[str], names: list[str]) -> None:
-    """The weights ``base.SKY_WEIGHTS`` gives the base fit's windows (sky_weights.py), from the
-    start model and parameters as calibrate_base computes them: σ_T, the weights' range, and
-    the mean weight of carried (night) rows relative to read ones."""
-    from gateway.diagnose import search
-    from gateway.diagnose.fit import HORIZON_S, coarsen, drivers, radiation_fit, window_starts
-    from gateway.diagnose.night_sky import RELAX
-    from gateway.diagnose.sky_weights import sky_response, sky_weights
-    from gateway.diagnose.structure import structure
-
-    print("| generator | window | σ_T mean [K] | σ_T at 6 h [K] | weights min..max | "
-          "mean weight carried / read |\n" + "| --- " * 6 + "|")
-    for g in gens:
-        for name in names:
-            with tempfile.TemporaryDirectory() as tmp:
-                _, gh, model, series = case_series(Case("diagnose", g, name, "none"), Path(tmp))
-            coarse = coarsen(series, max(int(search.FIT_STEP_S // series.step), 1))
-            x, dt = drivers(coarse, gh), coarse.step
-            s, h = int(round(0.5 * len(coarse))), max(int(round(HORIZON_S / dt)), 2)
-            m = structure(model, gh, store=False)
-            th = radiation_fit(m, x, m.defaults(gh), (0, s))
-            st = window_starts([(0, s)], h, skip=h)
-            resp, w = (f(m, th, x, gh, dt, st, h) for f in (sky_response, sky_weights))
-            carried = x[RELAX][st[:, None] + np.arange(1, h + 1)[None, :]] > 0
-            print(f"| {g} | {name} | {resp.mean():.2f} | {resp[:, -1].mean():.2f} | "
-                  f"{w.min():.2f}..{w.max():.2f} | {w[carried].mean() / w[~carried].mean():.2f} |",
-                  flush=True)
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--night", action="store_true", help="only the night-time sky table")
     ap.add_argument("--generators", default="refsim,twonode",
                     help="never the held-out one (default: refsim,twonode)")
     ap.add_argument("--windows", default=",".join(WINDOWS))
-    ap.add_argument("--weights", action="store_true",
-                    help="only the weights base.SKY_WEIGHTS would give (seconds per window)")
     ap.add_argument("--kit-only", action="store_true",
                     help="only the kit's sky (the generator's-sky column is left out: half the time)")
     a = ap.parse_args(argv)
@@ -168,9 +136,6 @@ def main(argv: list[str] | None = None) -> int:
     gens = a.generators.split(",")
     if set(gens) & set(HELD_OUT):
         ap.error(f"{', '.join(HELD_OUT)} is held out: not studied")
-    if a.weights:
-        weights_table(gens, a.windows.split(","))
-        return 0
     print("| generator | window | base MAE, kit sky [K] | base MAE, generator's sky [K] | "
           "findings (kit sky / generator's sky) | parts kept (kit sky / generator's sky) |")
     print("| --- " * 6 + "|")

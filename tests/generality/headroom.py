@@ -26,7 +26,7 @@ names another effect or none first: the verdict of the suite's results file, rea
 ``pieces``. Never the held-out generator.
 
     python tests/generality/headroom.py [--judge days|pieces] [--json out/generality/hr/hr.json]
-        [--suite /work/main/out/generality/vis/dg-dev.json] [refsim/autumn/drift ...]
+        [--suite bench/results/generality.json] [--store] [refsim/autumn/drift ...]
 
 All 42 cases: about 6 min on one core (one case: 4–20 s; each window's effect-free base once).
 """
@@ -64,7 +64,8 @@ from tests.generality.generators import EXPECTED, HELD_OUT, KINDS  # noqa: E402
 DEV = ("refsim", "twonode")
 WINDOWS = ("autumn", "winter", "summer")
 CLASSES = ("invisible", "unreachable", "start", "weak", "judge", "rival", "pass")
-SUITE = Path("/work/main/out/generality/vis/dg-dev.json")
+SUITE = ROOT / "bench" / "results" / "generality.json"
+"""The suite's results (suite.py's default output): the full library's verdict per case."""
 LEVER = {"invisible": "none (no method sees it)", "unreachable": "base error",
          "start": "start placement", "weak": "fit at the found start", "judge": "judge",
          "rival": "rival ranking", "pass": "-"}
@@ -364,7 +365,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("cases", nargs="*", help="generator/window/kind (default: all 42 dev cases)")
     ap.add_argument("--judge", choices=["days", "pieces"], default="days",
                     help="the judge's significance unit (judge.DAY_TEST; default days)")
-    ap.add_argument("--suite", default=str(SUITE), help="the suite's results file (full library)")
+    ap.add_argument("--suite", default=str(SUITE),
+                    help="the suite's results file, for the full library's verdict (pass or rival); "
+                         "default bench/results/generality.json")
     ap.add_argument("--json", help="write the rows here")
     ap.add_argument("--store", action="store_true",
                     help="thermal_mass: offer the added heat store too (not in LIBRARY by default)")
@@ -375,7 +378,12 @@ def main(argv: list[str] | None = None) -> int:
     labels = a.cases or [f"{g}/{w}/{k}" for g in DEV for w in WINDOWS for k in KINDS]
     if any(lb.split("/")[0] in HELD_OUT for lb in labels):
         ap.error(f"{', '.join(HELD_OUT)} is held out: dev generators only ({', '.join(DEV)})")
-    suite = json.loads(Path(a.suite).read_text(encoding="utf-8")) if Path(a.suite).exists() else {}
+    if not Path(a.suite).exists():
+        ap.error(f"{a.suite}: no suite results (make bench-generality, or --suite FILE)")
+    suite = json.loads(Path(a.suite).read_text(encoding="utf-8"))
+    missing = [lb for lb in labels if not full_verdict(suite, *lb.split("/"))]
+    if missing:
+        ap.error(f"{a.suite} has no verdict for {', '.join(missing)}")
     rows = []
     for label in labels:
         r = study(label, suite, a.store)

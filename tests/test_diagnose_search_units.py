@@ -216,3 +216,28 @@ def test_humidity_dates_more_air_exchange_that_the_temperature_leaves_open():
         sc = _scan(shoot, base, e, 4.0 * 86400, [(0, n)], latest=latest)
         assert abs(sc.taus[sc.best] - tau) <= 3 * 3600.0, (latest, sc.taus[sc.best] / 3600)
         assert sc.amps[sc.best] == pytest.approx(3.0, rel=0.1)
+
+
+def test_fit_effect_at_holds_the_start_and_fits_the_amplitude():
+    """``search.fit_effect_at`` (the headroom study's oracle): on 5 days made by the structured
+    prototype with a 0.5 K d-1 drift from day 2.4, the effect fitted with its start held at the
+    truth keeps that start exactly and recovers the rate, and fits better (lower ΔBIC) than held
+    a day late."""
+    from gateway.diagnose.search import _Context, fit_effect_at
+
+    gh, _, m0 = prototype_bases()
+    n, dt = 5 * 288, 300.0
+    x = drivers(sine_series(n=n, step=300), gh)
+    e = EFFECTS["sensor_drift"]
+    m = compose(m0, [e], gh, float(x["_index"][-1]))
+    tau = 2.4 * 86400.0
+    truth = m.defaults(gh)
+    truth[m.index(e.amp_name)], truth[m.index(e.tau_name)] = 0.5, tau
+    x["t_in"] = m.free_run(truth[None], x, gh, dt)[0] + np.random.default_rng(0).normal(0, 0.05, n)
+    ctx = _Context(x, gh, dt, float(x["_index"][-1]), 72, n // 2)
+    right = fit_effect_at(ctx, m, m0, m0.defaults(gh), e, [(0, n)], tau)
+    late = fit_effect_at(ctx, m, m0, m0.defaults(gh), e, [(0, n)], tau + 86400.0)
+    assert right.theta[m.index(e.tau_name)] == tau
+    assert late.theta[m.index(e.tau_name)] == tau + 86400.0
+    assert right.theta[m.index(e.amp_name)] == pytest.approx(0.5, rel=0.1)
+    assert right.delta_bic < late.delta_bic < 0

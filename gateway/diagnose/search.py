@@ -357,10 +357,21 @@ def _refit(ctx: _Context, model: Model, theta: np.ndarray, segments) -> np.ndarr
                   REFIT_LM_ITERATIONS)
 
 
+def fit_effect_at(ctx: _Context, new_model, old_model, theta_old, e: Effect, segments,
+                  tau: float) -> _EffectFit:
+    """``e`` fitted on ``segments`` as the search fits it (``_fit_effect``: amplitude scan,
+    joint refit of the base parameters and amplitude, ``TAU_ROUNDS`` alternations), but with
+    its start held at ``tau`` [s since the first row] instead of scanned: the oracle of a known
+    start (tests/generality/headroom.py). The amplitude is always fitted on the temperature."""
+    return _fit_effect(ctx, new_model, old_model, theta_old, e, segments, 0, latest=False,
+                       at=tau)
+
+
 def _fit_effect(ctx: _Context, new_model, old_model, theta_old, e: Effect, segments, seed,
-                latest: bool = True) -> _EffectFit:
+                latest: bool = True, at: float | None = None) -> _EffectFit:
     """τ scan (``_scan``) then a joint refit (base parameters + amplitude, τ held) on
-    ``segments``, alternated ``TAU_ROUNDS`` times while the SSE falls.
+    ``segments``, alternated ``TAU_ROUNDS`` times while the SSE falls; with ``at``, τ is held
+    there (an amplitude scan at that one start, ``fit_effect_at``).
 
     The base was calibrated on data that may hold the start of the change (the calibration
     part ends after it): with those parameters held, the first scan sees the change's first
@@ -373,12 +384,15 @@ def _fit_effect(ctx: _Context, new_model, old_model, theta_old, e: Effect, segme
     sse_old, npair = shoot.sse(th[None, :])
     lo, hi = new_model.bounds(ctx.gh)
     free = free_parameters(new_model)
-    if e.evidence.fits_start(new_model, ctx.x):
+    if at is None and e.evidence.fits_start(new_model, ctx.x):
         free = [j for j in free if new_model.names[j] != e.amp_name]  # fixed by the 2nd output
     ja, jt = new_model.index(e.amp_name), new_model.index(e.tau_name)
     best, best_sse, sc_best = None, np.inf, None
     for _ in range(TAU_ROUNDS):
-        sc = _scan(shoot, th, e, ctx.last, segments, latest)
+        if at is None:
+            sc = _scan(shoot, th, e, ctx.last, segments, latest)
+        else:
+            sc = scan_tau(shoot, th, e, np.array([float(at)]), float(shoot.sse(th[None, :])[0][0]))
         trial = th.copy()
         trial[jt], trial[ja] = sc.taus[sc.best], sc.amps[sc.best]
         trial = fit_lm(shoot, trial, free, lo, hi, REFIT_LM_ITERATIONS)

@@ -27,9 +27,9 @@ def test_unshielded_sensor_in_an_independent_house(tmp_path, monkeypatch):
 
     Run with the piece judge (``judge.DAY_TEST`` off): the test is about naming and the start
     on a generator the library was not built on. The shipped day test gives this candidate
-    p = 0.125 over its 4 held-out days (piece p 0.004; day means −0.01, +0.11, +0.12,
-    +0.09 K): too few days for the day test to call a 19 % cut significant; not reported either
-    way."""
+    p = 0.125 over its 4 held-out days (its trial's ``p_days``; ``p_pieces`` 0.004; day means
+    −0.01, +0.11, +0.12, +0.09 K): too few days for the day test to call a 19 % cut
+    significant; not reported either way."""
     monkeypatch.setattr(jd, "DAY_TEST", False)
     path = tmp_path / "house.csv"
     write_kit_csv(path, "house", effect="sunsensor", at=START, amp=0.006, seed=1)

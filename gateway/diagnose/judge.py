@@ -29,7 +29,8 @@ MIN_REF_CUT = 0.10
 """Smallest relative cut against the reference (the base refitted on the same data without the
 effect): what a refit alone gives is weather, not the effect."""
 ALPHA = 0.05
-"""Level of the one-sided test of each judged candidate's held-out cut (``paired_p``)."""
+"""Level of the one-sided test of each judged candidate's held-out cut (``day_p``; ``paired_p``
+without ``DAY_TEST``)."""
 DETREND_MIN_PIECES = 16
 """From this many pieces (4 days of 6 h) ``paired_p`` reads their autocorrelation about a line
 in time, not about their mean."""

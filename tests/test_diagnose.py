@@ -4,6 +4,11 @@ Each case simulates 6 days on synthetic Almería weather (seed 2), injects one e
 in (inside the held-out half), resamples to 5 min to keep the suite fast, and runs the whole
 diagnosis. The requirement: the first finding names the effect (or its documented equivalent,
 docs/effects.md) and cuts the held-out free-run MAE by at least 30 %.
+
+The 6-day cases test the library's naming and start times, not the judge's level, and run with
+the piece judge (``piece_judge``): a change at day 3.6 leaves 2 held-out days, on which the
+shipped day test cannot judge anything (``judge.MIN_DAYS``). The day test itself is checked on
+10-day records with the change at day 5.6 (``test_day_test_names_the_effect_on_ten_days``).
 """
 
 from __future__ import annotations
@@ -12,6 +17,7 @@ import numpy as np
 import pytest
 
 from gateway.diagnose import EFFECTS, diagnose, to_json
+from gateway.diagnose import judge as jd
 from gateway.diagnose.effects import LIBRARY
 from gateway.greenhouse import load_greenhouse
 from gateway.model import build_model
@@ -20,6 +26,8 @@ from training.simulate import simulate
 
 STEP = 300.0
 DAYS = 6
+LONG_DAYS, LONG_AT = 10, 5.6
+"""The day test's records: 10 days, the change at day 5.6 (4.4 held-out days after it)."""
 PRESET = {"almeria": "almeria-palmerillas", "prototype": "biskra-prototype"}
 EQUIVALENT = {
     "cover_transmission": {"solar_gain_change"},
@@ -59,11 +67,22 @@ less sharp; a capacity change shows only while the temperature swings (the repor
 the best-fitting one, 3.2 h early on Almería)."""
 
 
-def _data(tmp_path, plant: str, effect: str | None, post=None, at: float = 3.6):
-    clean = simulate(plant=plant, weather="almeria", days=DAYS, seed=2, step=60)
+@pytest.fixture
+def piece_judge(monkeypatch):
+    """The judge on 6-hour pieces (``judge.DAY_TEST`` off) for the 6-day records: they test the
+    library's naming and starts, and the shipped day test needs ``judge.MIN_DAYS`` held-out
+    days after a change where these leave 2 (docs/effects.md, "What switching it on costs on
+    short records")."""
+    monkeypatch.setattr(jd, "DAY_TEST", False)
+
+
+def _data(tmp_path, plant: str, effect: str | None, post=None, at: float = 3.6,
+          days: int | None = None):
+    days = DAYS if days is None else days  # read at call time (day_test_study.py sets DAYS)
+    clean = simulate(plant=plant, weather="almeria", days=days, seed=2, step=60)
     t0 = str(clean.time[0] + np.timedelta64(int(at * 86400), "s"))
     effects = [] if effect is None else [f"{effect}@{t0}:{SPECS[effect][plant]}"]
-    r = clean if effect is None else simulate(plant=plant, weather="almeria", days=DAYS, seed=2,
+    r = clean if effect is None else simulate(plant=plant, weather="almeria", days=days, seed=2,
                                               step=60, effects=effects)
     if post is not None:
         post(r)
@@ -84,6 +103,7 @@ def test_library_is_documented_and_bounded():
 
 
 @pytest.mark.slow
+@pytest.mark.usefixtures("piece_judge")
 @pytest.mark.parametrize("plant", ["almeria", "prototype"])
 @pytest.mark.parametrize("effect", list(SPECS))
 def test_injected_effect_is_first_finding(tmp_path, plant, effect, request):
@@ -100,6 +120,29 @@ def test_injected_effect_is_first_finding(tmp_path, plant, effect, request):
     assert first.start is not None
     lag = abs(np.datetime64(first.start.rstrip("Z")) - np.datetime64(t0)) / np.timedelta64(1, "h")
     assert lag <= START_TOLERANCE_H.get(effect, 3.0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("plant", "effect"), [
+    ("almeria", "heater"), ("prototype", "heater"), ("almeria", "cover_transmission"),
+    ("prototype", "cover_transmission")])
+def test_day_test_names_the_effect_on_ten_days(tmp_path, plant, effect):
+    """The judge as shipped (``judge.DAY_TEST``) on 10-day records, the change at day 5.6: the
+    first finding names it, significant over the held-out days after its start, its start
+    within 3 h (measured on all 12 cases: right first in 9 of 12, the heaters at day p 0.003
+    and 0.010, the whitewash 0.003 and 0.008; docs/effects.md, "What switching it on costs on
+    short records")."""
+    assert jd.DAY_TEST
+    series, gh, model, t0 = _data(tmp_path, plant, effect, at=LONG_AT, days=LONG_DAYS)
+    d = diagnose(series, gh, model)
+    assert d.findings, f"nothing found; rejected: {d.rejected}"
+    first = d.findings[0]
+    assert first.effect.name in EQUIVALENT[effect]
+    kept = next(t for t in d.trials if t["effect"] == first.effect.name and t["ok"])
+    assert kept["p"] == kept["p_days"] <= jd.ALPHA and len(kept["day_means"]) >= 4, kept
+    assert 1.0 - d.after["free_run"]["mae"] / d.before["free_run"]["mae"] >= 0.30
+    lag = abs(np.datetime64(first.start.rstrip("Z")) - np.datetime64(t0)) / np.timedelta64(1, "h")
+    assert lag <= 3.0
 
 
 @pytest.mark.slow
@@ -153,6 +196,7 @@ def test_effect_outside_library_is_reported_unexplained(tmp_path):
     assert "time-of-day" in d.signature
 
 
+@pytest.mark.usefixtures("piece_judge")  # in process: the 6-day record needs the piece judge
 def test_cli_json_and_report(tmp_path, capsys):
     import json
 

@@ -211,8 +211,30 @@ def test_the_switch_judges_on_days(monkeypatch):
     lasting cut still passes."""
     rng = np.random.default_rng(3)
     before, after, meas, blocks, s = _case(np.clip(0.3 + 0.05 * rng.normal(size=28), 0, 1))
+    assert jd.DAY_TEST  # shipped on (2026-11-27)
+    monkeypatch.setattr(jd, "DAY_TEST", False)
     off = jd.judge(before, before, after, meas, blocks, s, 300.0, [0.0], LAST)
     monkeypatch.setattr(jd, "DAY_TEST", True)
     on = jd.judge(before, before, after, meas, blocks, s, 300.0, [0.0], LAST)
     assert off.p == off.stats["p_pieces"] and on.p == on.stats["p_days"] == off.stats["p_days"]
     assert len(on.stats["day_means"]) == 7 and on.ok and "7 days" in on.why
+
+
+def test_a_change_with_too_few_days_after_it_cannot_be_judged_yet(monkeypatch):
+    """Under the day test a start leaving 2 held-out days is not "p = 1.000 over 2 days" but
+    plainly not judged yet; both p-values are still logged, and the piece test (off) would
+    have judged the same 7 pieces."""
+    rng = np.random.default_rng(6)
+    before, after, meas, blocks, s = _case(np.clip(0.3 + 0.05 * rng.normal(size=28), 0, 1))
+    start = END - 1.8 * 86400.0  # day 12.2 of 14: pieces after it on days 12 and 13
+    v = jd.judge(before, before, after, meas, blocks, s, 300.0, [start], END)
+    assert not v.ok and not v.stats["late"]
+    assert v.why.startswith("cannot be judged yet: only 2 held-out days after its start, and a "
+                            "change is judged once 3 days of it are held out"), v.why
+    assert "p = " not in v.why  # a p of 1 from no days is no evidence either way
+    assert v.p == v.stats["p"] == v.stats["p_days"] == 1.0 and len(v.stats["day_means"]) == 2
+    assert v.stats["p_pieces"] <= jd.ALPHA and v.stats["pieces"] == 7
+    monkeypatch.setattr(jd, "DAY_TEST", False)
+    off = jd.judge(before, before, after, meas, blocks, s, 300.0, [start], END)
+    assert off.ok and "over the 7 pieces of 6 h after its start" in off.why, off.why
+    assert off.stats["p_days"] == 1.0 and off.p == off.stats["p_pieces"]

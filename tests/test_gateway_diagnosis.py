@@ -19,16 +19,18 @@ from gateway.store.live import findings
 from tests.gateway_harness import KEY
 
 START = 1_257_033_600.0  # 2009-11-01T00:00Z
-DAYS = 4.0
+DAYS = 6.0
+HEATER_AT = 3.25  # [d]: held-out pieces after it on 3 days, what the judge's day test needs
 
 
 def stored_kit(db: Path) -> float:
-    """4 days of the prototype box (reference simulator) with an undeclared 40 W m-2 heater from
-    day 2.25, stored as the kit's records; returns the end time."""
+    """6 days of the prototype box (reference simulator) with an undeclared 40 W m-2 heater from
+    day 3.25, stored as the kit's records; returns the end time. (4 days with the heater from day
+    2.25 until the judge's day test: 2 held-out days after the start, too few to judge it.)"""
     from training.simulate import simulate
 
     sim = simulate(plant="prototype", weather="bleiswijk", start="2009-11-01", days=DAYS, seed=2,
-                   step=60, effects=["heater@2009-11-03T06:00:power=40"])
+                   step=60, effects=["heater@2009-11-04T06:00:power=40"])
     store = Store(db)
     items = []
     for k in range(len(sim.time)):
@@ -85,8 +87,8 @@ def test_scheduled_diagnosis_runs_in_a_subprocess_and_stores_its_findings(tmp_pa
     found = findings(store.conn, "north")
     assert len(found) == run.findings >= 1 and woken  # the worker is woken to publish it
     first = found[0]
-    assert first.effect == "heat_source" and first.id.startswith("north:heat_source-20091103T")
-    assert first.start is not None and abs(first.start - (START + 2.25 * 86400)) < 3 * 3600
+    assert first.effect == "heat_source" and first.id.startswith("north:heat_source-20091104T")
+    assert first.start is not None and abs(first.start - (START + HEATER_AT * 86400)) < 3 * 3600
     assert (first.revision, first.published_revision) == (1, 0)  # published once, by the worker
     assert float(store.get_meta("diagnosis_last")) == end  # next run one period later
     store.close()

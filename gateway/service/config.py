@@ -72,7 +72,10 @@ class EstimatorSettings:
 class DiagnosisSettings:
     enabled: bool = True
     every_hours: float = 24.0
-    days: float = 7.0
+    # the window diagnosed [d]; its second half is held out, and the judge's day test
+    # (judge.DAY_TEST) needs 3 held-out days after a change and has power from 4-5: with 10
+    # a change that has lasted 4-5 days is judged on 4-5 held-out days (with 7: at most 3.5)
+    days: float = 10.0
     min_days: float = 2.0  # less data than this: the run is skipped
     timeout_s: float = 1800.0  # wall seconds before a diagnosis run is abandoned
 
@@ -339,7 +342,7 @@ def _diagnosis(d: _Table) -> DiagnosisSettings:
     s = DiagnosisSettings(
         enabled=d.get("enabled", bool, True),
         every_hours=d.get("every_hours", float, 24.0, lo=0.01),
-        days=d.get("days", float, 7.0, lo=0.1),
+        days=d.get("days", float, 10.0, lo=0.1),
         min_days=d.get("min_days", float, 2.0, lo=0.05),
         timeout_s=d.get("timeout_s", float, 1800.0, lo=1.0),
     )

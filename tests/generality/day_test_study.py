@@ -16,7 +16,7 @@ the same for named suite cases. ``rho``: ``day_p`` of the logged day means at se
 ``DAY_RHO``. ``short``: the 12 model-made cases of tests/test_diagnose.py (reference
 simulator, 6 effects x 2 models) at ``--days`` with the change at ``--at``, each diagnosed with
 the piece test and with the day test: what the day test costs on short records. Otherwise the
-judge's switch is as imported (off unless a sitecustomize sets it).
+judge's switch is as imported (``judge.DAY_TEST``: on since 2026-11-27).
 """
 
 from __future__ import annotations
@@ -179,12 +179,16 @@ def short(days: int, at: float) -> None:
             print(f"| {effect}/{plant} | {cells[0]} | {cells[1]} |", flush=True)
 
 
+def _p_in(reason: str) -> float:
+    """The p a rejection reason states; 1 for one not judged yet (too few days, no p)."""
+    return float(reason.split("p = ")[1].split(" ")[0]) if "p = " in reason else 1.0
+
+
 def _short_cell(d, effect: str, t0: str) -> str:
     import tests.test_diagnose as td
 
     if not d.findings:
-        best = min(d.rejected, key=lambda r: float(r["reason"].split("p = ")[1].split(" ")[0]),
-                   default=None) if d.rejected else None
+        best = min(d.rejected, key=lambda r: _p_in(r["reason"]), default=None)
         return "none" + (f" (best rejected `{best['effect']}`: {best['reason'][:60]}…)"
                          if best else "")
     f = d.findings[0]

@@ -1,5 +1,7 @@
 """``make demo`` end to end (shortened): the offline demo's four steps run and leave their outputs."""
 
+import pytest
+
 from training.__main__ import main
 
 
@@ -11,3 +13,20 @@ def test_demo_runs_the_whole_loop(tmp_path, capsys):
     for name in ("almeria.csv", "params.toml", "replay.png", "predictions.csv",
                  "diagnosis/report.md"):
         assert (tmp_path / name).stat().st_size > 0
+
+
+def test_the_whitening_starts_at_0_56_of_the_length():
+    """The undeclared change sits at day 5.6 of the default 10 and follows --days."""
+    from training.demo import DAYS, effect_spec
+
+    assert DAYS == 10
+    assert effect_spec(10) == "cover_transmission@2009-10-31T14:24:factor=0.5"
+    assert effect_spec(6) == "cover_transmission@2009-10-29T08:38:factor=0.5"  # 3.36 d
+    assert effect_spec(3) == "cover_transmission@2009-10-27T16:19:factor=0.5"  # 1.68 d, rounded
+
+
+def test_demo_help_says_the_length_and_the_change(capsys):
+    with pytest.raises(SystemExit):
+        main(["demo", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "simulate 10 days" in text and "2009-10-31T14:24Z" in text

@@ -16,10 +16,10 @@ def test_demo_runs_the_whole_loop(tmp_path, capsys):
 
 
 def test_the_whitening_starts_at_0_56_of_the_length():
-    """The undeclared change sits at day 5.6 of the default 10 and follows --days."""
+    """The undeclared change sits at day 3.36 of the default 6 and follows --days."""
     from training.demo import DAYS, effect_spec
 
-    assert DAYS == 10
+    assert DAYS == 6
     assert effect_spec(10) == "cover_transmission@2009-10-31T14:24:factor=0.5"
     assert effect_spec(6) == "cover_transmission@2009-10-29T08:38:factor=0.5"  # 3.36 d
     assert effect_spec(3) == "cover_transmission@2009-10-27T16:19:factor=0.5"  # 1.68 d, rounded
@@ -29,4 +29,4 @@ def test_demo_help_says_the_length_and_the_change(capsys):
     with pytest.raises(SystemExit):
         main(["demo", "--help"])
     text = " ".join(capsys.readouterr().out.split())
-    assert "simulate 10 days" in text and "2009-10-31T14:24Z" in text
+    assert "simulate 6 days" in text and "2009-10-29T08:38Z" in text

@@ -1,9 +1,9 @@
 """``python -m training demo`` (``make demo``): the offline loop on shipped data.
 
-1. The reference simulator (training/simulate) grows 10 days (``--days``) of an Almería-type
+1. The reference simulator (training/simulate) grows 6 days (``--days``) of an Almería-type
    greenhouse on the shipped Bleiswijk weather from 2009-10-26, with an effect nobody declares:
-   the cover is whitened (transmission × 0.5) at 0.56 × the length after the start (day 5.6 of
-   10, 2009-10-31T14:24Z), so the judge's day test has 4–5 held-out days after it.
+   the cover is whitened (transmission × 0.5) at 0.56 × the length after the start (day 3.36
+   of 6, 2009-10-29T08:38Z; day 5.6 of ``--days 10``).
 2. ``calibrate`` fits the almeria model on the first 2 days (RSBA, thesis settings).
 3. ``replay`` runs the online estimator over the whole run as the live gateway would, beside the
    constant-parameter model and persistence, and plots it.
@@ -24,20 +24,20 @@ from pathlib import Path
 import numpy as np
 
 START = "2009-10-26"  # simulator start, 00:00 UTC
-DAYS = 10.0  # the live gateway's [diagnosis] days default
-CHANGE_AT = 0.56  # whitening start as a fraction of the run's length (day 5.6 of 10)
+DAYS = 6.0  # 10 (the live [diagnosis] default) names no more: README, "make demo"
+CHANGE_AT = 0.56  # whitening start as a fraction of the run's length (day 3.36 of 6)
 FACTOR = 0.5  # cover transmission × this from the start on
 
 
 def effect_start(days: float) -> np.datetime64:
     """When the whitening starts in a ``days``-long run: ``CHANGE_AT`` × ``days`` after
-    ``START`` (UTC), rounded to the minute (10 d → 2009-10-31T14:24)."""
+    ``START`` (UTC), rounded to the minute (6 d → 2009-10-29T08:38)."""
     return np.datetime64(START, "m") + np.timedelta64(round(CHANGE_AT * days * 1440.0), "m")
 
 
 def effect_spec(days: float) -> str:
     """The undeclared effect's simulator spec for a ``days``-long run
-    (10 d → ``cover_transmission@2009-10-31T14:24:factor=0.5``)."""
+    (6 d → ``cover_transmission@2009-10-29T08:38:factor=0.5``)."""
     return f"cover_transmission@{_when(days)}:factor={FACTOR:g}"
 
 

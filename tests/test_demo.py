@@ -15,18 +15,18 @@ def test_demo_runs_the_whole_loop(tmp_path, capsys):
         assert (tmp_path / name).stat().st_size > 0
 
 
-def test_the_whitening_starts_at_0_56_of_the_length():
-    """The undeclared change sits at day 3.36 of the default 6 and follows --days."""
+def test_the_whitening_follows_the_length():
+    """The undeclared change sits at 10:00 on day 4 of the default 6 (day 3.42) and follows --days."""
     from training.demo import DAYS, effect_spec
 
     assert DAYS == 6
-    assert effect_spec(10) == "cover_transmission@2009-10-31T14:24:factor=0.5"
-    assert effect_spec(6) == "cover_transmission@2009-10-29T08:38:factor=0.5"  # 3.36 d
-    assert effect_spec(3) == "cover_transmission@2009-10-27T16:19:factor=0.5"  # 1.68 d, rounded
+    assert effect_spec(10) == "cover_transmission@2009-10-31T16:40:factor=0.5"
+    assert effect_spec(6) == "cover_transmission@2009-10-29T10:00:factor=0.5"  # 3.42 d
+    assert effect_spec(3) == "cover_transmission@2009-10-27T17:00:factor=0.5"  # 1.71 d
 
 
 def test_demo_help_says_the_length_and_the_change(capsys):
     with pytest.raises(SystemExit):
         main(["demo", "--help"])
     text = " ".join(capsys.readouterr().out.split())
-    assert "simulate 6 days" in text and "2009-10-29T08:38Z" in text
+    assert "simulate 6 days" in text and "2009-10-29T10:00Z" in text

@@ -2,8 +2,8 @@
 
 1. The reference simulator (training/simulate) grows 6 days (``--days``) of an Almería-type
    greenhouse on the shipped Bleiswijk weather from 2009-10-26, with an effect nobody declares:
-   the cover is whitened (transmission × 0.5) at 0.56 × the length after the start (day 3.36
-   of 6, 2009-10-29T08:38Z; day 5.6 of ``--days 10``).
+   the cover is whitened (transmission × 0.5) at 41/72 of the length after the start (day 3.42
+   of 6, 2009-10-29T10:00Z, where it has always been; day 5.69 of ``--days 10``).
 2. ``calibrate`` fits the almeria model on the first 2 days (RSBA, thesis settings).
 3. ``replay`` runs the online estimator over the whole run as the live gateway would, beside the
    constant-parameter model and persistence, and plots it.
@@ -25,19 +25,19 @@ import numpy as np
 
 START = "2009-10-26"  # simulator start, 00:00 UTC
 DAYS = 6.0  # 10 (the live [diagnosis] default) names no more: README, "make demo"
-CHANGE_AT = 0.56  # whitening start as a fraction of the run's length (day 3.36 of 6)
+CHANGE_AT = 41 / 72  # whitening start as a fraction of the length: 10:00 on day 4 of the 6
 FACTOR = 0.5  # cover transmission × this from the start on
 
 
 def effect_start(days: float) -> np.datetime64:
     """When the whitening starts in a ``days``-long run: ``CHANGE_AT`` × ``days`` after
-    ``START`` (UTC), rounded to the minute (6 d → 2009-10-29T08:38)."""
+    ``START`` (UTC), rounded to the minute (6 d → 2009-10-29T10:00)."""
     return np.datetime64(START, "m") + np.timedelta64(round(CHANGE_AT * days * 1440.0), "m")
 
 
 def effect_spec(days: float) -> str:
     """The undeclared effect's simulator spec for a ``days``-long run
-    (6 d → ``cover_transmission@2009-10-29T08:38:factor=0.5``)."""
+    (6 d → ``cover_transmission@2009-10-29T10:00:factor=0.5``)."""
     return f"cover_transmission@{_when(days)}:factor={FACTOR:g}"
 
 
@@ -51,13 +51,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="end-to-end offline run on shipped data: simulate → calibrate → replay → diagnose",
         description=__doc__.split("\n\n")[0].replace("``", "")
         + f" Steps: simulate {DAYS:g} days (--days) from {START} with an undeclared cover"
-        f" whitening (transmission × {FACTOR:g}) at {CHANGE_AT:g} × the length"
+        f" whitening (transmission × {FACTOR:g}) at {CHANGE_AT:.3f} × the length"
         f" ({_when(DAYS)}Z for {DAYS:g} days), calibrate on the first 2 days, replay, diagnose.",
     )
     p.add_argument("--out", default="out/demo", metavar="DIR", help="output folder (out/demo)")
     p.add_argument("--days", type=float, default=DAYS,
                    help=f"days to simulate from {START} ({DAYS:g}); the undeclared whitening "
-                   f"(transmission × {FACTOR:g}) starts {CHANGE_AT:g} × DAYS after the start "
+                   f"(transmission × {FACTOR:g}) starts {CHANGE_AT:.3f} × DAYS after the start "
                    f"({_when(DAYS)}Z for {DAYS:g})")
     p.add_argument("--seed", type=int, default=1, help="simulator and swarm seed (1)")
     p.set_defaults(func=run)

@@ -1,10 +1,11 @@
 """``python -m training demo`` (``make demo``): the offline loop on shipped data.
 
-1. The reference simulator (training/simulate) grows 6 days of an Almería-type greenhouse on
-   the shipped Bleiswijk weather, with an effect nobody declares: the cover is whitened
-   (transmission × 0.5) on day 4.
+1. The reference simulator (training/simulate) grows 6 days (``--days``) of an Almería-type
+   greenhouse on the shipped Bleiswijk weather from 2009-10-26, with an effect nobody declares:
+   the cover is whitened (transmission × 0.5) at 41/72 of the length after the start (day 3.42
+   of 6, 2009-10-29T10:00Z, where it has always been; day 5.69 of ``--days 10``).
 2. ``calibrate`` fits the almeria model on the first 2 days (RSBA, thesis settings).
-3. ``replay`` runs the online estimator over the 6 days as the live gateway would, beside the
+3. ``replay`` runs the online estimator over the whole run as the live gateway would, beside the
    constant-parameter model and persistence, and plots it.
 4. ``diagnose`` looks for what the model lacks and reports it with the error before and after.
 
@@ -20,7 +21,28 @@ import sys
 import time
 from pathlib import Path
 
-EFFECT = "cover_transmission@2009-10-29T10:00:factor=0.5"
+import numpy as np
+
+START = "2009-10-26"  # simulator start, 00:00 UTC
+DAYS = 6.0  # 10 (the live [diagnosis] default) names no more: README, "make demo"
+CHANGE_AT = 41 / 72  # whitening start as a fraction of the length: 10:00 on day 4 of the 6
+FACTOR = 0.5  # cover transmission × this from the start on
+
+
+def effect_start(days: float) -> np.datetime64:
+    """When the whitening starts in a ``days``-long run: ``CHANGE_AT`` × ``days`` after
+    ``START`` (UTC), rounded to the minute (6 d → 2009-10-29T10:00)."""
+    return np.datetime64(START, "m") + np.timedelta64(round(CHANGE_AT * days * 1440.0), "m")
+
+
+def effect_spec(days: float) -> str:
+    """The undeclared effect's simulator spec for a ``days``-long run
+    (6 d → ``cover_transmission@2009-10-29T10:00:factor=0.5``)."""
+    return f"cover_transmission@{_when(days)}:factor={FACTOR:g}"
+
+
+def _when(days: float) -> str:
+    return np.datetime_as_string(effect_start(days), unit="m")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -28,10 +50,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "demo",
         help="end-to-end offline run on shipped data: simulate → calibrate → replay → diagnose",
         description=__doc__.split("\n\n")[0].replace("``", "")
-        + " Steps: simulate, calibrate, replay, diagnose.",
+        + f" Steps: simulate {DAYS:g} days (--days) from {START} with an undeclared cover"
+        f" whitening (transmission × {FACTOR:g}) at {CHANGE_AT:.3f} × the length"
+        f" ({_when(DAYS)}Z for {DAYS:g} days), calibrate on the first 2 days, replay, diagnose.",
     )
     p.add_argument("--out", default="out/demo", metavar="DIR", help="output folder (out/demo)")
-    p.add_argument("--days", type=float, default=6.0, help="days to simulate (6)")
+    p.add_argument("--days", type=float, default=DAYS,
+                   help=f"days to simulate from {START} ({DAYS:g}); the undeclared whitening "
+                   f"(transmission × {FACTOR:g}) starts {CHANGE_AT:.3f} × DAYS after the start "
+                   f"({_when(DAYS)}Z for {DAYS:g})")
     p.add_argument("--seed", type=int, default=1, help="simulator and swarm seed (1)")
     p.set_defaults(func=run)
 
@@ -39,6 +66,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def _step(title: str) -> float:
     print(f"\n== {title}", flush=True)
     return time.perf_counter()
+
+
+def _took(t0: float) -> None:
+    print(f"(step took {time.perf_counter() - t0:.1f} s)", flush=True)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -49,30 +80,38 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     data = out / "almeria.csv"
-    t0 = _step(f"1/4 simulate {args.days:g} days of an Almería-type greenhouse on Bleiswijk weather")
-    result = simulate("almeria", "bleiswijk", start="2009-10-26", days=args.days,
-                      effects=[EFFECT], seed=args.seed)
+    t_all = t0 = _step(f"1/4 simulate {args.days:g} days of an Almería-type greenhouse on "
+                       "Bleiswijk weather")
+    effect = effect_spec(args.days)
+    result = simulate("almeria", "bleiswijk", start=START, days=args.days,
+                      effects=[effect], seed=args.seed)
     result.write(data)
-    print(f"wrote {data} (+ truth) in {time.perf_counter() - t0:.1f} s; undeclared effect: {EFFECT}")
+    print(f"wrote {data} (+ truth) in {time.perf_counter() - t0:.1f} s; undeclared effect: {effect}")
     # the weather is Bleiswijk's: the sun (and with it the cloudiness the sky temperature is read
     # from) is computed there, not at the preset's Almería site
     common = ["--data", str(data), "--greenhouse", "almeria-palmerillas", "--model", "almeria",
               "--site", f"{BLEISWIJK_LATITUDE},{BLEISWIJK_LONGITUDE}"]
     params = out / "params.toml"
-    _step("2/4 calibrate the almeria model on the first 2 days (RSBA), validate on the rest")
+    t0 = _step("2/4 calibrate the almeria model on the first 2 days (RSBA), validate on the rest")
     code = gateway_main(["calibrate", *common, "--algorithm", "rsba", "--seed", str(args.seed),
                          "--calibrate-on", "2009-10-26/2009-10-28", "--out", str(params)])
     if code:
         return code
-    _step("3/4 replay: the online estimator sample by sample, vs constant parameters and persistence")
+    _took(t0)
+    t0 = _step("3/4 replay: the online estimator sample by sample, vs constant parameters and "
+               "persistence")
     code = gateway_main(["replay", *common, "--params", str(params), "--seed", str(args.seed),
                          "--out", str(out / "predictions.csv"), "--plot", str(out / "replay.png")])
     if code:
         return code
-    _step("4/4 diagnose: residual → effect → error before and after, on held-out data")
+    _took(t0)
+    t0 = _step("4/4 diagnose: residual → effect → error before and after, on held-out data")
     code = gateway_main(["diagnose", *common, "--seed", str(args.seed), "--report",
                          str(out / "diagnosis")])
     if code:
         return code
-    print(f"\nall outputs in {out}/ (replay.png, diagnosis/report.md)", file=sys.stderr)
+    _took(t0)
+    print(f"\nall outputs in {out}/ (replay.png, diagnosis/report.md) after "
+          f"{time.perf_counter() - t_all:.0f} s; the undeclared effect was {effect}",
+          file=sys.stderr)
     return 0

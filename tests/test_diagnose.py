@@ -196,6 +196,35 @@ def test_effect_outside_library_is_reported_unexplained(tmp_path):
     assert "time-of-day" in d.signature
 
 
+@pytest.mark.usefixtures("piece_judge")
+def test_a_round_through_the_public_entry_is_the_diagnosis_first(tmp_path):
+    """``search.prepare`` and ``search.search_round`` (the entry tests/generality/headroom.py
+    replays the search through) on the 6-day prototype record whitened at day 3.6: the round
+    tries what the diagnosis's first round tried, with the same verdicts, and picks its first
+    finding, which ``search.keep`` reports as the diagnosis does. With ``every`` a candidate the
+    search would not try (ranking ΔBIC ≥ 0) comes back too, never passed; ``try_effect`` with
+    ``at`` holds the start there."""
+    from gateway.diagnose import search
+
+    series, gh, model, _ = _data(tmp_path, "prototype", "cover_transmission")
+    d = diagnose(series, gh, model)
+    st = search.prepare(series, gh, model).state
+    r = search.search_round(st, LIBRARY)
+    assert [(t.effect.name, t.verdict.ok, t.verdict.delta_bic) for t in r.tried] == [
+        (t["effect"], t["ok"], t["delta_bic"]) for t in d.trials if t["round"] == 1]
+    assert r.best is not None and r.best.effect is d.findings[0].effect
+    worst, worst_dbic = r.ranked[-1]
+    assert worst_dbic >= 0
+    assert not search.search_round(st, [worst.effect]).tried
+    (late,) = search.search_round(st, [worst.effect], tries=None, every=True).tried
+    assert late.rank_dbic == worst_dbic and not late.passed and late.pred["free_run"].shape
+    at = r.best.starts[0] + 3600.0
+    assert search.try_effect(st, r.best.effect, r.reference, at=at).starts == [at, at]
+    kept = search.keep(st, r.best, series)
+    assert kept.to_json() == d.findings[0].to_json()
+    assert st.effects == [r.best.effect] and st.current_pred is r.best.pred
+
+
 @pytest.mark.usefixtures("piece_judge")  # in process: the 6-day record needs the piece judge
 def test_cli_json_and_report(tmp_path, capsys):
     import json

@@ -186,7 +186,7 @@ def test_humidity_dates_more_air_exchange_that_the_temperature_leaves_open():
     (humidity.py) steps at the change. The scan takes the second output's ΔBIC into its profile
     and puts the start within 3 h of the truth, also when it takes the latest of the equally
     good starts (the fold fits); before, that was the end of the still spell (+24 h)."""
-    from gateway.diagnose.search import _scan
+    from gateway.diagnose.effect_fit import scan
 
     gh, _, m0 = prototype_bases()
     n, dt = 5 * 288, 300.0
@@ -213,17 +213,17 @@ def test_humidity_dates_more_air_exchange_that_the_temperature_leaves_open():
     x = drivers(s, gh)
     shoot = Shooting(m, x, gh, dt, window_starts([(0, n)], 72, skip=72), 72)
     for latest in (False, True):
-        sc = _scan(shoot, base, e, 4.0 * 86400, [(0, n)], latest=latest)
+        sc = scan(shoot, base, e, 4.0 * 86400, [(0, n)], latest=latest)
         assert abs(sc.taus[sc.best] - tau) <= 3 * 3600.0, (latest, sc.taus[sc.best] / 3600)
         assert sc.amps[sc.best] == pytest.approx(3.0, rel=0.1)
 
 
 def test_fit_effect_at_holds_the_start_and_fits_the_amplitude():
-    """``search.fit_effect_at`` (the headroom study's oracle): on 5 days made by the structured
+    """``effect_fit.fit_effect_at`` (the headroom study's oracle): on 5 days made by the structured
     prototype with a 0.5 K d-1 drift from day 2.4, the effect fitted with its start held at the
     truth keeps that start exactly and recovers the rate, and fits better (lower ΔBIC) than held
     a day late."""
-    from gateway.diagnose.search import _Context, fit_effect_at
+    from gateway.diagnose.effect_fit import Context, fit_effect_at
 
     gh, _, m0 = prototype_bases()
     n, dt = 5 * 288, 300.0
@@ -234,7 +234,7 @@ def test_fit_effect_at_holds_the_start_and_fits_the_amplitude():
     truth = m.defaults(gh)
     truth[m.index(e.amp_name)], truth[m.index(e.tau_name)] = 0.5, tau
     x["t_in"] = m.free_run(truth[None], x, gh, dt)[0] + np.random.default_rng(0).normal(0, 0.05, n)
-    ctx = _Context(x, gh, dt, float(x["_index"][-1]), 72, n // 2)
+    ctx = Context(x, gh, dt, float(x["_index"][-1]), 72, n // 2)
     right = fit_effect_at(ctx, m, m0, m0.defaults(gh), e, [(0, n)], tau)
     late = fit_effect_at(ctx, m, m0, m0.defaults(gh), e, [(0, n)], tau + 86400.0)
     assert right.theta[m.index(e.tau_name)] == tau

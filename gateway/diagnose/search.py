@@ -11,39 +11,41 @@ data (docs/effects.md, "How the diagnosis decides").
    the same way without it (judge.py). The judge keeps one or none; repeat.
 5. Held-out error before and after, beside persistence; the residual's signature.
 
-Each effect carries its own part of the model and its second-output evidence (effects.py);
-this loop never asks an effect's name.
+Each effect carries its own part of the model and its second-output evidence (effects.py; its
+fits: effect_fit.py); this loop never asks an effect's name.
+
+Public steps, for studies that replay the search (tests/generality/headroom.py) with the very
+code ``diagnose`` runs: ``prepare`` (steps 1–3: the search's state on the calibrated base),
+``search_round`` (one round of step 4, every candidate tried returned with its fold fits,
+held-out prediction and verdict), ``try_effect`` (one candidate, optionally at a given start),
+``fit_all`` (a candidate's reported fit on all data) and ``keep``.
 """
 
 from __future__ import annotations
 
 import time as _time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from gateway.diagnose import judge as jd
 from gateway.diagnose import residuals as res
-from gateway.diagnose.base import Progress, calibrate_base, carry, free_parameters
-from gateway.diagnose.bic import EFFECTIVE_S, delta_bic, effective_samples
+from gateway.diagnose.base import Progress, calibrate_base
+from gateway.diagnose.effect_fit import Context, EffectFit, fit_effect, rank, refit
 from gateway.diagnose.effects import LIBRARY, Effect, compose
-from gateway.diagnose.fit import HORIZON_S, Scan, Shooting, coarsen, drivers, fit_lm, scan_tau, window_starts
+from gateway.diagnose.fit import HORIZON_S, Scan, coarsen, drivers
 from gateway.diagnose.result import Diagnosis, Finding, make_finding, to_json, traces
 from gateway.greenhouse import Greenhouse
 from gateway.model.model import Model
 from gateway.series import Series
 
-__all__ = ["Diagnosis", "Finding", "diagnose", "to_json"]
+__all__ = ["Diagnosis", "Finding", "Heldout", "Round", "Start", "State", "Tried", "diagnose",
+           "fit_all", "keep", "prepare", "reference", "search_round", "to_json", "try_effect"]
 
 FIT_STEP_S = 300.0
 """Coarsest grid the fits run on [s] (finer data is coarsened, see fit.coarsen)."""
 MAX_EFFECTS = 3
 TRIES_PER_ROUND = 3
-REFIT_LM_ITERATIONS = 12
-TAU_ROUNDS = 2
-"""Alternations of τ scan and joint refit in ``_fit_effect``."""
-COARSE_TAU_S = 3 * 3600.0
-"""Spacing of the coarse grid of candidate start times [s]; refined to COARSE/36 around the best."""
 
 
 def diagnose(
@@ -58,25 +60,16 @@ def diagnose(
     """Run the whole diagnosis on ``series`` (see the module docstring)."""
     t_start = _time.perf_counter()
     say = progress or (lambda msg: None)
-    if not 0.1 <= split <= 0.9:
-        raise ValueError(f"split must be within [0.1, 0.9], got {split}")
-    k = max(int(FIT_STEP_S // series.step), 1)
-    coarse = coarsen(series, k)
-    n, dt = len(coarse), coarse.step
-    s = int(round(split * n))
-    horizon = max(int(round(HORIZON_S / dt)), 2)
-    _check_length(series, s, n, horizon)  # before drivers(): it needs a first row
-    x = drivers(coarse, gh)
-    duration = float(x["_index"][-1])
-    held = _Heldout.of(s, n, dt)
-    model0, theta, structure_log = calibrate_base(base, gh, x, dt, s, horizon, seed, say)
-    ctx = _Context(x, gh, dt, duration, horizon, s)
-    state = _Search(ctx, model0, theta, held)
+    start = prepare(series, gh, base, split, seed, say)
+    st = start.state
     for rnd in range(1, MAX_EFFECTS + 1):
-        if not _search_round(ctx, state, library, rnd, series, seed, say):
+        r = search_round(st, library, rnd, seed, say)
+        _log(st, rnd, r)
+        if r.best is None:
             break
-    d = _report(series, ctx, k, _Fit(model0, [theta, theta], theta), state)
-    d.structure = structure_log
+        keep(st, r.best, series, seed, say)
+    d = _report(series, start.k, _Fit(st.model0, [start.theta, start.theta], start.theta), st)
+    d.structure = start.structure
     d.seconds = _time.perf_counter() - t_start
     return d
 
@@ -92,30 +85,8 @@ class _Fit:
     theta_all: np.ndarray
 
 
-@dataclass(frozen=True)
-class _Candidate:
-    """A candidate effect the judge passed (``_try_candidate``): the model so far with the
-    effect added, its parameters per fold, its cross-fitted held-out prediction and the
-    judge's verdict (its ``delta_bic`` filled in per fold)."""
-
-    effect: Effect
-    model: Model
-    thetas: list[np.ndarray]
-    pred: dict
-    verdict: jd.Verdict
-
-
-@dataclass(frozen=True)
-class _EffectFit:
-    """A candidate effect fitted on some segments (``_fit_effect``): its parameters and the
-    BIC change against the model without it (plus the second output's evidence)."""
-
-    theta: np.ndarray
-    delta_bic: float
-
-
 @dataclass
-class _Heldout:
+class Heldout:
     """The held-out part [s, n) cut into blocks dealt into two folds, and each fold's fit set:
     the calibration part plus the other fold (fold j is judged on ``folds[j]``)."""
 
@@ -125,22 +96,25 @@ class _Heldout:
     fit_sets: list[list[tuple[int, int]]]
 
     @classmethod
-    def of(cls, s: int, n: int, dt: float) -> _Heldout:
+    def of(cls, s: int, n: int, dt: float) -> Heldout:
+        """The blocks and folds of rows [s, n) on a grid of ``dt`` [s] (judge.heldout_blocks)."""
         blocks = jd.heldout_blocks(s, n, dt)
         folds = jd.folds_of(blocks)
         return cls(n, blocks, folds, [[(0, s)] + folds[1 - j] for j in (0, 1)])
 
 
-class _Search:
-    """The loop's state: the base, the model so far (the base + the effects kept), its
-    parameters per fold and on all data, its held-out prediction, and what was tried."""
+class State:
+    """The loop's state: the shared context, the base, the model so far (the base + the effects
+    kept), its parameters per fold and on all data, its held-out prediction, and what was
+    tried (``trials``) and rejected (``rejected``, with why)."""
 
-    def __init__(self, ctx: _Context, model0: Model, theta: np.ndarray, held: _Heldout) -> None:
+    def __init__(self, ctx: Context, model0: Model, theta: np.ndarray, held: Heldout) -> None:
+        self.ctx = ctx
         self.model0, self.model, self.held = model0, model0, held
         self.effects: list[Effect] = []
         self.thetas = [theta.copy(), theta.copy()]  # per fold
         self.theta_all = theta.copy()
-        self.current_pred = self.heldout(ctx, model0, self.thetas)
+        self.current_pred = self.heldout(model0, self.thetas)
         self.findings: list[Finding] = []
         self.rejected: list[dict] = []
         self.trials: list[dict] = []
@@ -149,69 +123,182 @@ class _Search:
         """The model so far with its parameters per fold and on all data."""
         return _Fit(self.model, self.thetas, self.theta_all)
 
-    def heldout(self, ctx: _Context, model: Model, thetas: list[np.ndarray]) -> dict:
+    def heldout(self, model: Model, thetas: list[np.ndarray]) -> dict:
         """Cross-fitted held-out predictions of ``model`` (judge.heldout)."""
+        ctx = self.ctx
         return jd.heldout(model, thetas, ctx.x, ctx.gh, ctx.dt, self.held.folds, ctx.split,
                           self.held.n)
 
 
-def _search_round(ctx: _Context, st: _Search, library: tuple[Effect, ...], rnd: int,
-                  series: Series, seed: int, say: Progress) -> bool:
-    """One round of the add-best-effect loop: rank the effects not yet kept, try the best ones
-    against the model so far refitted the same way, keep the one with the most evidence of
-    those the judge passes. False when no candidate is left or none passes."""
+@dataclass(frozen=True)
+class Start:
+    """What ``prepare`` builds before the search: the data on the fit grid (``coarse``, ``k``
+    data rows to one fit row), the calibrated base's parameters and structure log, and the
+    search's state on that base."""
+
+    coarse: Series
+    k: int
+    theta: np.ndarray
+    structure: list[dict]
+    state: State
+
+
+def prepare(series: Series, gh: Greenhouse, base: Model, split: float = 0.5, seed: int = 0,
+            progress: Progress | None = None) -> Start:
+    """Steps 1–3 of the module docstring, as ``diagnose`` runs them: ``series`` on the fit
+    grid, the base calibrated on its first ``split`` (base.calibrate_base), the held-out
+    folds, and the search's state with the base's cross-fitted held-out prediction."""
+    say = progress or (lambda msg: None)
+    if not 0.1 <= split <= 0.9:
+        raise ValueError(f"split must be within [0.1, 0.9], got {split}")
+    k = max(int(FIT_STEP_S // series.step), 1)
+    coarse = coarsen(series, k)
+    n, dt = len(coarse), coarse.step
+    s = int(round(split * n))
+    horizon = max(int(round(HORIZON_S / dt)), 2)
+    _check_length(series, s, n, horizon)  # before drivers(): it needs a first row
+    x = drivers(coarse, gh)
+    held = Heldout.of(s, n, dt)
+    model0, theta, structure_log = calibrate_base(base, gh, x, dt, s, horizon, seed, say)
+    ctx = Context(x, gh, dt, float(x["_index"][-1]), horizon, s)
+    return Start(coarse, k, theta, structure_log, State(ctx, model0, theta, held))
+
+
+@dataclass(frozen=True)
+class Tried:
+    """A candidate effect tried against the model so far (``try_effect``): the model with it
+    added, its fit on each fold's fit set (parameters, ΔBIC with the second output), its
+    cross-fitted held-out prediction, the judge's verdict (``delta_bic`` filled in per fold)
+    and the ΔBIC of its τ scan on all data that ranked it (None when not ranked)."""
+
+    effect: Effect
+    model: Model
+    fits: list[EffectFit]
+    pred: dict
+    verdict: jd.Verdict
+    rank_dbic: float | None = None
+
+    @property
+    def thetas(self) -> list[np.ndarray]:
+        """Its parameters per fold."""
+        return [f.theta for f in self.fits]
+
+    @property
+    def starts(self) -> list[float]:
+        """Its start per fold [s since the first row]."""
+        return [float(th[self.model.index(self.effect.tau_name)]) for th in self.thetas]
+
+    @property
+    def passed(self) -> bool:
+        """The judge keeps it, its fits lower the BIC on both folds' fit sets and (when ranked)
+        its ranking scan did on all data: a candidate the round may pick."""
+        ranked = self.rank_dbic is None or self.rank_dbic < 0
+        return bool(self.verdict.ok and max(self.verdict.delta_bic) < 0 and ranked)
+
+
+@dataclass(frozen=True)
+class Round:
+    """One round (``search_round``): the candidates ranked on all data (τ scan, ΔBIC), the
+    judge's reference prediction (the model so far refitted per fold without an effect), every
+    candidate tried in ranked order, passed or not, the one picked (None when none passed) and
+    the passed ones it beat (``rejected`` entries)."""
+
+    ranked: list[tuple[Scan, float]]
+    reference: dict | None
+    tried: list[Tried] = field(default_factory=list)
+    best: Tried | None = None
+    rivals: list[dict] = field(default_factory=list)
+
+
+def reference(st: State) -> dict:
+    """The judge's reference: the model so far refitted on each fold's fit set as a candidate
+    is (effect_fit.refit), its cross-fitted held-out prediction."""
+    ref = [refit(st.ctx, st.model, st.thetas[j], st.held.fit_sets[j]) for j in (0, 1)]
+    return st.heldout(st.model, ref)
+
+
+def search_round(st: State, library: tuple[Effect, ...] | list[Effect], rnd: int = 1,
+                 seed: int = 0, say: Progress | None = None, tries: int | None = TRIES_PER_ROUND,
+                 every: bool = False) -> Round:
+    """One round of the add-best-effect loop on ``st`` (which it leaves as it is): rank the
+    effects of ``library`` not yet kept, try the ``tries`` best (None: all) of those whose
+    ranking lowers the BIC (``every``: also the others, which never pass: a study's view of
+    what the search does not try) against the model so far refitted the same way, pick the
+    one with the most evidence of those that pass. ``diagnose`` logs it (``_log``) and
+    ``keep``s the pick."""
+    say = say or (lambda msg: None)
     candidates = [e for e in library if e not in st.effects]
     if not candidates:
-        return False
+        return Round([], None)
     say(f"round {rnd}: ranking {len(candidates)} candidate effects")
-    n = st.held.n
-    ranked = _rank(ctx, st.model0, st.model, st.theta_all, st.effects, candidates, [(0, n)])
-    # the reference: the model so far, refitted on each fold's fit set as a candidate is
-    ref = [_refit(ctx, st.model, st.thetas[j], st.held.fit_sets[j]) for j in (0, 1)]
-    ref_pred = st.heldout(ctx, st.model, ref)
-    passed: list[_Candidate] = []
-    for scan_all, dbic_all in ranked[:TRIES_PER_ROUND]:
-        if dbic_all >= 0:
+    ranked = rank(st.ctx, st.model0, st.model, st.theta_all, st.effects, candidates,
+                  [(0, st.held.n)])
+    ref_pred = reference(st)
+    tried: list[Tried] = []
+    for scan_all, dbic_all in ranked[:tries]:
+        if dbic_all >= 0 and not every:
             break
-        tried = _try_candidate(ctx, st, scan_all.effect, ref_pred, rnd, seed, say)
-        if tried is not None:
-            passed.append(tried)
+        say(f"round {rnd}: trying {scan_all.effect.name}")
+        tried.append(try_effect(st, scan_all.effect, ref_pred, seed, rank_dbic=float(dbic_all)))
+    passed = [t for t in tried if t.passed]
     if not passed:
-        return False
-    best = _pick(passed, ctx.x["t_in"], ctx.split, ctx.dt, st.rejected)
-    e = best.effect
-    full = _fit_effect(ctx, best.model, st.model, st.theta_all, e, [(0, n)], seed + 101,
-                       latest=False)
-    st.findings.append(make_finding(e, best.model, full.theta, series, st.current_pred,
-                                    best.verdict, full.delta_bic, ctx.x, ctx.split))
-    st.effects.append(e)
-    st.model, st.thetas, st.theta_all = best.model, best.thetas, full.theta
-    st.current_pred = best.pred
-    say(f"kept {e.name}: {st.findings[-1].summary}")
-    return True
+        return Round(ranked, ref_pred, tried)
+    best, rivals = _pick(passed, st.ctx.x["t_in"], st.ctx.split, st.ctx.dt)
+    return Round(ranked, ref_pred, tried, best, rivals)
 
 
-def _try_candidate(ctx: _Context, st: _Search, e: Effect, ref_pred: dict, rnd: int, seed: int,
-                   say: Progress) -> _Candidate | None:
-    """Candidate ``e`` added to the model so far, fitted per fold and judged on the held-out
-    folds against ``ref_pred``: the candidate when it passes, else None (logged in
-    ``st.rejected``); every trial is logged in ``st.trials``."""
-    say(f"round {rnd}: trying {e.name}")
+def try_effect(st: State, e: Effect, ref_pred: dict, seed: int = 0, at: float | None = None,
+               rank_dbic: float | None = None) -> Tried:
+    """Candidate ``e`` added to the model so far, fitted on each fold's fit set
+    (effect_fit.fit_effect; with ``at``, its start held there [s since the first row]: the
+    oracle of a known start) and judged on the held-out folds against ``ref_pred``
+    (``reference``)."""
+    ctx = st.ctx
     new_model = compose(st.model0, st.effects + [e], ctx.gh, ctx.duration)
-    fitted = [_fit_effect(ctx, new_model, st.model, st.thetas[j], e, st.held.fit_sets[j],
-                          seed + 17 * j) for j in (0, 1)]
-    new_thetas = [f.theta for f in fitted]
-    pred = st.heldout(ctx, new_model, new_thetas)
-    starts = [float(th[new_model.index(e.tau_name)]) for th in new_thetas]
+    fits = [fit_effect(ctx, new_model, st.model, st.thetas[j], e, st.held.fit_sets[j],
+                       seed + 17 * j, latest=at is None, at=at) for j in (0, 1)]
+    pred = st.heldout(new_model, [f.theta for f in fits])
+    starts = [float(f.theta[new_model.index(e.tau_name)]) for f in fits]
     verdict = jd.judge(st.current_pred, ref_pred, pred, ctx.x["t_in"], st.held.blocks,
                        ctx.split, ctx.dt, starts, ctx.last)
-    verdict.delta_bic = [float(f.delta_bic) for f in fitted]  # second output included
-    st.trials.append({"round": rnd, "effect": e.name, "ok": verdict.ok,
-                      "delta_bic": verdict.delta_bic, **verdict.stats})
-    if max(verdict.delta_bic) < 0 and verdict.ok:
-        return _Candidate(e, new_model, new_thetas, pred, verdict)
-    st.rejected.append({"effect": e.name, "reason": verdict.why, "delta_bic": verdict.delta_bic})
-    return None
+    verdict.delta_bic = [float(f.delta_bic) for f in fits]  # second output included
+    return Tried(e, new_model, fits, pred, verdict, rank_dbic)
+
+
+def fit_all(st: State, t: Tried, seed: int = 0) -> EffectFit:
+    """``t``'s effect fitted on all data after the model so far (the best-fitting start, not
+    the latest of the equally good): the finding's reported start and parameters."""
+    return fit_effect(st.ctx, t.model, st.model, st.theta_all, t.effect, [(0, st.held.n)],
+                      seed + 101, latest=False)
+
+
+def keep(st: State, t: Tried, series: Series, seed: int = 0, say: Progress | None = None
+         ) -> Finding:
+    """Add ``t`` to the model so far: its finding (reported from ``fit_all``), its model, fold
+    parameters and held-out prediction become the state's."""
+    full = fit_all(st, t, seed)
+    ctx, e = st.ctx, t.effect
+    st.findings.append(make_finding(e, t.model, full.theta, series, st.current_pred,
+                                    t.verdict, full.delta_bic, ctx.x, ctx.split))
+    st.effects.append(e)
+    st.model, st.thetas, st.theta_all = t.model, t.thetas, full.theta
+    st.current_pred = t.pred
+    if say is not None:
+        say(f"kept {e.name}: {st.findings[-1].summary}")
+    return st.findings[-1]
+
+
+def _log(st: State, rnd: int, r: Round) -> None:
+    """Every trial of round ``rnd`` into ``st.trials``; those that did not pass, then the passed
+    ones the pick beat, into ``st.rejected`` with why."""
+    for t in r.tried:
+        v = t.verdict
+        st.trials.append({"round": rnd, "effect": t.effect.name, "ok": v.ok,
+                          "delta_bic": v.delta_bic, **v.stats})
+        if not t.passed:
+            st.rejected.append({"effect": t.effect.name, "reason": v.why,
+                                "delta_bic": v.delta_bic})
+    st.rejected.extend(r.rivals)
 
 
 def _check_length(series: Series, s: int, n: int, horizon: int) -> None:
@@ -224,24 +311,27 @@ def _check_length(series: Series, s: int, n: int, horizon: int) -> None:
         )
 
 
-def _pick(passed: list[_Candidate], t_in: np.ndarray, s: int, dt: float, rejected: list[dict]
-          ) -> _Candidate:
-    """The passed candidate with the most evidence; the others go to ``rejected`` with why."""
+def _pick(passed: list[Tried], t_in: np.ndarray, s: int, dt: float
+          ) -> tuple[Tried, list[dict]]:
+    """The passed candidate with the most evidence (judge.scores), and the others as
+    ``rejected`` entries saying why."""
     score = jd.scores([c.verdict for c in passed], t_in, s, dt)
     order = np.argsort(score)
+    rivals = []
     for i in order[1:]:
         other = passed[i]
-        rejected.append({"effect": other.effect.name, "reason": "passed, but a rival has "
-                         f"more evidence (score {score[i]:.0f} vs {score[order[0]]:.0f},"
-                         " fit ΔBIC with second output + held-out): " + other.verdict.why,
-                         "delta_bic": other.verdict.delta_bic})
-    return passed[order[0]]
+        rivals.append({"effect": other.effect.name, "reason": "passed, but a rival has "
+                       f"more evidence (score {score[i]:.0f} vs {score[order[0]]:.0f},"
+                       " fit ΔBIC with second output + held-out): " + other.verdict.why,
+                       "delta_bic": other.verdict.delta_bic})
+    return passed[order[0]], rivals
 
 
-def _report(series: Series, ctx: _Context, k: int, base: _Fit, st: _Search) -> Diagnosis:
+def _report(series: Series, k: int, base: _Fit, st: State) -> Diagnosis:
     """Figures on the data's own grid (``k`` data samples to one fit step): held-out error of
     ``base`` and of the search's final model beside persistence, residuals; what the search
     found, rejected and tried."""
+    ctx = st.ctx
     gh, final, held = ctx.gh, st.final(), st.held
     xf = drivers(series, gh)
     nf, dtf = len(series), series.step
@@ -267,141 +357,3 @@ def _report(series: Series, ctx: _Context, k: int, base: _Fit, st: _Search) -> D
         time=series.time, measured=meas, pred_before=before_f, pred_after=after_f,
         analysis_before=an_before, analysis_after=an_after, trials=st.trials,
     )
-
-
-class _Context:
-    """What every step of one diagnosis shares: drivers, greenhouse, grid, split."""
-
-    def __init__(self, x, gh, dt, duration, horizon, split) -> None:
-        self.x, self.gh, self.dt, self.duration = x, gh, dt, duration
-        self.horizon, self.split = horizon, split
-        self.last = jd.last_start(duration, float(x["_index"][split]))
-        """The latest start an effect may have (judge.last_start)."""
-
-    def shooting(self, model: Model, segments: list[tuple[int, int]]) -> Shooting:
-        starts = window_starts(segments, self.horizon, skip=self.horizon)
-        return Shooting(model, self.x, self.gh, self.dt, starts, self.horizon)
-
-
-def _tau_grid(effect: Effect, last: float) -> np.ndarray:
-    first = 0.0 if effect.from_start else COARSE_TAU_S
-    return np.arange(first, last + 1.0, COARSE_TAU_S)
-
-
-def _scan(shoot: Shooting, theta: np.ndarray, e: Effect, last: float,
-          segments: list[tuple[int, int]], latest: bool = True) -> Scan:
-    """Coarse τ grid up to ``last`` (judge.last_start), then a fine grid around the best coarse
-    τ. With ``latest``, of the start
-    times that fit equally well (SSE within one effective sample's share: a likelihood ratio of
-    e) the latest is taken: "no change until the data shows it", so a judged block between two
-    pieces of fit data is never predicted with a guessed effect; else the best one (the reported
-    start). Starts are compared on the temperature's SSE with the second output's ΔBIC at each
-    start added (``Scan.score``): where the temperature leaves the start open, the output that
-    shows the change places it. An effect whose second output fixes its start (a transmission
-    change on the measured inside radiation) takes τ and amplitude from there."""
-    m = shoot.model
-    if e.evidence.fits_start(m, shoot.x):
-        first = 0.0 if e.from_start else COARSE_TAU_S
-        tau, amp = e.evidence.scan(m, shoot.x, theta, segments, first, last)
-        th = theta.copy()
-        th[m.index(e.tau_name)], th[m.index(e.amp_name)] = tau, np.clip(amp, e.lower, e.upper)
-        sse, npair = shoot.sse(th[None, :])
-        return Scan(e, np.array([tau]), np.array([th[m.index(e.amp_name)]]), sse, npair)
-    sse0, npair = shoot.sse(theta[None, :])
-    rel = 1.0 / max(npair * shoot.dt / EFFECTIVE_S, 1.0)
-    n_e = effective_samples(npair, shoot.dt)
-
-    def pick(sc: Scan) -> Scan:
-        ev = e.evidence.profile(m, shoot.x, theta, segments, sc.taus, sc.amps)
-        sc = replace(sc, score=sc.sse * np.exp(ev / n_e))  # second output's ΔBIC added (bic.py)
-        return sc.latest_of_best(rel) if latest else sc
-
-    grid = _tau_grid(e, last)
-    if len(grid) == 0:  # no start time leaves enough data after it
-        return Scan(e, np.array([last]), np.array([e.neutral]), sse0, npair)
-    coarse = pick(scan_tau(shoot, theta, e, grid, float(sse0[0])))
-    t_best = coarse.taus[coarse.best]
-    lo = 0.0 if e.from_start else shoot.dt
-    fine_taus = np.unique(np.clip(t_best + np.linspace(-1, 1, 37) * COARSE_TAU_S, lo,
-                                  max(last, lo)))
-    fine = pick(scan_tau(shoot, theta, e, fine_taus, float(sse0[0])))
-    return fine if fine.scores[fine.best] <= coarse.scores[coarse.best] * (1.0 + rel) else coarse
-
-
-def _evidence(e: Effect, model, x, theta, segments, sc: Scan) -> float:
-    return e.evidence.delta_bic(model, x, theta, segments, float(sc.taus[sc.best]),
-                                float(sc.amps[sc.best]))
-
-
-def _rank(ctx: _Context, base, model, theta, effects, candidates, segments):
-    """Each candidate's τ scan (other parameters held) on ``segments``, sorted by ΔBIC (its
-    second output's included)."""
-    out = []
-    for e in candidates:
-        new = compose(base, effects + [e], ctx.gh, ctx.duration)
-        th = carry(theta, model, new, ctx.gh)
-        shoot = ctx.shooting(new, segments)
-        sse0, npair = shoot.sse(th[None, :])
-        sc = _scan(shoot, th, e, ctx.last, segments)
-        dbic = delta_bic(sc.sse[sc.best], float(sse0[0]), effective_samples(npair, ctx.dt), 2)
-        out.append((sc, dbic + _evidence(e, new, ctx.x, th, segments, sc)))
-    out.sort(key=lambda item: item[1])
-    return out
-
-
-def _refit(ctx: _Context, model: Model, theta: np.ndarray, segments) -> np.ndarray:
-    """``model`` refitted on ``segments`` (base parameters and amplitudes, starts held), as
-    :func:`_fit_effect` refits a candidate: the judge's reference."""
-    lo, hi = model.bounds(ctx.gh)
-    return fit_lm(ctx.shooting(model, segments), theta.copy(), free_parameters(model), lo, hi,
-                  REFIT_LM_ITERATIONS)
-
-
-def fit_effect_at(ctx: _Context, new_model, old_model, theta_old, e: Effect, segments,
-                  tau: float) -> _EffectFit:
-    """``e`` fitted on ``segments`` as the search fits it (``_fit_effect``: amplitude scan,
-    joint refit of the base parameters and amplitude, ``TAU_ROUNDS`` alternations), but with
-    its start held at ``tau`` [s since the first row] instead of scanned: the oracle of a known
-    start (tests/generality/headroom.py). The amplitude is always fitted on the temperature."""
-    return _fit_effect(ctx, new_model, old_model, theta_old, e, segments, 0, latest=False,
-                       at=tau)
-
-
-def _fit_effect(ctx: _Context, new_model, old_model, theta_old, e: Effect, segments, seed,
-                latest: bool = True, at: float | None = None) -> _EffectFit:
-    """τ scan (``_scan``) then a joint refit (base parameters + amplitude, τ held) on
-    ``segments``, alternated ``TAU_ROUNDS`` times while the SSE falls; with ``at``, τ is held
-    there (an amplitude scan at that one start, ``fit_effect_at``).
-
-    The base was calibrated on data that may hold the start of the change (the calibration
-    part ends after it): with those parameters held, the first scan sees the change's first
-    hours already fitted by the base and puts τ late (at the next piece of data the base cannot
-    carry, typically the next morning). Refitted with the effect from that τ, the base is freed
-    of the change and a second scan finds where it really starts (coordinate descent on τ and
-    the other parameters; kept only when it lowers the SSE)."""
-    th = carry(theta_old, old_model, new_model, ctx.gh)
-    shoot = ctx.shooting(new_model, segments)
-    sse_old, npair = shoot.sse(th[None, :])
-    lo, hi = new_model.bounds(ctx.gh)
-    free = free_parameters(new_model)
-    if at is None and e.evidence.fits_start(new_model, ctx.x):
-        free = [j for j in free if new_model.names[j] != e.amp_name]  # fixed by the 2nd output
-    ja, jt = new_model.index(e.amp_name), new_model.index(e.tau_name)
-    best, best_sse, sc_best = None, np.inf, None
-    for _ in range(TAU_ROUNDS):
-        if at is None:
-            sc = _scan(shoot, th, e, ctx.last, segments, latest)
-        else:
-            sc = scan_tau(shoot, th, e, np.array([float(at)]), float(shoot.sse(th[None, :])[0][0]))
-        trial = th.copy()
-        trial[jt], trial[ja] = sc.taus[sc.best], sc.amps[sc.best]
-        trial = fit_lm(shoot, trial, free, lo, hi, REFIT_LM_ITERATIONS)
-        sse = float(shoot.sse(trial[None, :])[0][0])
-        if best is not None and not sse < best_sse:
-            break
-        best, best_sse, sc_best = trial, sse, sc
-        th = trial.copy()
-        th[ja] = e.neutral  # the next scan starts from the refitted base without the effect
-    k = len(new_model.names) - len(old_model.names)  # amplitude, start (+ an added store's h)
-    dbic = delta_bic(best_sse, float(sse_old[0]), effective_samples(npair, ctx.dt), k)
-    return _EffectFit(best, dbic + _evidence(e, new_model, ctx.x, best, segments, sc_best))

@@ -1,7 +1,7 @@
 """One library effect offered alone on dev cases: what the judge sees of it (docs/effects.md, "An
 added heat store"). Per case: the base structure kept (and m_cap), the candidate's held-out cut,
 p and the two folds' starts − truth from ``diagnose(..., library=(effect,))``, and with
-``--fit`` its parameters fitted on all data after the base (``search._fit_effect``, as
+``--fit`` its parameters fitted on all data after the base (``effect_fit.fit_effect``, as
 tau_profile.py). Never the held-out generator.
 
     python tests/generality/effect_alone.py --effect heat_store_added [--fit] \\
@@ -58,14 +58,14 @@ def judged(label: str, effect: str) -> list[str]:
 
 def fitted(label: str, effect: str) -> str:
     """The effect's parameters fitted on all data after the calibrated base."""
-    from gateway.diagnose import search
+    from gateway.diagnose import effect_fit
     from gateway.diagnose.effects import EFFECTS, compose
     from tests.generality.tau_profile import _setup
 
     e = EFFECTS[effect]
     ctx, gh, m0, th0, n = _setup(label)
     m = compose(m0, [e], gh, ctx.duration)
-    fit = search._fit_effect(ctx, m, m0, th0, e, [(0, n)], 101, latest=False)
+    fit = effect_fit.fit_effect(ctx, m, m0, th0, e, [(0, n)], 101, latest=False)
     th, dbic = fit.theta, fit.delta_bic
     own = [nm for nm in m.names if nm not in m0.names]
     return f"  fit on all data: {', '.join(f'{nm} {th[m.index(nm)]:.4g}' for nm in own)}, ΔBIC {dbic:.0f}"

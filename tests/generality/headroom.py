@@ -3,16 +3,16 @@ cases fail: headroom"). For every dev effect case (refsim, twonode × autumn, wi
 the 7 library kinds; heater and night_heater apart), with the RIGHT effect(s) for the kind
 (generators.EXPECTED, those in the diagnosis's LIBRARY):
 
-1. **alone**: the right effect(s) offered alone, the diagnosis's first round replayed on the
-   calibrated base (rank, per-fold fit, judge, pick: ``search._search_round``'s steps, kept
-   here so that a rejected candidate's held-out prediction is kept too): the held-out free-run
-   MAE cut against the base, the suite's own sign-flip p (``cases.own_significance``) and the
-   judge's p, whether the judge keeps it, and start − truth of the start the search reports
-   (its all-data fit, ``latest=False``, as the finding's start).
-2. **oracle**: the same effect with its start held at the injected one (``search.fit_effect_at``
-   per fold's fit set: base parameters and amplitude refitted as the search refits them), its
-   cut and p, and the judge's verdict on it. If this misses the 20 % cut or p < 0.05, the case
-   cannot pass with the present base, whatever the search does.
+1. **alone**: the right effect(s) offered alone, the diagnosis's first round run on the
+   calibrated base by the search's own code (``search.prepare``, ``search.search_round`` with
+   ``every``: rank, per-fold fit, judge, pick; every candidate comes back, a rejected one with
+   its held-out prediction too): the held-out free-run MAE cut against the base, the suite's
+   own sign-flip p (``cases.own_significance``) and the judge's p, whether the judge keeps it,
+   and start − truth of the start the search reports (``search.fit_all``, the finding's start).
+2. **oracle**: the same effect with its start held at the injected one (``search.try_effect``
+   with ``at``: base parameters and amplitude refitted per fold's fit set as the search refits
+   them), its cut and p, and the judge's verdict on it. If this misses the 20 % cut or
+   p < 0.05, the case cannot pass with the present base, whatever the search does.
 3. the case's visible size (``cases.case_visible_change``) and the base's held-out MAE on the
    same window without the change.
 
@@ -42,6 +42,7 @@ from dataclasses import asdict, dataclass, field
 from functools import lru_cache
 from pathlib import Path
 from types import SimpleNamespace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -62,6 +63,9 @@ from tests.generality.cases import (  # noqa: E402
 from tests.generality.generators import EXPECTED, HELD_OUT, KINDS  # noqa: E402
 from tests.generality.report import KIND_GROUPS, MAIN_WINDOWS  # noqa: E402
 
+if TYPE_CHECKING:
+    from gateway.diagnose.search import State, Tried
+
 DEV = ("refsim", "twonode")
 WINDOWS = MAIN_WINDOWS
 GROUP = {k: g for g, ks in KIND_GROUPS.items() for k in ks}
@@ -76,13 +80,10 @@ LEVER = {"invisible": "none (no method sees it)", "unreachable": "base error",
 
 @dataclass
 class Setup:
-    """One case as ``diagnose`` builds it before the search: calibrated base on C, folds."""
+    """One case as ``diagnose`` builds it before the search (``search.prepare``)."""
 
     data: object
-    ctx: object
-    model0: object
-    theta: np.ndarray
-    state: object  # search._Search: the base's cross-fitted held-out prediction, the folds
+    state: State  # the calibrated base, its held-out prediction, the folds
     time: np.ndarray
     truth: float | None  # injected start [s since the first row]
 
@@ -134,109 +135,65 @@ def right_effects(kind: str, store: bool = False) -> list:
 
 def setup(generator: str, window: str, kind: str) -> Setup:
     """Data, calibrated base and folds of one case, as ``diagnose`` makes them (split 0.5,
-    seed 0)."""
+    seed 0: ``search.prepare``)."""
     from gateway.diagnose import search
-    from gateway.diagnose.base import calibrate_base
-    from gateway.diagnose.fit import HORIZON_S, coarsen, drivers
 
     if generator in HELD_OUT:
         raise SystemExit(f"{generator} is held out: not a dev generator")
     with tempfile.TemporaryDirectory() as tmp:
         data, gh, model, series = case_series(Case("diagnose", generator, window, kind), Path(tmp))
-    if series.step != search.FIT_STEP_S:
-        raise SystemExit(f"rows of {series.step:g} s: this study assumes {search.FIT_STEP_S:g} s")
-    coarse = coarsen(series, 1)
-    n, dt = len(coarse), coarse.step
-    s, horizon = int(round(0.5 * n)), max(int(round(HORIZON_S / dt)), 2)
-    x = drivers(coarse, gh)
-    model0, theta, _ = calibrate_base(model, gh, x, dt, s, horizon, 0, lambda msg: None)
-    ctx = search._Context(x, gh, dt, float(x["_index"][-1]), horizon, s)
-    state = search._Search(ctx, model0, theta, search._Heldout.of(s, n, dt))
-    truth = (float((data.start - coarse.time[0]) / np.timedelta64(1, "s"))
+    start = search.prepare(series, gh, model)
+    truth = (float((data.start - start.coarse.time[0]) / np.timedelta64(1, "s"))
              if data.start is not None else None)
-    return Setup(data, ctx, model0, theta, state, coarse.time, truth)
+    return Setup(data, start.state, start.coarse.time, truth)
 
 
 def mae(su: Setup, pred: dict) -> float:
-    m = su.ctx.x["t_in"][su.ctx.split:]
+    m = su.state.ctx.x["t_in"][su.state.ctx.split:]
     e = np.abs(pred["free_run"] - m)
     return float(np.nanmean(e))
 
 
-def judged(su: Setup, e, model, thetas: list[np.ndarray], ref_pred: dict, dbic: list[float]) -> Fit:
-    """The held-out figures of ``model`` (``e`` added) fitted per fold (``thetas``)."""
-    from gateway.diagnose import judge as jd
-
-    ctx, st = su.ctx, su.state
-    pred = st.heldout(ctx, model, thetas)
-    starts = [float(th[model.index(e.tau_name)]) for th in thetas]
-    v = jd.judge(st.current_pred, ref_pred, pred, ctx.x["t_in"], st.held.blocks, ctx.split,
-                 ctx.dt, starts, ctx.last)
+def judged(su: Setup, t: Tried) -> Fit:
+    """The held-out figures of a candidate the search tried (``search.Tried``: its effect added
+    to the base, fitted per fold, judged against the base refitted per fold)."""
+    ctx, st, v = su.state.ctx, su.state, t.verdict
     m = ctx.x["t_in"][ctx.split:]
-    eb, ea = np.abs(st.current_pred["free_run"] - m), np.abs(pred["free_run"] - m)
+    eb, ea = np.abs(st.current_pred["free_run"] - m), np.abs(t.pred["free_run"] - m)
     ok = np.isfinite(eb) & np.isfinite(ea)
     ns = SimpleNamespace(split_index=ctx.split, measured=ctx.x["t_in"], time=su.time,
-                         pred_before=st.current_pred, pred_after=pred)
-    fit = Fit(e.name, float(1.0 - ea[ok].mean() / eb[ok].mean()), own_significance(ns),
-              float(v.p), float(v.stats["p_days"]), float(v.stats["p_pieces"]),
-              float(v.stats["cut_reference"]), bool(v.ok and max(dbic) < 0),
-              [(t - su.truth) / 3600.0 for t in starts], v.why, list(dbic), float(v.mse_after))
-    return fit
+                         pred_before=st.current_pred, pred_after=t.pred)
+    return Fit(t.effect.name, float(1.0 - ea[ok].mean() / eb[ok].mean()), own_significance(ns),
+               float(v.p), float(v.stats["p_days"]), float(v.stats["p_pieces"]),
+               float(v.stats["cut_reference"]), t.passed,
+               [(x - su.truth) / 3600.0 for x in t.starts], v.why, list(v.delta_bic),
+               float(v.mse_after), t.rank_dbic)
 
 
-def reference(su: Setup) -> dict:
-    """The base refitted on each fold's fit set without an effect: the judge's reference."""
+def alone(su: Setup, effects: list) -> tuple[list[Fit], str | None, dict]:
+    """The diagnosis's first round with only ``effects`` offered (``search.search_round``, all
+    of them tried: the ranking's ΔBIC noted, an effect the search would not try, ΔBIC ≥ 0,
+    never passes), each one's reported start from its all-data fit (``search.fit_all``); the
+    effect the round keeps, and the judge's reference prediction (for ``oracle``)."""
     from gateway.diagnose import search
 
     st = su.state
-    ref = [search._refit(su.ctx, st.model, st.thetas[j], st.held.fit_sets[j]) for j in (0, 1)]
-    return st.heldout(su.ctx, st.model, ref)
-
-
-def alone(su: Setup, effects: list, ref_pred: dict) -> tuple[list[Fit], str | None]:
-    """The diagnosis's first round with only ``effects`` offered: each fitted per fold and
-    judged (the ranking's ΔBIC noted; the search tries an effect only when it is < 0), its
-    reported start from the all-data fit; and the effect the round keeps (``_pick``)."""
-    from gateway.diagnose import judge as jd
-    from gateway.diagnose import search
-    from gateway.diagnose.effects import compose
-
-    ctx, st = su.ctx, su.state
-    n = st.held.n
-    ranked = search._rank(ctx, su.model0, su.model0, su.theta, [], effects, [(0, n)])
+    r = search.search_round(st, effects, tries=None, every=True)
     out = []
-    for sc, dbic_rank in ranked:
-        e = sc.effect
-        model = compose(su.model0, [e], ctx.gh, ctx.duration)
-        fitted = [search._fit_effect(ctx, model, su.model0, su.theta, e, st.held.fit_sets[j],
-                                     17 * j) for j in (0, 1)]
-        fit = judged(su, e, model, [f.theta for f in fitted], ref_pred,
-                     [float(f.delta_bic) for f in fitted])
-        fit.rank_dbic = float(dbic_rank)
-        fit.judge_ok = fit.judge_ok and dbic_rank < 0
-        full = search._fit_effect(ctx, model, su.model0, su.theta, e, [(0, n)], 101, latest=False)
-        fit.start_h = (float(full.theta[model.index(e.tau_name)]) - su.truth) / 3600.0
+    for t in r.tried:
+        fit = judged(su, t)
+        full = search.fit_all(st, t)
+        fit.start_h = (float(full.theta[t.model.index(t.effect.tau_name)]) - su.truth) / 3600.0
         out.append(fit)
-    kept = [f for f in out if f.judge_ok]
-    first = None
-    if kept:
-        score = jd.scores([SimpleNamespace(delta_bic=f.delta_bic, mse_after=f.mse_after)
-                           for f in kept], ctx.x["t_in"], ctx.split, ctx.dt)
-        first = kept[int(np.argmin(score))].effect
-    return out, first
+    return out, (r.best.effect.name if r.best is not None else None), r.reference
 
 
 def oracle(su: Setup, e, ref_pred: dict) -> Fit:
-    """``e`` with its start held at the injected one, fitted per fold's fit set."""
+    """``e`` with its start held at the injected one, fitted per fold's fit set and judged
+    (``search.try_effect`` with ``at``)."""
     from gateway.diagnose import search
-    from gateway.diagnose.effects import compose
 
-    ctx, st = su.ctx, su.state
-    model = compose(su.model0, [e], ctx.gh, ctx.duration)
-    fitted = [search.fit_effect_at(ctx, model, su.model0, su.theta, e, st.held.fit_sets[j],
-                                   su.truth) for j in (0, 1)]
-    fit = judged(su, e, model, [f.theta for f in fitted], ref_pred,
-                 [float(f.delta_bic) for f in fitted])
+    fit = judged(su, search.try_effect(su.state, e, ref_pred, at=su.truth))
     fit.start_h = 0.0
     return fit
 
@@ -292,8 +249,7 @@ def study(label: str, suite: dict, store: bool = False) -> Row:
     g, w, k = label.split("/")
     su = setup(g, w, k)
     effects = right_effects(k, store)
-    ref_pred = reference(su)
-    fits, first = alone(su, effects, ref_pred)
+    fits, first, ref_pred = alone(su, effects)
     row = Row(label, g, w, k, case_visible_change(Case("diagnose", g, w, k), su.data),
               mae(su, su.state.current_pred), base_mae_free(g, w), fits, first,
               [oracle(su, e, ref_pred) for e in effects], full_verdict(suite, g, w, k))

@@ -1,6 +1,6 @@
 """Why a start is found where it is (docs/effects.md, "Start times and the judge's power"): for
 one dev case and one effect, the *joint* τ profile (at each start on a grid, base parameters and
-amplitude refitted by Levenberg–Marquardt on all the data, as ``search._fit_effect`` refits
+amplitude refitted by Levenberg–Marquardt on all the data, as ``effect_fit.fit_effect`` refits
 them), the start the search reports, and the calibrated base's mean multiple-shooting residual
 per day on the case and on the same window without the change. When the profile's own minimum
 is far from the truth, no search on it finds the truth: the objective, not the search, decides.
@@ -50,7 +50,7 @@ def _setup(label: str, ramp: tuple[float, float] | None = None) -> tuple:
     """(search context, greenhouse, calibrated base, its parameters, samples) of one case, as
     ``diagnose`` builds them (split 0.5, seed 0); ``ramp`` (start day, rate [K d-1]) is added
     to the inside reading first (the suite's drift: the reading only, RH untouched)."""
-    from gateway.diagnose import search
+    from gateway.diagnose import effect_fit, search
     from gateway.diagnose.base import calibrate_base
     from gateway.diagnose.fit import HORIZON_S, coarsen, drivers
 
@@ -68,7 +68,7 @@ def _setup(label: str, ramp: tuple[float, float] | None = None) -> tuple:
     s, horizon = int(round(0.5 * n)), max(int(round(HORIZON_S / dt)), 2)
     x = drivers(coarse, gh)
     model0, theta, _ = calibrate_base(model, gh, x, dt, s, horizon, 0, lambda msg: None)
-    return search._Context(x, gh, dt, float(x["_index"][-1]), horizon, s), gh, model0, theta, n
+    return effect_fit.Context(x, gh, dt, float(x["_index"][-1]), horizon, s), gh, model0, theta, n
 
 
 def daily_residual(label: str) -> dict[int, float]:
@@ -83,7 +83,7 @@ def daily_residual(label: str) -> dict[int, float]:
 
 def joint_profile(label: str, effect: str) -> tuple[list[tuple[float, float, float]], float]:
     """([(τ − truth [d], ΔBIC against the base, amplitude)], reported τ − truth [d])."""
-    from gateway.diagnose import search
+    from gateway.diagnose import effect_fit
     from gateway.diagnose.base import carry, free_parameters
     from gateway.diagnose.bic import delta_bic, effective_samples
     from gateway.diagnose.effects import EFFECTS, compose
@@ -99,26 +99,26 @@ def joint_profile(label: str, effect: str) -> tuple[list[tuple[float, float, flo
     jt, ja = new.index(e.tau_name), new.index(e.amp_name)
     lo, hi = new.bounds(gh)
     truth = CHANGE_DAY * DAY
-    first = 0.0 if e.from_start else search.COARSE_TAU_S
+    first = 0.0 if e.from_start else effect_fit.COARSE_TAU_S
     out = []
     for tau in np.arange(max(first, truth - PROFILE_SPAN_S), min(ctx.last, truth + PROFILE_SPAN_S)
                          + 1.0, PROFILE_STEP_S):
         trial = th.copy()
         trial[jt] = tau
-        trial = fit_lm(shoot, trial, free_parameters(new), lo, hi, search.REFIT_LM_ITERATIONS)
+        trial = fit_lm(shoot, trial, free_parameters(new), lo, hi, effect_fit.REFIT_LM_ITERATIONS)
         sse = float(shoot.sse(trial[None])[0][0])
         out.append(((tau - truth) / DAY, delta_bic(sse, float(sse0[0]), ne, 2), float(trial[ja])))
-    fitted = search._fit_effect(ctx, new, model0, theta, e, [(0, n)], 101, latest=False).theta
+    fitted = effect_fit.fit_effect(ctx, new, model0, theta, e, [(0, n)], 101, latest=False).theta
     return out, (float(fitted[jt]) - truth) / DAY
 
 
 def injected_drift_start(label: str, day: float, rate: float = 0.5) -> tuple[float, ...]:
     """A ``rate`` K d-1 ramp from ``day`` added to the reading of ``label`` (an effect-free dev
     window): (start − truth [h], rate found) of the search's fit on all the data
-    (``search._fit_effect``, the reported start), then the same of the first τ scan alone (the
+    (``effect_fit.fit_effect``, the reported start), then the same of the first τ scan alone (the
     base held as calibrated on C). Where the ramp starts and whether the base is refitted are
     what move the start if the method, not the base's error, misplaces it."""
-    from gateway.diagnose import search
+    from gateway.diagnose import effect_fit
     from gateway.diagnose.base import carry
     from gateway.diagnose.effects import EFFECTS, compose
 
@@ -126,8 +126,8 @@ def injected_drift_start(label: str, day: float, rate: float = 0.5) -> tuple[flo
     e = EFFECTS["sensor_drift"]
     m = compose(m0, [e], gh, ctx.duration)
     jt, ja = m.index(e.tau_name), m.index(e.amp_name)
-    th = search._fit_effect(ctx, m, m0, th0, e, [(0, n)], 101, latest=False).theta
-    sc = search._scan(ctx.shooting(m, [(0, n)]), carry(th0, m0, m, gh), e, ctx.last, [(0, n)],
+    th = effect_fit.fit_effect(ctx, m, m0, th0, e, [(0, n)], 101, latest=False).theta
+    sc = effect_fit.scan(ctx.shooting(m, [(0, n)]), carry(th0, m0, m, gh), e, ctx.last, [(0, n)],
                       latest=False)
     return ((th[jt] - day * DAY) / 3600.0, float(th[ja]),
             (sc.taus[sc.best] - day * DAY) / 3600.0, float(sc.amps[sc.best]))
@@ -139,7 +139,7 @@ def synthetic_drift_start(bump: float, seed: int = 3, start_day: float = 3.4) ->
     ``seed``, reading noise 0.08 K), the reading lowered by a Gaussian bump of ``bump`` K
     (σ 0.6 d) centred 1.6 d after the start, searched as ``diagnose`` does (split 0.5, base held at the
     truth before the search)."""
-    from gateway.diagnose import search
+    from gateway.diagnose import effect_fit
     from gateway.diagnose.effects import EFFECTS, compose
     from gateway.diagnose.fit import drivers
     from gateway.diagnose.structure import structure
@@ -166,8 +166,8 @@ def synthetic_drift_start(bump: float, seed: int = 3, start_day: float = 3.4) ->
     truth[m.index(e.amp_name)], truth[m.index(e.tau_name)] = 0.5, tau
     x["t_in"] = (m.free_run(truth[None], x, gh, dt)[0] + rng.normal(0, 0.08, n)
                  - bump * np.exp(-0.5 * ((day - start_day - 1.6) / 0.6) ** 2))
-    ctx = search._Context(x, gh, dt, float(x["_index"][-1]), 72, n // 2)
-    fitted = search._fit_effect(ctx, m, m0, m0.defaults(gh), e, [(0, n)], 0, latest=False).theta
+    ctx = effect_fit.Context(x, gh, dt, float(x["_index"][-1]), 72, n // 2)
+    fitted = effect_fit.fit_effect(ctx, m, m0, m0.defaults(gh), e, [(0, n)], 0, latest=False).theta
     return (float(fitted[m.index(e.tau_name)]) - tau) / 3600.0
 
 

@@ -50,9 +50,7 @@ def _setup(label: str, ramp: tuple[float, float] | None = None) -> tuple:
     """(search context, greenhouse, calibrated base, its parameters, samples) of one case, as
     ``diagnose`` builds them (split 0.5, seed 0); ``ramp`` (start day, rate [K d-1]) is added
     to the inside reading first (the suite's drift: the reading only, RH untouched)."""
-    from gateway.diagnose import effect_fit, search
-    from gateway.diagnose.base import calibrate_base
-    from gateway.diagnose.fit import HORIZON_S, coarsen, drivers
+    from gateway.diagnose import search
 
     g, w, k = label.split("/")
     if g in HELD_OUT:
@@ -63,12 +61,8 @@ def _setup(label: str, ramp: tuple[float, float] | None = None) -> tuple:
         sec = (series.time - series.time[0]).astype("timedelta64[s]").astype(float)
         series.columns["t_in"] = (series.columns["t_in"]
                                   + ramp[1] * np.maximum(sec - ramp[0] * DAY, 0.0) / DAY)
-    coarse = coarsen(series, max(int(search.FIT_STEP_S // series.step), 1))
-    n, dt = len(coarse), coarse.step
-    s, horizon = int(round(0.5 * n)), max(int(round(HORIZON_S / dt)), 2)
-    x = drivers(coarse, gh)
-    model0, theta, _ = calibrate_base(model, gh, x, dt, s, horizon, 0, lambda msg: None)
-    return effect_fit.Context(x, gh, dt, float(x["_index"][-1]), horizon, s), gh, model0, theta, n
+    start = search.prepare(series, gh, model, 0.5, 0)
+    return start.state.ctx, gh, start.state.model0, start.theta, len(start.coarse)
 
 
 def daily_residual(label: str) -> dict[int, float]:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -160,6 +161,42 @@ def read_params_file(path: str, model: Model) -> np.ndarray:
         return read_params(path, model)
     except ParamsFileError as exc:
         raise CliError(str(exc)) from None
+
+
+def check_output(path: str | Path | None, option: str, folder: bool = False) -> None:
+    """Refuse an output the command could not write, before any computation (so that an hour
+    of calibration is not lost to a typo in ``--out``): a file's folder must exist and be
+    writable and the file must not be a folder; a ``folder`` output (created with its parents)
+    must not be a file and its nearest existing parent must be a writable folder."""
+    if not path:
+        return
+    p = Path(path)
+    if folder:
+        if p.exists() and not p.is_dir():
+            raise CliError(f"{option} {path}: exists and is not a folder")
+        parent = p
+        while not parent.exists() and parent != parent.parent:
+            parent = parent.parent
+    else:
+        if p.is_dir():
+            raise CliError(f"{option} {path}: is a folder; give a file name")
+        parent = p.parent
+        if not parent.exists():
+            raise CliError(f"{option} {path}: folder {parent} does not exist")
+    if not parent.is_dir():
+        raise CliError(f"{option} {path}: {parent} is not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise CliError(f"{option} {path}: folder {parent} is not writable by this user")
+
+
+@contextmanager
+def writing(option: str, path: str | Path) -> Iterator[None]:
+    """Turn an OSError while writing an output (disk full, permissions changed since
+    :func:`check_output`) into one line naming the option and the path."""
+    try:
+        yield
+    except OSError as exc:
+        raise CliError(f"{option} {path}: cannot write: {exc.strerror or exc}") from None
 
 
 def write_params_file(path: str, model: Model, params: dict[str, float], header: str) -> None:

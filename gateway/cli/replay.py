@@ -6,7 +6,15 @@ import argparse
 import sys
 
 from gateway.cli import CliError
-from gateway.cli.common import add_data_arguments, dump_json, load_inputs, progress_bar, read_params_file
+from gateway.cli.common import (
+    add_data_arguments,
+    check_output,
+    dump_json,
+    load_inputs,
+    progress_bar,
+    read_params_file,
+    writing,
+)
 from gateway.estimate.online import online_settings
 from gateway.estimate.outlook import OUTLOOKS, make_outlook
 from gateway.estimate.replay import replay, report, write_predictions
@@ -70,6 +78,8 @@ def _overrides(items: list[str]) -> dict[str, dict[str, float]]:
 
 
 def run(args: argparse.Namespace) -> int:
+    check_output(args.out, "--out")
+    check_output(args.plot, "--plot")
     series, gh, model = load_inputs(args)
     theta0 = read_params_file(args.params, model) if args.params else None
     try:
@@ -86,23 +96,26 @@ def run(args: argparse.Namespace) -> int:
         try:
             outlook = make_outlook(args.outlook, gh)
         except ValueError as exc:
-            raise CliError(str(exc)) from None
+            hint = "; or give --site LAT,LON" if gh.site is None else ""
+            raise CliError(f"{exc}{hint}") from None
     with progress_bar(f"replay {model.name}", len(series), True) as bar:
         result = replay(model, series, gh, theta0, settings, seed=args.seed,
                         progress=lambda done: bar(advance=100), outlook=outlook)
     rep = report(result, warmup)
     rep["data"] = args.data
     rep["start"] = "calibrated" if args.params else "middle of the hard box"
-    if args.out:
-        write_predictions(result, args.out)
-    if args.plot:
-        from gateway.plots import plot_replay
-
-        plot_replay(result, args.plot, title=f"{model.name} on {args.data}")
-    if args.json:
+    if args.json:  # the report first: a failed write below still leaves the result on screen
         dump_json(rep)
     else:
         _print_human(rep)
+    if args.out:
+        with writing("--out", args.out):
+            write_predictions(result, args.out)
+    if args.plot:
+        from gateway.plots import plot_replay
+
+        with writing("--plot", args.plot):
+            plot_replay(result, args.plot, title=f"{model.name} on {args.data}")
     return 0
 
 

@@ -1,0 +1,107 @@
+"""A new user's mistakes on the command lines: each is one line naming the file, line, key or
+option and what was wrong, exit status 2, never a traceback; and it is said before the work
+(an output that cannot be written is refused before an hour of calibration, not after)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gateway.cli import main
+from gateway.kitcsv import write_kit_csv
+
+PROTO = ["--greenhouse", "biskra-prototype", "--model", "prototype"]
+
+
+def kit_csv(folder: Path, rows: int = 30, name: str = "k.csv") -> Path:
+    """A few minutes of plausible kit rows (the columns of the prototype model)."""
+    t = np.datetime64("2020-03-27T10:00:00", "s") + np.arange(rows) * np.timedelta64(60, "s")
+    ramp = np.arange(rows, dtype=float)
+    cols = {"t_in": 20 + 0.1 * ramp, "rh_in": np.full(rows, 60.0), "t_out": 15 + 0.05 * ramp,
+            "rh_out": np.full(rows, 55.0), "i_glob": 400 + ramp, "wind": np.full(rows, 1.5)}
+    return write_kit_csv(folder / name, t, cols)
+
+
+def one_error_line(capsys) -> str:
+    err = capsys.readouterr().err.strip()
+    assert "Traceback" not in err
+    line = err.splitlines()[-1]
+    assert line.startswith("error: ")
+    return line
+
+
+@pytest.mark.parametrize("command,option", [
+    (["calibrate", "--iterations", "1", "--population", "2"], "--out"),
+    (["replay"], "--out"),
+    (["replay"], "--plot"),
+])
+def test_an_output_in_a_missing_folder_is_refused_before_the_work(capsys, tmp_path, command,
+                                                                   option):
+    data = kit_csv(tmp_path)
+    target = tmp_path / "no-such-folder" / "out.file"
+    assert main([*command, "--data", str(data), *PROTO, option, str(target)]) == 2
+    line = one_error_line(capsys)
+    assert f"{option} {target}" in line and "does not exist" in line
+    assert not target.parent.exists()
+
+
+def test_an_output_that_is_a_folder_is_named(capsys, tmp_path):
+    data = kit_csv(tmp_path)
+    assert main(["replay", "--data", str(data), *PROTO, "--plot", str(tmp_path)]) == 2
+    assert f"--plot {tmp_path}: is a folder" in one_error_line(capsys)
+
+
+def test_a_report_folder_that_is_a_file_is_refused_before_the_diagnosis(capsys, tmp_path):
+    data = kit_csv(tmp_path)  # far too short to diagnose: the report is checked first
+    assert main(["diagnose", "--data", str(data), *PROTO, "--report", str(data)]) == 2
+    assert f"--report {data}: exists and is not a folder" in one_error_line(capsys)
+
+
+def test_calibrate_writes_its_params_file_where_asked(capsys, tmp_path):
+    data, out = kit_csv(tmp_path), tmp_path / "p.toml"
+    assert main(["calibrate", "--data", str(data), *PROTO, "--iterations", "1", "--population",
+                 "2", "--out", str(out)]) == 0
+    assert "calibrated with rsba" in capsys.readouterr().out
+    assert "[params]" in out.read_text()
+
+
+def test_the_clear_sky_outlook_without_a_site_says_how_to_give_one(capsys, tmp_path):
+    gh = tmp_path / "nosite.toml"
+    gh.write_text('name = "x"\n[geometry]\nfloor_area = 0.68\nvolume = 0.76\n')
+    data = kit_csv(tmp_path)
+    assert main(["replay", "--data", str(data), "--greenhouse", str(gh), "--model", "prototype",
+                 "--outlook", "clear-sky-trend"]) == 2
+    line = one_error_line(capsys)
+    assert str(gh) in line and "[site]" in line and "--site LAT,LON" in line
+
+
+def test_vsensor_without_a_shipped_sensor_for_the_kind_is_one_line(capsys, tmp_path):
+    data = kit_csv(tmp_path)
+    assert main(["vsensor", "--data", str(data), "--greenhouse", "biskra-prototype",
+                 "--model-kind", "prototype"]) == 2
+    line = one_error_line(capsys)
+    assert "'prototype' model" in line and "--sensor MODEL.onnx" in line
+
+
+def test_vsensor_data_errors_come_before_the_sensor_is_looked_for(capsys, tmp_path):
+    missing = tmp_path / "none.csv"
+    assert main(["vsensor", "--data", str(missing), "--greenhouse", "biskra-prototype",
+                 "--model-kind", "prototype"]) == 2
+    assert f"{missing}: cannot open" in one_error_line(capsys)
+
+
+def test_vsensor_model_kind_given_as_the_sensor_file_is_named(capsys, tmp_path):
+    data = kit_csv(tmp_path)
+    assert main(["vsensor", "--data", str(data), "--greenhouse", "almeria-palmerillas",
+                 "--model-kind", "almeria", "--model", "almeria"]) == 2
+    line = one_error_line(capsys)
+    assert "--model almeria: that is a model kind" in line and "--model-kind almeria" in line
+
+
+def test_vsensor_missing_sensor_file_is_named(capsys, tmp_path):
+    data, onnx = kit_csv(tmp_path), tmp_path / "mine.onnx"
+    assert main(["vsensor", "--data", str(data), "--greenhouse", "biskra-prototype",
+                 "--model-kind", "prototype", "--sensor", str(onnx)]) == 2
+    assert f"--sensor {onnx}: no such file" in one_error_line(capsys)

@@ -105,3 +105,31 @@ def test_vsensor_missing_sensor_file_is_named(capsys, tmp_path):
     assert main(["vsensor", "--data", str(data), "--greenhouse", "biskra-prototype",
                  "--model-kind", "prototype", "--sensor", str(onnx)]) == 2
     assert f"--sensor {onnx}: no such file" in one_error_line(capsys)
+
+
+def test_a_typo_in_the_header_names_the_unknown_column_and_the_kit_name(capsys, tmp_path):
+    data = kit_csv(tmp_path)
+    lines = data.read_text().splitlines()
+    lines[0] = lines[0].replace("t_in", "T_in").replace("wind", "windspeed")
+    data.write_text("\n".join(lines) + "\n")
+    assert main(["calibrate", "--data", str(data), *PROTO]) == 2
+    line = one_error_line(capsys)
+    assert f"{data}:1: missing required column(s) t_in, wind" in line
+    assert "'T_in' (did you mean 't_in'?)" in line and "'windspeed' (did you mean 'wind'?)" in line
+
+
+def test_a_byte_that_is_not_utf8_far_into_the_file_names_its_line(capsys, tmp_path):
+    data = kit_csv(tmp_path, rows=600)  # ~30 kB: past the first block the reader decodes
+    raw = data.read_bytes().splitlines(keepends=True)
+    raw[499] = raw[499].replace(b"60,", b"6\xe90,", 1)  # Latin-1 'é' on line 500
+    data.write_bytes(b"".join(raw))
+    assert main(["calibrate", "--data", str(data), *PROTO]) == 2
+    line = one_error_line(capsys)
+    assert f"{data}:500: not UTF-8 text" in line
+
+
+def test_utf16_is_named(capsys, tmp_path):
+    data = kit_csv(tmp_path)
+    data.write_bytes(data.read_text().encode("utf-16"))
+    assert main(["calibrate", "--data", str(data), *PROTO]) == 2
+    assert f"{data}: UTF-16 text" in one_error_line(capsys)

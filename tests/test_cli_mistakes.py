@@ -133,3 +133,16 @@ def test_utf16_is_named(capsys, tmp_path):
     data.write_bytes(data.read_text().encode("utf-16"))
     assert main(["calibrate", "--data", str(data), *PROTO]) == 2
     assert f"{data}: UTF-16 text" in one_error_line(capsys)
+
+
+@pytest.mark.parametrize("span,message", [
+    ("2020-03-27", "expected START/END"),
+    ("yesterday/2020-03-28", "START 'yesterday' is not an ISO 8601 date or time, e.g."),
+    ("2020-03-27/2020-13-01", "END '2020-13-01' is not an ISO 8601 date or time (month"),
+    ("2020-03-27T10:10/2020-03-27T10:02", "END is not after START"),
+])
+def test_calibrate_on_mistakes_say_which_end_is_wrong(capsys, tmp_path, span, message):
+    data = kit_csv(tmp_path)
+    assert main(["calibrate", "--data", str(data), *PROTO, "--calibrate-on", span]) == 2
+    line = one_error_line(capsys)
+    assert f"--calibrate-on {span!r}: {message}" in line and "unpack" not in line

@@ -130,12 +130,21 @@ def parse_span(text: str | None, series: Series) -> tuple[int, int] | None:
     """``START/END`` (ISO 8601 times or dates; UTC when no offset) → row indices [a, b)."""
     if not text:
         return None
-    try:
-        start, end = text.split("/")
-        a = series.index_of(_stamp(start))
-        b = series.index_of(_stamp(end))
-    except ValueError as exc:
-        raise CliError(f"--calibrate-on {text!r}: expected START/END in ISO 8601 ({exc})") from None
+    parts = text.split("/")
+    if len(parts) != 2:
+        raise CliError(f"--calibrate-on {text!r}: expected START/END, two ISO 8601 dates or times "
+                       f"(UTC unless an offset is given), e.g. 2009-10-21/2009-10-23")
+    stamps = []
+    for name, part in zip(("START", "END"), parts, strict=True):
+        try:
+            stamps.append(_stamp(part))
+        except ValueError as exc:  # the parser's own words only when they say more
+            why = "" if str(exc).startswith("Invalid isoformat") else f" ({exc})"
+            raise CliError(f"--calibrate-on {text!r}: {name} {part!r} is not an ISO 8601 date or "
+                           f"time{why}, e.g. 2009-10-21 or 2009-10-21T06:00") from None
+    if stamps[1] <= stamps[0]:
+        raise CliError(f"--calibrate-on {text!r}: END is not after START")
+    a, b = series.index_of(stamps[0]), series.index_of(stamps[1])
     if b - a < 2:
         raise CliError(
             f"--calibrate-on {text!r} covers {max(b - a, 0)} samples of {series.source} "

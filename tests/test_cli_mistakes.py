@@ -146,3 +146,24 @@ def test_calibrate_on_mistakes_say_which_end_is_wrong(capsys, tmp_path, span, me
     assert main(["calibrate", "--data", str(data), *PROTO, "--calibrate-on", span]) == 2
     line = one_error_line(capsys)
     assert f"--calibrate-on {span!r}: {message}" in line and "unpack" not in line
+
+
+@pytest.mark.parametrize("text,message", [
+    ('name = "north"\n[geometry]\nvolume = 3\n', "gateway: missing (required): a [gateway] table"),
+    ('[gateway]\nfarm = "f"\n', "gateway.db: missing (required)"),
+    ('[gateway]\ndb = 5\n', "gateway.db: must be a path in quotes, got 5"),
+    ('[gateway\ndb = "x.db"\n', "invalid TOML"),
+])
+def test_status_names_what_is_wrong_in_the_config(capsys, tmp_path, text, message):
+    config = tmp_path / "gateway.toml"
+    config.write_text(text)
+    assert main(["status", "--once", "--config", str(config)]) == 2
+    assert f"{config}: {message}" in one_error_line(capsys)
+
+
+def test_status_on_a_config_whose_store_is_not_made_yet_says_so(capsys, tmp_path):
+    config = tmp_path / "gateway.toml"
+    config.write_text('[gateway]\ndb = "serra.db"\n')
+    assert main(["status", "--once", "--config", str(config)]) == 2
+    line = one_error_line(capsys)
+    assert f"{tmp_path / 'serra.db'}: no such store (the gateway.db of {config}" in line

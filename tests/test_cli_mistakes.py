@@ -167,3 +167,44 @@ def test_status_on_a_config_whose_store_is_not_made_yet_says_so(capsys, tmp_path
     assert main(["status", "--once", "--config", str(config)]) == 2
     line = one_error_line(capsys)
     assert f"{tmp_path / 'serra.db'}: no such store (the gateway.db of {config}" in line
+
+
+@pytest.mark.parametrize("db,message", [
+    ("no-such-folder/serra.db", "does not exist (the gateway creates the store serra.db, not its"),
+    (".", "is a folder; name the store's file"),
+])
+def test_run_check_refuses_a_store_it_could_not_create(capsys, tmp_path, db, message):
+    assert main(["keys", "add", "7", "--keys", str(tmp_path / "keys.txt")]) == 0
+    config = tmp_path / "gateway.toml"
+    config.write_text(f'[gateway]\nfarm = "f1"\ndb = "{db}"\nkeys = "keys.txt"\n[[greenhouse]]\n'
+                      'name = "north"\ngreenhouse = "biskra-prototype"\nmodel = "prototype"\n'
+                      'inside = 7\n')
+    capsys.readouterr()
+    assert main(["run", "--config", str(config), "--check"]) == 2
+    line = one_error_line(capsys)
+    assert f"{config}: gateway.db: " in line and message in line
+
+
+@pytest.mark.parametrize("option,value,message", [
+    ("--retention-days", "-3", "must be at least 1, got '-3'"),  # would delete every sample
+    ("--retention-days", "nan", "must be at least 1, got 'nan'"),
+    ("--max-db-mb", "0", "must be at least 1, got '0'"),
+    ("--batch-delay", "-1", "must be at least 0, got '-1'"),
+    ("--baudrate", "9600.5", "expected a whole number, got '9600.5'"),
+])
+def test_ingest_refuses_numbers_outside_the_configs_bounds(capsys, tmp_path, option, value,
+                                                           message):
+    with pytest.raises(SystemExit) as exc:  # argparse's usage error, before anything starts
+        main(["ingest", "--db", str(tmp_path / "s.db"), "--keys", str(tmp_path / "k.txt"),
+              option, value])
+    assert exc.value.code == 2
+    assert f"argument {option}: {message}" in capsys.readouterr().err
+    assert not (tmp_path / "s.db").exists()
+
+
+def test_ingest_without_its_keys_file_names_it_and_how_to_make_it(capsys, tmp_path):
+    keys = tmp_path / "keys.txt"
+    assert main(["ingest", "--db", str(tmp_path / "s.db"), "--keys", str(keys)]) == 2
+    line = one_error_line(capsys)
+    assert f"{keys}: cannot read the keys file: No such file" in line
+    assert "python -m gateway keys add" in line and "Errno" not in line

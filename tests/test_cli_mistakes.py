@@ -208,3 +208,13 @@ def test_ingest_without_its_keys_file_names_it_and_how_to_make_it(capsys, tmp_pa
     line = one_error_line(capsys)
     assert f"{keys}: cannot read the keys file: No such file" in line
     assert "python -m gateway keys add" in line and "Errno" not in line
+
+
+def test_keys_help_says_what_add_says_about_restarting(capsys, tmp_path):
+    with pytest.raises(SystemExit) as exc:
+        main(["keys", "--help"])
+    assert exc.value.code == 0
+    text = " ".join(capsys.readouterr().out.split())
+    assert "restart it afterwards" not in text and "no restart" in text
+    assert main(["keys", "add", "7", "--keys", str(tmp_path / "keys.txt")]) == 0
+    assert "no restart" in capsys.readouterr().err  # what add says agrees with the help

@@ -218,3 +218,22 @@ def test_keys_help_says_what_add_says_about_restarting(capsys, tmp_path):
     assert "restart it afterwards" not in text and "no restart" in text
     assert main(["keys", "add", "7", "--keys", str(tmp_path / "keys.txt")]) == 0
     assert "no restart" in capsys.readouterr().err  # what add says agrees with the help
+
+
+@pytest.mark.parametrize("option,value", [("--step", "0"), ("--days", "-1"), ("--days", "inf")])
+def test_simulate_refuses_a_step_or_length_that_is_not_positive(capsys, tmp_path, option, value):
+    from training.__main__ import main as training_main
+
+    with pytest.raises(SystemExit) as exc:
+        training_main(["simulate", "--out", str(tmp_path / "s.csv"), option, value])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert f"argument {option}: must be a positive number, got '{value}'" in err
+    assert "Traceback" not in err
+
+
+def test_simulate_into_a_folder_is_named_before_simulating(capsys, tmp_path):
+    from training.__main__ import main as training_main
+
+    assert training_main(["simulate", "--out", str(tmp_path), "--days", "0.01"]) == 2
+    assert f"--out {tmp_path}: is a folder" in one_error_line(capsys)

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
+from pathlib import Path
 
 from training.simulate.effects import EffectSpecError, describe_effects, parse_effect
 from training.simulate.plant import PRESETS
@@ -45,22 +47,40 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--weather", choices=WEATHER_SOURCES, default="bleiswijk",
                         help="bleiswijk = measured 2009-10-20..2009-12-10; biskra, almeria = "
                         "synthetic seeded days (default: bleiswijk)")
-    parser.add_argument("--start", default=None,
-                        help="first sample, UTC, YYYY-MM-DD[THH:MM] (default per weather)")
-    parser.add_argument("--days", type=float, default=14.0, help="length [d] (default: 14)")
-    parser.add_argument("--step", type=float, default=60.0, help="output step [s] (default: 60)")
+    parser.add_argument("--start", default=None, metavar="YYYY-MM-DD[THH:MM]",
+                        help="first sample, UTC (default per weather, below)")
+    parser.add_argument("--days", type=_positive, default=14.0, metavar="D",
+                        help="length [d] (default: 14)")
+    parser.add_argument("--step", type=_positive, default=60.0, metavar="S",
+                        help="output step [s] (default: 60)")
     parser.add_argument("--effect", action="append", default=[], metavar="SPEC",
                         help="inject an effect (repeatable), see below")
     parser.add_argument("--seed", type=int, default=0,
                         help="seed of synthetic weather and sensor errors (default: 0)")
-    parser.add_argument("--out", required=True, help="path of the kit CSV to write")
+    parser.add_argument("--out", required=True, metavar="FILE.csv",
+                        help="path of the kit CSV to write (its folder is created)")
     parser.set_defaults(func=run)
     return parser
+
+
+def _positive(text: str) -> float:
+    """argparse type: a finite number > 0 (a zero step divided by zero, a traceback)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return value
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the ``simulate`` subcommand."""
     from training.simulate.run import simulate
+
+    if Path(args.out).is_dir():
+        print(f"error: --out {args.out}: is a folder; give the kit CSV's file name", file=sys.stderr)
+        return 2
 
     try:
         start = parse_start(args.start or DEFAULT_START[args.weather])
@@ -75,7 +95,11 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    paths = result.write(args.out)
+    try:
+        paths = result.write(args.out)
+    except OSError as exc:
+        print(f"error: --out {args.out}: cannot write: {exc.strerror or exc}", file=sys.stderr)
+        return 2
     print(f"simulated {args.days:g} d of {args.plant} on {args.weather} weather in "
           f"{time.perf_counter() - began:.1f} s ({len(result.time)} rows, "
           f"{len(effects)} effect(s))")

@@ -237,3 +237,19 @@ def test_simulate_into_a_folder_is_named_before_simulating(capsys, tmp_path):
 
     assert training_main(["simulate", "--out", str(tmp_path), "--days", "0.01"]) == 2
     assert f"--out {tmp_path}: is a folder" in one_error_line(capsys)
+
+
+def test_training_vsensor_mistakes_are_one_line_exit_2(capsys, tmp_path):
+    from training.vsensor.cli import main as vsensor_main
+
+    common = ["--greenhouse", "almeria-palmerillas", "--model", "almeria", "--cache",
+              str(tmp_path / "cache")]
+    missing = tmp_path / "none.csv"
+    assert vsensor_main(["dataset", "--data", str(missing), *common]) == 2
+    line = one_error_line(capsys)
+    assert f"error: {missing}: No such file" in line and "Errno" not in line
+    assert vsensor_main(["dataset", "--data", str(missing), *common, "--set", "t_in.x"]) == 2
+    assert "--set 't_in.x': expected OUTPUT.KEY=NUMBER" in one_error_line(capsys)
+    assert vsensor_main(["corpus", "--out", str(tmp_path / "c"), "--only", "no-such-run"]) == 2
+    assert "--only: no run named no-such-run (runs: " in one_error_line(capsys)
+    assert not (tmp_path / "c").exists()

@@ -253,3 +253,16 @@ def test_training_vsensor_mistakes_are_one_line_exit_2(capsys, tmp_path):
     assert vsensor_main(["corpus", "--out", str(tmp_path / "c"), "--only", "no-such-run"]) == 2
     assert "--only: no run named no-such-run (runs: " in one_error_line(capsys)
     assert not (tmp_path / "c").exists()
+
+
+def test_a_gap_in_the_data_is_said_once_with_its_length_and_start(capsys, tmp_path):
+    data = kit_csv(tmp_path)
+    lines = data.read_text().splitlines()
+    data.write_text("\n".join(lines[:10] + lines[20:]) + "\n")  # 10:09 to 10:18 never sent
+    assert main(["replay", "--data", str(data), *PROTO, "--json"]) == 0
+    err = capsys.readouterr().err
+    assert (f"note: {data}: 10 of 30 rows on the 60 s grid lack a value the model needs, in 1 "
+            f"hole(s), the longest 10 min from 2020-03-27T10:09:00Z") in err
+    assert main(["replay", "--data", str(kit_csv(tmp_path, name="whole.csv")), *PROTO,
+                 "--json"]) == 0
+    assert "lack a value" not in capsys.readouterr().err  # whole data: no note

@@ -119,11 +119,35 @@ def load_inputs(args: argparse.Namespace) -> tuple[Series, Greenhouse, Model]:
         check_columns(model, [c for c in series.columns if c in series], args.data)
     except ValueError as exc:
         raise CliError(str(exc)) from None
+    note = gap_note(series, model.requires)
+    if note:
+        print(f"note: {args.data}: {note}", file=sys.stderr)
     if gh.site is None:
         print(f"note: {args.greenhouse} gives no [site] and no --site was given: the cloudiness "
               f"cannot be read from the radiation, so the sky temperature takes a cloud fraction "
               f"of {DEFAULT_CLOUD:g} and the outside humidity only", file=sys.stderr)
     return series, gh, model
+
+
+def gap_note(series: Series, names: tuple[str, ...] | list[str]) -> str | None:
+    """What the data lacks on the grid, said once: rows without a value of a column the model
+    needs (gaps longer than the interpolation limit, empty cells), as holes, with the longest
+    one's length and start; None when nothing is missing. Nothing is filled in beyond the
+    interpolation of docs/data-format.md."""
+    cols = [series[c] for c in names if c in series.columns]
+    if not cols or len(series) == 0:
+        return None
+    missing = ~np.all(np.isfinite(np.vstack(cols)), axis=0)
+    if not missing.any():
+        return None
+    edge = np.diff(np.concatenate(([0], missing.astype(np.int8), [0])))
+    starts, ends = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)
+    k = int(np.argmax(ends - starts))
+    minutes = (ends[k] - starts[k]) * series.step / 60.0
+    length = f"{minutes / 60.0:.1f} h" if minutes >= 120 else f"{minutes:g} min"
+    return (f"{int(missing.sum())} of {len(series)} rows on the {series.step:g} s grid lack a "
+            f"value the model needs, in {len(starts)} hole(s), the longest {length} from "
+            f"{series.time[starts[k]]}Z; no value is made up for them (docs/data-format.md)")
 
 
 def parse_span(text: str | None, series: Series) -> tuple[int, int] | None:

@@ -266,3 +266,17 @@ def test_a_gap_in_the_data_is_said_once_with_its_length_and_start(capsys, tmp_pa
     assert main(["replay", "--data", str(kit_csv(tmp_path, name="whole.csv")), *PROTO,
                  "--json"]) == 0
     assert "lack a value" not in capsys.readouterr().err  # whole data: no note
+
+
+def test_subscribe_export_from_a_mistyped_store_creates_nothing(capsys, tmp_path):
+    db = tmp_path / "clod.db"
+    assert main(["subscribe", "--db", str(db), "--export", str(tmp_path / "csv")]) == 2
+    assert f"{db}: no such cloud store" in one_error_line(capsys)
+    assert not db.exists() and not (tmp_path / "csv").exists()
+
+
+def test_subscribe_refuses_a_duration_that_is_not_positive(capsys, tmp_path):
+    assert main(["subscribe", "--connect", "tcp/127.0.0.1:1", "--db", str(tmp_path / "c.db"),
+                 "--duration", "-5"]) == 2
+    assert "--duration -5: must be a positive number of seconds" in one_error_line(capsys)
+    assert not (tmp_path / "c.db").exists()

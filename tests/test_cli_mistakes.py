@@ -280,3 +280,22 @@ def test_subscribe_refuses_a_duration_that_is_not_positive(capsys, tmp_path):
                  "--duration", "-5"]) == 2
     assert "--duration -5: must be a positive number of seconds" in one_error_line(capsys)
     assert not (tmp_path / "c.db").exists()
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--gateway", "bad farm!"], "gateway name 'bad farm!': use 1-63 letters"),
+    (["--router", "r 1=10.0.0.5"], "router name 'r 1': use 1-63 letters"),
+    (["--sign", "farm-d.csr"], "--sign 'farm-d.csr': expected ROLE:FILE.csr"),
+])
+def test_certs_mistakes_leave_no_ca_behind(capsys, tmp_path, args, message):
+    out = tmp_path / "certs"
+    assert main(["certs", "--out", str(out), *args]) == 2
+    assert message in one_error_line(capsys)
+    assert not out.exists()  # no CA made for a command that was refused
+
+
+def test_certs_out_that_is_a_file_is_named(capsys, tmp_path):
+    out = tmp_path / "certs"
+    out.write_text("")
+    assert main(["certs", "--out", str(out), "--gateway", "f1"]) == 2
+    assert f"--out {out}: exists and is not a folder" in one_error_line(capsys)

@@ -299,3 +299,10 @@ def test_certs_out_that_is_a_file_is_named(capsys, tmp_path):
     out.write_text("")
     assert main(["certs", "--out", str(out), "--gateway", "f1"]) == 2
     assert f"--out {out}: exists and is not a folder" in one_error_line(capsys)
+
+
+def test_status_connect_without_a_protocol_is_said_in_words(capsys):
+    assert main(["status", "--once", "--connect", "192.168.1.20:7447"]) == 2
+    line = one_error_line(capsys)
+    assert "--connect '192.168.1.20:7447': expected PROTOCOL/ADDRESS" in line
+    assert "Json5Err" not in line

@@ -56,8 +56,14 @@ def open_source(args: argparse.Namespace):
     from gateway.store import StoreError
 
     if args.connect:
+        import re
+
         from gateway.status.zenoh_source import ZenohSource
 
+        for endpoint in args.connect:  # the form gateway.toml's zenoh.listen takes, said in words
+            if not re.match(r"^[a-z0-9]+/.+", endpoint):  # (Zenoh's own is a Rust debug dump)
+                raise CliError(f"--connect {endpoint!r}: expected PROTOCOL/ADDRESS, e.g. "
+                               f"tcp/192.168.1.20:7447")
         try:
             return ZenohSource(args.connect, mode=args.mode, farm=args.farm)
         except Exception as e:

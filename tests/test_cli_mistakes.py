@@ -306,3 +306,14 @@ def test_status_connect_without_a_protocol_is_said_in_words(capsys):
     line = one_error_line(capsys)
     assert "--connect '192.168.1.20:7447': expected PROTOCOL/ADDRESS" in line
     assert "Json5Err" not in line
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--from", "2026-03-02T00:00Z", "--to", "2026-03-01T00:00Z"],
+     "--to 2026-03-01T00:00Z: not after --from 2026-03-02T00:00Z"),
+    (["--out", "."], "--out .: is a folder"),
+])
+def test_export_span_and_out_mistakes_come_before_the_store(capsys, tmp_path, args, message):
+    out = ["--out", str(tmp_path / "k.csv")] if "--out" not in args else []
+    assert main(["export", "--db", str(tmp_path / "none.db"), *out, *args]) == 2
+    assert message in one_error_line(capsys)

@@ -317,3 +317,16 @@ def test_export_span_and_out_mistakes_come_before_the_store(capsys, tmp_path, ar
     out = ["--out", str(tmp_path / "k.csv")] if "--out" not in args else []
     assert main(["export", "--db", str(tmp_path / "none.db"), *out, *args]) == 2
     assert message in one_error_line(capsys)
+
+
+def test_simulate_says_when_an_effect_starts_after_the_run(capsys, tmp_path):
+    from training.__main__ import main as training_main
+
+    late = "heater@2009-12-01:power=30"  # the run covers 2009-11-01, a quarter of an hour
+    assert training_main(["simulate", "--out", str(tmp_path / "s.csv"), "--days", "0.01",
+                          "--effect", "none", "--effect", late]) == 0
+    err = capsys.readouterr().err
+    assert f"note: --effect {late}: starts at 2009-12-01T00:00:00Z, after the simulated span" in err
+    assert training_main(["simulate", "--out", str(tmp_path / "t.csv"), "--days", "0.01",
+                          "--effect", "heater:power=30"]) == 0
+    assert "note" not in capsys.readouterr().err

@@ -8,6 +8,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from training.simulate.effects import EffectSpecError, describe_effects, parse_effect
 from training.simulate.plant import PRESETS
 from training.simulate.weather import DEFAULT_START, WEATHER_SOURCES, parse_start
@@ -84,10 +86,16 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         start = parse_start(args.start or DEFAULT_START[args.weather])
-        effects = [e for e in (parse_effect(s, start) for s in args.effect) if e is not None]
+        parsed = [(s, parse_effect(s, start)) for s in args.effect]
+        effects = [e for _, e in parsed if e is not None]
     except (EffectSpecError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    end = start + np.timedelta64(int(round(args.days * 86400.0)), "s")
+    for spec, effect in parsed:
+        if effect is not None and effect.start >= end:  # a wrong year or month: the effect would never act
+            print(f"note: --effect {spec}: starts at {effect.start}Z, after the simulated span "
+                  f"({start}Z to {end}Z): it has no influence on the data", file=sys.stderr)
     began = time.perf_counter()
     try:
         result = simulate(args.plant, args.weather, start, args.days, effects, args.seed,

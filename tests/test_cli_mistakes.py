@@ -330,3 +330,23 @@ def test_simulate_says_when_an_effect_starts_after_the_run(capsys, tmp_path):
     assert training_main(["simulate", "--out", str(tmp_path / "t.csv"), "--days", "0.01",
                           "--effect", "heater:power=30"]) == 0
     assert "note" not in capsys.readouterr().err
+
+
+def test_vsensor_says_what_a_greenhouse_without_site_means_and_takes_site(capsys, tmp_path):
+    from gateway.greenhouse import PRESET_DIR
+
+    text = (PRESET_DIR / "almeria-palmerillas.toml").read_text()
+    start, end = text.index("[site]"), text.index("[geometry]")
+    gh = tmp_path / "nosite.toml"
+    gh.write_text(text[:start] + text[end:])
+    t = np.datetime64("2020-03-27T10:00:00", "s") + np.arange(20) * np.timedelta64(60, "s")
+    cols = {c: np.full(20, v) for c, v in (("t_in", 20.0), ("rh_in", 60.0), ("t_out", 15.0),
+                                            ("rh_out", 55.0), ("i_glob", 400.0), ("wind", 1.5),
+                                            ("i_in", 250.0), ("t_soil", 18.0), ("lai", 2.0))}
+    data = write_kit_csv(tmp_path / "a.csv", t, cols)
+    common = ["vsensor", "--data", str(data), "--greenhouse", str(gh), "--model-kind", "almeria",
+              "--no-baselines", "--json"]
+    assert main(common) == 0
+    assert f"note: {gh} gives no [site] and no --site was given" in capsys.readouterr().err
+    assert main([*common, "--site", "36.79,-2.72"]) == 0
+    assert "no [site]" not in capsys.readouterr().err

@@ -45,6 +45,11 @@ def add_data_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", required=True, choices=MODEL_NAMES, help="climate model")
     p.add_argument("--step", type=_positive, default=60.0, metavar="S", help="model step [s] (60)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    add_site_argument(p)
+
+
+def add_site_argument(p: argparse.ArgumentParser) -> None:
+    """``--site LAT,LON``: for the commands that run a model over a kit CSV."""
     p.add_argument(
         "--site",
         type=_site,
@@ -53,6 +58,18 @@ def add_data_arguments(p: argparse.ArgumentParser) -> None:
         "sun's position there sets the clear sky that the cloudiness, and so the sky "
         "temperature, is read against (docs/effects.md, 'Sky temperature')",
     )
+
+
+def with_site(gh: Greenhouse, site: tuple[float, float] | None, greenhouse: str) -> Greenhouse:
+    """The greenhouse with ``--site`` applied; without a site at all, the note of what the sky
+    temperature then rests on (stderr)."""
+    if site is not None:
+        gh = replace(gh, site=Site(*site))
+    if gh.site is None:
+        print(f"note: {greenhouse} gives no [site] and no --site was given: the cloudiness "
+              f"cannot be read from the radiation, so the sky temperature takes a cloud fraction "
+              f"of {DEFAULT_CLOUD:g} and the outside humidity only", file=sys.stderr)
+    return gh
 
 
 def _positive(text: str) -> float:
@@ -122,10 +139,7 @@ def load_inputs(args: argparse.Namespace) -> tuple[Series, Greenhouse, Model]:
     note = gap_note(series, model.requires)
     if note:
         print(f"note: {args.data}: {note}", file=sys.stderr)
-    if gh.site is None:
-        print(f"note: {args.greenhouse} gives no [site] and no --site was given: the cloudiness "
-              f"cannot be read from the radiation, so the sky temperature takes a cloud fraction "
-              f"of {DEFAULT_CLOUD:g} and the outside humidity only", file=sys.stderr)
+    with_site(gh, None, args.greenhouse)  # the note, when there is no site at all
     return series, gh, model
 
 

@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from gateway.cli import CliError
-from gateway.cli.common import check_output, dump_json, progress_bar, writing
+from gateway.cli.common import add_site_argument, check_output, dump_json, progress_bar, with_site, writing
 from gateway.greenhouse import GreenhouseError, list_presets, load_greenhouse
 from gateway.kitcsv import KitCsvError
 from gateway.model import MODEL_NAMES, build_model
@@ -39,6 +39,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--model-kind", required=True, choices=MODEL_KINDS,
                    help="the adaptive model whose fluxes feed the sensor")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    add_site_argument(p)
     p.add_argument("--out", metavar="flows.csv",
                    help="write time, flow, heat loss, out-of-range and valid flags per row")
     p.add_argument("--no-baselines", action="store_true", help="skip the baseline models")
@@ -55,6 +56,7 @@ def run(args: argparse.Namespace) -> int:
     check_output(args.out, "--out")
     try:
         gh = load_greenhouse(args.greenhouse)
+        gh = with_site(gh, args.site, args.greenhouse)
         model = build_model(args.model_kind, gh)
     except GreenhouseError as exc:
         raise CliError(str(exc)) from None

@@ -350,3 +350,16 @@ def test_vsensor_says_what_a_greenhouse_without_site_means_and_takes_site(capsys
     assert f"note: {gh} gives no [site] and no --site was given" in capsys.readouterr().err
     assert main([*common, "--site", "36.79,-2.72"]) == 0
     assert "no [site]" not in capsys.readouterr().err
+
+
+def test_simulate_help_names_the_gateway_presets_that_read_its_csv(capsys):
+    from gateway.greenhouse import list_presets
+    from gateway.model import MODEL_NAMES
+    from training.__main__ import main as training_main
+
+    with pytest.raises(SystemExit):
+        training_main(["simulate", "--help"])
+    text = " ".join(capsys.readouterr().out.split()).replace("- ", "-")
+    for plant, preset in (("almeria", "almeria-palmerillas"), ("prototype", "biskra-prototype")):
+        assert preset in list_presets() and plant in MODEL_NAMES
+        assert preset in text

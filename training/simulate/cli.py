@@ -45,7 +45,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--plant", choices=sorted(PRESETS), default="almeria",
-                        help="greenhouse preset (default: almeria)")
+                        help="greenhouse simulated (default: almeria); the gateway tools read its "
+                        "CSV with --greenhouse almeria-palmerillas --model almeria, or "
+                        "biskra-prototype --model prototype for the prototype")
     parser.add_argument("--weather", choices=WEATHER_SOURCES, default="bleiswijk",
                         help="bleiswijk = measured 2009-10-20..2009-12-10; biskra, almeria = "
                         "synthetic seeded days (default: bleiswijk)")

@@ -4,6 +4,7 @@ option and what was wrong, exit status 2, never a traceback; and it is said befo
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 import numpy as np
@@ -363,3 +364,34 @@ def test_simulate_help_names_the_gateway_presets_that_read_its_csv(capsys):
     for plant, preset in (("almeria", "almeria-palmerillas"), ("prototype", "biskra-prototype")):
         assert preset in list_presets() and plant in MODEL_NAMES
         assert preset in text
+
+
+def _numeric_options_without_default(parser: argparse.ArgumentParser, prefix: str = ""):
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield from _numeric_options_without_default(sub, f"{prefix}{name} ")
+        elif (action.option_strings and action.type not in (None, str)
+              and action.default not in (None, argparse.SUPPRESS, False)
+              and action.help != argparse.SUPPRESS):
+            d, text = action.default, action.help or ""
+            shown = ["%(default)", f"({d})", f"default {d}", f"default: {d}"]
+            if isinstance(d, int | float):
+                shown += [f"({d:g})", f"default {d:g}", f"default: {d:g}"]
+            if not any(s in text for s in shown):
+                yield f"{prefix}{action.option_strings[0]}"
+
+
+def test_every_numeric_option_with_a_default_shows_it_in_help():
+    from gateway.cli import build_parser
+    from gateway.ingest.service import build_parser as ingest_parser
+    from training.appliance.cli import add_parser as run_parser
+    from training.simulate.cli import add_parser as simulate_parser
+    from training.vsensor.cli import build_parser as vsensor_parser
+
+    training = argparse.ArgumentParser()
+    sub = training.add_subparsers()
+    simulate_parser(sub)
+    run_parser(sub)
+    parsers = [build_parser(), ingest_parser(), vsensor_parser(), training]
+    assert [o for p in parsers for o in _numeric_options_without_default(p)] == []

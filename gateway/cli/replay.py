@@ -50,7 +50,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--warmup", type=float, default=0.0, metavar="MIN",
-        help="leave the first MIN minutes out of every metric (e.g. 1440 to score days 2..)",
+        help="leave the first MIN minutes out of every metric, e.g. 1440 to score days 2.. "
+        "(default 0)",
     )
     p.add_argument("--seed", type=int, default=0, help="random seed of the bats (0)")
     p.add_argument("--outlook", choices=sorted(OUTLOOKS),

@@ -395,3 +395,23 @@ def test_every_numeric_option_with_a_default_shows_it_in_help():
     run_parser(sub)
     parsers = [build_parser(), ingest_parser(), vsensor_parser(), training]
     assert [o for p in parsers for o in _numeric_options_without_default(p)] == []
+
+
+def test_replay_says_when_a_starting_parameter_is_outside_its_hard_box(capsys, tmp_path):
+    from gateway.greenhouse import load_greenhouse
+    from gateway.model import build_model
+
+    model = build_model("prototype", load_greenhouse("biskra-prototype"))
+    lo, hi = model.bounds(load_greenhouse("biskra-prototype"))
+    params = tmp_path / "p.toml"
+    values = {n: float(0.5 * (a + b)) for n, a, b in zip(model.names, lo, hi, strict=True)}
+    values["c_solar"] = 1e9  # a hand edit: calibrate never writes this
+    params.write_text('model = "prototype"\n[params]\n'
+                      + "".join(f"{n} = {v!r}\n" for n, v in values.items()))
+    data = kit_csv(tmp_path)
+    assert main(["replay", "--data", str(data), *PROTO, "--params", str(params), "--json"]) == 0
+    err = capsys.readouterr().err
+    j = model.names.index("c_solar")
+    assert (f"note: {params}: params.c_solar = 1e+09 is outside its hard box "
+            f"[{lo[j]:g}, {hi[j]:g}]") in err and f"use {hi[j]:g}" in err
+    assert err.count("outside its hard box") == 1  # the others are inside

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+import numpy as np
+
 from gateway.cli import CliError
 from gateway.cli.common import (
     add_data_arguments,
@@ -83,6 +85,13 @@ def run(args: argparse.Namespace) -> int:
     check_output(args.plot, "--plot")
     series, gh, model = load_inputs(args)
     theta0 = read_params_file(args.params, model) if args.params else None
+    if theta0 is not None:
+        lo, hi = model.bounds(gh)
+        for j in np.flatnonzero((theta0 < lo) | (theta0 > hi)):  # the estimator clips them
+            print(f"note: {args.params}: params.{model.names[j]} = {theta0[j]:g} is outside its "
+                  f"hard box [{lo[j]:g}, {hi[j]:g}] (the model's, or the greenhouse's "
+                  f"[parameters] bounds): the estimator, and the 'constant' model, use "
+                  f"{min(max(theta0[j], lo[j]), hi[j]):g}", file=sys.stderr)
     try:
         settings = online_settings(model, gh, _overrides(args.set))
     except ValueError as exc:

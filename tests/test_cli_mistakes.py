@@ -415,3 +415,11 @@ def test_replay_says_when_a_starting_parameter_is_outside_its_hard_box(capsys, t
     assert (f"note: {params}: params.c_solar = 1e+09 is outside its hard box "
             f"[{lo[j]:g}, {hi[j]:g}]") in err and f"use {hi[j]:g}" in err
     assert err.count("outside its hard box") == 1  # the others are inside
+
+
+def test_subscribe_says_its_counters_in_words(capsys, tmp_path):
+    assert main(["subscribe", "--connect", "tcp/127.0.0.1:1", "--db", str(tmp_path / "c.db"),
+                 "--duration", "0.3"]) == 0
+    err = capsys.readouterr().err
+    assert "subscribe stopped: received 0, stored 0, repeats 0" in err
+    assert "SubscribeStats(" not in err

@@ -164,10 +164,19 @@ def _subscribe(args: argparse.Namespace, s, store) -> None:
                 break
             if time.monotonic() - last >= 10:
                 last = time.monotonic()
-                print(f"subscribe: {sub.stats}", file=sys.stderr, flush=True)
+                print(f"subscribe: {_stats(sub.stats)}", file=sys.stderr, flush=True)
     finally:
         sub.stop()
-        print(f"subscribe stopped: {sub.stats}; {store.count()} messages stored", file=sys.stderr,
-              flush=True)
+        print(f"subscribe stopped: {_stats(sub.stats)}; {store.count()} messages in the store",
+              file=sys.stderr, flush=True)
         if sub.error is not None:
             raise CliError(str(sub.error))
+
+
+def _stats(stats) -> str:
+    """The subscriber's counters as words (``received 3, stored 3, ...``), not a dataclass repr."""
+    from dataclasses import asdict
+
+    return ", ".join(f"{k.replace('_', ' ')} {v:.1f} s" if k.endswith("_s") else
+                     f"{k.replace('_', ' ')} {v}" for k, v in asdict(stats).items()).replace(
+        "store s", "storing")

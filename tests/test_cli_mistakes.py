@@ -423,3 +423,18 @@ def test_subscribe_says_its_counters_in_words(capsys, tmp_path):
     err = capsys.readouterr().err
     assert "subscribe stopped: received 0, stored 0, repeats 0" in err
     assert "SubscribeStats(" not in err
+
+
+def test_a_rejected_packet_is_logged_with_its_sender_as_host_port(caplog, tmp_path):
+    import logging
+
+    from gateway.ingest.core import IngestCore, peer_text
+    from gateway.store import Store
+
+    core = IngestCore(Store(tmp_path / "g.db"), {7: b"\x00" * 32})
+    with caplog.at_level(logging.WARNING, logger="serra.ingest"):
+        core.handle(b"hello", ("192.168.4.7", 40000), lambda data, peer: None)
+    assert "packet from 192.168.4.7:40000 rejected: short 5 bytes" in caplog.text
+    assert peer_text(("fe80::1", 5683, 0, 0)) == "[fe80::1]:5683"
+    assert peer_text("/dev/ttyUSB0") == "/dev/ttyUSB0"
+    core.store.close()

@@ -438,3 +438,17 @@ def test_a_rejected_packet_is_logged_with_its_sender_as_host_port(caplog, tmp_pa
     assert peer_text(("fe80::1", 5683, 0, 0)) == "[fe80::1]:5683"
     assert peer_text("/dev/ttyUSB0") == "/dev/ttyUSB0"
     core.store.close()
+
+
+def test_bench_runner_lists_its_benches_and_refuses_an_unknown_one():
+    import subprocess
+    import sys
+
+    run = Path(__file__).parent / "bench" / "run.py"
+    r = subprocess.run([sys.executable, str(run), "--help"], capture_output=True, text=True,
+                       timeout=60)
+    assert r.returncode == 0 and "calibration" in r.stdout and "failed" not in r.stderr
+    r = subprocess.run([sys.executable, str(run), "calibratoin"], capture_output=True, text=True,
+                       timeout=60)
+    assert r.returncode == 2 and "no bench named calibratoin (benches: " in r.stderr
+    assert "== bench" not in r.stdout  # nothing was started

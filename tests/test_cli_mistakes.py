@@ -452,3 +452,16 @@ def test_bench_runner_lists_its_benches_and_refuses_an_unknown_one():
                        timeout=60)
     assert r.returncode == 2 and "no bench named calibratoin (benches: " in r.stderr
     assert "== bench" not in r.stdout  # nothing was started
+
+
+def test_images_build_out_that_is_a_file_is_a_usage_error(tmp_path):
+    import subprocess
+    import sys
+
+    build = Path(__file__).parents[1] / "images" / "build.py"
+    out = tmp_path / "build"
+    out.write_text("keep me")
+    r = subprocess.run([sys.executable, str(build), "--out", str(out)], capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 2 and f"--out {out}: exists and is not a folder" in r.stderr
+    assert "Traceback" not in r.stderr and out.read_text() == "keep me"

@@ -465,3 +465,27 @@ def test_images_build_out_that_is_a_file_is_a_usage_error(tmp_path):
                        text=True, timeout=60)
     assert r.returncode == 2 and f"--out {out}: exists and is not a folder" in r.stderr
     assert "Traceback" not in r.stderr and out.read_text() == "keep me"
+
+
+@pytest.mark.parametrize("command,option", [
+    (["replay"], "--out"),
+    (["replay"], "--plot"),
+    (["calibrate", "--iterations", "1", "--population", "2"], "--out"),
+])
+def test_an_output_that_is_the_input_data_is_refused(capsys, tmp_path, command, option):
+    data = kit_csv(tmp_path)
+    before = data.read_bytes()
+    assert main([*command, "--data", str(data), *PROTO, option, str(data)]) == 2
+    assert f"{option} {data}: is the --data input" in one_error_line(capsys)
+    assert data.read_bytes() == before
+
+
+def test_export_over_its_own_store_is_refused(capsys, tmp_path):
+    from gateway.store import Store
+
+    db = tmp_path / "serra.db"
+    Store(db).close()
+    before = db.read_bytes()
+    assert main(["export", "--db", str(db), "--out", str(db)]) == 2
+    assert f"--out {db}: is the store --db" in one_error_line(capsys)
+    assert db.read_bytes() == before

@@ -52,7 +52,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    check_output(args.out, "--out")
+    check_output(args.out, "--out", inputs={"--data": args.data, "--greenhouse": args.greenhouse})
     series, gh, model = load_inputs(args)
     span = parse_span(args.calibrate_on, series) or (0, len(series))
     algorithm = make_algorithm(args.algorithm, model.name, args.iterations, args.population)

@@ -210,14 +210,21 @@ def read_params_file(path: str, model: Model) -> np.ndarray:
         raise CliError(str(exc)) from None
 
 
-def check_output(path: str | Path | None, option: str, folder: bool = False) -> None:
+def check_output(path: str | Path | None, option: str, folder: bool = False,
+                 inputs: dict[str, str | Path | None] | None = None) -> None:
     """Refuse an output the command could not write, before any computation (so that an hour
     of calibration is not lost to a typo in ``--out``): a file's folder must exist and be
     writable and the file must not be a folder; a ``folder`` output (created with its parents)
-    must not be a file and its nearest existing parent must be a writable folder."""
+    must not be a file and its nearest existing parent must be a writable folder. An output
+    that is one of the command's ``inputs`` (option → path) is refused: writing it would
+    replace the data it was computed from."""
     if not path:
         return
     p = Path(path)
+    for name, source in (inputs or {}).items():
+        if source and Path(source).is_file() and p.exists() and p.samefile(source):
+            raise CliError(f"{option} {path}: is the {name} input; writing it would replace "
+                           f"what it was computed from (give another file name)")
     if folder:
         if p.exists() and not p.is_dir():
             raise CliError(f"{option} {path}: exists and is not a folder")

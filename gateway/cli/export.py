@@ -52,6 +52,8 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(f"--to {args.end}: not after --from {args.start}")
     if args.out.is_dir():
         raise CliError(f"--out {args.out}: is a folder; give the kit CSV's file name")
+    if args.out.exists() and args.db.exists() and args.out.samefile(args.db):
+        raise CliError(f"--out {args.out}: is the store --db; writing the CSV would replace it")
     try:  # a reader: never creates, converts or writes the file it reads
         conn = open_readonly(args.db)
     except StoreError as exc:

@@ -81,8 +81,9 @@ def _overrides(items: list[str]) -> dict[str, dict[str, float]]:
 
 
 def run(args: argparse.Namespace) -> int:
-    check_output(args.out, "--out")
-    check_output(args.plot, "--plot")
+    inputs = {"--data": args.data, "--greenhouse": args.greenhouse, "--params": args.params}
+    check_output(args.out, "--out", inputs=inputs)
+    check_output(args.plot, "--plot", inputs=inputs)
     series, gh, model = load_inputs(args)
     theta0 = read_params_file(args.params, model) if args.params else None
     if theta0 is not None:

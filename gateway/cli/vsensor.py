@@ -53,7 +53,8 @@ def run(args: argparse.Namespace) -> int:
     from gateway.vsensor.runtime import ModelMismatch
 
     sensor_file(args.sensor)
-    check_output(args.out, "--out")
+    check_output(args.out, "--out", inputs={"--data": args.data, "--greenhouse": args.greenhouse,
+                                            "--sensor": args.sensor})
     try:
         gh = load_greenhouse(args.greenhouse)
         gh = with_site(gh, args.site, args.greenhouse)

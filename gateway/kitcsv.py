@@ -7,6 +7,7 @@ cell is an error naming the file, the line and the column, never a silent guess.
 from __future__ import annotations
 
 import csv
+import difflib
 import logging
 import math
 from collections.abc import Iterable, Mapping
@@ -104,9 +105,12 @@ def read_kit_csv(path: str | Path, required: Iterable[str] = ()) -> KitData:
     notices: list[str] = []
     with handle:
         reader = csv.reader(handle)
-        header = _read_header(path, reader, required, notices)
-        known = [(i, h) for i, h in enumerate(header) if h in COLUMNS]
-        times, values = _read_rows(path, reader, len(header), known, notices)
+        try:
+            header = _read_header(path, reader, required, notices)
+            known = [(i, h) for i, h in enumerate(header) if h in COLUMNS]
+            times, values = _read_rows(path, reader, len(header), known, notices)
+        except UnicodeDecodeError as exc:  # decoded a block at a time: find the line
+            raise KitCsvError(_not_utf8(path, exc)) from None
     _refuse_rh_fractions(path, values)
     return KitData(
         time=np.array(times, dtype="datetime64[s]"),
@@ -123,8 +127,6 @@ def _read_header(path: Path, reader, required: Iterable[str], notices: list[str]
         header = [h.strip() for h in next(reader)]
     except StopIteration:
         raise KitCsvError(f"{path}: empty file, expected a header row") from None
-    except UnicodeDecodeError as exc:
-        raise KitCsvError(f"{path}: not UTF-8 text ({exc.reason})") from None
     if not header or header[0] != "time":
         sep = next((c for c in ";\t|" if header and c in header[0]), None)
         hint = f" (the separator must be a comma, not {sep!r})" if sep else ""
@@ -134,14 +136,43 @@ def _read_header(path: Path, reader, required: Iterable[str], notices: list[str]
     if len(set(header)) != len(header):
         dup = sorted({h for h in header if header.count(h) > 1})
         raise KitCsvError(f"{path}:1: duplicate column(s) {', '.join(dup)}")
+    extra = [h for h in header[1:] if h not in COLUMNS]
     missing = [c for c in required if c not in header]
     if missing:
-        raise KitCsvError(f"{path}:1: missing required column(s) {', '.join(missing)}")
-    extra = [h for h in header[1:] if h not in COLUMNS]
+        raise KitCsvError(f"{path}:1: missing required column(s) {', '.join(missing)}"
+                          + _unknown_hint(extra))
     if extra:
         notices.append(f"{path}: ignoring unknown column(s) {', '.join(extra)}")
         log.warning(notices[-1])
     return header
+
+
+def _unknown_hint(extra: list[str]) -> str:
+    """What the header has instead: its unknown columns, each with the kit name it is close to
+    (a typo such as ``tin`` or ``T_in``)."""
+    if not extra:
+        return ""
+    names = []
+    for h in extra:
+        close = difflib.get_close_matches(h.lower(), COLUMNS, n=1, cutoff=0.6)
+        names.append(f"{h!r} (did you mean {close[0]!r}?)" if close else repr(h))
+    return (f"; the header has unknown column(s) {', '.join(names)} (kit column names: "
+            f"docs/data-format.md)")
+
+
+def _not_utf8(path: Path, exc: UnicodeDecodeError) -> str:
+    """``file:line: not UTF-8 text`` with the line of the first byte that is not UTF-8 (the
+    reader decodes block by block, so the exception's offset is within a block)."""
+    data = path.read_bytes()
+    if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        return f"{path}: UTF-16 text (a spreadsheet's 'Unicode text'); save the file as UTF-8 CSV"
+    try:
+        data.decode("utf-8")
+    except UnicodeDecodeError as whole:
+        line = data[: whole.start].count(b"\n") + 1
+        return (f"{path}:{line}: not UTF-8 text ({whole.reason} at byte {whole.start}; save the "
+                f"file as UTF-8)")
+    return f"{path}: not UTF-8 text ({exc.reason})"
 
 
 def _read_rows(path: Path, reader, width: int, known: list[tuple[int, str]],

@@ -137,6 +137,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=BUILD, metavar="DIR",
                         help="output folder, emptied first (images/build)")
     args = parser.parse_args(argv)
+    if args.out.exists() and not args.out.is_dir():
+        parser.error(f"--out {args.out}: exists and is not a folder")
     if args.out.exists():
         foreign = sorted(p.name for p in args.out.iterdir() if p.name not in BUILT)
         if foreign:

@@ -9,12 +9,14 @@ from gateway.cli import CliError
 from gateway.cli.common import (
     add_data_arguments,
     add_sampling_argument,
+    check_output,
     dump_json,
     load_inputs,
     parse_span,
     positive_int,
     progress_bar,
     write_params_file,
+    writing,
 )
 from gateway.estimate.calibrate import calibrate, evaluate
 from gateway.estimate.objective import MODES
@@ -41,13 +43,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--cost", choices=MODES, default="one_step",
         help="error minimised: one-step-ahead (default) or free-run prediction",
     )
-    p.add_argument("--iterations", type=positive_int, help="iterations (thesis settings by default)")
-    p.add_argument("--population", type=positive_int, help="particles or bats (thesis settings by default)")
+    p.add_argument("--iterations", type=positive_int, metavar="N",
+                   help="iterations (default: the thesis's setting for the algorithm and model)")
+    p.add_argument("--population", type=positive_int, metavar="N",
+                   help="particles or bats (default: the thesis's setting for the algorithm and model)")
     p.add_argument("--out", metavar="params.toml", help="write the fitted parameters as TOML")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    check_output(args.out, "--out", inputs={"--data": args.data, "--greenhouse": args.greenhouse})
     series, gh, model = load_inputs(args)
     span = parse_span(args.calibrate_on, series) or (0, len(series))
     algorithm = make_algorithm(args.algorithm, model.name, args.iterations, args.population)
@@ -80,16 +85,17 @@ def run(args: argparse.Namespace) -> int:
         "cost": {"kind": args.cost, "mse": result.cost},
         "span": {"start": str(series.time[a]) + "Z", "end": str(series.time[b - 1]) + "Z"},
     }
-    if args.out:
-        write_params_file(
-            args.out, model, result.params,
-            f"python -m gateway calibrate --algorithm {args.algorithm} --seed {args.seed} "
-            f"on {args.data}",
-        )
-    if args.json:
+    if args.json:  # the report first: a failed write below still leaves the result on screen
         dump_json(report)
     else:
         _print_human(report)
+    if args.out:
+        with writing("--out", args.out):
+            write_params_file(
+                args.out, model, result.params,
+                f"python -m gateway calibrate --algorithm {args.algorithm} --seed {args.seed} "
+                f"on {args.data}",
+            )
     return 0
 
 

@@ -47,14 +47,25 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gateway.net.certs import CertError, issue, load_ca, make_ca, sign_csr
+    from gateway.net.certs import CertError, check_name, issue, load_ca, make_ca, sign_csr
 
     out = Path(args.out)
     if not (args.router or args.gateway or args.client or args.sign) and (out / "ca.pem").exists():
         raise CliError("nothing to do: name at least one --router, --gateway, --client or --sign")
     if args.days <= 0:
         raise CliError(f"--days must be positive, got {args.days:g}")
+    if out.exists() and not out.is_dir():
+        raise CliError(f"--out {out}: exists and is not a folder")
+    for spec in args.sign:  # every mistake before the CA is made: a typo leaves nothing behind
+        role, sep, _ = spec.partition(":")
+        if not sep or role not in ("gateway", "client", "router"):
+            raise CliError(f"--sign {spec!r}: expected ROLE:FILE.csr, ROLE one of gateway, "
+                           "client, router")
     try:
+        for option, names in (("router", [r.partition("=")[0] for r in args.router]),
+                              ("gateway", args.gateway), ("client", args.client)):
+            for name in names:
+                check_name(name, f"{option} name")
         if not out.exists():
             out.mkdir(parents=True, mode=0o700)
         if (out / "ca.pem").exists():
@@ -74,14 +85,13 @@ def run(args: argparse.Namespace) -> int:
         for name in args.client:
             made.append(issue(ca, "client", name, out, days=args.days, overwrite=args.force))
         for spec in args.sign:
-            role, sep, csr = spec.partition(":")
-            if not sep or role not in ("gateway", "client", "router"):
-                raise CliError(f"--sign {spec!r}: expected ROLE:FILE.csr, ROLE one of gateway, "
-                               "client, router")
+            role, _, csr = spec.partition(":")
             made.append(sign_csr(ca, role, csr, out, hosts=["127.0.0.1", "localhost"],
                                  days=args.days, overwrite=args.force))
     except CertError as exc:
         raise CliError(str(exc)) from None
+    except OSError as exc:
+        raise CliError(f"--out {out}: {exc.strerror or exc}") from None
     for m in made:
         key = f"  key {m.key} (0600)" if m.key is not None else "  (key stays on the device)"
         print(f"{m.role:8} CN={m.name:20} {m.cert}{key}")

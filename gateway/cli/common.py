@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -44,6 +45,11 @@ def add_data_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", required=True, choices=MODEL_NAMES, help="climate model")
     p.add_argument("--step", type=_positive, default=60.0, metavar="S", help="model step [s] (60)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    add_site_argument(p)
+
+
+def add_site_argument(p: argparse.ArgumentParser) -> None:
+    """``--site LAT,LON``: for the commands that run a model over a kit CSV."""
     p.add_argument(
         "--site",
         type=_site,
@@ -52,6 +58,18 @@ def add_data_arguments(p: argparse.ArgumentParser) -> None:
         "sun's position there sets the clear sky that the cloudiness, and so the sky "
         "temperature, is read against (docs/effects.md, 'Sky temperature')",
     )
+
+
+def with_site(gh: Greenhouse, site: tuple[float, float] | None, greenhouse: str) -> Greenhouse:
+    """The greenhouse with ``--site`` applied; without a site at all, the note of what the sky
+    temperature then rests on (stderr)."""
+    if site is not None:
+        gh = replace(gh, site=Site(*site))
+    if gh.site is None:
+        print(f"note: {greenhouse} gives no [site] and no --site was given: the cloudiness "
+              f"cannot be read from the radiation, so the sky temperature takes a cloud fraction "
+              f"of {DEFAULT_CLOUD:g} and the outside humidity only", file=sys.stderr)
+    return gh
 
 
 def _positive(text: str) -> float:
@@ -118,23 +136,53 @@ def load_inputs(args: argparse.Namespace) -> tuple[Series, Greenhouse, Model]:
         check_columns(model, [c for c in series.columns if c in series], args.data)
     except ValueError as exc:
         raise CliError(str(exc)) from None
-    if gh.site is None:
-        print(f"note: {args.greenhouse} gives no [site] and no --site was given: the cloudiness "
-              f"cannot be read from the radiation, so the sky temperature takes a cloud fraction "
-              f"of {DEFAULT_CLOUD:g} and the outside humidity only", file=sys.stderr)
+    note = gap_note(series, model.requires)
+    if note:
+        print(f"note: {args.data}: {note}", file=sys.stderr)
+    with_site(gh, None, args.greenhouse)  # the note, when there is no site at all
     return series, gh, model
+
+
+def gap_note(series: Series, names: tuple[str, ...] | list[str]) -> str | None:
+    """What the data lacks on the grid, said once: rows without a value of a column the model
+    needs (gaps longer than the interpolation limit, empty cells), as holes, with the longest
+    one's length and start; None when nothing is missing. Nothing is filled in beyond the
+    interpolation of docs/data-format.md."""
+    cols = [series[c] for c in names if c in series.columns]
+    if not cols or len(series) == 0:
+        return None
+    missing = ~np.all(np.isfinite(np.vstack(cols)), axis=0)
+    if not missing.any():
+        return None
+    edge = np.diff(np.concatenate(([0], missing.astype(np.int8), [0])))
+    starts, ends = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)
+    k = int(np.argmax(ends - starts))
+    minutes = (ends[k] - starts[k]) * series.step / 60.0
+    length = f"{minutes / 60.0:.1f} h" if minutes >= 120 else f"{minutes:g} min"
+    return (f"{int(missing.sum())} of {len(series)} rows on the {series.step:g} s grid lack a "
+            f"value the model needs, in {len(starts)} hole(s), the longest {length} from "
+            f"{series.time[starts[k]]}Z; no value is made up for them (docs/data-format.md)")
 
 
 def parse_span(text: str | None, series: Series) -> tuple[int, int] | None:
     """``START/END`` (ISO 8601 times or dates; UTC when no offset) → row indices [a, b)."""
     if not text:
         return None
-    try:
-        start, end = text.split("/")
-        a = series.index_of(_stamp(start))
-        b = series.index_of(_stamp(end))
-    except ValueError as exc:
-        raise CliError(f"--calibrate-on {text!r}: expected START/END in ISO 8601 ({exc})") from None
+    parts = text.split("/")
+    if len(parts) != 2:
+        raise CliError(f"--calibrate-on {text!r}: expected START/END, two ISO 8601 dates or times "
+                       f"(UTC unless an offset is given), e.g. 2009-10-21/2009-10-23")
+    stamps = []
+    for name, part in zip(("START", "END"), parts, strict=True):
+        try:
+            stamps.append(_stamp(part))
+        except ValueError as exc:  # the parser's own words only when they say more
+            why = "" if str(exc).startswith("Invalid isoformat") else f" ({exc})"
+            raise CliError(f"--calibrate-on {text!r}: {name} {part!r} is not an ISO 8601 date or "
+                           f"time{why}, e.g. 2009-10-21 or 2009-10-21T06:00") from None
+    if stamps[1] <= stamps[0]:
+        raise CliError(f"--calibrate-on {text!r}: END is not after START")
+    a, b = series.index_of(stamps[0]), series.index_of(stamps[1])
     if b - a < 2:
         raise CliError(
             f"--calibrate-on {text!r} covers {max(b - a, 0)} samples of {series.source} "
@@ -160,6 +208,49 @@ def read_params_file(path: str, model: Model) -> np.ndarray:
         return read_params(path, model)
     except ParamsFileError as exc:
         raise CliError(str(exc)) from None
+
+
+def check_output(path: str | Path | None, option: str, folder: bool = False,
+                 inputs: dict[str, str | Path | None] | None = None) -> None:
+    """Refuse an output the command could not write, before any computation (so that an hour
+    of calibration is not lost to a typo in ``--out``): a file's folder must exist and be
+    writable and the file must not be a folder; a ``folder`` output (created with its parents)
+    must not be a file and its nearest existing parent must be a writable folder. An output
+    that is one of the command's ``inputs`` (option → path) is refused: writing it would
+    replace the data it was computed from."""
+    if not path:
+        return
+    p = Path(path)
+    for name, source in (inputs or {}).items():
+        if source and Path(source).is_file() and p.exists() and p.samefile(source):
+            raise CliError(f"{option} {path}: is the {name} input; writing it would replace "
+                           f"what it was computed from (give another file name)")
+    if folder:
+        if p.exists() and not p.is_dir():
+            raise CliError(f"{option} {path}: exists and is not a folder")
+        parent = p
+        while not parent.exists() and parent != parent.parent:
+            parent = parent.parent
+    else:
+        if p.is_dir():
+            raise CliError(f"{option} {path}: is a folder; give a file name")
+        parent = p.parent
+        if not parent.exists():
+            raise CliError(f"{option} {path}: folder {parent} does not exist")
+    if not parent.is_dir():
+        raise CliError(f"{option} {path}: {parent} is not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise CliError(f"{option} {path}: folder {parent} is not writable by this user")
+
+
+@contextmanager
+def writing(option: str, path: str | Path) -> Iterator[None]:
+    """Turn an OSError while writing an output (disk full, permissions changed since
+    :func:`check_output`) into one line naming the option and the path."""
+    try:
+        yield
+    except OSError as exc:
+        raise CliError(f"{option} {path}: cannot write: {exc.strerror or exc}") from None
 
 
 def write_params_file(path: str, model: Model, params: dict[str, float], header: str) -> None:

@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from gateway.cli import CliError
-from gateway.cli.common import add_data_arguments, dump_json, load_inputs
+from gateway.cli.common import add_data_arguments, check_output, dump_json, load_inputs, writing
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -20,7 +20,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     add_data_arguments(p)
     p.add_argument("--split", type=float, default=0.5, metavar="FRACTION",
-                   help="fraction of the data used to calibrate the base model (0.5)")
+                   help="fraction of the data used to calibrate the base model, 0.1 to 0.9; the "
+                   "rest is held out (0.5)")
     p.add_argument("--report", metavar="DIR", help="write report.md and PNG plots into DIR")
     p.add_argument("--seed", type=int, default=0, help="random seed of the swarm (0)")
     p.set_defaults(func=run)
@@ -31,6 +32,7 @@ def run(args: argparse.Namespace) -> int:
 
     if not 0.1 <= args.split <= 0.9:
         raise CliError(f"--split {args.split}: must be between 0.1 and 0.9")
+    check_output(args.report, "--report", folder=True)
     series, gh, model = load_inputs(args)
     tty = sys.stderr.isatty()
 
@@ -42,18 +44,19 @@ def run(args: argparse.Namespace) -> int:
         d = diagnose(series, gh, model, split=args.split, seed=args.seed, progress=say)
     except ValueError as exc:
         raise CliError(str(exc)) from None
-    if args.report:
-        from gateway.diagnose.report import write_report
-
-        path = write_report(d, args.report, args.data)
-        say(f"report written to {path}")
     hint = live_model_hint(args.model, d.structure)
-    if args.json:
+    if args.json:  # the findings first: a failed write below still leaves them on screen
         dump_json({**to_json(d), "hint": hint})
     else:
         _print_human(d)
         if hint:
             sys.stdout.write(f"hint: {hint}\n")
+    if args.report:
+        from gateway.diagnose.report import write_report
+
+        with writing("--report", args.report):
+            path = write_report(d, args.report, args.data)
+        say(f"report written to {path}")
     return 0
 
 

@@ -22,9 +22,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--out march.csv && python -m gateway diagnose --data march.csv --greenhouse "
         "biskra-prototype --model prototype",
     )
-    p.add_argument("--db", required=True, type=Path, help="the ingest service's SQLite store")
+    p.add_argument("--db", required=True, type=Path, metavar="serra.db",
+                   help="the ingest service's SQLite store")
     p.add_argument("--out", required=True, type=Path, metavar="FILE.csv", help="kit CSV to write")
-    p.add_argument("--device", type=int, help="device id (default: the only one in the store)")
+    p.add_argument("--device", type=int, metavar="ID",
+                   help="device id (default: the only one in the store)")
     p.add_argument("--from", dest="start", metavar="ISO", help="first minute, e.g. 2026-03-01T00:00Z")
     p.add_argument("--to", dest="end", metavar="ISO", help="end of the span (excluded)")
     p.add_argument("--json", action="store_true", help="print what was written as one JSON object")
@@ -46,6 +48,12 @@ def run(args: argparse.Namespace) -> int:
     from gateway.store.export import ExportError, export_kit_csv
 
     start, end = _when(args.start, "--from"), _when(args.end, "--to")
+    if start is not None and end is not None and end <= start:
+        raise CliError(f"--to {args.end}: not after --from {args.start}")
+    if args.out.is_dir():
+        raise CliError(f"--out {args.out}: is a folder; give the kit CSV's file name")
+    if args.out.exists() and args.db.exists() and args.out.samefile(args.db):
+        raise CliError(f"--out {args.out}: is the store --db; writing the CSV would replace it")
     try:  # a reader: never creates, converts or writes the file it reads
         conn = open_readonly(args.db)
     except StoreError as exc:
@@ -56,6 +64,8 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(f"{args.db}: {exc}") from None
     except sqlite3.Error as exc:
         raise CliError(f"{args.db}: {exc}") from None
+    except OSError as exc:  # writing the CSV (the store was opened above)
+        raise CliError(f"--out {args.out}: cannot write: {exc.strerror or exc}") from None
     finally:
         conn.close()
     if args.json:

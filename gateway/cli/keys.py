@@ -45,7 +45,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="make, rotate and list device keys (the keys file, mode 600)",
         description="Manage the device keys file the ingest service reads (--keys). Keys are "
         "random (secrets module); the file is created 0600, edited atomically, and refused if "
-        "other users may read it. The gateway reads the file at start: restart it afterwards.",
+        "other users may read it. A running gateway or ingest service reads the file again by "
+        "itself within its maintenance period (10 s by default): no restart.",
         epilog="examples: python -m gateway keys add 7 --keys /etc/serra/keys.txt --name north | "
         "python -m gateway keys rotate 7 --keys /etc/serra/keys.txt (a reflashed board)",
     )

@@ -5,8 +5,18 @@ from __future__ import annotations
 import argparse
 import sys
 
+import numpy as np
+
 from gateway.cli import CliError
-from gateway.cli.common import add_data_arguments, dump_json, load_inputs, progress_bar, read_params_file
+from gateway.cli.common import (
+    add_data_arguments,
+    check_output,
+    dump_json,
+    load_inputs,
+    progress_bar,
+    read_params_file,
+    writing,
+)
 from gateway.estimate.online import online_settings
 from gateway.estimate.outlook import OUTLOOKS, make_outlook
 from gateway.estimate.replay import replay, report, write_predictions
@@ -42,7 +52,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--warmup", type=float, default=0.0, metavar="MIN",
-        help="leave the first MIN minutes out of every metric (e.g. 1440 to score days 2..)",
+        help="leave the first MIN minutes out of every metric, e.g. 1440 to score days 2.. "
+        "(default 0)",
     )
     p.add_argument("--seed", type=int, default=0, help="random seed of the bats (0)")
     p.add_argument("--outlook", choices=sorted(OUTLOOKS),
@@ -70,8 +81,18 @@ def _overrides(items: list[str]) -> dict[str, dict[str, float]]:
 
 
 def run(args: argparse.Namespace) -> int:
+    inputs = {"--data": args.data, "--greenhouse": args.greenhouse, "--params": args.params}
+    check_output(args.out, "--out", inputs=inputs)
+    check_output(args.plot, "--plot", inputs=inputs)
     series, gh, model = load_inputs(args)
     theta0 = read_params_file(args.params, model) if args.params else None
+    if theta0 is not None:
+        lo, hi = model.bounds(gh)
+        for j in np.flatnonzero((theta0 < lo) | (theta0 > hi)):  # the estimator clips them
+            print(f"note: {args.params}: params.{model.names[j]} = {theta0[j]:g} is outside its "
+                  f"hard box [{lo[j]:g}, {hi[j]:g}] (the model's, or the greenhouse's "
+                  f"[parameters] bounds): the estimator, and the 'constant' model, use "
+                  f"{min(max(theta0[j], lo[j]), hi[j]):g}", file=sys.stderr)
     try:
         settings = online_settings(model, gh, _overrides(args.set))
     except ValueError as exc:
@@ -86,23 +107,26 @@ def run(args: argparse.Namespace) -> int:
         try:
             outlook = make_outlook(args.outlook, gh)
         except ValueError as exc:
-            raise CliError(str(exc)) from None
+            hint = "; or give --site LAT,LON" if gh.site is None else ""
+            raise CliError(f"{exc}{hint}") from None
     with progress_bar(f"replay {model.name}", len(series), True) as bar:
         result = replay(model, series, gh, theta0, settings, seed=args.seed,
                         progress=lambda done: bar(advance=100), outlook=outlook)
     rep = report(result, warmup)
     rep["data"] = args.data
     rep["start"] = "calibrated" if args.params else "middle of the hard box"
-    if args.out:
-        write_predictions(result, args.out)
-    if args.plot:
-        from gateway.plots import plot_replay
-
-        plot_replay(result, args.plot, title=f"{model.name} on {args.data}")
-    if args.json:
+    if args.json:  # the report first: a failed write below still leaves the result on screen
         dump_json(rep)
     else:
         _print_human(rep)
+    if args.out:
+        with writing("--out", args.out):
+            write_predictions(result, args.out)
+    if args.plot:
+        from gateway.plots import plot_replay
+
+        with writing("--plot", args.plot):
+            plot_replay(result, args.plot, title=f"{model.name} on {args.data}")
     return 0
 
 

@@ -49,7 +49,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--config", required=True, type=Path, metavar="gateway.toml",
                    help="the gateway config (TOML)")
     p.add_argument("--check", action="store_true",
-                   help="validate the config and what it names (keys, greenhouses, parameters), then exit")
+                   help="validate the config and what it names (keys, greenhouses, parameters, "
+                   "the store's folder), then exit")
     p.add_argument("--log-level", choices=("debug", "info", "warning", "error"),
                    help="override [gateway] log_level")
     p.set_defaults(func=run)

@@ -38,7 +38,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        help="ask a gateway (or a router) over Zenoh, e.g. tcp/192.168.1.20:7447 "
                        "(repeatable)")
     p.add_argument("--mode", choices=("peer", "client"), default="peer",
-                   help="Zenoh mode with --connect (client: through a router)")
+                   help="Zenoh mode with --connect (client: through a router; default peer)")
     p.add_argument("--farm", default="*", help="with --connect: only this farm (default: any)")
     p.add_argument("--once", action="store_true",
                    help="print one plain snapshot of every panel and exit (also when stdout is "
@@ -56,15 +56,25 @@ def open_source(args: argparse.Namespace):
     from gateway.store import StoreError
 
     if args.connect:
+        import re
+
         from gateway.status.zenoh_source import ZenohSource
 
+        for endpoint in args.connect:  # the form gateway.toml's zenoh.listen takes, said in words
+            if not re.match(r"^[a-z0-9]+/.+", endpoint):  # (Zenoh's own is a Rust debug dump)
+                raise CliError(f"--connect {endpoint!r}: expected PROTOCOL/ADDRESS, e.g. "
+                               f"tcp/192.168.1.20:7447")
         try:
             return ZenohSource(args.connect, mode=args.mode, farm=args.farm)
         except Exception as e:
             raise CliError(f"cannot open a Zenoh session to {', '.join(args.connect)}: {e}") from None
     db = args.db
     if db is None:
-        db = _db_from_config(args.config or DEFAULT_CONFIG, explicit=args.config is not None)
+        config = args.config or DEFAULT_CONFIG
+        db = _db_from_config(config, explicit=args.config is not None)
+        if not db.exists():
+            raise CliError(f"{db}: no such store (the gateway.db of {config}; the gateway "
+                           f"creates it when it first runs)")
     from gateway.status.store_source import StoreSource
 
     try:
@@ -74,19 +84,24 @@ def open_source(args: argparse.Namespace):
 
 
 def _db_from_config(path: Path, explicit: bool) -> Path:
-    import tomllib
+    from gateway.tomlfile import read_toml
 
     if not path.exists():
         if explicit:
             raise CliError(f"{path}: no such config")
         raise CliError(f"give --db serra.db, --config gateway.toml or --connect ENDPOINT "
                        f"({path} does not exist)")
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-        db = raw["gateway"]["db"]
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, KeyError, TypeError) as e:
-        raise CliError(f"{path}: cannot read gateway.db from it: {e}") from None
-    p = Path(str(db)).expanduser()
+    raw = read_toml(path, CliError, "gateway config")
+    table = raw.get("gateway")
+    if not isinstance(table, dict):  # worded as the service's own config check words it
+        raise CliError(f"{path}: gateway: missing (required): a [gateway] table with db = "
+                       f"\"serra.db\" (is this the gateway's config?)")
+    db = table.get("db")
+    if db is None:
+        raise CliError(f"{path}: gateway.db: missing (required)")
+    if not isinstance(db, str) or not db:
+        raise CliError(f"{path}: gateway.db: must be a path in quotes, got {db!r}")
+    p = Path(db).expanduser()
     return p if p.is_absolute() else path.resolve().parent / p
 
 

@@ -60,7 +60,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tls-key", type=Path, metavar="KEY", help="its private key (mode 0600)")
     p.add_argument("--export", type=Path, metavar="DIR",
                    help="write <farm>-<greenhouse>.csv kit CSVs here (at exit when subscribed)")
-    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
+    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (> 0)")
     p.set_defaults(func=run)
 
 
@@ -105,11 +105,17 @@ def run(args: argparse.Namespace) -> int:
 
     from gateway.cloud.store import open_store
 
+    if args.duration is not None and not args.duration > 0:  # also NaN
+        raise CliError(f"--duration {args.duration:g}: must be a positive number of seconds")
     s = settings(args)
     if not s.connect and not s.listen and not args.export:
         raise CliError("give --connect ENDPOINT (or --listen) to subscribe, or --export DIR")
     if s.db is None and not s.dsn:
         raise CliError("give --db FILE (SQLite) or --dsn DSN (PostgreSQL) for the cloud store")
+    if not (s.connect or s.listen) and not s.dsn and not Path(s.db).exists():
+        # export only: a reader must not create an empty store from a mistyped path
+        raise CliError(f"{s.db}: no such cloud store (subscribe --db creates it when it "
+                       f"subscribes; --export alone only reads)")
     try:
         store = open_store(s.db, s.dsn, s.schema)
     except sqlite3.Error as e:
@@ -158,10 +164,19 @@ def _subscribe(args: argparse.Namespace, s, store) -> None:
                 break
             if time.monotonic() - last >= 10:
                 last = time.monotonic()
-                print(f"subscribe: {sub.stats}", file=sys.stderr, flush=True)
+                print(f"subscribe: {_stats(sub.stats)}", file=sys.stderr, flush=True)
     finally:
         sub.stop()
-        print(f"subscribe stopped: {sub.stats}; {store.count()} messages stored", file=sys.stderr,
-              flush=True)
+        print(f"subscribe stopped: {_stats(sub.stats)}; {store.count()} messages in the store",
+              file=sys.stderr, flush=True)
         if sub.error is not None:
             raise CliError(str(sub.error))
+
+
+def _stats(stats) -> str:
+    """The subscriber's counters as words (``received 3, stored 3, ...``), not a dataclass repr."""
+    from dataclasses import asdict
+
+    return ", ".join(f"{k.replace('_', ' ')} {v:.1f} s" if k.endswith("_s") else
+                     f"{k.replace('_', ' ')} {v}" for k, v in asdict(stats).items()).replace(
+        "store s", "storing")

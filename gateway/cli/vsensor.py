@@ -6,10 +6,10 @@ import argparse
 import sys
 
 from gateway.cli import CliError
-from gateway.cli.common import dump_json, progress_bar
+from gateway.cli.common import add_site_argument, check_output, dump_json, progress_bar, with_site, writing
 from gateway.greenhouse import GreenhouseError, list_presets, load_greenhouse
 from gateway.kitcsv import KitCsvError
-from gateway.model import build_model
+from gateway.model import MODEL_NAMES, build_model
 from gateway.series import load_series
 from gateway.vsensor.features import MODEL_KINDS
 
@@ -30,13 +30,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         epilog="example: python -m gateway vsensor --data house.csv --greenhouse "
         "almeria-palmerillas --model-kind almeria --json --out flows.csv",
     )
-    p.add_argument("--model", metavar="MODEL.onnx", help=f"the sensor (default: {SHIPPED})")
+    p.add_argument("--sensor", "--model", dest="sensor", metavar="MODEL.onnx",
+                   help=f"the sensor's ONNX file, as 'python -m training.vsensor' names it; --model "
+                   f"is the older name (default: {SHIPPED})")
     p.add_argument("--data", required=True, metavar="FILE", help="kit CSV (docs/data-format.md)")
     p.add_argument("--greenhouse", required=True, metavar="PRESET|FILE.toml",
                    help=f"greenhouse description: a preset ({', '.join(list_presets())}) or a TOML file")
     p.add_argument("--model-kind", required=True, choices=MODEL_KINDS,
                    help="the adaptive model whose fluxes feed the sensor")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    add_site_argument(p)
     p.add_argument("--out", metavar="flows.csv",
                    help="write time, flow, heat loss, out-of-range and valid flags per row")
     p.add_argument("--no-baselines", action="store_true", help="skip the baseline models")
@@ -49,15 +52,22 @@ def run(args: argparse.Namespace) -> int:
     from gateway.vsensor.models import shipped_model
     from gateway.vsensor.runtime import ModelMismatch
 
+    sensor_file(args.sensor)
+    check_output(args.out, "--out", inputs={"--data": args.data, "--greenhouse": args.greenhouse,
+                                            "--sensor": args.sensor})
     try:
         gh = load_greenhouse(args.greenhouse)
+        gh = with_site(gh, args.site, args.greenhouse)
         model = build_model(args.model_kind, gh)
     except GreenhouseError as exc:
         raise CliError(str(exc)) from None
-    path = args.model or shipped_model(args.model_kind)
     try:
         series = load_series(args.data, step=60.0, required=model.requires)
     except KitCsvError as exc:
+        raise CliError(str(exc)) from None
+    try:
+        path = args.sensor or shipped_model(args.model_kind)
+    except FileNotFoundError as exc:
         raise CliError(str(exc)) from None
     vents = [c for c in ("vent_roof", "vent_side") if c in series]
     replays = 2 if vents else 1
@@ -77,13 +87,29 @@ def run(args: argparse.Namespace) -> int:
         "reference": "explicit vent-based flow of the adaptive model (III.31)" if vents else None,
         "notes": result.notes,
     }
-    if args.out:
-        write_flows(result, args.out)
-    if args.json:
+    if args.json:  # the report first: a failed write below still leaves the result on screen
         dump_json(report)
     else:
         _print_human(report, main)
+    if args.out:
+        with writing("--out", args.out):
+            write_flows(result, args.out)
     return 0
+
+
+def sensor_file(path: str | None) -> None:
+    """The sensor's file must exist; a model kind given in its place (``--model almeria``, as
+    the other commands take it) is named as such instead of failing to load 'almeria' as ONNX."""
+    from pathlib import Path
+
+    if not path or Path(path).is_file():
+        return
+    if path in MODEL_NAMES and not Path(path).exists():
+        raise CliError(f"--sensor/--model {path}: that is a model kind; here it goes in "
+                       f"--model-kind {path}, and --sensor (or --model) names the sensor's "
+                       f"ONNX file (default: {SHIPPED})")
+    raise CliError(f"--sensor {path}: " + ("is a folder, not an ONNX file" if Path(path).is_dir()
+                                           else "no such file"))
 
 
 def _line(name: str, block: dict) -> str:

@@ -42,6 +42,15 @@ WINDOW = 1024
 _HEADER = p.MAGIC + bytes([p.VERSION, p.TYPE_RECORD])
 
 
+def peer_text(peer: Hashable) -> str:
+    """Where a packet came from, as a log line says it: ``192.168.4.7:5683`` for a UDP
+    (host, port), ``[fe80::1]:5683`` for IPv6, the port's name for serial."""
+    if isinstance(peer, tuple) and len(peer) >= 2 and isinstance(peer[0], str):
+        host = f"[{peer[0]}]" if ":" in peer[0] else peer[0]
+        return f"{host}:{peer[1]}"
+    return str(peer)
+
+
 @dataclass(slots=True)
 class _Dev:
     key: p.Mac
@@ -151,8 +160,8 @@ class IngestCore:
     # -- receiving ------------------------------------------------------------------------
     def _reject(self, reason: str, detail: str, peer: Hashable, device: int | None = None) -> None:
         self.counters[reason] += 1
-        self.rlog.warning(reason, "packet from %s rejected: %s %s", peer, reason, detail,
-                          device=device)
+        self.rlog.warning(reason, "packet from %s rejected: %s %s", peer_text(peer), reason,
+                          detail, device=device)
 
     def _refuse_old_boot(self, dev_id: int, d: _Dev, boot: int, peer: Hashable) -> None:
         """An authenticated record from a boot older than the latest stored: a board whose
@@ -172,7 +181,8 @@ class IngestCore:
             "boot %d already stored, so its records are dropped unanswered. A board reflashed "
             "or replaced (its boot counter lost) looks like this, and so do replayed packets. "
             "To take the board back (stored data is kept): %s (the gateway reads the keys file "
-            "again by itself) and put the printed line in the board's config.json", dev_id, peer,
+            "again by itself) and put the printed line in the board's config.json", dev_id,
+            peer_text(peer),
             boot, latest, cmd, device=dev_id)
 
     def handle(self, data: bytes, peer: Hashable, send: Send) -> None:
@@ -181,7 +191,8 @@ class IngestCore:
             self._handle(data, peer, send)
         except Exception:  # a bug must not stop ingest; counted and logged
             self.counters["internal_error"] += 1
-            log.exception("internal error on packet %s from %s", bytes(data[:80]).hex(), peer)
+            log.exception("internal error on packet %s from %s", bytes(data[:80]).hex(),
+                          peer_text(peer))
 
     def _handle(self, data: bytes, peer: Hashable, send: Send) -> None:
         if len(data) == p.RECORD_LEN and data[:4] == _HEADER:  # fast path: well framed
@@ -248,7 +259,7 @@ class IngestCore:
             send(pkt, peer)
         except Exception as e:  # a lost ack only costs a resend
             self.counters["ack_send_failed"] += 1
-            self.rlog.warning("ack_send_failed", "ack to %s failed: %s", peer, e)
+            self.rlog.warning("ack_send_failed", "ack to %s failed: %s", peer_text(peer), e)
 
     # -- committing -----------------------------------------------------------------------
     async def run_writer(self) -> None:

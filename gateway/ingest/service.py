@@ -180,28 +180,53 @@ def _refused(core: IngestCore) -> str:
         for r in core.refused.values())
 
 
+def bounded(kind: type, lo: float, hi: float | None = None) -> Callable[[str], float]:
+    """argparse type: a finite number of ``kind`` in [lo, hi], the bounds of the same keys
+    in gateway.toml (a negative retention would delete every sample as it arrives)."""
+
+    def parse(text: str) -> float:
+        try:
+            value = kind(text)
+        except ValueError:
+            what = "a whole number" if kind is int else "a number"
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+        if not (value >= lo and (hi is None or value <= hi)):  # NaN fails too
+            span = f"at least {lo:g}" if hi is None else f"between {lo:g} and {hi:g}"
+            raise argparse.ArgumentTypeError(f"must be {span}, got {text!r}")
+        return value
+
+    return parse
+
+
 def build_parser(prog: str = "python -m gateway.ingest.service") -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog=prog,
         description="Serra ingest: kit packets in over UDP and/or a serial port, validated, "
         "stored durably in SQLite (WAL), then acknowledged. See docs/wire-format.md.",
         epilog="example: %(prog)s --db serra.db --keys keys.txt --listen 0.0.0.0:5683")
-    ap.add_argument("--db", type=Path, required=True, help="SQLite store (created if absent)")
-    ap.add_argument("--keys", type=Path, required=True,
-                    help="device keys file, mode 600: '<device_id> <hex key>' per line")
+    ap.add_argument("--db", type=Path, required=True, metavar="serra.db",
+                    help="SQLite store (created if absent; its folder must exist)")
+    ap.add_argument("--keys", type=Path, required=True, metavar="keys.txt",
+                    help="device keys file, mode 600: '<device_id> <hex key>' per line "
+                         "(python -m gateway keys)")
     ap.add_argument("--listen", type=parse_hostport, default=None, metavar="ADDRESS:PORT",
                     help=f"UDP address (numeric, never resolved) and port (default "
                          f"0.0.0.0:{DEFAULT_PORT} unless --serial only)")
-    ap.add_argument("--serial", default=None,
+    ap.add_argument("--serial", default=None, metavar="URL",
                     help="pyserial URL of a board on USB, e.g. /dev/ttyUSB0 or loop://")
-    ap.add_argument("--baudrate", type=int, default=115200, help="serial speed (default 115200)")
-    ap.add_argument("--retention-days", type=float, default=retention.Policy.samples_days,
-                    help="keep raw samples this many days (minute aggregates are kept longer)")
-    ap.add_argument("--max-db-mb", type=float, default=retention.Policy.max_db_bytes / 2**20,
-                    help="alarm when the database reaches 80 %% of this size")
-    ap.add_argument("--batch-delay", type=float, default=0.0,
+    ap.add_argument("--baudrate", type=bounded(int, 300, 4_000_000), default=115200,
+                    metavar="BAUD", help="serial speed [bit s-1] (default %(default)s)")
+    ap.add_argument("--retention-days", type=bounded(float, 1.0), metavar="DAYS",
+                    default=retention.Policy.samples_days,
+                    help="keep raw samples this many days, at least 1 (minute aggregates are "
+                         "kept longer; default %(default)g)")
+    ap.add_argument("--max-db-mb", type=bounded(float, 1.0), metavar="MB",
+                    default=retention.Policy.max_db_bytes / 2**20,
+                    help="alarm when the database reaches 80 %% of this size [MiB] "
+                         "(default %(default)g)")
+    ap.add_argument("--batch-delay", type=bounded(float, 0.0), default=0.0, metavar="S",
                     help="seconds to wait for more records before a commit (fewer SD-card "
-                         "writes; acks are delayed as much)")
+                         "writes; acks are delayed as much; default %(default)g)")
     ap.add_argument("--maintenance-every", type=float, default=10.0, help=argparse.SUPPRESS)
     ap.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     return ap
@@ -221,8 +246,12 @@ def main(argv: list[str] | None = None, prog: str = "python -m gateway.ingest.se
                                 max_db_bytes=int(args.max_db_mb * 2**20)))
     try:
         load_keys(cfg.keys)  # fail early with a clear message
-    except (KeyFileError, OSError) as e:
+    except KeyFileError as e:
         print(f"error: {e}", file=sys.stderr)
+        return 2
+    except OSError as e:
+        print(f"error: {cfg.keys}: cannot read the keys file: {e.strerror or e} (make it with "
+              f"python -m gateway keys add DEVICE_ID --keys {cfg.keys})", file=sys.stderr)
         return 2
     try:
         Store(cfg.db).close()

@@ -62,6 +62,13 @@ def load_ventilation(path: Path, model: Model, gh: Greenhouse) -> Ventilation:
 
 def prepare(cfg: GatewayConfig) -> list[GreenhouseResources]:
     """Load and check everything the config names (raises ConfigError naming the key)."""
+    folder = cfg.db.parent  # the store is created at start, its folder is not
+    if not folder.is_dir():
+        raise ConfigError(f"{cfg.source}: gateway.db: folder {folder} "
+                          f"{'is not a folder' if folder.exists() else 'does not exist'} "
+                          f"(the gateway creates the store {cfg.db.name}, not its folder)")
+    if cfg.db.is_dir():
+        raise ConfigError(f"{cfg.source}: gateway.db: {cfg.db} is a folder; name the store's file")
     try:
         keys = load_keys(cfg.keys)
     except OSError as e:

@@ -18,8 +18,19 @@ from _common import RESULTS  # noqa: E402
 
 
 def main(argv: list[str]) -> int:
-    found = sorted(p.stem for p in HERE.glob("*.py") if not p.stem.startswith("_"))
-    names = argv or [n for n in found if n != "run"]
+    import argparse
+
+    found = [n for n in sorted(p.stem for p in HERE.glob("*.py") if not p.stem.startswith("_"))
+             if n != "run"]
+    parser = argparse.ArgumentParser(
+        prog="python tests/bench/run.py", description=__doc__.split("\n\n")[0].replace("``", ""))
+    parser.add_argument("names", nargs="*", metavar="NAME",
+                        help=f"the benches to run (default: all of {', '.join(found)})")
+    args = parser.parse_args(argv)
+    unknown = [n for n in args.names if n not in found]
+    if unknown:
+        parser.error(f"no bench named {', '.join(unknown)} (benches: {', '.join(found)})")
+    names = args.names or found
     failed = []
     for name in names:
         print(f"== bench {name}", flush=True)

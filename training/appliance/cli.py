@@ -49,7 +49,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="simulated minutes to run (default: until you quit on a terminal, "
                    "120 without one)")
     p.add_argument("--scale", type=float, default=120.0, metavar="X",
-                   help="simulated seconds per wall second (120: two simulated minutes a second)")
+                   help="simulated seconds per wall second, 1 to 1000 (default 120: two simulated "
+                   "minutes a second)")
     p.add_argument("--screen", choices=("auto", "yes", "no"), default="auto",
                    help="the status screen: auto = when stdin and stdout are a terminal")
     p.add_argument("--no-calibrate", dest="calibrate", action="store_false",

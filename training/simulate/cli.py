@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
+from pathlib import Path
+
+import numpy as np
 
 from training.simulate.effects import EffectSpecError, describe_effects, parse_effect
 from training.simulate.plant import PRESETS
@@ -41,33 +45,59 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--plant", choices=sorted(PRESETS), default="almeria",
-                        help="greenhouse preset (default: almeria)")
+                        help="greenhouse simulated (default: almeria); the gateway tools read its "
+                        "CSV with --greenhouse almeria-palmerillas --model almeria, or "
+                        "biskra-prototype --model prototype for the prototype")
     parser.add_argument("--weather", choices=WEATHER_SOURCES, default="bleiswijk",
                         help="bleiswijk = measured 2009-10-20..2009-12-10; biskra, almeria = "
                         "synthetic seeded days (default: bleiswijk)")
-    parser.add_argument("--start", default=None,
-                        help="first sample, UTC, YYYY-MM-DD[THH:MM] (default per weather)")
-    parser.add_argument("--days", type=float, default=14.0, help="length [d] (default: 14)")
-    parser.add_argument("--step", type=float, default=60.0, help="output step [s] (default: 60)")
+    parser.add_argument("--start", default=None, metavar="YYYY-MM-DD[THH:MM]",
+                        help="first sample, UTC (default per weather, below)")
+    parser.add_argument("--days", type=_positive, default=14.0, metavar="D",
+                        help="length [d] (default: 14)")
+    parser.add_argument("--step", type=_positive, default=60.0, metavar="S",
+                        help="output step [s] (default: 60)")
     parser.add_argument("--effect", action="append", default=[], metavar="SPEC",
                         help="inject an effect (repeatable), see below")
     parser.add_argument("--seed", type=int, default=0,
                         help="seed of synthetic weather and sensor errors (default: 0)")
-    parser.add_argument("--out", required=True, help="path of the kit CSV to write")
+    parser.add_argument("--out", required=True, metavar="FILE.csv",
+                        help="path of the kit CSV to write (its folder is created)")
     parser.set_defaults(func=run)
     return parser
+
+
+def _positive(text: str) -> float:
+    """argparse type: a finite number > 0 (a zero step divided by zero, a traceback)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return value
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the ``simulate`` subcommand."""
     from training.simulate.run import simulate
 
+    if Path(args.out).is_dir():
+        print(f"error: --out {args.out}: is a folder; give the kit CSV's file name", file=sys.stderr)
+        return 2
+
     try:
         start = parse_start(args.start or DEFAULT_START[args.weather])
-        effects = [e for e in (parse_effect(s, start) for s in args.effect) if e is not None]
+        parsed = [(s, parse_effect(s, start)) for s in args.effect]
+        effects = [e for _, e in parsed if e is not None]
     except (EffectSpecError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    end = start + np.timedelta64(int(round(args.days * 86400.0)), "s")
+    for spec, effect in parsed:
+        if effect is not None and effect.start >= end:  # a wrong year or month: the effect would never act
+            print(f"note: --effect {spec}: starts at {effect.start}Z, after the simulated span "
+                  f"({start}Z to {end}Z): it has no influence on the data", file=sys.stderr)
     began = time.perf_counter()
     try:
         result = simulate(args.plant, args.weather, start, args.days, effects, args.seed,
@@ -75,7 +105,11 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    paths = result.write(args.out)
+    try:
+        paths = result.write(args.out)
+    except OSError as exc:
+        print(f"error: --out {args.out}: cannot write: {exc.strerror or exc}", file=sys.stderr)
+        return 2
     print(f"simulated {args.days:g} d of {args.plant} on {args.weather} weather in "
           f"{time.perf_counter() - began:.1f} s ({len(result.time)} rows, "
           f"{len(effects)} effect(s))")

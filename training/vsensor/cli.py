@@ -50,8 +50,10 @@ def build_parser() -> argparse.ArgumentParser:
                                      "(thesis §IV.3). See docs/vsensor.md.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     c = sub.add_parser("corpus", help="generate the training and test kit CSVs")
-    c.add_argument("--out", required=True, metavar="DIR")
-    c.add_argument("--only", nargs="*", default=None, metavar="NAME", help="only these runs")
+    c.add_argument("--out", required=True, metavar="DIR",
+                   help="folder for the kit CSVs (train/, test/, ...) and their truth files")
+    c.add_argument("--only", nargs="*", default=None, metavar="NAME",
+                   help="only these runs (names as in training/vsensor/corpus.py)")
     c.set_defaults(func=_corpus)
     d = sub.add_parser("dataset", help="run the adaptive model with and without vents, cache")
     _data_args(d)
@@ -123,15 +125,20 @@ def overrides(items: list[str]) -> dict[str, dict[str, float]]:
             key, value = item.split("=", 1)
             output, name = key.split(".", 1)
             out.setdefault(output, {})[name] = float(value)
-        except ValueError:
-            raise SystemExit(f"error: --set {item!r}: expected OUTPUT.KEY=NUMBER") from None
+        except ValueError:  # main() prints it as one line, exit status 2
+            raise ValueError(f"--set {item!r}: expected OUTPUT.KEY=NUMBER, e.g. t_in.bats=6") from None
     return out
 
 
 def _corpus(args: argparse.Namespace) -> int:
     from training.vsensor.corpus import FRESH, OTHER, TEST, TRAIN, write_corpus
 
-    runs = tuple(r for r in TRAIN + TEST + FRESH + OTHER if args.only is None or r.name in args.only)
+    every = TRAIN + TEST + FRESH + OTHER
+    unknown = sorted(set(args.only or ()) - {r.name for r in every})
+    if unknown:
+        raise ValueError(f"--only: no run named {', '.join(unknown)} (runs: "
+                         f"{', '.join(r.name for r in every)})")
+    runs = tuple(r for r in every if args.only is None or r.name in args.only)
     t0 = time.perf_counter()
     for path in write_corpus(Path(args.out), runs):
         print(f"wrote {path}")
@@ -182,6 +189,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         return int(args.func(args) or 0)
-    except (GreenhouseError, KitCsvError, ValueError, FileNotFoundError) as exc:
+    except (GreenhouseError, KitCsvError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # a file named on the command line: say which, not Python's repr
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 2

@@ -20,5 +20,5 @@ def shipped_model(kind: str) -> Path:
         raise FileNotFoundError(
             f"no shipped ventilation sensor for the '{kind}' model (shipped: "
             f"{', '.join(shipped) or 'none'}); train one with python -m training.vsensor train "
-            f"(docs/vsensor.md) and pass --model")
+            f"(docs/vsensor.md) and pass its file (--sensor MODEL.onnx)")
     return path

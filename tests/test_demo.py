@@ -30,3 +30,23 @@ def test_demo_help_says_the_length_and_the_change(capsys):
         main(["demo", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert "simulate 6 days" in text and "2009-10-29T10:00Z" in text
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--days", "0"], "must be at least 3"),
+    (["--days", "nan"], "must be at least 3"),
+    (["--days", "two"], "not a number"),
+])
+def test_demo_refuses_a_bad_length(argv, says, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["demo", *argv])
+    assert exc.value.code == 2 and says in capsys.readouterr().err
+
+
+def test_demo_refuses_an_out_that_is_a_file(tmp_path, capsys):
+    f = tmp_path / "file.txt"
+    f.write_text("x")
+    for out in (f, f / "sub"):
+        with pytest.raises(SystemExit) as exc:
+            main(["demo", "--out", str(out)])
+        assert exc.value.code == 2 and "exists and is not a folder" in capsys.readouterr().err

@@ -45,6 +45,33 @@ def _when(days: float) -> str:
     return np.datetime_as_string(effect_start(days), unit="m")
 
 
+MIN_DAYS = 3.0
+"""[d] the first 2 days calibrate; the rest validates and is replayed and diagnosed."""
+
+
+def _days(text: str) -> float:
+    """argparse type of ``--days``: a number of at least ``MIN_DAYS``."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not value >= MIN_DAYS:  # also refuses NaN
+        raise argparse.ArgumentTypeError(f"must be at least {MIN_DAYS:g} (the first 2 days "
+                                         f"calibrate), got {text!r}")
+    return value
+
+
+def _folder(text: str) -> str:
+    """argparse type of ``--out``: a folder, or a path where one can be made."""
+    p = Path(text)
+    for parent in (p, *p.parents):
+        if parent.exists():
+            if not parent.is_dir():
+                raise argparse.ArgumentTypeError(f"{parent} exists and is not a folder")
+            break
+    return text
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "demo",
@@ -54,8 +81,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         f" whitening (transmission × {FACTOR:g}) at {CHANGE_AT:.3f} × the length"
         f" ({_when(DAYS)}Z for {DAYS:g} days), calibrate on the first 2 days, replay, diagnose.",
     )
-    p.add_argument("--out", default="out/demo", metavar="DIR", help="output folder (out/demo)")
-    p.add_argument("--days", type=float, default=DAYS,
+    p.add_argument("--out", type=_folder, default="out/demo", metavar="DIR",
+                   help="output folder, created with its parents (out/demo)")
+    p.add_argument("--days", type=_days, default=DAYS, metavar="D",
                    help=f"days to simulate from {START} ({DAYS:g}); the undeclared whitening "
                    f"(transmission × {FACTOR:g}) starts {CHANGE_AT:.3f} × DAYS after the start "
                    f"({_when(DAYS)}Z for {DAYS:g})")

@@ -85,7 +85,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="output folder, created with its parents (out/demo)")
     p.add_argument("--days", type=_days, default=DAYS, metavar="D",
                    help=f"days to simulate from {START} ({DAYS:g}); the undeclared whitening "
-                   f"(transmission × {FACTOR:g}) starts {CHANGE_AT:.3f} × DAYS after the start "
+                   f"(transmission × {FACTOR:g}) starts {CHANGE_AT:.3f} × D after the start "
                    f"({_when(DAYS)}Z for {DAYS:g})")
     p.add_argument("--seed", type=int, default=1, help="simulator and swarm seed (1)")
     p.set_defaults(func=run)

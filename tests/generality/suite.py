@@ -27,7 +27,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from tests.generality.cases import EXTRA_WINDOWS, MODEL, Case, run  # noqa: E402
-from tests.generality.generators import GENERATORS, KINDS, OUTSIDE  # noqa: E402
+from tests.generality.generators import GENERATORS, HELD_OUT, KINDS, OUTSIDE  # noqa: E402
 from tests.generality.report import MAIN_WINDOWS, markdown, update_docs  # noqa: E402
 
 RESULTS = ROOT / "bench" / "results" / "generality.json"
@@ -78,10 +78,13 @@ def commit_id() -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--jobs", type=int, default=2, help="parallel processes (2)")
-    ap.add_argument("--generators", default=",".join(GENERATORS))
+    ap.add_argument("--generators", default=",".join(GENERATORS), metavar="G,G",
+                    help=f"comma-separated generators ({','.join(GENERATORS)}; "
+                    f"{','.join(sorted(HELD_OUT))} is held out: reported apart)")
     ap.add_argument("--windows", default=",".join(MAIN_WINDOWS),
                     help="main windows (the 8 extra effect-free ones run only with all three)")
-    ap.add_argument("--only", choices=["diagnose", "forecast"])
+    ap.add_argument("--only", choices=["diagnose", "forecast"],
+                    help="run only the diagnosis cases or only the forecast rows (both)")
     ap.add_argument("--kinds", default=",".join(ALL_KINDS), help="changes to diagnose (all)")
     ap.add_argument("--json", default=str(RESULTS), help=f"results file ({RESULTS.relative_to(ROOT)})")
     ap.add_argument("--no-docs", action="store_true", help="do not rewrite docs/effects.md")

@@ -109,7 +109,8 @@ def prepare(cfg: GatewayConfig) -> list[GreenhouseResources]:
         if missing:
             raise ConfigError(f"{where}.model: the '{g.model}' model needs {', '.join(missing)}, "
                               f"which a Serra kit does not measure (kit: {', '.join(KIT_COLUMNS)})")
-        theta0, warnings = None, ()
+        theta0: np.ndarray | None = None
+        warnings: tuple[str, ...] = ()
         if g.params is not None:
             try:
                 theta0 = read_params(g.params, model)

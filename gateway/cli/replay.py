@@ -5,8 +5,6 @@ from __future__ import annotations
 import argparse
 import sys
 
-import numpy as np
-
 from gateway.cli import CliError
 from gateway.cli.common import (
     add_data_arguments,
@@ -20,6 +18,7 @@ from gateway.cli.common import (
 from gateway.estimate.online import online_settings
 from gateway.estimate.outlook import OUTLOOKS, make_outlook
 from gateway.estimate.replay import replay, report, write_predictions
+from gateway.model.params_file import outside_box
 
 _KEYS = ("window", "every", "iterations", "bats", "prior")
 
@@ -86,13 +85,9 @@ def run(args: argparse.Namespace) -> int:
     check_output(args.plot, "--plot", inputs=inputs)
     series, gh, model = load_inputs(args)
     theta0 = read_params_file(args.params, model) if args.params else None
-    if theta0 is not None:
-        lo, hi = model.bounds(gh)
-        for j in np.flatnonzero((theta0 < lo) | (theta0 > hi)):  # the estimator clips them
-            print(f"note: {args.params}: params.{model.names[j]} = {theta0[j]:g} is outside its "
-                  f"hard box [{lo[j]:g}, {hi[j]:g}] (the model's, or the greenhouse's "
-                  f"[parameters] bounds): the estimator, and the 'constant' model, use "
-                  f"{min(max(theta0[j], lo[j]), hi[j]):g}", file=sys.stderr)
+    for o in outside_box(theta0, model, gh) if theta0 is not None else ():
+        uses = "the estimator, and the 'constant' model, use"
+        print(f"note: {o.describe(args.params, uses)}", file=sys.stderr)
     try:
         settings = online_settings(model, gh, _overrides(args.set))
     except ValueError as exc:

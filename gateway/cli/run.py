@@ -66,7 +66,9 @@ def run(args: argparse.Namespace) -> int:
     except ConfigError as e:
         raise CliError(str(e)) from None
     setup_logging(args.log_level or ("debug" if args.verbose else cfg.log_level))
-    if args.check:
+    if args.check:  # the service logs the same warnings once at start (worker.py)
+        for line in (w for r in resources for w in r.warnings):
+            print(f"warning: {line}", file=sys.stderr)
         print(f"{args.config}: ok: farm {cfg.farm}, {len(cfg.greenhouses)} greenhouse(s), "
               f"devices {', '.join(map(str, sorted(cfg.devices())))}")
         return 0

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -89,27 +89,33 @@ class ClockSettings:
     anchor: float | None = None  # wall time [unix s] at which the clock read ``epoch``
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class GatewayConfig:
+    """The whole config. The defaults here are the ones a gateway.toml without the key gets
+    (the parser reads them from these dataclasses: :func:`defaults`)."""
+
     source: str
     farm: str
     db: Path
     keys: Path
-    listen: tuple[str, int] | None
-    serial: str | None
-    baudrate: int
-    retention_days: float
-    history_days: float
-    estimates_days: float
-    max_db_mb: float
-    maintenance_s: float
     greenhouses: tuple[GreenhouseSettings, ...]
-    zenoh: ZenohSettings
-    estimator: EstimatorSettings
-    diagnosis: DiagnosisSettings
-    clock: ClockSettings
+    # [ingest]
+    listen: tuple[str, int] | None = ("0.0.0.0", DEFAULT_PORT)  # None: no UDP
+    serial: str | None = None
+    baudrate: int = 115200
+    retention_days: float = 400.0  # raw records
+    history_days: float = 30.0  # published messages (history queries)
+    estimates_days: float = 400.0
+    max_db_mb: float = 4096.0  # alarm at 80 % of this
+    maintenance_s: float = 10.0
+    zenoh: ZenohSettings = field(default_factory=ZenohSettings)
+    estimator: EstimatorSettings = field(default_factory=EstimatorSettings)
+    diagnosis: DiagnosisSettings = field(default_factory=DiagnosisSettings)
+    clock: ClockSettings = field(default_factory=ClockSettings)
+    # [outbox] max_messages, alarm_fraction
     outbox_max: int = 100_000
     outbox_alarm: float = 0.8
+    # [gateway]
     status_every_s: float = 300.0
     log_level: str = "info"
 
@@ -165,6 +171,18 @@ class _Table:
             self.fail(extra[0], f"unknown key (allowed here: {', '.join(sorted(self.seen))})")
 
 
+def defaults(cls: type) -> dict[str, Any]:
+    """A settings dataclass's defaults by field name (a factory's made afresh): the parsers take
+    a missing key's value from here, so a default is written once, in the dataclass."""
+    out: dict[str, Any] = {}
+    for f in fields(cls):
+        if f.default is not MISSING:
+            out[f.name] = f.default
+        elif f.default_factory is not MISSING:
+            out[f.name] = f.default_factory()
+    return out
+
+
 def _kind_name(kind: type) -> str:
     return {str: "a string", int: "a whole number", float: "a number", bool: "true or false",
             list: "a list", dict: "a table"}.get(kind, kind.__name__)
@@ -175,8 +193,12 @@ def _path(base: Path, text: str) -> Path:
     return p if p.is_absolute() else base / p
 
 
-def _hostport(t: _Table, key: str, default: str) -> tuple[str, int] | None:
-    text = t.get(key, str, default)
+def _hostport(t: _Table, key: str,
+              default: tuple[str, int] | None) -> tuple[str, int] | None:
+    """``HOST:PORT`` (``""``: None, no such transport); ``default`` when the key is absent."""
+    text = t.get(key, str, None)
+    if text is None:
+        return default
     if not text:
         return None
     host, sep, port = text.rpartition(":")
@@ -185,18 +207,18 @@ def _hostport(t: _Table, key: str, default: str) -> tuple[str, int] | None:
     return host.strip("[]") or "0.0.0.0", int(port)
 
 
-def _endpoints(t: _Table, key: str) -> tuple[str, ...]:
-    items = t.get(key, list, [])
+def _endpoints(t: _Table, key: str, default: tuple[str, ...]) -> tuple[str, ...]:
+    items = t.get(key, list, list(default))
     for i, e in enumerate(items):
         if not isinstance(e, str) or not re.match(r"^[a-z0-9]+/.+", e):
             t.fail(f"{key}[{i}]", f"expected a Zenoh endpoint like 'tcp/192.168.1.10:7447', got {e!r}")
     return tuple(items)
 
 
-def _time(t: _Table, key: str) -> float | None:
+def _time(t: _Table, key: str, default: float | None) -> float | None:
     import numpy as np
 
-    v = t.get(key, str, None) if isinstance(t.raw.get(key), str) else t.get(key, float, None)
+    v = t.get(key, str, None) if isinstance(t.raw.get(key), str) else t.get(key, float, default)
     if isinstance(v, str):
         try:
             return float(np.datetime64(v.rstrip("Z"), "s").astype("int64"))
@@ -214,24 +236,25 @@ def load_config(path: str | Path) -> GatewayConfig:
 
 def parse_config(raw: dict[str, Any], source: str = "<config>", base: Path = Path(".")) -> GatewayConfig:
     top = _Table(source, "", raw)
+    d = defaults(GatewayConfig)
     g = top.sub("gateway")
     farm = g.get("farm", str)
     if not NAME.match(farm):
         g.fail("farm", f"{farm!r} is not usable in a Zenoh key (letters, digits, _ . -)")
     db = _path(base, g.get("db", str))
     keys = _path(base, g.get("keys", str))
-    log_level = g.get("log_level", str, "info", choices=("debug", "info", "warning", "error"))
-    status_every = g.get("status_every_s", float, 300.0, lo=1.0)
+    log_level = g.get("log_level", str, d["log_level"], choices=("debug", "info", "warning", "error"))
+    status_every = g.get("status_every_s", float, d["status_every_s"], lo=1.0)
     g.done()
     ing = top.sub("ingest")
-    listen = _hostport(ing, "listen", f"0.0.0.0:{DEFAULT_PORT}")
-    serial = ing.get("serial", str, "") or None
-    baud = ing.get("baudrate", int, 115200, lo=300, hi=4_000_000)
-    retention = ing.get("retention_days", float, 400.0, lo=1.0)
-    history = ing.get("history_days", float, 30.0, lo=0.01)
-    estimates_days = ing.get("estimates_days", float, 400.0, lo=1.0)
-    max_db = ing.get("max_db_mb", float, 4096.0, lo=1.0)
-    maint = ing.get("maintenance_s", float, 10.0, lo=0.05)
+    listen = _hostport(ing, "listen", d["listen"])
+    serial = ing.get("serial", str, d["serial"]) or None  # "" is none too
+    baud = ing.get("baudrate", int, d["baudrate"], lo=300, hi=4_000_000)
+    retention = ing.get("retention_days", float, d["retention_days"], lo=1.0)
+    history = ing.get("history_days", float, d["history_days"], lo=0.01)
+    estimates_days = ing.get("estimates_days", float, d["estimates_days"], lo=1.0)
+    max_db = ing.get("max_db_mb", float, d["max_db_mb"], lo=1.0)
+    maint = ing.get("maintenance_s", float, d["maintenance_s"], lo=0.05)
     ing.done()
     if listen is None and serial is None:
         ing.fail("listen", "no transport: set listen (UDP) or serial")
@@ -241,8 +264,8 @@ def parse_config(raw: dict[str, Any], source: str = "<config>", base: Path = Pat
     loc.done()
     zen = _zenoh(top.sub("zenoh"), base, farm)
     ob = top.sub("outbox")
-    outbox_max = ob.get("max_messages", int, 100_000, lo=10)
-    outbox_alarm = ob.get("alarm_fraction", float, 0.8, lo=0.05, hi=1.0)
+    outbox_max = ob.get("max_messages", int, d["outbox_max"], lo=10)
+    outbox_alarm = ob.get("alarm_fraction", float, d["outbox_alarm"], lo=0.05, hi=1.0)
     ob.done()
     est = _estimator(top.sub("estimator"))
     dia = _diagnosis(top.sub("diagnosis"))
@@ -269,17 +292,18 @@ def parse_config(raw: dict[str, Any], source: str = "<config>", base: Path = Pat
 
 
 def _zenoh(z: _Table, base: Path, farm: str) -> ZenohSettings:
-    retry = Retry(z.get("retry_initial_ms", int, 500, lo=10, hi=3_600_000),
-                  z.get("retry_max_ms", int, 4000, lo=10, hi=3_600_000))
+    d, r = defaults(ZenohSettings), defaults(Retry)
+    retry = Retry(z.get("retry_initial_ms", int, r["initial_ms"], lo=10, hi=3_600_000),
+                  z.get("retry_max_ms", int, r["max_ms"], lo=10, hi=3_600_000))
     s = ZenohSettings(
-        enabled=z.get("enabled", bool, True),
-        mode=z.get("mode", str, "peer", choices=("peer", "client")),
-        connect=_endpoints(z, "connect"),
-        listen=_endpoints(z, "listen"),
-        multicast_scouting=z.get("multicast_scouting", bool, False),
-        cache=z.get("cache", int, 256, lo=1, hi=1_000_000),
-        resend_on_start_s=z.get("resend_on_start_s", float, 5.0, lo=0.0),
-        extra=z.get("config", dict, {}),
+        enabled=z.get("enabled", bool, d["enabled"]),
+        mode=z.get("mode", str, d["mode"], choices=("peer", "client")),
+        connect=_endpoints(z, "connect", d["connect"]),
+        listen=_endpoints(z, "listen", d["listen"]),
+        multicast_scouting=z.get("multicast_scouting", bool, d["multicast_scouting"]),
+        cache=z.get("cache", int, d["cache"], lo=1, hi=1_000_000),
+        resend_on_start_s=z.get("resend_on_start_s", float, d["resend_on_start_s"], lo=0.0),
+        extra=z.get("config", dict, d["extra"]),
         tls=_tls(z, base, farm),
         retry=retry,
     )
@@ -320,31 +344,33 @@ def _tls(z: _Table, base: Path, farm: str) -> TlsFiles | None:
 def _estimator(e: _Table) -> EstimatorSettings:
     from gateway.service.forecaster import KINDS
 
-    horizons = e.get("horizons_min", list, [15, 30, 60])
+    d = defaults(EstimatorSettings)
+    horizons = e.get("horizons_min", list, list(d["horizons_min"]))
     if not horizons or not all(isinstance(h, int) and not isinstance(h, bool) and 1 <= h <= 1440
                                for h in horizons):
         e.fail("horizons_min", f"must be whole minutes in 1..1440, got {horizons!r}")
     e.get("outlook", str, None)  # checked per greenhouse (default: outlook.default_outlook)
     s = EstimatorSettings(
         horizons_min=tuple(sorted(set(horizons))),
-        seed=e.get("seed", int, 0, lo=0),
-        max_wait_s=e.get("max_wait_s", float, 600.0, lo=0.0),
-        settle_s=e.get("settle_s", float, 60.0, lo=0.0),
-        gap_s=e.get("gap_s", float, 300.0, lo=60.0),
-        history_min=e.get("history_min", int, 1440, lo=1, hi=100_000),
-        forecast=e.get("forecast", str, "corrected", choices=KINDS),
+        seed=e.get("seed", int, d["seed"], lo=0),
+        max_wait_s=e.get("max_wait_s", float, d["max_wait_s"], lo=0.0),
+        settle_s=e.get("settle_s", float, d["settle_s"], lo=0.0),
+        gap_s=e.get("gap_s", float, d["gap_s"], lo=60.0),
+        history_min=e.get("history_min", int, d["history_min"], lo=1, hi=100_000),
+        forecast=e.get("forecast", str, d["forecast"], choices=KINDS),
     )
     e.done()
     return s
 
 
 def _diagnosis(d: _Table) -> DiagnosisSettings:
+    f = defaults(DiagnosisSettings)
     s = DiagnosisSettings(
-        enabled=d.get("enabled", bool, True),
-        every_hours=d.get("every_hours", float, 24.0, lo=0.01),
-        days=d.get("days", float, 10.0, lo=0.1),
-        min_days=d.get("min_days", float, 2.0, lo=0.05),
-        timeout_s=d.get("timeout_s", float, 1800.0, lo=1.0),
+        enabled=d.get("enabled", bool, f["enabled"]),
+        every_hours=d.get("every_hours", float, f["every_hours"], lo=0.01),
+        days=d.get("days", float, f["days"], lo=0.1),
+        min_days=d.get("min_days", float, f["min_days"], lo=0.05),
+        timeout_s=d.get("timeout_s", float, f["timeout_s"], lo=1.0),
     )
     d.done()
     if s.min_days > s.days:
@@ -353,8 +379,10 @@ def _diagnosis(d: _Table) -> DiagnosisSettings:
 
 
 def _clock(c: _Table) -> ClockSettings:
-    s = ClockSettings(scale=c.get("scale", float, 1.0, lo=1e-3, hi=1e5),
-                      epoch=_time(c, "epoch"), anchor=c.get("anchor", float, None, lo=0.0))
+    d = defaults(ClockSettings)
+    s = ClockSettings(scale=c.get("scale", float, d["scale"], lo=1e-3, hi=1e5),
+                      epoch=_time(c, "epoch", d["epoch"]),
+                      anchor=c.get("anchor", float, d["anchor"], lo=0.0))
     c.done()
     if s.scale != 1.0 and s.epoch is None:
         c.fail("epoch", "a scaled clock needs the time it starts from (epoch)")

@@ -32,6 +32,7 @@ from gateway.greenhouse import Greenhouse
 from gateway.model.drivers import prepare_drivers
 from gateway.model.model import Model
 from gateway.series import Series
+from gateway.service.config import EstimatorSettings, GreenhouseSettings
 from gateway.service.forecaster import LiveForecaster
 from gateway.service.minutes import KIT_COLUMNS, Minute, final_before, first_minute, read_minutes
 from gateway.store.db import transaction
@@ -69,10 +70,15 @@ class GreenhousePipeline:
     """The estimator of one greenhouse, resumed from (and saved to) the store."""
 
     def __init__(self, name: str, gh: Greenhouse, model: Model, inside: int, outside: int,
-                 theta0: np.ndarray | None, *, horizons: tuple[int, ...] = (15, 30, 60),
-                 outlook: str = "hold-latest", seed: int = 0, gap_s: float = 300.0,
-                 history_min: int = 1440, ventilation: Ventilation | None = None,
-                 forecast: str = "corrected") -> None:
+                 theta0: np.ndarray | None, *,
+                 horizons: tuple[int, ...] = EstimatorSettings.horizons_min,
+                 outlook: str = GreenhouseSettings.outlook, seed: int = EstimatorSettings.seed,
+                 gap_s: float = EstimatorSettings.gap_s,
+                 history_min: int = EstimatorSettings.history_min,
+                 ventilation: Ventilation | None = None,
+                 forecast: str = EstimatorSettings.forecast) -> None:
+        """The keyword defaults are the config's ([estimator] and [[greenhouse]] outlook), read
+        from its dataclasses so that they cannot drift apart."""
         self.name, self.gh, self.model = name, gh, model
         self.inside, self.outside = inside, outside
         self.devices = {inside, outside}

@@ -1,6 +1,8 @@
 """What the config points at, loaded and checked before anything starts: the keys file, each
 greenhouse's description, model, calibrated parameters and (optional) virtual ventilation
-sensor. Every problem is a :class:`ConfigError` naming the config key."""
+sensor. Every problem is a :class:`ConfigError` naming the config key; what the gateway can
+start with but should be told (a starting parameter outside its hard box) is a warning line in
+:attr:`GreenhouseResources.warnings`, which ``run --check`` prints and the service logs once."""
 
 from __future__ import annotations
 
@@ -13,7 +15,7 @@ import numpy as np
 from gateway.greenhouse import Greenhouse, GreenhouseError, Site, load_greenhouse
 from gateway.model import build_model, check_parameters
 from gateway.model.model import Model
-from gateway.model.params_file import ParamsFileError, read_params
+from gateway.model.params_file import ParamsFileError, outside_box, read_params
 from gateway.service.config import ConfigError, GatewayConfig, GreenhouseSettings
 from gateway.service.minutes import KIT_COLUMNS
 from gateway.service.pipeline import Ventilation, VentilationEstimate
@@ -27,6 +29,17 @@ class GreenhouseResources:
     model: Model
     theta0: np.ndarray | None
     ventilation: Ventilation | None
+    warnings: tuple[str, ...] = ()  # one line each, naming the config key: not errors
+
+
+def params_warnings(where: str, g: GreenhouseSettings, theta0: np.ndarray, model: Model,
+                    gh: Greenhouse) -> tuple[str, ...]:
+    """The starting values of ``g.params`` outside their hard box, one line each naming the
+    config key, the greenhouse, the file, the parameter, the box and the value the estimator
+    will use (it clips them). A warning, not an error: a file calibrated before the greenhouse's
+    bounds were narrowed still starts (the value used is inside the box)."""
+    return tuple(f"{where}.params ({g.name}): {o.describe(g.params or '')}"
+                 for o in outside_box(theta0, model, gh))
 
 
 VENT_GAP_S = 90.0
@@ -96,17 +109,19 @@ def prepare(cfg: GatewayConfig) -> list[GreenhouseResources]:
         if missing:
             raise ConfigError(f"{where}.model: the '{g.model}' model needs {', '.join(missing)}, "
                               f"which a Serra kit does not measure (kit: {', '.join(KIT_COLUMNS)})")
-        theta0 = None
+        theta0: np.ndarray | None = None
+        warnings: tuple[str, ...] = ()
         if g.params is not None:
             try:
                 theta0 = read_params(g.params, model)
             except ParamsFileError as e:
                 raise ConfigError(f"{where}.params: {e}") from None
+            warnings = params_warnings(where, g, theta0, model, gh)
         vent = None
         if g.vsensor is not None:
             try:
                 vent = load_ventilation(g.vsensor, model, gh)
             except (ValueError, OSError) as e:
                 raise ConfigError(f"{where}.vsensor: {e}") from None
-        out.append(GreenhouseResources(g, gh, model, theta0, vent))
+        out.append(GreenhouseResources(g, gh, model, theta0, vent, warnings))
     return out

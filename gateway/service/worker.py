@@ -72,6 +72,8 @@ class Worker:
                                    horizons=est.horizons_min, outlook=s.outlook, seed=est.seed,
                                    gap_s=est.gap_s, history_min=est.history_min,
                                    ventilation=r.ventilation, forecast=est.forecast)
+            for line in r.warnings:  # what run --check printed: said once, as the estimator is made
+                log.warning("%s", line)
             log.info(p.resume(conn))
             self.pipelines.append(p)
             lo, hi = r.model.bounds(r.gh)

@@ -59,3 +59,18 @@ def test_a_config_that_is_not_utf8_is_one_line_and_exit_2(tmp_path: Path, comman
                        cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert r.returncode == 2, r.stderr
     assert r.stderr.count("\n") == 1 and "latin1.toml: line 2: not UTF-8 text" in r.stderr, r.stderr
+
+
+def test_a_params_file_lacking_a_key_starts_it_at_the_greenhouses_default(tmp_path: Path) -> None:
+    """Keys a params file lacks start where they would without a file: the greenhouse's cover
+    transmission for c_tsw (0.7 for biskra-prototype), not the model's generic default."""
+    gh = load_greenhouse("biskra-prototype")
+    model = build_model("almeria", gh)
+    p = tmp_path / "p.toml"
+    p.write_text('model = "almeria"\n[params]\nc_asw = 0.5\n')
+    theta = read_params(p, model, gh)
+    assert theta[model.index("c_asw")] == 0.5
+    assert theta[model.index("c_tsw")] == pytest.approx(gh.cover_transmission)
+    assert gh.cover_transmission != model.defaults()[model.index("c_tsw")]  # the case matters
+    others = [j for j, n in enumerate(model.names) if n != "c_asw"]
+    assert list(theta[others]) == list(model.defaults(gh)[others])

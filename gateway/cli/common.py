@@ -200,12 +200,13 @@ def _stamp(text: str) -> np.datetime64:
     return parse_time(text)
 
 
-def read_params_file(path: str, model: Model) -> np.ndarray:
-    """Parameters written by ``calibrate --out`` (TOML ``[params]``), checked against the model."""
+def read_params_file(path: str, model: Model, gh: Greenhouse) -> np.ndarray:
+    """Parameters written by ``calibrate --out`` (TOML ``[params]``), checked against the model;
+    keys the file lacks take the greenhouse's defaults."""
     from gateway.model.params_file import ParamsFileError, read_params
 
     try:
-        return read_params(path, model)
+        return read_params(path, model, gh)
     except ParamsFileError as exc:
         raise CliError(str(exc)) from None
 

@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
     check_output(args.out, "--out", inputs=inputs)
     check_output(args.plot, "--plot", inputs=inputs)
     series, gh, model = load_inputs(args)
-    theta0 = read_params_file(args.params, model) if args.params else None
+    theta0 = read_params_file(args.params, model, gh) if args.params else None
     for o in outside_box(theta0, model, gh) if theta0 is not None else ():
         uses = "the estimator, and the 'constant' model, use"
         print(f"note: {o.describe(args.params, uses)}", file=sys.stderr)

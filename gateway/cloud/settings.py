@@ -94,7 +94,7 @@ def parse_settings(raw: dict[str, Any], source: str, base: Path) -> SubscribeSet
         if farms:
             raise t.fail("access", "and 'farms' both name the farms: give one")
         farms = farms_from_access(access, tls)
-    retry = Retry(_ms(t, "retry_initial_ms", 500), _ms(t, "retry_max_ms", 4000))
+    retry = Retry(_ms(t, "retry_initial_ms", Retry.initial_ms), _ms(t, "retry_max_ms", Retry.max_ms))
     db = t.path("db", base)
     return SubscribeSettings(source, mode, t.strings("connect"), t.strings("listen"),
                              t.strings("keys"), farms, db, t.str("dsn"), t.str("schema", "serra") or "serra",

@@ -17,8 +17,10 @@ class ParamsFileError(ValueError):
     """A parameters file that cannot be used; the message names the file and the key."""
 
 
-def read_params(path: str | Path, model: Model) -> np.ndarray:
-    """The parameter vector of ``model``: its defaults with the file's ``[params]`` on top."""
+def read_params(path: str | Path, model: Model, gh: Greenhouse | None = None) -> np.ndarray:
+    """The parameter vector of ``model``: its defaults for greenhouse ``gh`` (its overrides and
+    cover transmission, ``Model.defaults``) with the file's ``[params]`` on top, so a key the
+    file lacks starts where it would without a file."""
     raw = read_toml(path, ParamsFileError, "parameters file")
     params = raw.get("params")
     if not isinstance(params, dict):
@@ -28,7 +30,7 @@ def read_params(path: str | Path, model: Model) -> np.ndarray:
     unknown = [k for k in params if k not in model.names]
     if unknown:
         raise ParamsFileError(f"{path}: unknown parameter(s) {', '.join(unknown)} for model {model.name}")
-    theta = model.defaults()
+    theta = model.defaults(gh)
     for k, v in params.items():
         if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
             raise ParamsFileError(f"{path}: params.{k} must be a finite number")

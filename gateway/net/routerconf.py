@@ -83,7 +83,7 @@ def parse_router_config(raw: dict[str, Any], source: str, base: Path) -> RouterS
     level = r.str("log", "warn") or "warn"
     if level not in LOG_LEVELS:
         raise r.fail("log", f"= {level!r}: expected one of {', '.join(LOG_LEVELS)}")
-    retry = Retry(_ms(r, "retry_initial_ms", 500), _ms(r, "retry_max_ms", 4000))
+    retry = Retry(_ms(r, "retry_initial_ms", Retry.initial_ms), _ms(r, "retry_max_ms", Retry.max_ms))
     if retry.max_ms < retry.initial_ms:
         raise r.fail("retry_max_ms", "must not be below retry_initial_ms")
     tls = parse_tls(top.table("tls"), base)

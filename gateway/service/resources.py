@@ -113,7 +113,7 @@ def prepare(cfg: GatewayConfig) -> list[GreenhouseResources]:
         warnings: tuple[str, ...] = ()
         if g.params is not None:
             try:
-                theta0 = read_params(g.params, model)
+                theta0 = read_params(g.params, model, gh)
             except ParamsFileError as e:
                 raise ConfigError(f"{where}.params: {e}") from None
             warnings = params_warnings(where, g, theta0, model, gh)

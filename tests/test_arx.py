@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gateway.estimate.arx import FORGETTING, REGRESSORS, Rls, fit, regressors
+from gateway.estimate.arx import FORGETTING, REGRESSORS, ArxResult, Rls, exchange, fit, regressors
 from gateway.model.drivers import prepare_drivers
 from gateway.series import Series
 
@@ -81,6 +81,67 @@ def test_forecast_is_a_vectorised_recursion():
     rows = np.array([0, 13, 26])
     block = {k: np.concatenate([v[s:s + h + 1] for s in starts]) for k, v in x.items()}
     np.testing.assert_allclose(res.forecast(block, starts, h, rows), got, atol=1e-12)
+
+
+def _unguarded(x: dict[str, np.ndarray], theta: np.ndarray, h: int) -> np.ndarray:
+    """T_in[h] from T_in[0] by the plain recursion T + θ · φ(T), one θ per row of ``theta``."""
+    t = np.full(len(theta), x["t_in"][0])
+    for k in range(h):
+        t = t + np.einsum("nj,nj->n", regressors(x, t, k), theta)
+    return t
+
+
+def test_forecast_guard_keeps_the_coefficient_on_t_in_physical():
+    """The recursion's multiplier on T_in is 1 − c, c = θ₂ + θ₃ u + θ₄. Poorly excited RLS
+    parameters can leave 0 ≤ c ≤ 1; the plain 60-step recursion then amplifies (c < 0) or
+    oscillates with growing amplitude (c > 1). The forecast clips c to [0, 1] about the start's
+    temperature: the same numbers where c is in range, bounded where not."""
+    h = 60
+    x = {"t_out": np.full(h + 1, 10.0), "t_sky": np.full(h + 1, -5.0),
+         "i_glob": np.full(h + 1, 300.0), "wind": np.full(h + 1, 2.0),
+         "t_in": np.full(h + 1, 20.0)}
+    theta = np.array([
+        [4e-4, 0.02, 0.005, 0.01, 0.01],   # c = 0.04: stable, in range
+        [4e-4, -0.30, 0.0, 0.01, 0.0],     # c = -0.29: multiplier 1.29, amplifies
+        [4e-4, 2.0, 0.0, 0.5, 0.0],        # c = 2.5: multiplier -1.5, oscillates and grows
+        [0.0, 1.0, 0.0, 0.0, 0.0],         # c = 1: the edge, in range (lands on T_out)
+        [0.0, 0.0, 0.0, 0.0, 0.0],         # c = 0: the other edge, in range (no exchange)
+    ])
+    c = exchange(theta, 2.0)
+    np.testing.assert_allclose(c, [0.04, -0.29, 2.5, 1.0, 0.0])
+    res = ArxResult(theta=theta, one_step=np.zeros(0), updates=1)
+    starts = np.arange(len(theta))
+    rows = np.zeros(len(theta), dtype=int)
+    plain = _unguarded(x, theta, h)
+    got = res.forecast(x, starts, h, rows)
+    assert np.all(np.abs(plain[1:3] - 20.0) > 1e5)  # the unguarded recursion runs away
+    inside = np.array([True, False, False, True, True])
+    np.testing.assert_array_equal(got[inside], plain[inside])  # the same numbers, bit for bit
+    # outside the range, the fitted step at the start's 20 °C and c* = 0 or 1 about it:
+    step0 = np.einsum("nj,nj->n", regressors(x, x["t_in"][rows], 0), theta)
+    assert got[1] == pytest.approx(20.0 + h * step0[1])  # c* = 0: the start's step, every step
+    assert got[2] == pytest.approx(20.0 + step0[2])  # c* = 1: each step from the start's point
+    # the first step is the fitted one-step prediction, guarded or not
+    np.testing.assert_array_equal(res.forecast(x, starts, 1, rows), _unguarded(x, theta, 1))
+    assert np.all(np.abs(got - 20.0) < 200.0)
+
+
+def test_forecast_guard_is_per_step_with_the_wind():
+    """c depends on the wind of each step: a θ₃ < 0 that is harmless in a breeze (c > 0) turns
+    the exchange around in a gale; only those steps are clipped."""
+    h = 30
+    wind = np.where(np.arange(h + 1) < 10, 1.0, 12.0)
+    x = {"t_out": np.full(h + 1, 5.0), "t_sky": np.full(h + 1, -10.0),
+         "i_glob": np.zeros(h + 1), "wind": wind, "t_in": np.full(h + 1, 18.0)}
+    theta = np.array([[0.0, 0.05, -0.01, 0.02, 0.0]])  # c = 0.06 at 1 m/s, -0.05 at 12 m/s
+    res = ArxResult(theta=theta, one_step=np.zeros(0), updates=1)
+    np.testing.assert_array_equal(res.forecast(x, np.array([0]), 10, np.array([0])),
+                                  _unguarded(x, theta, 10))
+    plain, got = _unguarded(x, theta, h), res.forecast(x, np.array([0]), h, np.array([0]))
+    t10 = float(_unguarded(x, theta, 10)[0])
+    step = float((regressors(x, np.array([18.0]), 10) @ theta[0])[0])  # the fitted step at 18 °C
+    assert got[0] == pytest.approx(t10 + (h - 10) * step)  # c* = 0 from step 10 on
+    assert got[0] != plain[0]
 
 
 def _one_minute_greenhouse(weather: dict[str, np.ndarray], gh, days: int = 5) -> dict[str, np.ndarray]:

@@ -63,15 +63,46 @@ class ArxResult:
                  rows: np.ndarray | None = None) -> np.ndarray:
         """T_in[start + horizon] from the measured T_in[start] with the parameters in force at
         each start and the drivers of ``x`` from row ``rows`` on (default: the starts; driver
-        blocks of gateway/estimate/horizon.py have rows of their own), vectorised over starts."""
+        blocks of gateway/estimate/horizon.py have rows of their own), vectorised over starts;
+        each step is ``forecast_step`` (the coefficient on T_in held in its physical range)."""
         starts = np.asarray(starts, dtype=int)
         rows = starts if rows is None else np.asarray(rows, dtype=int)
         theta = self.theta[starts]
-        state = np.asarray(x["t_in"], dtype=float)[rows]
+        start = np.asarray(x["t_in"], dtype=float)[rows]
+        state = start
         for k in range(horizon):
-            phi = regressors(x, state, rows + k)
-            state = state + np.einsum("nj,nj->n", phi, theta)
+            state = forecast_step(x, state, start, theta, rows + k)
         return state
+
+
+def exchange(theta: np.ndarray, wind: np.ndarray) -> np.ndarray:
+    """c = θ₂ + θ₃ u + θ₄: the step's coefficient on −T_in (the exchange with the outside air and
+    the sky per step; the recursion's multiplier on T_in is 1 − c)."""
+    return theta[..., 1] + theta[..., 2] * wind + theta[..., 3]
+
+
+def forecast_step(x: Mapping[str, np.ndarray], state: np.ndarray, start: np.ndarray,
+                  theta: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """One step of the forecast recursion from ``state`` with the drivers of row ``t``; ``start``
+    is the measured T_in the forecast started from.
+
+    The fitted step is kept at the start's temperature, where the fit has its data; how the step
+    changes as the forecast moves away from it follows the coefficient on T_in clipped to the
+    physical range, c* = min(max(c, 0), 1):
+
+        T[k+1] = T[k] + θ · φ(T_start)[k] − c*[k] (T[k] − T_start),
+
+    heat flows from warm to cold (c ≥ 0: a warmer inside gains less) and a step cannot overshoot
+    its equilibrium (c ≤ 1). Where 0 ≤ c ≤ 1 this is the unguarded recursion T + θ · φ(T)
+    exactly (θ · φ is linear in T with slope −c); outside, the unguarded one amplifies
+    (1 − c > 1) or oscillates (1 − c < 0) and a 60-step forecast of poorly excited parameters
+    runs away (docs/online-estimator.md, "The ARX baseline on 1-minute data"). The RLS fit is
+    not touched, and the first step (the one-step prediction) is the unguarded one.
+    """
+    c = exchange(theta, x["wind"][t])
+    clipped = np.clip(c, 0.0, 1.0)
+    step = np.einsum("nj,nj->n", regressors(x, state, t), theta)
+    return state + step + (c - clipped) * (state - start)
 
 
 class Rls:

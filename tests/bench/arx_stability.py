@@ -7,7 +7,9 @@ P kept symmetric), and the symmetric one with the forgetting defined per unit ti
 after the first day: the condition number and smallest eigenvalue of P, the sample where P
 first had a negative eigenvalue, the implied state multiplier of the forecast recursion
 1 − θ₂ − θ₃ u − θ₄ (|·| > 1: the recursion amplifies), and the 15/30/60-min forecast MAE beside
-persistence (docs/online-estimator.md, "The ARX baseline on 1-minute data").
+persistence, with the forecast's guard (``arx.forecast_step``: the coefficient on T_in held in
+[0, 1]) and without it, the plain recursion T + θ · φ(T) (docs/online-estimator.md, "The ARX
+baseline on 1-minute data").
 
     .venv/bin/python tests/bench/arx_stability.py --data almeria_spring.csv \\
         --greenhouse almeria-palmerillas [--step 60]
@@ -63,6 +65,14 @@ def run(x: dict, lam: float, symmetric: bool, every: int = 10) -> dict:
             "skew": np.array(skew), "first_negative": first_negative}
 
 
+def plain(x: dict, theta: np.ndarray, starts: np.ndarray, h: int) -> np.ndarray:
+    """The unguarded recursion T[k+1] = T[k] + θ · φ(T[k]) (the forecast before the guard)."""
+    t = x["t_in"][starts]
+    for k in range(h):
+        t = t + np.einsum("nj,nj->n", arx.regressors(x, t, starts + k), theta[starts])
+    return t
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", required=True, help="kit CSV")
@@ -96,8 +106,10 @@ def main(argv: list[str] | None = None) -> int:
             starts = np.arange(day, n - h)
             truth = x["t_in"][starts + h]
             err = np.abs(res.forecast(x, starts, h) - truth)
+            unguarded = np.abs(plain(x, th, starts, h) - truth)
             pers = np.abs(x["t_in"][starts] - truth)
-            print(f"  {minutes} min: MAE {np.nanmean(err):.4g} (max {np.nanmax(err):.3g}), "
+            print(f"  {minutes} min: MAE {np.nanmean(err):.4g} (max {np.nanmax(err):.3g}); "
+                  f"unguarded {np.nanmean(unguarded):.4g} (max {np.nanmax(unguarded):.3g}); "
                   f"persistence {np.nanmean(pers):.3f}")
     return 0
 

@@ -319,9 +319,17 @@ key = "{tls.key}"
                           sorted(bad), len(last))
 
     def subscriber_stats(self) -> dict[str, float]:
-        """The subscriber's last stats line (printed every 10 s and at exit)."""
+        """The subscriber's last stats line (printed every 10 s and at exit: ``subscribe: stored
+        3, not messages 0, …, storing 0.1 s``), keyed as SubscribeStats' fields (``stored``,
+        ``not_messages``; the time spent storing as ``storing``)."""
         assert self.subscriber is not None
-        found = re.findall(r"SubscribeStats\(([^)]*)\)", self.subscriber.text())
-        if not found:
+        lines = re.findall(r"^subscribe(?: stopped)?: (.*)$", self.subscriber.text(), re.M)
+        if not lines:
             return {}
-        return {k: float(v) for k, v in re.findall(r"(\w+)=([\d.]+)", found[-1])}
+        out = {}
+        for item in lines[-1].split(";")[0].split(", "):
+            m = re.fullmatch(r"([a-z ]+) ([\d.]+)(?: s)?", item.strip())
+            if m:
+                name = m.group(1)
+                out["store_s" if name == "storing" else name.replace(" ", "_")] = float(m.group(2))
+        return out

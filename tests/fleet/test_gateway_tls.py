@@ -141,4 +141,4 @@ def test_a_tls_client_gateway_waits_for_its_router_then_reaches_the_postgres_sto
     assert "cannot open the session (Unable to connect to any of [tls/127.0.0.1:" in log
     assert "session open after" in log
     assert "Traceback" not in log
-    assert "messages stored" in sub.text()
+    assert "messages in the store" in sub.text()

@@ -15,21 +15,21 @@ def test_demo_runs_the_whole_loop(tmp_path, capsys):
         assert (tmp_path / name).stat().st_size > 0
 
 
-def test_the_whitening_follows_the_length():
-    """The undeclared change sits at 10:00 on day 4 of the default 6 (day 3.42) and follows --days."""
+def test_the_change_follows_the_length():
+    """The undeclared heater starts at 41/72 of the length: 16:40 on day 6 of the default 10."""
     from training.demo import DAYS, effect_spec
 
-    assert DAYS == 6
-    assert effect_spec(10) == "cover_transmission@2009-10-31T16:40:factor=0.5"
-    assert effect_spec(6) == "cover_transmission@2009-10-29T10:00:factor=0.5"  # 3.42 d
-    assert effect_spec(3) == "cover_transmission@2009-10-27T17:00:factor=0.5"  # 1.71 d
+    assert DAYS == 10
+    assert effect_spec(10) == "heater@2009-10-31T16:40:power=25"  # 5.69 d
+    assert effect_spec(6) == "heater@2009-10-29T10:00:power=25"  # 3.42 d
+    assert effect_spec(3) == "heater@2009-10-27T17:00:power=25"  # 1.71 d
 
 
 def test_demo_help_says_the_length_and_the_change(capsys):
     with pytest.raises(SystemExit):
         main(["demo", "--help"])
     text = " ".join(capsys.readouterr().out.split())
-    assert "simulate 6 days" in text and "2009-10-29T10:00Z" in text
+    assert "simulate 10 days" in text and "2009-10-31T16:40Z" in text and "heater" in text
 
 
 @pytest.mark.parametrize("argv, says", [

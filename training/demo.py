@@ -1,9 +1,12 @@
 """``python -m training demo`` (``make demo``): the offline loop on shipped data.
 
-1. The reference simulator (training/simulate) grows 6 days (``--days``) of an Almería-type
+1. The reference simulator (training/simulate) grows 10 days (``--days``) of an Almería-type
    greenhouse on the shipped Bleiswijk weather from 2009-10-26, with an effect nobody declares:
-   the cover is whitened (transmission × 0.5) at 41/72 of the length after the start (day 3.42
-   of 6, 2009-10-29T10:00Z, where it has always been; day 5.69 of ``--days 10``).
+   a 25 W m-2 heater switched on at 41/72 of the length after the start (day 5.69 of 10,
+   2009-10-31T16:40Z). Ten days because the diagnosis judges a change on the held-out days after
+   it (at least 3, power from 4-5) and holds out the second half; a heater because a cover
+   whitening, the demo's change until 2026-11-27, is regulated away by the house's measured vent
+   controller (README, "make demo").
 2. ``calibrate`` fits the almeria model on the first 2 days (RSBA, thesis settings).
 3. ``replay`` runs the online estimator over the whole run as the live gateway would, beside the
    constant-parameter model and persistence, and plots it.
@@ -24,21 +27,21 @@ from pathlib import Path
 import numpy as np
 
 START = "2009-10-26"  # simulator start, 00:00 UTC
-DAYS = 6.0  # 10 (the live [diagnosis] default) names no more: README, "make demo"
-CHANGE_AT = 41 / 72  # whitening start as a fraction of the length: 10:00 on day 4 of the 6
-FACTOR = 0.5  # cover transmission × this from the start on
+DAYS = 10.0  # the live [diagnosis] default: 5 held-out days, 4.3 of them after the change
+CHANGE_AT = 41 / 72  # the change's start as a fraction of the length (16:40 on day 6 of 10)
+POWER = 25.0  # [W m-2 floor] the undeclared heater (the generality suite's size)
 
 
 def effect_start(days: float) -> np.datetime64:
-    """When the whitening starts in a ``days``-long run: ``CHANGE_AT`` × ``days`` after
-    ``START`` (UTC), rounded to the minute (6 d → 2009-10-29T10:00)."""
+    """When the heater starts in a ``days``-long run: ``CHANGE_AT`` × ``days`` after
+    ``START`` (UTC), rounded to the minute (10 d → 2009-10-31T16:40)."""
     return np.datetime64(START, "m") + np.timedelta64(round(CHANGE_AT * days * 1440.0), "m")
 
 
 def effect_spec(days: float) -> str:
     """The undeclared effect's simulator spec for a ``days``-long run
-    (6 d → ``cover_transmission@2009-10-29T10:00:factor=0.5``)."""
-    return f"cover_transmission@{_when(days)}:factor={FACTOR:g}"
+    (10 d → ``heater@2009-10-31T16:40:power=25``)."""
+    return f"heater@{_when(days)}:power={POWER:g}"
 
 
 def _when(days: float) -> str:
@@ -77,15 +80,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "demo",
         help="end-to-end offline run on shipped data: simulate → calibrate → replay → diagnose",
         description=__doc__.split("\n\n")[0].replace("``", "")
-        + f" Steps: simulate {DAYS:g} days (--days) from {START} with an undeclared cover"
-        f" whitening (transmission × {FACTOR:g}) at {CHANGE_AT:.3f} × the length"
+        + f" Steps: simulate {DAYS:g} days (--days) from {START} with an undeclared"
+        f" {POWER:g} W m-2 heater from {CHANGE_AT:.3f} × the length on"
         f" ({_when(DAYS)}Z for {DAYS:g} days), calibrate on the first 2 days, replay, diagnose.",
     )
     p.add_argument("--out", type=_folder, default="out/demo", metavar="DIR",
                    help="output folder, created with its parents (out/demo)")
     p.add_argument("--days", type=_days, default=DAYS, metavar="D",
-                   help=f"days to simulate from {START} ({DAYS:g}); the undeclared whitening "
-                   f"(transmission × {FACTOR:g}) starts {CHANGE_AT:.3f} × D after the start "
+                   help=f"days to simulate from {START} ({DAYS:g}); the undeclared heater "
+                   f"({POWER:g} W m-2) starts {CHANGE_AT:.3f} × D after the start "
                    f"({_when(DAYS)}Z for {DAYS:g})")
     p.add_argument("--seed", type=int, default=1, help="simulator and swarm seed (1)")
     p.set_defaults(func=run)

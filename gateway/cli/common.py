@@ -43,7 +43,7 @@ def add_data_arguments(p: argparse.ArgumentParser) -> None:
         help=f"greenhouse description: a preset ({', '.join(list_presets())}) or a TOML file",
     )
     p.add_argument("--model", required=True, choices=MODEL_NAMES, help="climate model")
-    p.add_argument("--step", type=_positive, default=60.0, metavar="S", help="model step [s] (60)")
+    p.add_argument("--step", type=positive_number, default=60.0, metavar="S", help="model step [s] (60)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     add_site_argument(p)
 
@@ -72,8 +72,9 @@ def with_site(gh: Greenhouse, site: tuple[float, float] | None, greenhouse: str)
     return gh
 
 
-def _positive(text: str) -> float:
-    """argparse type: a finite number > 0 (a zero or negative step would be a traceback later)."""
+def positive_number(text: str) -> float:
+    """argparse type: a finite number > 0 (a zero or negative step or length would be a
+    traceback later)."""
     try:
         value = float(text)
     except ValueError:

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from gateway.cli.common import positive_number
 from training.simulate.effects import EffectSpecError, describe_effects, parse_effect
 from training.simulate.plant import PRESETS
 from training.simulate.weather import DEFAULT_START, WEATHER_SOURCES, parse_start
@@ -53,9 +53,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         "synthetic seeded days (default: bleiswijk)")
     parser.add_argument("--start", default=None, metavar="YYYY-MM-DD[THH:MM]",
                         help="first sample, UTC (default per weather, below)")
-    parser.add_argument("--days", type=_positive, default=14.0, metavar="D",
+    parser.add_argument("--days", type=positive_number, default=14.0, metavar="D",
                         help="length [d] (default: 14)")
-    parser.add_argument("--step", type=_positive, default=60.0, metavar="S",
+    parser.add_argument("--step", type=positive_number, default=60.0, metavar="S",
                         help="output step [s] (default: 60)")
     parser.add_argument("--effect", action="append", default=[], metavar="SPEC",
                         help="inject an effect (repeatable), see below")
@@ -65,17 +65,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help="path of the kit CSV to write (its folder is created)")
     parser.set_defaults(func=run)
     return parser
-
-
-def _positive(text: str) -> float:
-    """argparse type: a finite number > 0 (a zero step divided by zero, a traceback)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
-    return value
 
 
 def run(args: argparse.Namespace) -> int:

@@ -38,7 +38,8 @@ NIGHT_SKY_IN_BASE = False
 kit's carried night cloud relaxes to replaced by a site-level cloud fraction fitted with the
 base on the calibration part. Off: on the tuning generators it cut the mean effect-free base
 error (refsim 0.856 → 0.742, twonode 0.668 → 0.549 K) but made two suite verdicts worse and
-one better, at × 1.57 CPU (× 1.31 since the sky is computed once per shooting call)
+one better, at × 1.57 CPU (× 1.31 since the sky is computed once per shooting call); again
+under the day-test judge (2026-11-27): no effect kind gained a pass, one verdict worse
 (docs/effects.md, "Base structure"); the part stays available."""
 OFFER_NIGHT_SKY = False
 """Whether ``options`` offers the night sky level as an optional part instead (tried after the

@@ -14,15 +14,13 @@ import pytest
 
 from gateway.net.zenohcfg import Retry
 from gateway.service import config as config_module
-from gateway.service.config import (
+from gateway.service.config import defaults, load_config, parse_config
+from gateway.service.settings import (
     ClockSettings,
     DiagnosisSettings,
     EstimatorSettings,
     GatewayConfig,
     ZenohSettings,
-    defaults,
-    load_config,
-    parse_config,
 )
 from tests.test_gateway_config import GOOD, with_
 

@@ -26,9 +26,9 @@ from typing import Any
 import numpy as np
 
 from gateway.kitcsv import write_kit_csv
-from gateway.service.config import GatewayConfig
 from gateway.service.minutes import KIT_COLUMNS, read_minutes
 from gateway.service.resources import GreenhouseResources
+from gateway.service.settings import GatewayConfig
 from gateway.store.db import open_db, transaction
 
 log = logging.getLogger("serra.gateway")

@@ -32,9 +32,9 @@ from gateway.greenhouse import Greenhouse
 from gateway.model.drivers import prepare_drivers
 from gateway.model.model import Model
 from gateway.series import Series
-from gateway.service.config import EstimatorSettings, GreenhouseSettings
 from gateway.service.forecaster import LiveForecaster
 from gateway.service.minutes import KIT_COLUMNS, Minute, final_before, first_minute, read_minutes
+from gateway.service.settings import EstimatorSettings, GreenhouseSettings
 from gateway.store.db import transaction
 from gateway.store.live import EstimateRow, add_estimates, load_state, save_state
 

@@ -16,9 +16,10 @@ from gateway.greenhouse import Greenhouse, GreenhouseError, Site, load_greenhous
 from gateway.model import build_model, check_parameters
 from gateway.model.model import Model
 from gateway.model.params_file import ParamsFileError, outside_box, read_params
-from gateway.service.config import ConfigError, GatewayConfig, GreenhouseSettings
+from gateway.service.config import ConfigError
 from gateway.service.minutes import KIT_COLUMNS
 from gateway.service.pipeline import Ventilation, VentilationEstimate
+from gateway.service.settings import GatewayConfig, GreenhouseSettings
 from gateway.store.keys import KeyFileError, load_keys
 
 

@@ -18,9 +18,9 @@ from typing import Any
 
 from gateway.ingest.service import IngestConfig, ListenError, Running, serve
 from gateway.service.clock import Clock, make_clock
-from gateway.service.config import GatewayConfig
 from gateway.service.diagnosis import DiagnosisScheduler
 from gateway.service.resources import GreenhouseResources
+from gateway.service.settings import GatewayConfig
 from gateway.service.worker import Worker
 from gateway.store import Store, retention
 from gateway.store.live import save_greenhouses

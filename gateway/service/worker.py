@@ -15,10 +15,10 @@ from typing import Any
 
 from gateway.publish.payloads import Place
 from gateway.service.clock import Clock
-from gateway.service.config import GatewayConfig
 from gateway.service.pipeline import GreenhousePipeline
 from gateway.service.producers import GreenhouseInfo, Producers
 from gateway.service.resources import GreenhouseResources
+from gateway.service.settings import GatewayConfig
 from gateway.store.aggregate import aggregate
 from gateway.store.db import open_db
 from gateway.store.live import outbox_backlog, set_status

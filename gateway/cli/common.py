@@ -60,16 +60,17 @@ def add_site_argument(p: argparse.ArgumentParser) -> None:
     )
 
 
-def with_site(gh: Greenhouse, site: tuple[float, float] | None, greenhouse: str) -> Greenhouse:
-    """The greenhouse with ``--site`` applied; without a site at all, the note of what the sky
-    temperature then rests on (stderr)."""
-    if site is not None:
-        gh = replace(gh, site=Site(*site))
+def with_site(gh: Greenhouse, site: tuple[float, float] | None) -> Greenhouse:
+    """The greenhouse with ``--site LAT,LON`` applied (unchanged without one)."""
+    return gh if site is None else replace(gh, site=Site(*site))
+
+
+def site_note(gh: Greenhouse, greenhouse: str) -> None:
+    """Without a site at all, the note of what the sky temperature then rests on (stderr)."""
     if gh.site is None:
         print(f"note: {greenhouse} gives no [site] and no --site was given: the cloudiness "
               f"cannot be read from the radiation, so the sky temperature takes a cloud fraction "
               f"of {DEFAULT_CLOUD:g} and the outside humidity only", file=sys.stderr)
-    return gh
 
 
 def positive_number(text: str) -> float:
@@ -110,9 +111,7 @@ def positive_int(text: str) -> int:
 def load_inputs(args: argparse.Namespace) -> tuple[Series, Greenhouse, Model]:
     """Greenhouse, model and resampled data, with errors turned into one clear line."""
     try:
-        gh = load_greenhouse(args.greenhouse)
-        if getattr(args, "site", None) is not None:
-            gh = replace(gh, site=Site(*args.site))
+        gh = with_site(load_greenhouse(args.greenhouse), getattr(args, "site", None))
         model = build_model(args.model, gh)
         check_parameters(model, gh)
     except GreenhouseError as exc:
@@ -140,7 +139,7 @@ def load_inputs(args: argparse.Namespace) -> tuple[Series, Greenhouse, Model]:
     note = gap_note(series, model.requires)
     if note:
         print(f"note: {args.data}: {note}", file=sys.stderr)
-    with_site(gh, None, args.greenhouse)  # the note, when there is no site at all
+    site_note(gh, args.greenhouse)
     return series, gh, model
 
 

@@ -6,7 +6,15 @@ import argparse
 import sys
 
 from gateway.cli import CliError
-from gateway.cli.common import add_site_argument, check_output, dump_json, progress_bar, with_site, writing
+from gateway.cli.common import (
+    add_site_argument,
+    check_output,
+    dump_json,
+    progress_bar,
+    site_note,
+    with_site,
+    writing,
+)
 from gateway.greenhouse import GreenhouseError, list_presets, load_greenhouse
 from gateway.kitcsv import KitCsvError
 from gateway.model import MODEL_NAMES, build_model
@@ -57,7 +65,8 @@ def run(args: argparse.Namespace) -> int:
                                             "--sensor": args.sensor})
     try:
         gh = load_greenhouse(args.greenhouse)
-        gh = with_site(gh, args.site, args.greenhouse)
+        gh = with_site(gh, args.site)
+        site_note(gh, args.greenhouse)
         model = build_model(args.model_kind, gh)
     except GreenhouseError as exc:
         raise CliError(str(exc)) from None

@@ -194,3 +194,37 @@ def test_structure_detail_lists_every_part():
     assert structure_detail(vented) == "effective heat capacity m_cap, vent controller (c_vc, t_vc)"
     assert structure_detail(m.with_night_sky()) == (
         "effective heat capacity m_cap, night sky level c_sky_night")
+
+
+def test_almeria_base_is_scale_free_so_a_heat_source_is_in_its_capacity_scale():
+    """Every flux coefficient of the structured Almería base is free and enters its balance
+    linearly, as m_cap does the capacity: all of them × λ is the same model, and a heat source
+    of λ P then runs exactly as P did. Temperatures cannot tell the scale (the box pins it), so
+    a fitted p_heat is in the scale of the fitted capacity m_cap × C_ter: `make demo`'s 9.85
+    W m-2 for a simulated 25 into an air node of 2.42 C_ter (README; docs/effects.md, "What a
+    flux amplitude's W m-2 are"; the study ``python -m training.demo_heater`` scales this list).
+    """
+    from training.demo_heater import SCALED as SCALE_FREE
+
+    gh = load_greenhouse("almeria-palmerillas")
+    m0 = structure(build_model("almeria", gh), gh, store=False)
+    assert set(m0.names) - set(SCALE_FREE) == {"c_tsw", "c_ven_w"}  # inside the square roots
+    s = sine_series()
+    day = np.arange(len(s)) % 1440 / 1440
+    sun = s.columns["i_glob"] > 300.0
+    s.columns.update(t_soil=12 + 3 * np.sin(2 * np.pi * (day - 0.4)),
+                     vent_roof=np.where(sun, 30.0, 0.0), vent_side=np.where(sun, 20.0, 0.0))
+    x = drivers(s, gh)
+    e = EFFECTS["heat_source"]
+    m = compose(m0, [e], gh, x["_index"][-1])
+    th = m.defaults(gh)
+    th[m.index("p_heat")], th[m.index("tau_heat_source")] = 25.0, 1500 * 60.0
+    run = m.free_run(th[None], x, gh, 60.0)[0]
+    scaled = th.copy()
+    for name in (*SCALE_FREE, "p_heat"):
+        scaled[m.index(name)] *= 2.42
+    np.testing.assert_allclose(m.free_run(scaled[None], x, gh, 60.0)[0], run, atol=1e-9)
+    scaled[m.index("p_heat")] = 25.0  # the same W m-2 on the scaled base warms the air less
+    cooler = m.free_run(scaled[None], x, gh, 60.0)[0]
+    np.testing.assert_allclose(cooler[:1501], run[:1501], atol=1e-9)
+    assert np.mean(run[1501:] - cooler[1501:]) > 0.3

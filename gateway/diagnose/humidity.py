@@ -49,7 +49,10 @@ from gateway.model.terms import SUN_THRESHOLD
 
 DRIFT_EVIDENCE = False
 """Whether ``sensor_drift`` is also judged on the night vapour balance (``DriftEvidence``); read
-at call time. (Measured: docs/effects.md, "The drift's start on the humidity".)"""
+at call time. Off: on the six dev drift cases it moved no start by more than 1 h (1 of 6 within
+12 h either way; the rule written first asked for 2 more), the balance seeing the drift but
+hardly its start (docs/effects.md, "The drift's start on the humidity";
+tests/generality/drift_humidity.py)."""
 
 MIN_HOURS = 6
 """Night hours needed on each side of τ for the humidity evidence to count."""

@@ -29,7 +29,7 @@ import numpy as np
 
 from gateway.diagnose.evidence import NONE, Evidence
 from gateway.diagnose.heat_store import AddedStore
-from gateway.diagnose.humidity import HumidityEvidence
+from gateway.diagnose.humidity import DriftEvidence, HumidityEvidence
 from gateway.diagnose.radiation import RadiationEvidence
 from gateway.diagnose.structure import (
     INDEX,
@@ -239,7 +239,7 @@ LIBRARY: tuple[Effect, ...] = (
            "drifting inside temperature sensor (ageing, contamination)",
            "residual growing linearly with time",
            "a_drift", "K d-1", -3.0, 3.0, 0.0, lambda a: f"sensor drifts {a:+.3g} K per day",
-           _drift, from_start=False),
+           _drift, from_start=False, evidence=DriftEvidence()),
 )
 HEAT_STORE = Effect(
     "heat_store_added", "store",

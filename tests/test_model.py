@@ -208,3 +208,15 @@ def test_each_terms_slope_is_minus_the_derivative_of_its_flux(which, request):
         g0, s0 = term.coefficients(p, x, state, t)
         np.testing.assert_allclose(g, np.broadcast_to(g0, state.shape), rtol=1e-12)
         np.testing.assert_allclose(s, np.broadcast_to(s0, state.shape), rtol=1e-12)
+
+
+@pytest.mark.parametrize("which", ["almeria", "prototype", "prototype_vc"])
+def test_a_model_pickles_and_runs_the_same_after(which, request):
+    """The studies and the suite hand models (and replay results holding them) to process
+    pools: the terms' activity conditions must not be lambdas."""
+    import pickle
+
+    model, x, gh = request.getfixturevalue(which)
+    theta = random_population(model, gh, 3)
+    back = pickle.loads(pickle.dumps(model))
+    np.testing.assert_array_equal(back.free_run(theta, x, gh, 60.0), model.free_run(theta, x, gh, 60.0))

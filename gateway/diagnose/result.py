@@ -9,7 +9,7 @@ import numpy as np
 from gateway.diagnose import residuals as res
 from gateway.diagnose.effects import Effect
 from gateway.diagnose.judge import Verdict
-from gateway.diagnose.structure import INDEX, Structured, model_unit
+from gateway.diagnose.structure import INDEX, Structured, model_unit, physical_capacity
 from gateway.greenhouse import Greenhouse
 from gateway.model.model import Model
 from gateway.series import Series
@@ -31,16 +31,35 @@ class Finding:
     trace: np.ndarray = field(default_factory=lambda: np.zeros(0))
     """The fitted effect over the record: flux [W m-2 of floor], factor [-] or offset [K]."""
     trace_unit: str = ""
+    heating_rate: float | None = None
+    """A heat flux's warming of the air node before losses [K h-1]: P / (m_cap C_phys). The
+    temperatures fix this, not P: the base is scale-free (docs/effects.md, "What a flux
+    amplitude's W m-2 are"), so P is in the fitted capacity's scale."""
 
     def to_json(self) -> dict:
         e = self.effect
-        return {
+        out = {
             "effect": e.name,
             "start": self.start,
             "params": {e.amp_name: self.amplitude, "unit": e.unit},
             "summary": self.summary,
             "evidence": self.evidence,
         }
+        if self.heating_rate is not None:
+            out["heating_rate_K_per_h"] = self.heating_rate
+        return out
+
+
+def heating_rate(e: Effect, model: Model, theta: np.ndarray, gh: Greenhouse
+                 ) -> tuple[float, float] | None:
+    """(warming rate [K h-1], capacity factor m_cap [-]) of a heat-input effect's fitted P
+    [W m-2]: P / (m_cap C_phys) (III.24), what the temperatures identify; None for other
+    effects."""
+    if e.unit != "W m-2" or e.kind != "flux":
+        return None
+    m_cap = float(theta[model.index("m_cap")]) if "m_cap" in model.names else 1.0
+    amp = float(theta[model.index(e.amp_name)])
+    return amp * 3600.0 / (m_cap * physical_capacity(gh)), m_cap
 
 
 @dataclass
@@ -74,7 +93,7 @@ class Diagnosis:
 
 
 def make_finding(e: Effect, model: Model, theta: np.ndarray, series: Series, pred_before: dict,
-                 verdict: Verdict, dbic: float, x: dict, s: int) -> Finding:
+                 verdict: Verdict, dbic: float, x: dict, s: int, gh: Greenhouse) -> Finding:
     """The finding of ``e`` as fitted on all data (``theta``), with its evidence."""
     tau = float(theta[model.index(e.tau_name)])
     amp = float(theta[model.index(e.amp_name)])
@@ -82,13 +101,17 @@ def make_finding(e: Effect, model: Model, theta: np.ndarray, series: Series, pre
     start = None if tau <= 0 else str(stamp) + "Z"
     when = f"from {str(stamp)[:16].replace('T', ' ')} UTC" if start else "throughout the data"
     summary = f"{e.describe(amp)} {when}"
+    rate = heating_rate(e, model, theta, gh)
+    if rate is not None:
+        summary += (f" (warms the air {rate[0]:.2g} K h-1 before losses; the W m-2 are at the "
+                    f"fitted heat capacity, {rate[1]:.2f} x the air's)")
     r = x["t_in"][s:] - pred_before["free_run"]
     t_c = series.time[0] + x["_index"].astype("timedelta64[s]")
     sig = res.short_signature(t_c[s:], r, x, s, float(x["_index"][1] - x["_index"][0]))
     evidence = (f"{verdict.why}; ΔBIC {dbic:.0f} on all data; residual before it: {sig}; "
                 f"expected signature: {e.signature}")
     return Finding(e, tau, start, amp, summary, evidence, verdict.mae_before,
-                   verdict.mae_after, dbic)
+                   verdict.mae_after, dbic, heating_rate=None if rate is None else rate[0])
 
 
 def traces(findings: list[Finding], model: Structured, theta: np.ndarray, x, gh: Greenhouse,

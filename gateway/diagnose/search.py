@@ -279,7 +279,7 @@ def keep(st: State, t: Tried, series: Series, seed: int = 0, say: Progress | Non
     full = fit_all(st, t, seed)
     ctx, e = st.ctx, t.effect
     st.findings.append(make_finding(e, t.model, full.theta, series, st.current_pred,
-                                    t.verdict, full.delta_bic, ctx.x, ctx.split))
+                                    t.verdict, full.delta_bic, ctx.x, ctx.split, ctx.gh))
     st.effects.append(e)
     st.model, st.thetas, st.theta_all = t.model, t.thetas, full.theta
     st.current_pred = t.pred

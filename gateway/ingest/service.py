@@ -216,11 +216,11 @@ def build_parser(prog: str = "python -m gateway.ingest.service") -> argparse.Arg
                     help="pyserial URL of a board on USB, e.g. /dev/ttyUSB0 or loop://")
     ap.add_argument("--baudrate", type=bounded(int, 300, 4_000_000), default=115200,
                     metavar="BAUD", help="serial speed [bit s-1] (default %(default)s)")
-    ap.add_argument("--retention-days", type=bounded(float, 1.0), metavar="DAYS",
+    ap.add_argument("--retention-days", type=bounded(float, retention.MIN_DAYS), metavar="DAYS",
                     default=retention.Policy.samples_days,
-                    help="keep raw samples this many days, at least 1 (minute aggregates are "
-                         "kept longer; default %(default)g)")
-    ap.add_argument("--max-db-mb", type=bounded(float, 1.0), metavar="MB",
+                    help=f"keep raw samples this many days, at least {retention.MIN_DAYS:g} (minute "
+                         "aggregates are kept longer; default %(default)g)")
+    ap.add_argument("--max-db-mb", type=bounded(float, retention.MIN_DB_MB), metavar="MB",
                     default=retention.Policy.max_db_bytes / 2**20,
                     help="alarm when the database reaches 80 %% of this size [MiB] "
                          "(default %(default)g)")

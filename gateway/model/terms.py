@@ -40,24 +40,42 @@ SUN_THRESHOLD = 5.0
 LAI_THRESHOLD = 0.1
 """Leaf area index above which transpiration counts as active [m2 m-2] (§IV.2.1.2)."""
 
-ALWAYS = Condition("always", "always active", lambda x: np.ones_like(x["t_out"], dtype=bool))
-SUNLIT = Condition(
-    "sunlit", f"outside radiation > {SUN_THRESHOLD:g} W m-2", lambda x: x["i_glob"] > SUN_THRESHOLD
-)
-VENTS_OPEN = Condition(
-    "vents_open", "a roof or side vent is open", lambda x: (x["a_roof"] + x["a_side"]) > 0.0
-)
+# Named functions, not lambdas: a model (and a replay result holding it) must pickle, for the
+# process pools of the studies and the suite.
+def _always(x: Mapping[str, np.ndarray]) -> np.ndarray:
+    return np.ones_like(x["t_out"], dtype=bool)
+
+
+def _sunlit(x: Mapping[str, np.ndarray]) -> np.ndarray:
+    return x["i_glob"] > SUN_THRESHOLD
+
+
+def _vents_open(x: Mapping[str, np.ndarray]) -> np.ndarray:
+    return (x["a_roof"] + x["a_side"]) > 0.0
+
+
+def _crop(x: Mapping[str, np.ndarray]) -> np.ndarray:
+    return x["lai"] > LAI_THRESHOLD
+
+
+def _crop_day(x: Mapping[str, np.ndarray]) -> np.ndarray:
+    return _crop(x) & _sunlit(x)
+
+
+def _crop_night(x: Mapping[str, np.ndarray]) -> np.ndarray:
+    return _crop(x) & ~_sunlit(x)
+
+
+ALWAYS = Condition("always", "always active", _always)
+SUNLIT = Condition("sunlit", f"outside radiation > {SUN_THRESHOLD:g} W m-2", _sunlit)
+VENTS_OPEN = Condition("vents_open", "a roof or side vent is open", _vents_open)
 CROP_DAY = Condition(
-    "crop_day",
-    f"LAI > {LAI_THRESHOLD:g} and radiation > {SUN_THRESHOLD:g} W m-2",
-    lambda x: (x["lai"] > LAI_THRESHOLD) & (x["i_glob"] > SUN_THRESHOLD),
+    "crop_day", f"LAI > {LAI_THRESHOLD:g} and radiation > {SUN_THRESHOLD:g} W m-2", _crop_day
 )
 CROP_NIGHT = Condition(
-    "crop_night",
-    f"LAI > {LAI_THRESHOLD:g} and radiation <= {SUN_THRESHOLD:g} W m-2",
-    lambda x: (x["lai"] > LAI_THRESHOLD) & ~(x["i_glob"] > SUN_THRESHOLD),
+    "crop_night", f"LAI > {LAI_THRESHOLD:g} and radiation <= {SUN_THRESHOLD:g} W m-2", _crop_night
 )
-CROP = Condition("crop", f"LAI > {LAI_THRESHOLD:g}", lambda x: x["lai"] > LAI_THRESHOLD)
+CROP = Condition("crop", f"LAI > {LAI_THRESHOLD:g}", _crop)
 
 
 @dataclass(frozen=True)

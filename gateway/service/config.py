@@ -23,6 +23,7 @@ from gateway.service.settings import (
     GreenhouseSettings,
     ZenohSettings,
 )
+from gateway.store.retention import MIN_DAYS, MIN_DB_MB
 from gateway.tomlfile import read_toml
 
 NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,62}$")
@@ -158,10 +159,10 @@ def parse_config(raw: dict[str, Any], source: str = "<config>", base: Path = Pat
     listen = _hostport(ing, "listen", d["listen"])
     serial = ing.get("serial", str, d["serial"]) or None  # "" is none too
     baud = ing.get("baudrate", int, d["baudrate"], lo=300, hi=4_000_000)
-    retention = ing.get("retention_days", float, d["retention_days"], lo=1.0)
+    retention = ing.get("retention_days", float, d["retention_days"], lo=MIN_DAYS)
     history = ing.get("history_days", float, d["history_days"], lo=0.01)
-    estimates_days = ing.get("estimates_days", float, d["estimates_days"], lo=1.0)
-    max_db = ing.get("max_db_mb", float, d["max_db_mb"], lo=1.0)
+    estimates_days = ing.get("estimates_days", float, d["estimates_days"], lo=MIN_DAYS)
+    max_db = ing.get("max_db_mb", float, d["max_db_mb"], lo=MIN_DB_MB)
     maint = ing.get("maintenance_s", float, d["maintenance_s"], lo=0.05)
     ing.done()
     if listen is None and serial is None:

@@ -12,6 +12,12 @@ from pathlib import Path
 
 log = logging.getLogger("serra.store.retention")
 
+MIN_DAYS = 1.0
+"""Shortest age [d] a table may be kept for: less would delete samples before the day's
+diagnosis has read them (the ingest command line and the gateway config both check it)."""
+MIN_DB_MB = 1.0
+"""Smallest database size alarm [MiB] accepted."""
+
 
 @dataclass(frozen=True)
 class Policy:

@@ -140,7 +140,7 @@ def fits(start, gh: Greenhouse, series: Series) -> list[str]:
     th[jt] = tau
     held = scan_tau(shoot, th, e, np.array([tau]), float(shoot.sse(th[None])[0][0])).amps[0]
     refit = fit_effect_at(ctx, m, m0, th0, e, whole, tau).theta
-    rep = fit_effect(ctx, m, m0, th0, e, whole, SEED + 101, latest=False).theta
+    rep = fit_effect(ctx, m, m0, th0, e, whole, latest=False).theta
     lines = [f"p_heat at the injected start: base held {held:.3f} (scan), "
              f"{_best_p(shoot, th, ja):.3f} (SSE minimised); base refitted {refit[ja]:.3f}; "
              f"reported {rep[ja]:.3f} at {(rep[jt] - tau) / 60:+.0f} min"]

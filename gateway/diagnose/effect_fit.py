@@ -143,11 +143,11 @@ def fit_effect_at(ctx: Context, new_model: Model, old_model: Model, theta_old: n
     its start held at ``tau`` [s since the first row] instead of scanned: the oracle of a known
     start (as ``search.try_effect`` with ``at`` fits each fold: tests/generality/headroom.py).
     The amplitude is always fitted on the temperature."""
-    return fit_effect(ctx, new_model, old_model, theta_old, e, segments, 0, latest=False, at=tau)
+    return fit_effect(ctx, new_model, old_model, theta_old, e, segments, latest=False, at=tau)
 
 
 def fit_effect(ctx: Context, new_model: Model, old_model: Model, theta_old: np.ndarray,
-               e: Effect, segments: Segments, seed: int, latest: bool = True,
+               e: Effect, segments: Segments, latest: bool = True,
                at: float | None = None) -> EffectFit:
     """τ scan (``scan``) then a joint refit (base parameters + amplitude, τ held) on
     ``segments``, alternated ``TAU_ROUNDS`` times while the SSE falls; with ``at``, τ is held

@@ -63,11 +63,11 @@ def diagnose(
     start = prepare(series, gh, base, split, seed, say)
     st = start.state
     for rnd in range(1, MAX_EFFECTS + 1):
-        r = search_round(st, library, rnd, seed, say)
+        r = search_round(st, library, rnd, say)
         _log(st, rnd, r)
         if r.best is None:
             break
-        keep(st, r.best, series, seed, say)
+        keep(st, r.best, series, say)
     d = _report(series, start.k, _Fit(st.model0, [start.theta, start.theta], start.theta), st)
     d.structure = start.structure
     d.seconds = _time.perf_counter() - t_start
@@ -218,7 +218,7 @@ def reference(st: State) -> dict:
 
 
 def search_round(st: State, library: tuple[Effect, ...] | list[Effect], rnd: int = 1,
-                 seed: int = 0, say: Progress | None = None, tries: int | None = TRIES_PER_ROUND,
+                 say: Progress | None = None, tries: int | None = TRIES_PER_ROUND,
                  every: bool = False) -> Round:
     """One round of the add-best-effect loop on ``st`` (which it leaves as it is): rank the
     effects of ``library`` not yet kept, try the ``tries`` best (None: all) of those whose
@@ -239,7 +239,7 @@ def search_round(st: State, library: tuple[Effect, ...] | list[Effect], rnd: int
         if dbic_all >= 0 and not every:
             break
         say(f"round {rnd}: trying {scan_all.effect.name}")
-        tried.append(try_effect(st, scan_all.effect, ref_pred, seed, rank_dbic=float(dbic_all)))
+        tried.append(try_effect(st, scan_all.effect, ref_pred, rank_dbic=float(dbic_all)))
     passed = [t for t in tried if t.passed]
     if not passed:
         return Round(ranked, ref_pred, tried)
@@ -247,7 +247,7 @@ def search_round(st: State, library: tuple[Effect, ...] | list[Effect], rnd: int
     return Round(ranked, ref_pred, tried, best, rivals)
 
 
-def try_effect(st: State, e: Effect, ref_pred: dict, seed: int = 0, at: float | None = None,
+def try_effect(st: State, e: Effect, ref_pred: dict, at: float | None = None,
                rank_dbic: float | None = None) -> Tried:
     """Candidate ``e`` added to the model so far, fitted on each fold's fit set
     (effect_fit.fit_effect; with ``at``, its start held there [s since the first row]: the
@@ -256,7 +256,7 @@ def try_effect(st: State, e: Effect, ref_pred: dict, seed: int = 0, at: float | 
     ctx = st.ctx
     new_model = compose(st.model0, st.effects + [e], ctx.gh, ctx.duration)
     fits = [fit_effect(ctx, new_model, st.model, st.thetas[j], e, st.held.fit_sets[j],
-                       seed + 17 * j, latest=at is None, at=at) for j in (0, 1)]
+                       latest=at is None, at=at) for j in (0, 1)]
     pred = st.heldout(new_model, [f.theta for f in fits])
     starts = [float(f.theta[new_model.index(e.tau_name)]) for f in fits]
     verdict = jd.judge(st.current_pred, ref_pred, pred, ctx.x["t_in"], st.held.blocks,
@@ -265,18 +265,18 @@ def try_effect(st: State, e: Effect, ref_pred: dict, seed: int = 0, at: float | 
     return Tried(e, new_model, fits, pred, verdict, rank_dbic)
 
 
-def fit_all(st: State, t: Tried, seed: int = 0) -> EffectFit:
+def fit_all(st: State, t: Tried) -> EffectFit:
     """``t``'s effect fitted on all data after the model so far (the best-fitting start, not
     the latest of the equally good): the finding's reported start and parameters."""
     return fit_effect(st.ctx, t.model, st.model, st.theta_all, t.effect, [(0, st.held.n)],
-                      seed + 101, latest=False)
+                      latest=False)
 
 
-def keep(st: State, t: Tried, series: Series, seed: int = 0, say: Progress | None = None
+def keep(st: State, t: Tried, series: Series, say: Progress | None = None
          ) -> Finding:
     """Add ``t`` to the model so far: its finding (reported from ``fit_all``), its model, fold
     parameters and held-out prediction become the state's."""
-    full = fit_all(st, t, seed)
+    full = fit_all(st, t)
     ctx, e = st.ctx, t.effect
     st.findings.append(make_finding(e, t.model, full.theta, series, st.current_pred,
                                     t.verdict, full.delta_bic, ctx.x, ctx.split, ctx.gh))

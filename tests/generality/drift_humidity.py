@@ -38,7 +38,7 @@ def starts(label: str) -> str:
     out = []
     for on in (False, True):
         humidity.DRIFT_EVIDENCE = on
-        th = effect_fit.fit_effect(ctx, m, m0, th0, e, seg, 101, latest=False).theta
+        th = effect_fit.fit_effect(ctx, m, m0, th0, e, seg, latest=False).theta
         ev = humidity.drift_profile(ctx.x, seg, np.array([th[jt]]), np.array([th[ja]]))[0]
         out.append(f"{(th[jt] - truth) / 3600:+7.1f} h {th[ja]:+.3f} K/d (ev {ev:+6.1f})")
     humidity.DRIFT_EVIDENCE = False

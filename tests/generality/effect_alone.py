@@ -65,7 +65,7 @@ def fitted(label: str, effect: str) -> str:
     e = EFFECTS[effect]
     ctx, gh, m0, th0, n = _setup(label)
     m = compose(m0, [e], gh, ctx.duration)
-    fit = effect_fit.fit_effect(ctx, m, m0, th0, e, [(0, n)], 101, latest=False)
+    fit = effect_fit.fit_effect(ctx, m, m0, th0, e, [(0, n)], latest=False)
     th, dbic = fit.theta, fit.delta_bic
     own = [nm for nm in m.names if nm not in m0.names]
     return f"  fit on all data: {', '.join(f'{nm} {th[m.index(nm)]:.4g}' for nm in own)}, ΔBIC {dbic:.0f}"

@@ -102,7 +102,7 @@ def joint_profile(label: str, effect: str) -> tuple[list[tuple[float, float, flo
         trial = fit_lm(shoot, trial, free_parameters(new), lo, hi, effect_fit.REFIT_LM_ITERATIONS)
         sse = float(shoot.sse(trial[None])[0][0])
         out.append(((tau - truth) / DAY, delta_bic(sse, float(sse0[0]), ne, 2), float(trial[ja])))
-    fitted = effect_fit.fit_effect(ctx, new, model0, theta, e, [(0, n)], 101, latest=False).theta
+    fitted = effect_fit.fit_effect(ctx, new, model0, theta, e, [(0, n)], latest=False).theta
     return out, (float(fitted[jt]) - truth) / DAY
 
 
@@ -120,7 +120,7 @@ def injected_drift_start(label: str, day: float, rate: float = 0.5) -> tuple[flo
     e = EFFECTS["sensor_drift"]
     m = compose(m0, [e], gh, ctx.duration)
     jt, ja = m.index(e.tau_name), m.index(e.amp_name)
-    th = effect_fit.fit_effect(ctx, m, m0, th0, e, [(0, n)], 101, latest=False).theta
+    th = effect_fit.fit_effect(ctx, m, m0, th0, e, [(0, n)], latest=False).theta
     sc = effect_fit.scan(ctx.shooting(m, [(0, n)]), carry(th0, m0, m, gh), e, ctx.last, [(0, n)],
                       latest=False)
     return ((th[jt] - day * DAY) / 3600.0, float(th[ja]),
@@ -161,7 +161,7 @@ def synthetic_drift_start(bump: float, seed: int = 3, start_day: float = 3.4) ->
     x["t_in"] = (m.free_run(truth[None], x, gh, dt)[0] + rng.normal(0, 0.08, n)
                  - bump * np.exp(-0.5 * ((day - start_day - 1.6) / 0.6) ** 2))
     ctx = effect_fit.Context(x, gh, dt, float(x["_index"][-1]), 72, n // 2)
-    fitted = effect_fit.fit_effect(ctx, m, m0, m0.defaults(gh), e, [(0, n)], 0, latest=False).theta
+    fitted = effect_fit.fit_effect(ctx, m, m0, m0.defaults(gh), e, [(0, n)], latest=False).theta
     return (float(fitted[m.index(e.tau_name)]) - tau) / 3600.0
 
 

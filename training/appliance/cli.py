@@ -1,7 +1,9 @@
 """``python -m training run`` (``make run``): the whole kit on this machine, on embedded defaults.
 
 A device key (``gateway keys add``), the model calibrated on two earlier simulated days
-(``gateway calibrate``), the live gateway (SQLite under ``--out``, a Zenoh peer on loopback),
+(``gateway calibrate``; the greenhouse is the ``biskra-prototype`` preset placed where the
+simulated weather was measured, Bleiswijk, so that the sun the model and the outlook compute is
+that weather's), the live gateway (SQLite under ``--out``, a Zenoh peer on loopback),
 a local subscriber (the cloud side, its own SQLite), the simulated kit (the real firmware under
 MicroPython, its sensors fed by the reference simulator, ``--scale`` times faster than the wall
 clock, the gateway's clock scaled alike), and the status screen. On a terminal it
@@ -14,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import shutil
 import signal
 import subprocess
@@ -22,16 +25,21 @@ import textwrap
 import threading
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from training.appliance.procs import ChildError, Group
 from training.appliance.summary import count, summarise
 
+if TYPE_CHECKING:
+    from training.kitsim import KitClock
+
 DEVICE = 7
 GREENHOUSE = "north"
 START = "2009-11-01T08:00:00Z"  # the simulated weather's morning (Bleiswijk, real)
+PRESET = "biskra-prototype"  # the kit's greenhouse: the thesis's prototype (table 2)
 FILES = ("serra.db", "serra.db-wal", "serra.db-shm", "cloud.db", "cloud.db-wal", "cloud.db-shm",
-         "keys.txt", "gateway.toml", "trace.txt", "gateway.log", "subscribe.log", "summary.json",
-         "calibration.csv", "calibration.truth.json", "calibration.truth.npz", "params.toml")
+         "keys.txt", "gateway.toml", "greenhouse.toml", "trace.txt", "gateway.log", "subscribe.log",
+         "summary.json", "calibration.csv", "calibration.truth.json", "calibration.truth.npz", "params.toml")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -146,9 +154,7 @@ class Demo:
                  f"--keys {self.out}/keys.txt")
         params = self.calibrate() if self.calibrate_first else None
         self.clock = KitClock(self.scale, self.epoch)  # simulated time starts now, at START
-        (self.out / "gateway.toml").write_text(CONFIG.format(
-            scale=self.scale, epoch=self.clock.epoch, anchor=self.clock.anchor, device=DEVICE,
-            greenhouse=GREENHOUSE) + (f'params = "{params.name}"\n' if params else ""))
+        write_config(self.out, self.clock, params)
 
     def calibrate(self) -> Path:
         """Fit the model offline on two simulated days before the run (data the run never
@@ -159,10 +165,8 @@ class Demo:
         data, params = self.out / "calibration.csv", self.out / "params.toml"
         simulate(plant="prototype", weather="bleiswijk", start="2009-10-30", days=2.0, seed=3,
                  step=60).write(data)
-        r = subprocess.run([sys.executable, "-m", "gateway", "calibrate", "--data", str(data),
-                            "--greenhouse", "biskra-prototype", "--model", "prototype",
-                            "--algorithm", "riwpso", "--seed", "1", "--out", str(params)],
-                           capture_output=True, text=True, timeout=600)
+        r = subprocess.run(calibrate_command(data, params), capture_output=True, text=True,
+                           timeout=600)
         if r.returncode:
             raise ChildError(f"calibrate failed: {r.stderr.strip()[-500:]}")
         return params
@@ -296,8 +300,49 @@ class Demo:
         self.say(f"  look again: python -m gateway status --db {self.out}/serra.db")
 
 
+def weather_site() -> tuple[float, float]:
+    """Where the run's weather was measured (Bleiswijk) [deg N, deg E]: the sun the model's
+    cloudiness (sky temperature) and the clear-sky outlook are computed for must be the sun of
+    that weather, not the preset's Biskra sun (as ``make demo`` passes ``--site``)."""
+    from training.simulate.weather import BLEISWIJK_LATITUDE, BLEISWIJK_LONGITUDE
+
+    return BLEISWIJK_LATITUDE, BLEISWIJK_LONGITUDE
+
+
+def calibrate_command(data: Path, params: Path) -> list[str]:
+    """``gateway calibrate`` on the two earlier days, at the weather's site."""
+    lat, lon = weather_site()
+    return [sys.executable, "-m", "gateway", "calibrate", "--data", str(data), "--greenhouse",
+            PRESET, "--model", "prototype", "--algorithm", "riwpso", "--seed", "1",
+            "--site", f"{lat},{lon}", "--out", str(params)]
+
+
+def greenhouse_toml() -> str:
+    """The preset's description with its ``[site]`` moved to where the weather was measured."""
+    from gateway.greenhouse import PRESET_DIR
+
+    lat, lon = weather_site()
+    text = (PRESET_DIR / f"{PRESET}.toml").read_text(encoding="utf-8")
+    site = (f"[site]              # where the run's weather was measured (Bleiswijk), written by "
+            f"python -m training run\nlatitude = {lat}\nlongitude = {lon}\n")
+    new, n = re.subn(r"^\[site\][^\n]*\n(?:(?:latitude|longitude)\s*=[^\n]*\n){2}", site, text,
+                     flags=re.M)
+    if n != 1:
+        raise ChildError(f"{PRESET}.toml: no [site] table with latitude and longitude to replace")
+    return new
+
+
+def write_config(out: Path, clock: KitClock, params: Path | None) -> None:
+    """``gateway.toml`` and the ``greenhouse.toml`` it names, under ``out``."""
+    (out / "greenhouse.toml").write_text(greenhouse_toml(), encoding="utf-8")
+    (out / "gateway.toml").write_text(CONFIG.format(
+        scale=clock.scale, epoch=clock.epoch, anchor=clock.anchor, device=DEVICE,
+        greenhouse=GREENHOUSE) + (f'params = "{params.name}"\n' if params else ""))
+
+
 CONFIG = """# Written by python -m training run (make run): the shipped defaults
-# (images/gateway/gateway.toml) on loopback, with the TEST/DEMO clock.
+# (images/gateway/gateway.toml) on loopback, with the TEST/DEMO clock; the greenhouse is the
+# biskra-prototype preset at the site of the kit's weather (greenhouse.toml: Bleiswijk).
 [gateway]
 farm = "demo-farm"
 db = "serra.db"
@@ -323,7 +368,7 @@ anchor = {anchor!r}
 
 [[greenhouse]]
 name = "{greenhouse}"
-greenhouse = "biskra-prototype"
+greenhouse = "greenhouse.toml"
 model = "prototype"
 inside = {device}
 """

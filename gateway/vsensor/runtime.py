@@ -40,10 +40,13 @@ from gateway.vsensor.features import (
 )
 
 FORMAT = "serra-vsensor/1"
-TARGET_KINDS = ("flow", "opening")
+TARGET_KINDS = ("flow", "opening", "mixed")
 """What the graph's network predicts (metadata ``target_kind``, absent: ``flow``); either way the
 graph takes past flows and gives a flow. ``opening``: G / D, the graph computing the ventilation
-driver D from its inputs with the constants of ``opening_driver`` (docs/vsensor.md)."""
+driver D from its inputs with the constants of ``opening_driver`` (docs/vsensor.md). ``mixed``:
+an ensemble whose members learn ``member_targets`` (each ``flow`` or ``opening``), averaged as
+flows in the graph."""
+MEMBER_TARGETS = ("flow", "opening")
 RANGE_MARGIN = 0.02
 """An input counts as outside the training range beyond min − 2 % or max + 2 % of its span."""
 
@@ -163,12 +166,15 @@ def check_model(info: ModelInfo, kind: str, n_graph_features: int | None = None)
 
 
 def check_target(info: ModelInfo, gh: Greenhouse | None = None) -> None:
-    """Raise :class:`ModelMismatch` for a target kind this code does not serve, or an opening
-    model whose driver is not the model layer's (``ventilation_driver``) for ``gh``, the house
-    it was trained on (checked when ``gh`` is that house: a changed III.31 needs a retrain)."""
+    """Raise :class:`ModelMismatch` for a target kind this code does not serve, a mixed model
+    whose members' targets it does not, or an opening (or mixed) model whose driver is not the
+    model layer's (``ventilation_driver``) for ``gh``, the house it was trained on (checked when
+    ``gh`` is that house: a changed III.31 needs a retrain)."""
     kind = info.meta.get("target_kind", "flow")
     if kind not in TARGET_KINDS:
         raise ModelMismatch(f"{info.path}: target kind {kind!r}, this code serves {TARGET_KINDS}")
+    if kind == "mixed" and not _mixed_needs_driver(info):  # flow members only: no driver
+        return
     if kind == "flow":
         return
     drv = info.meta.get("opening_driver")
@@ -186,6 +192,23 @@ def check_target(info: ModelInfo, gh: Greenhouse | None = None) -> None:
         if not math.isclose(float(drv[k]), v, rel_tol=1e-6):
             raise ModelMismatch(f"{info.path}: opening driver {k} {drv[k]} but the model layer "
                                 f"gives {v:.6g} for this house: retrain")
+
+
+def _mixed_needs_driver(info: ModelInfo) -> bool:
+    """Raise :class:`ModelMismatch` unless a mixed model names its members' targets (two or
+    more, each one this code serves, one per output history with own feedback); True when one
+    of them is an opening member (whose driver is then checked)."""
+    members = info.meta.get("member_targets")
+    if not isinstance(members, list) or len(members) < 2:
+        raise ModelMismatch(f"{info.path}: a mixed model without its members' targets")
+    bad = sorted({str(m) for m in members} - set(MEMBER_TARGETS))
+    if bad:
+        raise ModelMismatch(f"{info.path}: member target {', '.join(bad)}, this code serves "
+                            f"{MEMBER_TARGETS}")
+    k = int(info.meta.get("feedback_histories", 1))
+    if k > 1 and k != len(members):
+        raise ModelMismatch(f"{info.path}: {len(members)} member targets for {k} output histories")
+    return "opening" in members
 
 
 class VentSensor:

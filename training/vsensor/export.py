@@ -12,7 +12,9 @@ members each hear their own past (``Narx.own_feedback``) takes ``y_past`` (N, K,
 the effective opening (``Narx.target`` "opening", eighth pass) computes the ventilation driver
 D = max(sqrt(b |ΔT| + w u²), floor) from ``u``'s wind and T_in − T_out at every delay
 (``narx.Driver``, constants from the model layer), divides the past flows by D(k−1 … k−5) and
-multiplies its output by D(k).
+multiplies its output by D(k). A mixed ensemble (``narx.MixedNarx``, ninth pass) shares the
+standardisation, PCA and D; each member has its own output scaling and target (an opening
+member as above) and the members' flows are averaged (``Mean``), or given apart (own feedback).
 
 ``metadata_props`` carry everything the runtime checks and a reader needs: the feature names,
 order, units and filter time constants, the delays, the model kind the fluxes come from, the
@@ -30,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from gateway.vsensor.features import INPUT_DELAYS, OUTPUT_DELAYS
-from training.vsensor.narx import DT_IN_OUT, WIND, Narx
+from training.vsensor.narx import DT_IN_OUT, WIND, MixedNarx, Narx
 
 OPSET = 17
 IR_VERSION = 8
@@ -58,18 +60,19 @@ def _y_transform(net: Narx, src: str, pre: str) -> list:
                     helper.make_node("Log", [f"{pre}y_p1"], [f"{pre}y_t"], name=f"{pre}y_log")]
 
 
-def _y_input(net: Narx, src: str, pre: str) -> list:
-    """Standardise the past outputs ``src`` (empty: ``y_past``) and join the delayed inputs
-    (→ ``{pre}h0``)."""
+def _y_input(net: Narx, src: str, pre: str, scale: str = "") -> list:
+    """Standardise the past outputs ``src`` (empty: ``y_past``) with ``{scale}y_mean`` and
+    ``{scale}y_std`` and join the delayed inputs (→ ``{pre}h0``)."""
     from onnx import helper
 
-    return [helper.make_node("Sub", [src or "y_past", "y_mean"], [f"{pre}y_c"], name=f"{pre}y_centre"),
-            helper.make_node("Div", [f"{pre}y_c", "y_std"], [f"{pre}y_s"], name=f"{pre}y_reduce"),
+    return [helper.make_node("Sub", [src or "y_past", f"{scale}y_mean"], [f"{pre}y_c"],
+                             name=f"{pre}y_centre"),
+            helper.make_node("Div", [f"{pre}y_c", f"{scale}y_std"], [f"{pre}y_s"], name=f"{pre}y_reduce"),
             helper.make_node("Concat", ["z_flat", f"{pre}y_s"], [f"{pre}h0"], axis=1,
                              name=f"{pre}narx_input")]
 
 
-def _driver(net: Narx) -> tuple[list, list]:
+def _driver(net: Narx | MixedNarx) -> tuple[list, list]:
     """(initialisers, nodes) of the ventilation driver D (N, 6) from ``u``, sliced into
     ``d_now`` (N, 1), the delay 0, and ``d_past`` (N, 5), the delays 1–5."""
     from onnx import TensorProto, helper
@@ -98,25 +101,33 @@ def _driver(net: Narx) -> tuple[list, list]:
     return inits, nodes
 
 
-def build_graph(net: Narx, n_features: int):
+def _reduce(net: Narx | MixedNarx, inits: list, nodes: list) -> str:
+    """Append the standardisation and the PCA of ``u``; returns the reduced inputs' name."""
+    from onnx import helper
+
+    nodes += [helper.make_node("Sub", ["u", "mean"], ["u_c"], name="centre"),
+              helper.make_node("Div", ["u_c", "std"], ["z"], name="reduce")]
+    if net.projection is None:
+        return "z"
+    inits.append(_const("pca", net.projection))
+    nodes.append(helper.make_node("MatMul", ["z", "pca"], ["pcs"], name="pca"))
+    return "pcs"
+
+
+def build_graph(net: Narx | MixedNarx, n_features: int):
     """The ONNX ModelProto of ``net`` (no metadata yet)."""
     from onnx import TensorProto, helper
 
-    d_in, d_out = len(INPUT_DELAYS), len(OUTPUT_DELAYS)
+    d_in = len(INPUT_DELAYS)
+    if isinstance(net, MixedNarx):
+        return _model(net, n_features, *_mixed(net))
     inits = [
         _const("mean", net.mean), _const("std", net.std),
         _const("y_mean", np.array([net.y_mean])), _const("y_std", np.array([net.y_std])),
         helper.make_tensor("flat_shape", TensorProto.INT64, [2], [-1, d_in * net.width]),
     ]
-    nodes = [
-        helper.make_node("Sub", ["u", "mean"], ["u_c"], name="centre"),
-        helper.make_node("Div", ["u_c", "std"], ["z"], name="reduce"),
-    ]
-    z = "z"
-    if net.projection is not None:
-        inits.append(_const("pca", net.projection))
-        nodes.append(helper.make_node("MatMul", ["z", "pca"], ["pcs"], name="pca"))
-        z = "pcs"
+    nodes: list = []
+    z = _reduce(net, inits, nodes)
     k_h = net.histories  # K > 1: every member on its own past outputs, y_past (N, K, 5)
     if net.target in ("sqrt", "log1p"):
         inits.append(_const("one", np.array([1.0])))
@@ -144,6 +155,14 @@ def build_graph(net: Narx, n_features: int):
             heads.append(f"{pre}h0")
     h = _networks(net, heads, inits, nodes)
     nodes += _to_flow(net, h)
+    return _model(net, n_features, inits, nodes)
+
+
+def _model(net: Narx | MixedNarx, n_features: int, inits: list, nodes: list):
+    """The graph of ``nodes`` (inputs ``u``, ``y_past``; output ``flow``) as a ModelProto."""
+    from onnx import TensorProto, helper
+
+    d_in, d_out, k_h = len(INPUT_DELAYS), len(OUTPUT_DELAYS), net.histories
     y_shape = ["N", d_out] if k_h == 1 else ["N", k_h, d_out]
     graph = helper.make_graph(
         nodes, f"serra_vsensor_{net.name}",
@@ -163,19 +182,8 @@ def _networks(net: Narx, heads: list[str], inits: list, nodes: list) -> str:
     returns the name of the scaled output: the members' mean, or all of them (own feedback)."""
     from onnx import helper
 
-    outs = []
-    for j, stack in enumerate(net.stacks):
-        pre = "" if len(net.stacks) == 1 else f"m{j}_"
-        h = heads[j]
-        for i, layer in enumerate(stack):
-            w, b, a, nxt = f"{pre}w{i}", f"{pre}b{i}", f"{pre}a{i}", f"{pre}h{i + 1}"
-            inits += [_const(w, layer.weight), _const(b, layer.bias)]
-            out = a if layer.activation == "tanh" else nxt
-            nodes.append(helper.make_node("Gemm", [h, w, b], [out], name=f"{pre}layer{i}"))
-            if layer.activation == "tanh":
-                nodes.append(helper.make_node("Tanh", [out], [nxt], name=f"{pre}tanh{i}"))
-            h = nxt
-        outs.append(h)
+    outs = [_stack(stack, heads[j], "" if len(net.stacks) == 1 else f"m{j}_", inits, nodes)
+            for j, stack in enumerate(net.stacks)]
     if net.histories > 1:  # own feedback: every member's flow (the runtime clips and averages)
         nodes.append(helper.make_node("Concat", outs, ["h_all"], axis=1, name="members_out"))
         return "h_all"
@@ -183,6 +191,68 @@ def _networks(net: Narx, heads: list[str], inits: list, nodes: list) -> str:
         nodes.append(helper.make_node("Mean", outs, ["h_mean"], name="ensemble_mean"))
         return "h_mean"
     return outs[0]
+
+
+def _stack(stack: list, h: str, pre: str, inits: list, nodes: list) -> str:
+    """Append one member's layers (prefix ``pre``) from its input ``h``; returns its output."""
+    from onnx import helper
+
+    for i, layer in enumerate(stack):
+        w, b, a, nxt = f"{pre}w{i}", f"{pre}b{i}", f"{pre}a{i}", f"{pre}h{i + 1}"
+        inits += [_const(w, layer.weight), _const(b, layer.bias)]
+        out = a if layer.activation == "tanh" else nxt
+        nodes.append(helper.make_node("Gemm", [h, w, b], [out], name=f"{pre}layer{i}"))
+        if layer.activation == "tanh":
+            nodes.append(helper.make_node("Tanh", [out], [nxt], name=f"{pre}tanh{i}"))
+        h = nxt
+    return h
+
+
+def _mixed(net: MixedNarx) -> tuple[list, list]:
+    """(initialisers, nodes) of a mixed ensemble (ninth pass): shared standardisation, PCA and
+    driver D; per member its own y_mean, y_std and target (an opening member hears the past
+    flows divided by D(k−1…k−5) and its output is multiplied by D(k), as a ``--target opening``
+    graph does); the members' flows averaged (``Mean``) or, with own feedback, each member on
+    its own past and all their flows given (N, K)."""
+    from onnx import TensorProto, helper
+
+    inits = [_const("mean", net.mean), _const("std", net.std),
+             helper.make_tensor("flat_shape", TensorProto.INT64, [2],
+                                [-1, len(INPUT_DELAYS) * net.width])]
+    nodes: list = []
+    z = _reduce(net, inits, nodes)
+    if net.driver is not None:
+        d_inits, d_nodes = _driver(net)
+        inits += d_inits
+        nodes += d_nodes
+    nodes.append(helper.make_node("Reshape", [z, "flat_shape"], ["z_flat"], name="delays"))
+    flows = []
+    for j, part in enumerate(net.parts):
+        pre = f"m{j}_"
+        inits += [_const(f"{pre}y_mean", np.array([part.y_mean])),
+                  _const(f"{pre}y_std", np.array([part.y_std]))]
+        src = "y_past"
+        if net.histories > 1:  # this member's own past flows
+            inits.append(helper.make_tensor(f"{pre}index", TensorProto.INT64, [], [j]))
+            nodes.append(helper.make_node("Gather", ["y_past", f"{pre}index"], [f"{pre}y_past"],
+                                          axis=1, name=f"{pre}own_past"))
+            src = f"{pre}y_past"
+        nodes += _y_transform(part, src, pre)  # opening: past flows / D(k−1…k−5)
+        nodes += _y_input(part, src if part.target == "identity" else f"{pre}y_t", pre, pre)
+        h = _stack(part.layers, f"{pre}h0", pre, inits, nodes)
+        flow = f"{pre}flow" if part.target == "identity" else f"{pre}v"
+        nodes += [helper.make_node("Mul", [h, f"{pre}y_std"], [f"{pre}y_scaled"], name=f"{pre}y_unscale"),
+                  helper.make_node("Add", [f"{pre}y_scaled", f"{pre}y_mean"], [flow],
+                                   name=f"{pre}y_uncentre")]
+        if part.target == "opening":  # opening × D(k) → a flow
+            nodes.append(helper.make_node("Mul", [flow, "d_now"], [f"{pre}flow"],
+                                          name=f"{pre}v_times_driver"))
+        flows.append(f"{pre}flow")
+    if net.histories > 1:
+        nodes.append(helper.make_node("Concat", flows, ["flow"], axis=1, name="members_out"))
+    else:  # the ensemble: the members' flows averaged
+        nodes.append(helper.make_node("Mean", flows, ["flow"], name="ensemble_mean"))
+    return inits, nodes
 
 
 def _to_flow(net: Narx, h: str) -> list:

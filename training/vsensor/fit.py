@@ -20,7 +20,7 @@ import numpy as np
 from gateway.vsensor.features import OUTPUT_DELAYS
 from gateway.vsensor.loop import closed_loop, fill_missing
 from training.vsensor.dataset import Segment
-from training.vsensor.narx import TARGETS, Driver, Layer, Narx, lag_rows, to_target
+from training.vsensor.narx import MIXED, TARGETS, Driver, Layer, MixedNarx, Narx, lag_rows, to_target
 
 TRAIN_SHARE = 0.75
 MIN_VARIANCE = 0.90
@@ -94,7 +94,7 @@ def train_targets(data: list[tuple[np.ndarray, np.ndarray]], opts: RowOptions) -
                            for u, y in data])
 
 
-def simulate(net: Narx, split: Split) -> list[np.ndarray]:
+def simulate(net: Narx | MixedNarx, split: Split) -> list[np.ndarray]:
     """Closed-loop flows of every whole segment (all at once, padded to the longest)."""
     n_max = max(len(s.flow) for s in split.segments)
     n_f = split.segments[0].inputs.shape[1]
@@ -109,14 +109,14 @@ def simulate(net: Narx, split: Split) -> list[np.ndarray]:
     return [y[i, : len(s.flow)] for i, s in enumerate(split.segments)]
 
 
-def simulate_own_feedback(net: Narx, split: Split) -> list[np.ndarray]:
+def simulate_own_feedback(net: Narx | MixedNarx, split: Split) -> list[np.ndarray]:
     """Closed-loop flows of an ensemble whose members each hear **their own** past outputs
     (K histories, each member's output clipped to the physical range, then averaged): what the
     graph and runtime of an ``own_feedback`` model do. A single network: ``simulate``."""
     return simulate(dataclasses.replace(net, own_feedback=True), split)
 
 
-def validation_mae(net: Narx, split: Split) -> float:
+def validation_mae(net: Narx | MixedNarx, split: Split) -> float:
     sims = simulate(net, split)
     err = [np.abs(y[c:] - s.flow[c:]) for y, s, c in zip(sims, split.segments, split.cut, strict=True)]
     e = np.concatenate(err)
@@ -141,14 +141,15 @@ class RowOptions:
 
     noise_sigma: float = 0.0  # see feedback_noise
     high_weight: float = 1.0  # loss weight of the rows above HIGH_FLOW_QUANTILE (the peaks)
-    target: str = "identity"  # narx.TARGETS: the flow, √G, log(1 + G) or G / D learnt and fed back
-    driver: Driver | None = None  # the ``opening`` target's D (narx.Driver.of_greenhouse)
+    target: str = "identity"  # narx.TARGETS: the flow, √G, log(1 + G) or G / D learnt and fed back,
+    # or MIXED: an ensemble's members alternating flow and opening by seed (training/vsensor/mixed.py)
+    driver: Driver | None = None  # the ``opening`` (or MIXED) target's D (narx.Driver.of_greenhouse)
 
     def __post_init__(self) -> None:
-        if self.target not in TARGETS:
-            raise ValueError(f"target {self.target!r}: one of {TARGETS}")
-        if (self.target == "opening") != (self.driver is not None):
-            raise ValueError("the opening target needs its driver, and only it takes one")
+        if self.target not in (*TARGETS, MIXED):
+            raise ValueError(f"target {self.target!r}: one of {(*TARGETS, MIXED)}")
+        if (self.target in ("opening", MIXED)) != (self.driver is not None):
+            raise ValueError("the opening and mixed targets need the driver, and only they take it")
 
     def as_settings(self) -> dict[str, float | str]:
         """The non-default options, for the model's training settings."""
@@ -166,7 +167,7 @@ def row_options(noise_sigma: float, high_weight: float, target: str, gh) -> RowO
     """The command line's :class:`RowOptions`; the ``opening`` target's driver from the
     greenhouse ``gh`` (narx.Driver.of_greenhouse)."""
     return RowOptions(noise_sigma, high_weight, target,
-                      Driver.of_greenhouse(gh) if target == "opening" else None)
+                      Driver.of_greenhouse(gh) if target in ("opening", MIXED) else None)
 
 
 def row_weights(t: np.ndarray, threshold: float, high_weight: float) -> np.ndarray | None:
@@ -340,7 +341,8 @@ def _joint(name: str, split: Split, mean, std, projection, seeds: list[int], hid
 def fit_ensemble(name: str, split: Split, mean, std, projection, seeds: list[int],
                  hidden=HIDDEN, epochs: int = 150, rounds: int = 3, round_epochs: int = 30,
                  progress: Progress | None = None, round_lr: float | None = None,
-                 opts: RowOptions = RowOptions(), feedback: str = "member") -> tuple[Narx, dict]:
+                 opts: RowOptions = RowOptions(), feedback: str = "member"
+                 ) -> tuple[Narx | MixedNarx, dict]:
     """``fit_narx`` once per seed on the same rows; the members' outputs are averaged.
 
     ``feedback`` "member": each member is fitted (and its closed-loop rounds run) on its own,
@@ -351,6 +353,11 @@ def fit_ensemble(name: str, split: Split, mean, std, projection, seeds: list[int
     if feedback not in FEEDBACKS:
         raise ValueError(f"feedback {feedback!r}: one of {FEEDBACKS}")
     progress = progress or (lambda **k: None)
+    if opts.target == MIXED:  # members of two targets: averaged as flows (mixed.py)
+        from training.vsensor.mixed import fit_mixed
+
+        return fit_mixed(name, split, mean, std, projection, seeds, hidden, epochs, rounds,
+                         round_epochs, progress, round_lr, opts, feedback)
     if feedback == "ensemble" and len(seeds) > 1:
         return _joint(name, split, mean, std, projection, seeds, hidden, epochs, rounds,
                       round_epochs, progress, round_lr, opts)

@@ -109,6 +109,16 @@ def _inputs_and_structure(out: Path, meta: dict, names: list[str], nets: dict) -
     return lines
 
 
+def _target_words(target: str) -> str:
+    """The settings sentence's part on what the networks learn (empty for the flow)."""
+    if target == "identity":
+        return ""
+    if target == "mixed":
+        return (", the even seeds' networks learning the flow G and the odd seeds' the effective "
+                "opening G / D, averaged as flows in the graph")
+    return f", the networks learning and feeding back {target}(G), inverted in the graph"
+
+
 def _validation(out: Path, meta: dict, metrics: dict, heldout: str | None,
                 held_files: tuple[str, ...]) -> list[str]:
     """Closed-loop validation, the training settings and command, the held-out files."""
@@ -132,8 +142,7 @@ def _validation(out: Path, meta: dict, metrics: dict, heldout: str | None,
            "target standard deviations" if st.get("feedback_noise") else "")
         + (f", rows above the targets' 90th percentile weighing {st['high_flow_weight']:g}"
            if st.get("high_flow_weight", 1.0) != 1.0 else "")
-        + (f", the networks learning and feeding back {st['target_transform']}(G), inverted in the "
-           "graph" if st.get("target_transform", "identity") != "identity" else "") + ".",
+        + _target_words(st.get("target_transform", "identity")) + ".",
         "",
     ]
     lines += [f"Trained with: `{train_command(out, meta, held_files)}` (paths in docs/vsensor.md).", ""]

@@ -17,6 +17,8 @@ An ensemble (``members``: several layer stacks fitted from different seeds on th
 shares the pre-processing and averages the stacks' outputs; in closed loop every member hears
 the ensemble's own past outputs (one ``y_past``), or, with ``own_feedback``, its own (K output
 histories: ``y_past`` (N, K, 5), one flow per member, averaged by the loop after clipping).
+A mixed ensemble (:class:`MixedNarx`, ninth pass) holds members of different targets (flow and
+opening, alternating by seed), each with its own y_mean, y_std, and averages them as flows.
 """
 
 from __future__ import annotations
@@ -185,6 +187,78 @@ class Narx:
             v = self.forward(self.head(z, y_past, d_past))
             d_now = None if d is None else d[:, 0]
         return from_target(v * self.y_std + self.y_mean, self.target, d_now)
+
+
+MIXED = "mixed"
+"""The mixed ensemble (ninth pass): members alternate target by seed (:func:`member_target`)."""
+MEMBER_KINDS = {"identity": "flow", "opening": "opening"}
+"""A mixed member's target → its name in the metadata's ``member_targets``."""
+
+
+def member_target(seed: int) -> str:
+    """A mixed ensemble's member of network seed ``seed``: even seeds learn the flow (the
+    shipped setting's members), odd seeds the effective opening G / D (the eighth pass's)."""
+    return "identity" if seed % 2 == 0 else "opening"
+
+
+@dataclass
+class MixedNarx:
+    """An ensemble whose members learn different targets (``member_target``): each member a
+    single :class:`Narx` with its own target, y_mean, y_std (and driver), all sharing the
+    standardisation and PCA; their outputs are averaged **as flows** (an opening member's output
+    multiplied by D(k)). Closed loop, every member hears the ensemble's past flows (an opening
+    member divides them by D(k−1…k−5)), or with ``own_feedback`` its own."""
+
+    name: str
+    parts: list[Narx]
+    own_feedback: bool = False
+    explained: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if any(p.members for p in self.parts) or any(p.target not in MEMBER_KINDS for p in self.parts):
+            raise ValueError(f"mixed members: single networks on {tuple(MEMBER_KINDS)}")
+        y0 = {p.y0 for p in self.parts}  # the training flows' median, whatever the target
+        if len(y0) != 1:
+            raise ValueError(f"mixed members disagree on y0: {sorted(y0)}")
+
+    target = MIXED
+    mean = property(lambda self: self.parts[0].mean)
+    std = property(lambda self: self.parts[0].std)
+    projection = property(lambda self: self.parts[0].projection)
+    width = property(lambda self: self.parts[0].width)
+    hidden = property(lambda self: self.parts[0].hidden)
+    y0 = property(lambda self: self.parts[0].y0)
+
+    @property
+    def targets(self) -> list[str]:
+        """Each member's target in the metadata's words (``flow``, ``opening``)."""
+        return [MEMBER_KINDS[p.target] for p in self.parts]
+
+    @property
+    def driver(self) -> Driver | None:
+        return next((p.driver for p in self.parts if p.target == "opening"), None)
+
+    @property
+    def stacks(self) -> list[list[Layer]]:
+        return [p.layers for p in self.parts]
+
+    @property
+    def members(self) -> list[list[Layer]]:
+        return self.stacks
+
+    @property
+    def histories(self) -> int:
+        return len(self.parts) if self.own_feedback else 1
+
+    def reduce(self, inputs: np.ndarray) -> np.ndarray:
+        return self.parts[0].reduce(inputs)
+
+    def predict(self, u: np.ndarray, y_past: np.ndarray) -> np.ndarray:
+        """Flows (N,) from raw inputs u (N, D, F) and the ensemble's past flows (N, 5): the
+        members' flows averaged; own feedback: y_past (N, K, 5) → each member's flow (N, K)."""
+        if self.histories > 1:
+            return np.column_stack([p.predict(u, y_past[:, j]) for j, p in enumerate(self.parts)])
+        return np.mean([p.predict(u, y_past) for p in self.parts], axis=0)
 
 
 def _run(stack: list[Layer], h: np.ndarray) -> np.ndarray:

@@ -29,8 +29,9 @@ from gateway.vsensor.probe import code_probe
 from training.vsensor import fit, heldout, report
 from training.vsensor.dataset import Segment, build_segment, fingerprint
 from training.vsensor.export import write_model
+from training.vsensor.mixed import check_settings
 from training.vsensor.model_card import model_card
-from training.vsensor.narx import Narx
+from training.vsensor.narx import MIXED, MixedNarx, Narx
 
 NETWORKS = ("pca_narx", "narx_no_pca", "linear_arx")
 
@@ -55,7 +56,7 @@ def _version() -> str:
         return "unknown"
 
 
-def validation_metrics(net: Narx, split: fit.Split, sims: list[np.ndarray] | None = None
+def validation_metrics(net: Narx | MixedNarx, split: fit.Split, sims: list[np.ndarray] | None = None
                        ) -> tuple[dict, list[np.ndarray]]:
     """Closed-loop flow error on the validation quarter of every file (and the sims; given
     ``sims``, those flows are scored instead of ``net``'s closed loop)."""
@@ -171,11 +172,20 @@ def _write_models(nets: dict, n_inputs: int, base_meta: dict, out: Path) -> dict
         path = out if name == "pca_narx" else out.with_name(f"{out.stem}.{name}.onnx")
         meta = {**base_meta, "network": name, "hidden_layers": list(net.hidden), "y0": net.y0,
                 **({"feedback_histories": net.histories} if net.histories > 1 else {}),
-                **({"target_kind": "opening", "opening_driver": net.driver.as_meta()}
-                   if net.target == "opening" else {})}
+                **_target_meta(net)}
         write_model(net, n_inputs, meta, path)
         written[name] = path
     return written
+
+
+def _target_meta(net) -> dict:
+    """Metadata naming what the network learns (absent: the flow; VentSensor checks it)."""
+    if net.target == "opening":
+        return {"target_kind": "opening", "opening_driver": net.driver.as_meta()}
+    if net.target == MIXED:  # members of two targets, averaged as flows (mixed.py)
+        return {"target_kind": MIXED, "member_targets": net.targets,
+                "opening_driver": net.driver.as_meta()}
+    return {}
 
 
 def _score_heldout(paths: list[str], written: dict[str, Path], gh: Greenhouse, kind: str, cache,
@@ -233,6 +243,7 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
         raise ValueError(f"pca_variance {pca_variance}: must be in [{fit.MIN_VARIANCE}, 1]")
     if ensemble < 1:
         raise ValueError(f"ensemble {ensemble}: at least one network")
+    check_settings(target, ensemble, feedback)
     net_seed = seed if net_seed is None else net_seed
     seeds = [net_seed + j for j in range(ensemble)]
     opts = fit.row_options(feedback_noise, high_flow_weight, target, gh)

@@ -57,11 +57,14 @@ def add_fit_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--high-flow-weight", type=float, default=1.0, metavar="W",
                    help="loss weight of the training rows whose target is above the targets' 90th "
                    "percentile, the others 1 (default 1: unweighted)")
-    p.add_argument("--target", choices=("identity", "sqrt", "log1p", "opening"), default="identity",
+    p.add_argument("--target", choices=("identity", "sqrt", "log1p", "opening", "mixed"),
+                   default="identity",
                    help="what the NARX networks learn and feed back: the flow (default), its square "
                    "root, log(1 + flow) or the effective opening flow / D (D: the ventilation "
                    "driver of III.31 from wind and T_in - T_out); the graph inverts it (flows in, "
-                   "flow out)")
+                   "flow out). mixed: an ensemble (--ensemble 2 or more) whose even network seeds "
+                   "learn the flow and odd seeds the opening, each fitted as in a one-target "
+                   "ensemble, averaged as flows in the graph")
     p.add_argument("--extra-features", nargs="+", default=[], metavar="NAME",
                    choices=("dvp_in_out", "wind_dt"),
                    help="derived inputs after the base ones (gateway.vsensor.features.EXTRAS; "

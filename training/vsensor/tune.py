@@ -64,12 +64,14 @@ def run(args: argparse.Namespace) -> int:
     from gateway.greenhouse import load_greenhouse
     from training.vsensor import fit
     from training.vsensor.cli import overrides
+    from training.vsensor.mixed import check_settings
     from training.vsensor.train import prepare, validation_metrics
 
     gh = load_greenhouse(args.greenhouse)
     hidden = tuple(int(v) for v in args.hidden.split(","))
     net_seed = args.seed if args.net_seed is None else args.net_seed
     seeds = [net_seed + j for j in range(args.ensemble)]
+    check_settings(args.target, args.ensemble, args.feedback)
     if args.holdout_groups is not None:
         return run_groups(args, gh, hidden, seeds)
     t0 = time.perf_counter()

@@ -118,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
     print("| run | seed | " + " | ".join(f"{g} {w} kinds" for (g, w), _ in gw)
           + " | kinds sum | " + " | ".join(f"{g} quiet" for g in sorted(pairs[0][0]["quiet"]))
           + " | cases passing |")
-    print("| --- " * (5 + len(gw) + len(pairs[0][0]["quiet"])) + "|")
+    print("| --- " * (4 + len(gw) + len(pairs[0][0]["quiet"])) + "|")
     for arm in ("A", "B"):
         for seed, name, f in arms[arm]:
             print(run_line(f"{arm} {name}", seed, f))

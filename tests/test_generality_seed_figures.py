@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from tests.generality.seed_figures import diagnose_rows, figures, noise, over_pairs
+from tests.generality.seed_figures import diagnose_rows, figures, noise, over_pairs, verdict_lines
 
 
 def _row(gen: str, window: str, kind: str, ok: bool, seed: int = 1, invisible: bool = False) -> dict:
@@ -55,3 +55,9 @@ def test_one_seed_per_results_file(tmp_path):
     p.write_text(json.dumps({"results": _run(True, 10, 3) + _run(True, 10, 2)}), encoding="utf-8")
     with pytest.raises(ValueError, match="seeds"):
         diagnose_rows(p)
+
+
+def test_verdict_lines_list_the_cases_that_differ():
+    lines = verdict_lines([("a", figures(_run(False, 10))), ("b", figures(_run(True, 9)))])
+    assert "| refsim/autumn/heater | n | y |" in lines and "| refsim/w9/none | y | n |" in lines
+    assert lines[-1] == "\nthe other 12 cases: 11 pass and 1 fail in every run"

@@ -103,7 +103,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--pair", nargs=2, action="append", required=True, metavar=("A.json", "B.json"),
                     help="A and B run on one seed (repeat per seed)")
-    ap.add_argument("--verdicts", action="store_true", help="also list every case's pass/fail")
+    ap.add_argument("--verdicts", action="store_true",
+                    help="also every case's pass/fail: the cases that differ between runs")
     a = ap.parse_args(argv)
     pairs, arms = [], {"A": [], "B": []}
     for fa, fb in a.pair:
@@ -138,11 +139,25 @@ def main(argv: list[str] | None = None) -> int:
           f"{o['fewest_quiet_b']} of 10; quiet total {o['quiet_a']} → {o['quiet_b']} "
           f"({o['quiet_b'] - o['quiet_a']:+d}); cases passing {o['passes_a']} → {o['passes_b']}")
     if a.verdicts:
-        for arm in ("A", "B"):
-            for seed, name, f in arms[arm]:
-                fails = [c for c, v in sorted(f["ok"].items()) if not v]
-                print(f"\n{arm} {name} (seed {seed}) fails: " + ", ".join("/".join(c) for c in fails))
+        print("\n" + "\n".join(verdict_lines([(n, f) for arm in ("A", "B") for _, n, f in arms[arm]])))
     return 0
+
+
+def verdict_lines(runs: list[tuple[str, dict]]) -> list[str]:
+    """Every case's verdict in every run: a Markdown row (y/n per run) for each case whose
+    verdict is not the same in all, then the count of the cases that pass or fail in all."""
+    cases = sorted(set.intersection(*(set(f["ok"]) for _, f in runs)))
+    lines = ["| case | " + " | ".join(n for n, _ in runs) + " |", "| --- " * (len(runs) + 1) + "|"]
+    same = {True: 0, False: 0}
+    for c in cases:
+        seen = [f["ok"][c] for _, f in runs]
+        if len(set(seen)) == 1:
+            same[seen[0]] += 1
+        else:
+            lines.append(f"| {'/'.join(c)} | " + " | ".join("y" if v else "n" for v in seen) + " |")
+    lines.append(f"\nthe other {same[True] + same[False]} cases: {same[True]} pass and "
+                 f"{same[False]} fail in every run")
+    return lines
 
 
 if __name__ == "__main__":

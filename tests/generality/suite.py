@@ -8,7 +8,7 @@ on each generator's three main windows. Writes ``bench/results/generality.json``
 Markdown section of docs/effects.md (between its markers).
 
     python tests/generality/suite.py [--jobs 2] [--generators refsim,twonode,vanthoor]
-        [--only diagnose|forecast] [--windows autumn,winter] [--no-docs]
+        [--only diagnose|forecast] [--windows autumn,winter] [--no-docs] [--seed 1]
 """
 
 from __future__ import annotations
@@ -39,16 +39,17 @@ ALL_KINDS = ("none", *KINDS, *OUTSIDE)
 
 
 def all_cases(generators=GENERATORS, windows=MAIN_WINDOWS, only: str | None = None,
-              kinds=ALL_KINDS) -> list[Case]:
-    """Slowest first (forecast replays), so the processes finish together."""
+              kinds=ALL_KINDS, seed: int = 1) -> list[Case]:
+    """Slowest first (forecast replays), so the processes finish together. ``seed``: the
+    generators' sensor noise and biases (and the visible-size reference, same seed)."""
     cases = []
     if only in (None, "forecast"):
-        cases += [Case("forecast", g, w) for g in generators for w in windows]
+        cases += [Case("forecast", g, w, seed=seed) for g in generators for w in windows]
     if only in (None, "diagnose"):
         for g in generators:
-            cases += [Case("diagnose", g, w, k) for w in windows for k in kinds]
+            cases += [Case("diagnose", g, w, k, seed) for w in windows for k in kinds]
             if tuple(windows) == MAIN_WINDOWS and "none" in kinds:
-                cases += [Case("diagnose", g, w) for w in EXTRA_WINDOWS]
+                cases += [Case("diagnose", g, w, seed=seed) for w in EXTRA_WINDOWS]
     return cases
 
 
@@ -86,6 +87,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", choices=["diagnose", "forecast"],
                     help="run only the diagnosis cases or only the forecast rows (both)")
     ap.add_argument("--kinds", default=",".join(ALL_KINDS), help="changes to diagnose (all)")
+    ap.add_argument("--seed", type=int, default=1,
+                    help="the generators' noise seed, every case (1: the suite's usual results)")
     ap.add_argument("--json", default=str(RESULTS), help=f"results file ({RESULTS.relative_to(ROOT)})")
     ap.add_argument("--no-docs", action="store_true", help="do not rewrite docs/effects.md")
     ap.add_argument("--merge", action="store_true",
@@ -103,7 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     unknown = [k for k in kinds if k not in ALL_KINDS]
     if unknown:
         ap.error(f"unknown change(s) {unknown}; known: {', '.join(ALL_KINDS)}")
-    cases = all_cases(gens, tuple(a.windows.split(",")), a.only, kinds)
+    cases = all_cases(gens, tuple(a.windows.split(",")), a.only, kinds, a.seed)
     print(f"generality suite: {len(cases)} cases on {a.jobs} processes", flush=True)
     t0 = time.perf_counter()
     results = []
@@ -127,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     meta = {"command": "make bench-generality", "cases": len(results), "jobs": a.jobs,
             "minutes": minutes, "runs": [{"minutes": minutes, "jobs": a.jobs}],
             "when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": commit_id(),
-            "model": MODEL, "generators": list(gens)}
+            "model": MODEL, "generators": list(gens), "seed": a.seed}
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"meta": meta, "results": results}, indent=1) + "\n", encoding="utf-8")
     print(f"wrote {out} in {minutes:.1f} min", flush=True)

@@ -144,20 +144,6 @@ def test_mixed_model_is_reproducible_named_and_runs_live_as_in_training(gh, mixe
     assert np.all(np.isfinite(live)) and live.min() >= 0.0
 
 
-def _rewrite(src, dst, **changes):
-    model = onnx.load(str(src))
-    props = {p.key: p.value for p in model.metadata_props}
-    for k, v in changes.items():
-        if v is None:
-            props.pop(k, None)
-        else:
-            props[k] = v if isinstance(v, str) else json.dumps(v)
-    del model.metadata_props[:]
-    onnx.helper.set_model_props(model, props)
-    onnx.save(model, str(dst))
-    return dst
-
-
 def test_the_runtime_refuses_a_mixed_model_it_cannot_serve(gh, mixed_model, tmp_path):
     meta = {p.key: p.value for p in onnx.load(str(mixed_model)).metadata_props}
     drv = json.loads(meta["opening_driver"])
@@ -169,8 +155,8 @@ def test_the_runtime_refuses_a_mixed_model_it_cannot_serve(gh, mixed_model, tmp_
              ({"opening_driver": {**drv, "w": drv["w"] * 1.01}}, "opening driver w")]
     for i, (changes, message) in enumerate(cases):
         with pytest.raises(ModelMismatch, match=message):
-            VentSensor(_rewrite(mixed_model, tmp_path / f"bad{i}.onnx", **changes), gh, "almeria")
-    flow_as_mixed = _rewrite(vd.tiny_model(), tmp_path / "flow.onnx", target_kind="mixed")
+            VentSensor(vd.rewrite_metadata(mixed_model, tmp_path / f"bad{i}.onnx", **changes), gh, "almeria")
+    flow_as_mixed = vd.rewrite_metadata(vd.tiny_model(), tmp_path / "flow.onnx", target_kind="mixed")
     with pytest.raises(ModelMismatch, match="without its members' targets"):
         VentSensor(flow_as_mixed, gh, "almeria")
 

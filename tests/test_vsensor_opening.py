@@ -93,32 +93,19 @@ def test_opening_model_is_reproducible_and_named_in_its_metadata(gh, opening_mod
     assert np.isfinite(est.flow) and est.flow >= 0
 
 
-def _rewrite(src, dst, **changes):
-    model = onnx.load(str(src))
-    props = {p.key: p.value for p in model.metadata_props}
-    for k, v in changes.items():
-        if v is None:
-            props.pop(k, None)
-        else:
-            props[k] = v if isinstance(v, str) else json.dumps(v)
-    del model.metadata_props[:]
-    onnx.helper.set_model_props(model, props)
-    onnx.save(model, str(dst))
-    return dst
-
-
 def test_a_mismatched_target_is_refused(gh, opening_model, tmp_path):
     meta = {p.key: p.value for p in onnx.load(str(opening_model)).metadata_props}
     drv = json.loads(meta["opening_driver"])
-    bad = _rewrite(opening_model, tmp_path / "kind.onnx", target_kind="velocity")
+    bad = vd.rewrite_metadata(opening_model, tmp_path / "kind.onnx", target_kind="velocity")
     with pytest.raises(ModelMismatch, match="target kind 'velocity'"):
         VentSensor(bad, gh, "almeria")
-    bad = _rewrite(opening_model, tmp_path / "nodriver.onnx", opening_driver=None)
+    bad = vd.rewrite_metadata(opening_model, tmp_path / "nodriver.onnx", opening_driver=None)
     with pytest.raises(ModelMismatch, match="without its driver"):
         VentSensor(bad, gh, "almeria")
-    bad = _rewrite(opening_model, tmp_path / "driver.onnx", opening_driver={**drv, "b": drv["b"] * 1.01})
+    bad = vd.rewrite_metadata(opening_model, tmp_path / "driver.onnx",
+                              opening_driver={**drv, "b": drv["b"] * 1.01})
     with pytest.raises(ModelMismatch, match="opening driver b"):
         VentSensor(bad, gh, "almeria")
-    bad = _rewrite(vd.tiny_model(), tmp_path / "flow-as-opening.onnx", target_kind="opening")
+    bad = vd.rewrite_metadata(vd.tiny_model(), tmp_path / "flow-as-opening.onnx", target_kind="opening")
     with pytest.raises(ModelMismatch, match="without its driver"):
         VentSensor(bad, gh, "almeria")

@@ -8,6 +8,7 @@ take seconds; the network is small (8-8) and trained for a few epochs. Real trai
 from __future__ import annotations
 
 import functools
+import json
 import tempfile
 from pathlib import Path
 
@@ -58,3 +59,21 @@ def tiny_model(tag: str = "a", ensemble: int = 1, **options) -> Path:
               workdir() / "cache", TINY, seed=0, hidden=(8, 8), epochs=8, rounds=1,
               ensemble=ensemble, **options)
     return out
+
+
+def rewrite_metadata(src: Path, dst: Path, **changes) -> Path:
+    """A copy of the ONNX model ``src`` at ``dst`` with metadata entries changed (None: removed;
+    non-strings JSON-encoded): what the runtime's refusals are tested on."""
+    import onnx  # the training extra
+
+    model = onnx.load(str(src))
+    props = {p.key: p.value for p in model.metadata_props}
+    for k, v in changes.items():
+        if v is None:
+            props.pop(k, None)
+        else:
+            props[k] = v if isinstance(v, str) else json.dumps(v)
+    del model.metadata_props[:]
+    onnx.helper.set_model_props(model, props)
+    onnx.save(model, str(dst))
+    return dst

@@ -118,11 +118,6 @@ def test_members_are_fitted_as_in_their_one_target_ensembles(gh):
 
 
 def test_mixed_model_is_reproducible_named_and_runs_live_as_in_training(gh, mixed_model):
-    from gateway.vsensor.adaptive import AdaptiveRun
-    from gateway.vsensor.batch import run_sensor
-    from training.vsensor.dataset import build_segment
-    from training.vsensor.errors import simulate_model
-
     assert mixed_model.read_bytes() == vd.tiny_model("mixed-b", ensemble=2, target="mixed").read_bytes()
     meta = {p.key: p.value for p in onnx.load(str(mixed_model)).metadata_props}
     assert meta["target_kind"] == "mixed"
@@ -134,11 +129,7 @@ def test_mixed_model_is_reproducible_named_and_runs_live_as_in_training(gh, mixe
     linear = {p.key: p.value for p in onnx.load(str(mixed_model.with_name(
         "tiny.linear_arx.onnx"))).metadata_props}
     assert "target_kind" not in linear  # the linear ARX stays on the flow
-    seg = build_segment(vd.test_file(), gh, "almeria", vd.workdir() / "cache", vd.TINY)
-    batch = simulate_model(mixed_model, [seg], gh, "almeria")[0]
-    nov = AdaptiveRun(seg.time, seg.x, seg.fluxes, np.empty((len(seg.time), 0)), [])
-    sensor = VentSensor(mixed_model, gh, "almeria")
-    live = run_sensor(sensor, nov).flow
+    sensor, live, batch = vd.live_and_batch(mixed_model, gh)
     assert sensor.histories == 1
     assert np.allclose(live, batch, rtol=1e-4, atol=1e-4)
     assert np.all(np.isfinite(live)) and live.min() >= 0.0

@@ -187,9 +187,6 @@ def test_extra_features_and_sqrt_target_run_the_same_live_as_in_training(tmp_pat
     from threadpoolctl import threadpool_limits
 
     from gateway.vsensor import VentSensor
-    from gateway.vsensor.adaptive import AdaptiveRun
-    from gateway.vsensor.batch import run_sensor
-    from training.vsensor.errors import simulate_model
     from training.vsensor.train import train
 
     gh = load_greenhouse(vd.GREENHOUSE)
@@ -207,9 +204,7 @@ def test_extra_features_and_sqrt_target_run_the_same_live_as_in_training(tmp_pat
     assert "--target sqrt --extra-features dvp_in_out wind_dt" in r.card.read_text()
     seg = build_segment(vd.test_file(), gh, "almeria", vd.workdir() / "cache", vd.TINY, extra=extra)
     assert seg.inputs.shape[1] == len(names)
-    batch = simulate_model(model, [seg], gh, "almeria")[0]
-    nov = AdaptiveRun(seg.time, seg.x, seg.fluxes, np.empty((len(seg.time), 0)), [])
-    live = run_sensor(VentSensor(model, gh, "almeria"), nov).flow
+    _, live, batch = vd.live_and_batch(model, gh, extra)
     assert np.allclose(live, batch, rtol=1e-4, atol=1e-4)
     assert np.all(live >= 0)
     # the model without its extras' code is refused, naming the input
@@ -259,10 +254,6 @@ def test_members_on_their_own_past_run_the_same_live_as_in_training(tmp_path):
 
     from threadpoolctl import threadpool_limits
 
-    from gateway.vsensor import VentSensor
-    from gateway.vsensor.adaptive import AdaptiveRun
-    from gateway.vsensor.batch import run_sensor
-    from training.vsensor.errors import simulate_model
     from training.vsensor.train import train
 
     gh = load_greenhouse(vd.GREENHOUSE)
@@ -277,11 +268,7 @@ def test_members_on_their_own_past_run_the_same_live_as_in_training(tmp_path):
     assert "--ensemble 2 --target log1p --own-feedback" in r.card.read_text()
     sess = ort.InferenceSession(str(model), providers=["CPUExecutionProvider"])
     assert sess.get_inputs()[1].shape[1:] == [2, 5] and sess.get_outputs()[0].shape[1] == 2
-    seg = build_segment(vd.test_file(), gh, "almeria", vd.workdir() / "cache", vd.TINY)
-    batch = simulate_model(model, [seg], gh, "almeria")[0]
-    nov = AdaptiveRun(seg.time, seg.x, seg.fluxes, np.empty((len(seg.time), 0)), [])
-    sensor = VentSensor(model, gh, "almeria")
-    live = run_sensor(sensor, nov).flow
+    sensor, live, batch = vd.live_and_batch(model, gh)
     assert sensor.histories == 2
     assert np.allclose(live, batch, rtol=1e-4, atol=1e-4)
     # the train log's shared-feedback ensemble differs from the shipped own-feedback figure

@@ -77,3 +77,22 @@ def rewrite_metadata(src: Path, dst: Path, **changes) -> Path:
     onnx.helper.set_model_props(model, props)
     onnx.save(model, str(dst))
     return dst
+
+
+def live_and_batch(model: Path, gh, extra: tuple[str, ...] = ()):
+    """(sensor, live flows, batch flows) of ``model`` on the test file: the gateway's sensor
+    run step by step (``run_sensor``) beside training's batch closed loop (``simulate_model``)
+    on the same replayed segment, which the tests hold equal."""
+    import numpy as np
+
+    from gateway.vsensor import VentSensor
+    from gateway.vsensor.adaptive import AdaptiveRun
+    from gateway.vsensor.batch import run_sensor
+    from training.vsensor.dataset import build_segment
+    from training.vsensor.errors import simulate_model
+
+    seg = build_segment(test_file(), gh, "almeria", workdir() / "cache", TINY, extra=extra)
+    batch = simulate_model(model, [seg], gh, "almeria")[0]
+    nov = AdaptiveRun(seg.time, seg.x, seg.fluxes, np.empty((len(seg.time), 0)), [])
+    sensor = VentSensor(model, gh, "almeria")
+    return sensor, run_sensor(sensor, nov).flow, batch

@@ -39,10 +39,11 @@ run: $(STAMP)
 demo: $(STAMP)
 	$(PY) -m training demo
 
-## test: the whole suite (CI calls this)
+## test: the whole suite (CI calls this), in two worker processes (pytest-xdist; CI has 2 cores):
+## a test file stays in one worker, so its module fixtures are built once
 test: $(STAMP) $(STUBS)
 	$(VENV)/bin/ruff check .
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n 2 --dist loadfile
 
 # The peers (mealpy pins numpy < 2) live in their own virtualenv so they never touch .venv.
 BENCH_VENV  := .venv-bench

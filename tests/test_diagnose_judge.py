@@ -143,6 +143,29 @@ def test_the_reference_refit_takes_its_own_share():
     assert not v.ok and v.gain == pytest.approx(0.3)
 
 
+def test_the_reference_test_rejects_a_fading_spell_the_refit_leaves(monkeypatch):
+    """A base that does not carry over leaves a spell the refit without the effect takes only
+    in part: the candidate beats the model before on every day (p ~ 0), the reference by 36 %
+    overall and positively in both halves, but by 0.5 K on the first 3 days and 0.02 K after.
+    Main's rule passes it; with ``REFERENCE_TEST`` its days against the reference are not
+    significant and it is rejected saying so. A cut against the reference that lasts passes."""
+    piece = int(jd.JUDGE_PIECE_S / 300.0)
+    before, after, meas, blocks, s = _case(np.full(28, 0.6))
+    fading = {"free_run": after["free_run"] + np.repeat(np.where(np.arange(28) < 12, 0.5, 0.02),
+                                                         piece)}
+    assert not jd.REFERENCE_TEST  # off: main's rule
+    v = jd.judge(before, fading, after, meas, blocks, s, 300.0, [0.0], LAST)
+    assert v.ok and v.stats["p"] < 1e-6 and min(v.stats["halves"]) > 0
+    assert v.stats["cut_reference"] > jd.MIN_REF_CUT and v.stats["p_days_reference"] > jd.ALPHA
+    monkeypatch.setattr(jd, "REFERENCE_TEST", True)
+    v = jd.judge(before, fading, after, meas, blocks, s, 300.0, [0.0], LAST)
+    assert not v.ok and "not significant against the reference" in v.why, v.why
+    rng = np.random.default_rng(3)
+    lasting = {"free_run": after["free_run"] + np.repeat(0.2 + 0.05 * rng.normal(size=28), piece)}
+    v = jd.judge(before, lasting, after, meas, blocks, s, 300.0, [0.0], LAST)
+    assert v.ok and v.stats["p_days_reference"] <= jd.ALPHA, v.why
+
+
 def test_one_delta_bic():
     n_e = effective_samples(7200, 60.0)  # 5 days of 1-minute residuals: 120 effective samples
     assert n_e == pytest.approx(120.0)

@@ -42,7 +42,10 @@ one better, at × 1.57 CPU (× 1.31 since the sky is computed once per shooting 
 under the day-test judge (2026-11-27): no effect kind gained a pass, one verdict worse
 (docs/effects.md, "Base structure"); together with ``WIDE_VENT_BOX`` over seeds 2 and 3
 (2026-11-27): kinds passing +2, but twonode 8 of 10 effect-free windows quiet on both seeds
-(docs/effects.md, "The suite's seed noise"); the part stays available."""
+(docs/effects.md, "The suite's seed noise"); twonode winter's false alarm under it comes from
+this switch alone: a fading held-out warm spell the kit's sky does not see, with c_loss and
+c_store on bounds (docs/effects.md, "Why the freer base gives twonode winter a heater"); the
+part stays available."""
 OFFER_NIGHT_SKY = False
 """Whether ``options`` offers the night sky level as an optional part instead (tried after the
 sky loss, kept on the inner validation split): measured, not the choice (docs/effects.md)."""

@@ -33,10 +33,13 @@ def test_groups_are_site_and_season_of_the_corpus_names():
 
 def test_a_fold_fits_on_the_other_groups_and_scores_the_whole_held_out_files(tmp_path):
     """Two one-file groups: each fold's figure is the closed loop, over the whole held-out file,
-    of the PCA-NARX fitted (standardisation and PCA included) on the other file alone."""
+    of the PCA-NARX fitted (standardisation and PCA included) on the other file alone; with
+    ``--clamp-inputs`` the same networks also scored with the inputs clamped to the padded
+    ranges of that fit's training rows (the ranges its written model would carry)."""
+    from gateway.vsensor.loop import padded_ranges
     from training.vsensor import fit
     from training.vsensor.cli import main
-    from training.vsensor.train import prepare_segments, upper_limits
+    from training.vsensor.train import prepare_segments, training_ranges, upper_limits
 
     grower, controller = vd.train_files()
     paths = [tmp_path / "almeria-summer-grower.csv", tmp_path / "bleiswijk-autumn-controller.csv"]
@@ -47,7 +50,7 @@ def test_a_fold_fits_on_the_other_groups_and_scores_the_whole_held_out_files(tmp
     assert main(["tune", "--data", *map(str, paths), "--greenhouse", vd.GREENHOUSE, "--model",
                  "almeria", "--cache", str(cache), *sets, "--hidden", "8,8", "--epochs", "6",
                  "--rounds", "1", "--ensemble", "2", "--own-feedback", "--holdout-groups",
-                 "--log", str(log)]) == 0
+                 "--clamp-inputs", "--log", str(log)]) == 0
     got = json.loads(log.read_text())
     folds = {f["group"]: f for f in got["folds"]}
     assert list(folds) == ["almeria-summer", "bleiswijk-autumn"]
@@ -63,8 +66,13 @@ def test_a_fold_fits_on_the_other_groups_and_scores_the_whole_held_out_files(tmp
     net, _ = fit.fit_ensemble("pca_narx", prep.split, prep.mean, prep.std, prep.loadings, [0, 1],
                               (8, 8), 6, 1, 6)
     held = fit.Split([segs[0]], upper_limits([segs[0]], gh, "almeria"), [0])
+    ranges = training_ranges(prep.split, prep.names)[0]
+    lo, hi = padded_ranges(np.array([ranges[n] for n in prep.names]))
+    assert np.any((segs[0].inputs < lo) | (segs[0].inputs > hi))  # the clamp acts here
     for key, sims in (("scores", fit.simulate(net, held)),
-                      ("own", fit.simulate_own_feedback(net, held))):
+                      ("own", fit.simulate_own_feedback(net, held)),
+                      ("clamped", fit.simulate(net, held, (lo, hi))),
+                      ("own_clamped", fit.simulate_own_feedback(net, held, (lo, hi)))):
         ref = segs[0].flow
         ok = np.isfinite(ref)
         assert ok.sum() == len(ref) - 60  # the whole file but its first hour
@@ -73,6 +81,12 @@ def test_a_fold_fits_on_the_other_groups_and_scores_the_whole_held_out_files(tmp
         assert s["mae"] == pytest.approx(mae, rel=1e-12)
         assert s["pct_range"] == pytest.approx(100 * mae / np.ptp(ref[ok]), rel=1e-12)
         assert folds["almeria-summer"][key]["all"]["mae"] == s["mae"]
+    assert folds["almeria-summer"]["clamped"]["all"]["mae"] != folds["almeria-summer"]["scores"][
+        "all"]["mae"]
+    clamped = {g: f["clamped"]["all"]["mae"] for g, f in folds.items()}
+    assert got["clamped"]["criterion"] == pytest.approx(sum(clamped.values()) / 2)
+    assert got["own_feedback_clamped"]["grower_mae"] == pytest.approx(
+        folds["almeria-summer"]["own_clamped"]["all"]["mae"])
     pct = {g: f["own"]["all"]["pct_range"] for g, f in folds.items()}
     mae = {g: f["own"]["all"]["mae"] for g, f in folds.items()}
     own = got["own_feedback"]

@@ -91,8 +91,10 @@ def test_step_equals_the_batch_closed_loop(gh, model_path, novent):
     assert np.all(np.isfinite(run.q_vent))
 
 
-def test_nan_and_out_of_range_inputs_are_flagged_never_nan_or_negative(gh, model_path):
-    sensor = VentSensor(model_path, gh, "almeria")
+@pytest.mark.parametrize("clamp", [False, True])
+def test_nan_and_out_of_range_inputs_are_flagged_never_nan_or_negative(gh, model_path, clamp):
+    """Absurd inputs give a finite, non-negative flow and stay flagged, clamped or not."""
+    sensor = VentSensor(model_path, gh, "almeria", clamp_inputs=clamp)
     names = feature_names("almeria")[3:]
     good_m = {"t_in": 22.0, "t_out": 18.0, "rh_in": 70.0, "rh_out": 60.0, "wind": 3.0}
     good_f = {n: 0.0 for n in names}
@@ -114,6 +116,75 @@ def test_nan_and_out_of_range_inputs_are_flagged_never_nan_or_negative(gh, model
     assert c.steps == 6 and c.flagged == 5
     assert c.missing["wind"] >= 2 and c.out_of_range_steps >= 2
     assert sum(c.missing.values()) >= 1 + 8 + 3
+    assert c.inputs_clamped == (c.out_of_range_steps if clamp else 0)
+
+
+def _narrow(model: Path, dst: Path) -> Path:
+    """The model with its training ranges shrunk to their middle fifth: the test file then
+    drives every input outside them often, so the clamp acts."""
+    info = VentSensor(model, load_greenhouse(vd.GREENHOUSE), "almeria").info
+    mid, span = info.ranges.mean(axis=1), info.ranges[:, 1] - info.ranges[:, 0]
+    ranges = {n: [float(m - s / 10), float(m + s / 10)]
+              for n, m, s in zip(info.names, mid, span, strict=True)}
+    return vd.rewrite_metadata(model, dst, training_ranges=ranges)
+
+
+def _fed_rows(sensor: VentSensor, novent) -> np.ndarray:
+    """The rows the graph was fed at every step (u at delay 0), as run_sensor steps."""
+    cols = {k: novent.x[k] for k in ("t_in", "t_out", "rh_in", "rh_out", "wind")}
+    rows = []
+    for t in range(len(novent.time)):
+        sensor.step({k: v[t] for k, v in cols.items()}, {k: v[t] for k, v in novent.fluxes.items()})
+        rows.append(sensor._u[0, 0].copy())
+    return np.array(rows)
+
+
+def test_the_input_clamp_keeps_inputs_in_bounds_and_in_range_inputs_bit_identical(
+        gh, model_path, novent, tmp_path):
+    """clamp_inputs: an input outside its padded training range is fed at the bound it crossed
+    (still flagged, counted alike), an input inside it is fed bit for bit as without the clamp;
+    the batch closed loop (loop.closed_loop bounds) feeds the network the same."""
+    from gateway.vsensor.loop import padded_ranges
+
+    narrow = _narrow(model_path, tmp_path / "narrow.onnx")
+    off, on = VentSensor(narrow, gh, "almeria"), VentSensor(narrow, gh, "almeria", clamp_inputs=True)
+    rows_off, rows_on = _fed_rows(off, novent), _fed_rows(on, novent)
+    lo, hi = padded_ranges(on.info.ranges)
+    inside = (rows_off >= lo.astype(np.float32)) & (rows_off <= hi.astype(np.float32))
+    assert (~inside).any(axis=0).sum() >= 3  # several inputs cross their bounds
+    assert np.array_equal(rows_on[inside], rows_off[inside])
+    assert np.all(rows_on >= lo.astype(np.float32)) and np.all(rows_on <= hi.astype(np.float32))
+    below = np.broadcast_to(lo.astype(np.float32), rows_on.shape)
+    above = np.broadcast_to(hi.astype(np.float32), rows_on.shape)
+    low_cells = rows_off < below
+    assert np.array_equal(rows_on[low_cells], below[low_cells])
+    assert np.array_equal(rows_on[rows_off > above], above[rows_off > above])
+    assert on.counts.out_of_range == off.counts.out_of_range  # the flag is not hidden
+    assert on.counts.inputs_clamped == on.counts.out_of_range_steps > 0
+    assert off.counts.inputs_clamped == 0
+    seen = []
+
+    def predict(u, y_past):
+        seen.append(u[:, 0].copy())
+        return np.ones((u.shape[0], 1))
+
+    raw = np.where(inside, rows_off, rows_off * 10.0)[None].astype(float)
+    closed_loop(predict, raw, np.full(raw.shape[:2], 1e9), 0.0, bounds=(lo, hi))
+    fed = np.concatenate(seen)
+    assert np.all(fed >= lo) and np.all(fed <= hi)
+    assert np.array_equal(fed[inside], raw[0][inside])
+
+
+def test_clamped_sensor_runs_live_as_the_batch_closed_loop(gh, model_path, tmp_path):
+    """With the clamp on, the gateway's VentSensor and training's batch closed loop
+    (simulate_model, the path of tune's clamped scoring) give the same flows."""
+    narrow = _narrow(model_path, tmp_path / "narrow.onnx")
+    sensor, live, batch = vd.live_and_batch(narrow, gh, clamp_inputs=True)
+    assert sensor.counts.inputs_clamped > 100
+    assert np.allclose(live, batch, rtol=1e-5, atol=1e-5)
+    assert np.all(np.isfinite(live)) and live.min() >= 0.0
+    _, unclamped, _ = vd.live_and_batch(narrow, gh)
+    assert not np.allclose(live, unclamped, rtol=1e-3, atol=1e-3)
 
 
 def test_other_greenhouse_is_flagged(tmp_path, model_path):

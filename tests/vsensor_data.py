@@ -79,10 +79,10 @@ def rewrite_metadata(src: Path, dst: Path, **changes) -> Path:
     return dst
 
 
-def live_and_batch(model: Path, gh, extra: tuple[str, ...] = ()):
+def live_and_batch(model: Path, gh, extra: tuple[str, ...] = (), clamp_inputs: bool = False):
     """(sensor, live flows, batch flows) of ``model`` on the test file: the gateway's sensor
     run step by step (``run_sensor``) beside training's batch closed loop (``simulate_model``)
-    on the same replayed segment, which the tests hold equal."""
+    on the same replayed segment, which the tests hold equal (``clamp_inputs``: both clamp)."""
     import numpy as np
 
     from gateway.vsensor import VentSensor
@@ -92,7 +92,7 @@ def live_and_batch(model: Path, gh, extra: tuple[str, ...] = ()):
     from training.vsensor.errors import simulate_model
 
     seg = build_segment(test_file(), gh, "almeria", workdir() / "cache", TINY, extra=extra)
-    batch = simulate_model(model, [seg], gh, "almeria")[0]
+    batch = simulate_model(model, [seg], gh, "almeria", clamp_inputs)[0]
     nov = AdaptiveRun(seg.time, seg.x, seg.fluxes, np.empty((len(seg.time), 0)), [])
-    sensor = VentSensor(model, gh, "almeria")
+    sensor = VentSensor(model, gh, "almeria", clamp_inputs=clamp_inputs)
     return sensor, run_sensor(sensor, nov).flow, batch

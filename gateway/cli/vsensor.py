@@ -52,6 +52,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="write time, flow, heat loss, out-of-range and valid flags per row")
     p.add_argument("--no-baselines", action="store_true", help="skip the baseline models")
     p.add_argument("--seed", type=int, default=0, help="seed of the online estimator (0)")
+    p.add_argument("--clamp-inputs", action="store_true",
+                   help="feed inputs outside the padded training ranges at their bound (still "
+                   "flagged; off by default, docs/vsensor.md tenth pass)")
     p.set_defaults(func=run)
 
 
@@ -83,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         with progress_bar("vsensor", replays * len(series), True) as bar:
             result = run_series(path, series, gh, args.model_kind, seed=args.seed,
-                                baselines=not args.no_baselines,
+                                baselines=not args.no_baselines, clamp_inputs=args.clamp_inputs,
                                 progress=lambda done: bar(advance=100))
     except (ModelMismatch, FileNotFoundError) as exc:
         raise CliError(str(exc)) from None

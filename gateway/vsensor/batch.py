@@ -70,16 +70,19 @@ def baseline_paths(model_path: str | Path) -> dict[str, Path]:
 
 def run_series(model_path: str | Path, series: Series, gh: Greenhouse, kind: str,
                overrides=None, seed: int = 0, baselines: bool = True,
-               progress: Callable[[int], None] | None = None) -> BatchResult:
-    """Everything ``python -m gateway vsensor`` computes (see the module docstring)."""
-    sensor = VentSensor(model_path, gh, kind)
+               progress: Callable[[int], None] | None = None,
+               clamp_inputs: bool = False) -> BatchResult:
+    """Everything ``python -m gateway vsensor`` computes (see the module docstring);
+    ``clamp_inputs``: every sensor built with it (``VentSensor``)."""
+    sensor = VentSensor(model_path, gh, kind, clamp_inputs=clamp_inputs)
     if overrides is None:
         overrides = sensor.info.meta.get("online_overrides") or None
     novent = run_adaptive(kind, series, gh, vents=False, overrides=overrides, seed=seed, progress=progress)
     runs = {"pca_narx": run_sensor(sensor, novent, sensor.info.network)}
     if baselines:
         for name, path in baseline_paths(model_path).items():
-            runs[name] = run_sensor(VentSensor(path, gh, kind), novent, name)
+            runs[name] = run_sensor(VentSensor(path, gh, kind, clamp_inputs=clamp_inputs),
+                                    novent, name)
     dt = novent.x["t_in"] - novent.x["t_out"]
     result = BatchResult(series.time, runs, dt_in_out=dt)
     if has_vents(series):
@@ -120,6 +123,7 @@ def score(result: BatchResult, warmup: int = WARMUP_STEPS) -> dict:
             "missing": c.missing_steps,
             "missing_by_input": dict(sorted(c.missing.items())),
             "clamped": c.clamped,
+            "inputs_clamped": c.inputs_clamped,
             "flow": None, "q_vent": None, "flow_error_pct": None,
         }
         if result.reference_flow is not None:

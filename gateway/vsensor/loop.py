@@ -4,6 +4,10 @@
 sensor's own past (clamped) outputs, never a measured flow: the deployed sensor has none. One
 function for every batch user (training metrics, baselines, tests); ``VentSensor.step`` runs the
 same recurrence one step at a time, and a test holds the two equal.
+
+``bounds`` (optional, both): every filtered input clamped to its padded training range
+(:func:`padded_ranges`, the bounds beyond which the runtime flags it out of range) before it
+enters the network, so the network is never asked to extrapolate (docs/vsensor.md, tenth pass).
 """
 
 from __future__ import annotations
@@ -14,9 +18,22 @@ import numpy as np
 
 from gateway.vsensor.features import INPUT_DELAYS, OUTPUT_DELAYS
 
+RANGE_MARGIN = 0.02
+"""An input counts as outside the training range beyond min − 2 % or max + 2 % of its span."""
+Bounds = tuple[np.ndarray, np.ndarray]
+"""(lo, hi), each (F,): the padded training range of every filtered input."""
 Predict = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """``predict(u, y_past)``: u (N, len(INPUT_DELAYS), F) with u[:, d] the inputs at k - d;
 y_past (N, len(OUTPUT_DELAYS)) with y_past[:, j] the output at k - 1 - j → flows (N,)."""
+
+
+def padded_ranges(ranges: np.ndarray) -> Bounds:
+    """(lo, hi) of the training ranges (F, 2) widened by ``RANGE_MARGIN`` of their span: the
+    runtime's out-of-range flag and, when asked, the input clamp (one arithmetic for both)."""
+    r = np.asarray(ranges, dtype=float)
+    lo, hi = r[:, 0], r[:, 1]
+    pad = RANGE_MARGIN * np.maximum(hi - lo, 1e-9)
+    return lo - pad, hi + pad
 
 
 def fill_missing(inputs: np.ndarray, fill: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -26,7 +43,7 @@ def fill_missing(inputs: np.ndarray, fill: np.ndarray) -> tuple[np.ndarray, np.n
 
 
 def closed_loop(predict: Predict, inputs: np.ndarray, upper: np.ndarray, y0: float,
-                histories: int = 1) -> np.ndarray:
+                histories: int = 1, bounds: Bounds | None = None) -> np.ndarray:
     """Run the NARX over ``inputs`` (N, T, F) (no NaN: see :func:`fill_missing`) in closed loop.
 
     ``upper`` (N, T) is the physical upper limit of the flow at each step (``FlowLimits.upper``);
@@ -35,8 +52,11 @@ def closed_loop(predict: Predict, inputs: np.ndarray, upper: np.ndarray, y0: flo
     ``histories`` K > 1: an ensemble whose members each hear their own past outputs; ``predict``
     takes y_past (N, K, 5) and gives (N, K), each member's output is held (non-finite) and
     clipped on its own, the flow is their mean.
+    ``bounds``: each input clipped to [lo, hi] first (in-range values untouched, bit for bit).
     Returns the flows (N, T) [m3 s-1]. Vectorised over the N series: one call per step.
     """
+    if bounds is not None:
+        inputs = np.clip(inputs, bounds[0], bounds[1])
     n, t_len, n_f = inputs.shape
     d_in = max(INPUT_DELAYS) + 1
     d_out = max(OUTPUT_DELAYS)

@@ -10,6 +10,9 @@ model whose metadata does not match the features this code computes for the runn
 (:class:`ModelMismatch` names the difference). It feeds back its own past outputs, clamps every
 output to [0, the physical maximum of this house now], flags inputs that are missing or outside
 the training ranges and counts them. No NaN and no negative flow ever leaves it.
+``VentSensor(..., clamp_inputs=True)`` (off by default) also feeds every filtered input outside
+its padded training range at that range's bound (``loop.padded_ranges``; still flagged, and
+counted in ``counts.inputs_clamped``), as ``loop.closed_loop(..., bounds=...)`` does in batch.
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ from gateway.vsensor.features import (
     rho_cp_per_area,
     signature_mismatch,
 )
+from gateway.vsensor.loop import padded_ranges
 
 FORMAT = "serra-vsensor/1"
 TARGET_KINDS = ("flow", "opening", "mixed")
@@ -47,8 +51,6 @@ driver D from its inputs with the constants of ``opening_driver`` (docs/vsensor.
 an ensemble whose members learn ``member_targets`` (each ``flow`` or ``opening``), averaged as
 flows in the graph."""
 MEMBER_TARGETS = ("flow", "opening")
-RANGE_MARGIN = 0.02
-"""An input counts as outside the training range beyond min − 2 % or max + 2 % of its span."""
 
 
 class ModelMismatch(ValueError):
@@ -84,6 +86,7 @@ class SensorCounts:
     non_finite_output: int = 0
     out_of_range: dict[str, int] = field(default_factory=dict)
     missing: dict[str, int] = field(default_factory=dict)
+    inputs_clamped: int = 0  # steps with an input fed at its bound (clamp_inputs only)
 
 
 @dataclass(frozen=True)
@@ -215,7 +218,7 @@ class VentSensor:
     """The deployed sensor for one greenhouse (see the module docstring)."""
 
     def __init__(self, model_path: str | Path, gh: Greenhouse, model_kind: str,
-                 threads: int = 1) -> None:
+                 threads: int = 1, clamp_inputs: bool = False) -> None:
         import onnxruntime as ort
 
         opts = ort.SessionOptions()
@@ -240,9 +243,9 @@ class VentSensor:
         self.extra = extras_of(model_kind, self.info.names)
         self._extra_fns = [EXTRAS[n][1] for n in self.extra]
         self._gains = [float(a) for a in filter_gains(model_kind, extra=self.extra)]
-        lo, hi = self.info.ranges[:, 0], self.info.ranges[:, 1]
-        pad = RANGE_MARGIN * np.maximum(hi - lo, 1e-9)
-        self._lo, self._hi = [float(v) for v in lo - pad], [float(v) for v in hi + pad]
+        lo, hi = padded_ranges(self.info.ranges)
+        self._lo, self._hi = [float(v) for v in lo], [float(v) for v in hi]
+        self.clamp_inputs = bool(clamp_inputs)
         self._flux_names = flux_names(model_kind)
         self._out = [self.session.get_outputs()[0].name]
         self.histories = _histories(model_path, self.session, self.info)
@@ -272,6 +275,8 @@ class VentSensor:
                 return np.array([_num(m.get(name))])
             raw += [float(f(col)[0]) for f in self._extra_fns]
         row, missing, outside = self._filter(raw)
+        if outside and self.clamp_inputs:
+            self.counts.inputs_clamped += 1
         if not self._started:
             self._u[0, :] = row
             self._started = True
@@ -305,7 +310,10 @@ class VentSensor:
         return min(max(y, 0.0), upper), not 0.0 <= y <= upper
 
     def _filter(self, raw: list[float]) -> tuple[list[float], tuple[str, ...], tuple[str, ...]]:
-        """Low-pass each input (features.low_pass, one row); NaN holds the filter."""
+        """Low-pass each input (features.low_pass, one row); NaN holds the filter. With
+        ``clamp_inputs`` an input flagged outside its padded range is fed at the bound it
+        crossed; the filter's state itself is never clamped (the batch clamps the filtered
+        series, loop.closed_loop)."""
         names, state, gains = self.info.names, self._state, self._gains
         row, missing, outside = [], [], []
         for i, v in enumerate(raw):
@@ -318,6 +326,8 @@ class VentSensor:
                 s = float(self.info.mean[i])  # never seen yet: the training mean
             elif not self._lo[i] <= s <= self._hi[i]:
                 outside.append(names[i])
+            if self.clamp_inputs:  # the mean too, as the batch clips after fill_missing
+                s = min(max(s, self._lo[i]), self._hi[i])
             row.append(s)
         return row, tuple(missing), tuple(outside)
 

@@ -95,6 +95,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--sensor", dest="onnx", nargs="+", required=True, metavar="MODEL.onnx",
                    help="the written sensors to score")
     s.add_argument("--json", action="store_true", help="print the scores as JSON")
+    s.add_argument("--clamp-inputs", action="store_true",
+                   help="the sensors clamp their inputs to the padded training ranges")
     s.set_defaults(func=_score)
     return parser
 
@@ -109,7 +111,8 @@ def _score(args: argparse.Namespace) -> int:
     models = {str(p): Path(p) for p in args.onnx}
     scores = {Path(p).stem: score_segment(build_segment(p, gh, args.model, args.cache,
                                                         overrides(args.set) or None, args.seed),
-                                          models, gh, args.model) for p in args.data}
+                                          models, gh, args.model, args.clamp_inputs)
+              for p in args.data}
     if args.json:
         print(json.dumps({f: {m: {k: s[k] for k in ("flow", "q_vent", "flow_error_pct")}
                               for m, s in per.items()} for f, per in scores.items()}, indent=1))

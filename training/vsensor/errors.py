@@ -19,7 +19,7 @@ import numpy as np
 from gateway.greenhouse import Greenhouse
 from gateway.series import load_series
 from gateway.vsensor.features import extras_of, flow_limits
-from gateway.vsensor.loop import closed_loop, fill_missing
+from gateway.vsensor.loop import closed_loop, fill_missing, padded_ranges
 from training.vsensor import fit
 from training.vsensor.dataset import Segment, build_segment
 
@@ -70,15 +70,20 @@ def model_feature_names(model: str | Path) -> list[str]:
     return [f["name"] for f in json.loads(props["features"])]
 
 
-def simulate_model(model: str | Path, segments: list[Segment], gh: Greenhouse, kind: str
-                   ) -> list[np.ndarray]:
-    """Closed-loop flows of the model over every whole segment (as ``fit.simulate``)."""
+def simulate_model(model: str | Path, segments: list[Segment], gh: Greenhouse, kind: str,
+                   clamp_inputs: bool = False) -> list[np.ndarray]:
+    """Closed-loop flows of the model over every whole segment (as ``fit.simulate``);
+    ``clamp_inputs``: inputs clamped to the metadata's padded training ranges, as
+    ``VentSensor(clamp_inputs=True)``."""
     import json
 
     predict, sess = onnx_predict(model)
     meta = sess.get_modelmeta().custom_metadata_map
-    mean = np.array(list(json.loads(meta["input_mean"]).values()), dtype=float)
+    names = [f["name"] for f in json.loads(meta["features"])]  # the metadata's dicts are sorted
+    mean = np.array([json.loads(meta["input_mean"])[n] for n in names], dtype=float)
     y0 = float(json.loads(meta["y0"]))
+    ranges = json.loads(meta["training_ranges"])
+    bounds = padded_ranges(np.array([ranges[n] for n in names])) if clamp_inputs else None
     limits = flow_limits(gh, kind)
     n_max = max(len(s.flow) for s in segments)
     u = np.empty((len(segments), n_max, segments[0].inputs.shape[1]))
@@ -88,7 +93,8 @@ def simulate_model(model: str | Path, segments: list[Segment], gh: Greenhouse, k
         u[i, : len(filled)] = filled
         u[i, len(filled):] = filled[-1]
         up[i, : len(filled)] = limits.upper(s.x["t_in"] - s.x["t_out"], s.x["t_out"], s.x["wind"])
-    y = closed_loop(predict, u, up, y0, int(json.loads(meta.get("feedback_histories", "1"))))
+    y = closed_loop(predict, u, up, y0, int(json.loads(meta.get("feedback_histories", "1"))),
+                    bounds)
     return [y[i, : len(s.flow)] for i, s in enumerate(segments)]
 
 

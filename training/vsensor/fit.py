@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gateway.vsensor.features import OUTPUT_DELAYS
-from gateway.vsensor.loop import closed_loop, fill_missing
+from gateway.vsensor.loop import Bounds, closed_loop, fill_missing
 from training.vsensor.dataset import Segment
 from training.vsensor.narx import MIXED, TARGETS, Driver, Layer, MixedNarx, Narx, lag_rows, to_target
 
@@ -94,8 +94,9 @@ def train_targets(data: list[tuple[np.ndarray, np.ndarray]], opts: RowOptions) -
                            for u, y in data])
 
 
-def simulate(net: Narx | MixedNarx, split: Split) -> list[np.ndarray]:
-    """Closed-loop flows of every whole segment (all at once, padded to the longest)."""
+def simulate(net: Narx | MixedNarx, split: Split, bounds: Bounds | None = None) -> list[np.ndarray]:
+    """Closed-loop flows of every whole segment (all at once, padded to the longest);
+    ``bounds``: inputs clamped to them (``loop.closed_loop``, ``VentSensor(clamp_inputs=True)``)."""
     n_max = max(len(s.flow) for s in split.segments)
     n_f = split.segments[0].inputs.shape[1]
     u = np.empty((len(split.segments), n_max, n_f))
@@ -105,15 +106,16 @@ def simulate(net: Narx | MixedNarx, split: Split) -> list[np.ndarray]:
         u[i, : len(filled)] = filled
         u[i, len(filled):] = filled[-1]
         up[i, : len(filled)] = split.upper[i]
-    y = closed_loop(net.predict, u, up, net.y0, net.histories)
+    y = closed_loop(net.predict, u, up, net.y0, net.histories, bounds)
     return [y[i, : len(s.flow)] for i, s in enumerate(split.segments)]
 
 
-def simulate_own_feedback(net: Narx | MixedNarx, split: Split) -> list[np.ndarray]:
+def simulate_own_feedback(net: Narx | MixedNarx, split: Split, bounds: Bounds | None = None
+                          ) -> list[np.ndarray]:
     """Closed-loop flows of an ensemble whose members each hear **their own** past outputs
     (K histories, each member's output clipped to the physical range, then averaged): what the
     graph and runtime of an ``own_feedback`` model do. A single network: ``simulate``."""
-    return simulate(dataclasses.replace(net, own_feedback=True), split)
+    return simulate(dataclasses.replace(net, own_feedback=True), split, bounds)
 
 
 def validation_mae(net: Narx | MixedNarx, split: Split) -> float:

@@ -23,10 +23,12 @@ from training.vsensor.dataset import Segment
 LABELS = {"pca_narx": "PCA-NARX", "narx_no_pca": "NARX without PCA", "linear_arx": "linear ARX"}
 
 
-def score_segment(seg: Segment, models: dict[str, Path], gh: Greenhouse, kind: str) -> dict:
+def score_segment(seg: Segment, models: dict[str, Path], gh: Greenhouse, kind: str,
+                  clamp_inputs: bool = False) -> dict:
     """``score()`` of every model on one held-out segment (same keys as the CLI's JSON)."""
     nov = AdaptiveRun(seg.time, seg.x, seg.fluxes, np.empty((len(seg.time), 0)), [])
-    runs = {name: run_sensor(VentSensor(path, gh, kind), nov, name) for name, path in models.items()}
+    runs = {name: run_sensor(VentSensor(path, gh, kind, clamp_inputs=clamp_inputs), nov, name)
+            for name, path in models.items()}
     dt = seg.x["t_in"] - seg.x["t_out"]
     ref = seg.flow  # NaN in the first hour, which score() leaves out anyway
     return score(BatchResult(seg.time, runs, ref, heat_loss(ref, dt, gh), dt))

@@ -15,6 +15,10 @@ folds of the grower's files' MAE, and the same over the controller's files, aver
 goal's two kinds of vents weighted alike. (``criterion_pct``, the same on % of range, was the
 rule first written down: three held-out controller files barely ventilate, so their % of range
 is large for a tiny error.)
+
+``clamp``: the same fitted networks also run with every input clamped to the fold's padded
+training ranges (``loop.padded_ranges`` of the ranges its model's metadata would carry), paired
+with the unclamped run: ``Fold.clamped`` and ``own_clamped`` (docs/vsensor.md, tenth pass).
 """
 
 from __future__ import annotations
@@ -102,12 +106,17 @@ class Fold:
     own: dict[str, Score | None] | None  # the same members each on its own past (K > 1)
     by_file: dict[str, float]  # held-out stem → MAE (ensemble's past)
     seconds: float
+    clamped: dict[str, Score | None] | None = None  # ``scores`` with the inputs clamped
+    own_clamped: dict[str, Score | None] | None = None  # ``own`` with the inputs clamped
 
 
 def run_fold(group: str, segments: list[Segment], gh: Greenhouse, kind: str, seed: int,
-             pca_variance: float, extra: tuple[str, ...], fitter: Fitter) -> Fold:
-    """Fit on the files outside ``group`` and score the whole files inside it."""
-    from training.vsensor.train import prepare_segments, upper_limits
+             pca_variance: float, extra: tuple[str, ...], fitter: Fitter,
+             clamp: bool = False) -> Fold:
+    """Fit on the files outside ``group`` and score the whole files inside it (``clamp``: also
+    with the inputs clamped, the same networks)."""
+    from gateway.vsensor.loop import padded_ranges
+    from training.vsensor.train import prepare_segments, training_ranges, upper_limits
 
     t0 = time.perf_counter()
     inside = [s for s in segments if group_of(Path(s.source).stem) == group]
@@ -121,9 +130,17 @@ def run_fold(group: str, segments: list[Segment], gh: Greenhouse, kind: str, see
     own = fit.simulate_own_feedback(net, held) if len(net.members) > 1 else None
     stems = [Path(s.source).stem for s in inside]
     by_file = {st: score([s.flow], [y]).mae for st, s, y in zip(stems, inside, shared, strict=True)}
-    return Fold(group, stems, [Path(s.source).stem for s in outside], int(prep.loadings.shape[1]),
+    fold = Fold(group, stems, [Path(s.source).stem for s in outside], int(prep.loadings.shape[1]),
                 score_files(inside, shared), None if own is None else score_files(inside, own),
-                by_file, time.perf_counter() - t0)
+                by_file, 0.0)
+    if clamp:  # the bounds the fold's written model would carry (training_ranges, padded)
+        ranges = training_ranges(prep.split, prep.names)[0]
+        bounds = padded_ranges(np.array([ranges[n] for n in prep.names]))
+        fold.clamped = score_files(inside, fit.simulate(_shared(net), held, bounds))
+        if own is not None:
+            fold.own_clamped = score_files(inside, fit.simulate_own_feedback(net, held, bounds))
+    fold.seconds = time.perf_counter() - t0
+    return fold
 
 
 def _shared(net: Narx) -> Narx:
@@ -136,15 +153,24 @@ def _mean(values: list[float]) -> float | None:
     return float(np.mean(values)) if values else None
 
 
-def summarise(folds: list[Fold], own: bool = False) -> dict:
+def pick(f: Fold, own: bool = False, clamped: bool = False) -> dict[str, Score | None]:
+    """A fold's scores: the ensemble's past or (``own``) each member's, inputs clamped or not
+    (``clamped``: None when the fold was not scored clamped)."""
+    if clamped:
+        return f.own_clamped if own and f.own_clamped is not None else f.clamped
+    return f.own if own and f.own is not None else f.scores
+
+
+def summarise(folds: list[Fold], own: bool = False, clamped: bool = False) -> dict:
     """Means over the folds (grower and controller apart) and the selection ``criterion``;
-    ``own``: the figures of the members each on its own past."""
-    def pick(f: Fold) -> dict[str, Score | None]:
-        return f.own if own and f.own is not None else f.scores
+    ``own``: the figures of the members each on its own past; ``clamped``: with the inputs
+    clamped (the folds must have been scored so)."""
+    def pick_(f: Fold) -> dict[str, Score | None]:
+        return pick(f, own, clamped)
 
     out: dict[str, float | None] = {}
     for key in ("all", "grower", "controller"):
-        got = [pick(f)[key] for f in folds if pick(f)[key] is not None]
+        got = [pick_(f)[key] for f in folds if pick_(f)[key] is not None]
         out[f"{key}_mae"] = _mean([s.mae for s in got])
         out[f"{key}_pct"] = _mean([s.pct_range for s in got])
     for name, unit in (("criterion", "mae"), ("criterion_pct", "pct")):
@@ -157,7 +183,7 @@ def as_dict(fold: Fold) -> dict:
     return asdict(fold)
 
 
-def describe(folds: list[Fold], own: bool) -> str:
+def describe(folds: list[Fold], own: bool, clamped: bool = False) -> str:
     """A Markdown table: one row per fold (MAE and % of range; grower and controller apart)."""
     def cell(s: Score | None) -> str:
         return "—" if s is None else f"{s.mae:.3f} ({s.pct_range:.2f} %)"
@@ -165,10 +191,10 @@ def describe(folds: list[Fold], own: bool) -> str:
     lines = ["| held-out group (files) | all | grower's files | controller's files |",
              "| --- | --- | --- | --- |"]
     for f in folds:
-        sc = f.own if own and f.own is not None else f.scores
+        sc = pick(f, own, clamped)
         lines.append(f"| {f.group} ({len(f.held_out)}) | {cell(sc['all'])} | "
                      f"{cell(sc['grower'])} | {cell(sc['controller'])} |")
-    m = summarise(folds, own)
+    m = summarise(folds, own, clamped)
 
     def mean_cell(key: str) -> str:
         mae, pct = m[f"{key}_mae"], m[f"{key}_pct"]

@@ -80,7 +80,9 @@ def validation_metrics(net: Narx | MixedNarx, split: fit.Split, sims: list[np.nd
     return m, sims
 
 
-def _ranges(split: fit.Split, names: list[str]) -> tuple[dict, dict]:
+def training_ranges(split: fit.Split, names: list[str]) -> tuple[dict, dict]:
+    """Min, max and mean of every input over the training rows (the metadata's
+    ``training_ranges`` and ``input_mean``)."""
     u = np.concatenate([i for i, _ in split.part("train")])
     u = u[np.all(np.isfinite(u), axis=1)]
     lo, hi, mean = u.min(axis=0), u.max(axis=0), u.mean(axis=0)
@@ -143,7 +145,7 @@ def _metadata(kind: str, extra: tuple[str, ...], prep, nets: dict, gh: Greenhous
               seed: int, settings: dict, pca_info: dict, metrics: dict) -> dict:
     """The ONNX metadata the three written models share (docs/vsensor.md, "Training")."""
     segments = prep.segments
-    ranges, input_mean = _ranges(prep.split, prep.names)
+    ranges, input_mean = training_ranges(prep.split, prep.names)
     flows = np.concatenate([s.flow for s in segments])
     return {
         "model_kind": kind,

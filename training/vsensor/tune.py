@@ -10,6 +10,8 @@ of an earlier pass); ``--log FILE`` appends the summary as one JSON line. For an
 also scores the same members each fed its own past outputs (``own_feedback``: K loops averaged,
 ``fit.simulate_own_feedback``; ``--own-feedback`` makes it the figure, as train would).
 ``--holdout-groups``: leave one site x season out instead (training/vsensor/holdout_groups.py).
+``--clamp-inputs``: also score the same fitted networks with every input clamped to the padded
+training ranges (``VentSensor(clamp_inputs=True)``), paired: the ``clamped`` figures.
 """
 
 from __future__ import annotations
@@ -37,6 +39,9 @@ def add_tune_parser(sub: argparse._SubParsersAction, data_args) -> None:
                    help="leave one site x season out instead (training/vsensor/holdout_groups.py): "
                    "for each group (all, or the ones named) fit on the other groups' files and "
                    "score the whole held-out files")
+    p.add_argument("--clamp-inputs", action="store_true",
+                   help="also score the same networks with the inputs clamped to the padded "
+                   "training ranges (paired; the 'clamped' figures)")
     p.set_defaults(func=run)
 
 
@@ -89,6 +94,9 @@ def run(args: argparse.Namespace) -> int:
         m, _ = validation_metrics(net, prep.split)
         own = (validation_metrics(net, prep.split, fit.simulate_own_feedback(net, prep.split))[0]
                if len(seeds) > 1 else None)
+        clamped = (validation_metrics(net, prep.split, fit.simulate(net, prep.split,
+                                                                    _bounds(prep)))[0]
+                   if args.clamp_inputs else None)
     summary = {"label": args.label, "components": int(prep.loadings.shape[1]),
                "variance": float(np.sum(prep.share[: prep.loadings.shape[1]])),
                "settings": _settings(args, net_seed),
@@ -98,6 +106,9 @@ def run(args: argparse.Namespace) -> int:
                "own_feedback": None if own is None else
                {"mae": own["mae"], "by_file": {k: v["mae"] for k, v in own["by_file"].items()},
                 "groups": groups(own["by_file"], args.subset)},
+               "clamped": None if clamped is None else
+               {"mae": clamped["mae"], "by_file": {k: v["mae"] for k, v in clamped["by_file"].items()},
+                "groups": groups(clamped["by_file"], args.subset)},
                "members": log.get("member_val_mae"),
                "ensemble_by_size": log.get("ensemble_val_mae_by_size"),
                "rounds_log": log.get("ensemble_round_val_mae")
@@ -108,11 +119,20 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bounds(prep):
+    """The padded training ranges a model fitted on ``prep`` would carry (loop.padded_ranges)."""
+    from gateway.vsensor.loop import padded_ranges
+    from training.vsensor.train import training_ranges
+
+    ranges = training_ranges(prep.split, prep.names)[0]
+    return padded_ranges(np.array([ranges[n] for n in prep.names]))
+
+
 def _settings(args: argparse.Namespace, net_seed: int) -> dict:
     return {k: getattr(args, k) for k in ("hidden", "epochs", "rounds", "round_lr", "pca_variance",
                                           "ensemble", "feedback", "feedback_noise",
                                           "high_flow_weight", "target", "extra_features",
-                                          "own_feedback")} | {"net_seed": net_seed}
+                                          "own_feedback", "clamp_inputs")} | {"net_seed": net_seed}
 
 
 def _append(log: str | None, summary: dict) -> None:
@@ -148,17 +168,26 @@ def run_groups(args: argparse.Namespace, gh, hidden: tuple[int, ...], seeds: lis
             if g not in groups:
                 raise ValueError(f"--holdout-groups {g}: not one of {', '.join(groups)}")
             folds.append(hg.run_fold(g, segments, gh, args.model, args.seed, args.pca_variance,
-                                     extra, fitter))
+                                     extra, fitter, args.clamp_inputs))
             f = folds[-1]
             print(f"fold {g}: {f.scores['all'].mae:.3f} m3 s-1 "
-                  f"(own feedback {f.own['all'].mae:.3f}) in {f.seconds:.0f} s" if f.own else
-                  f"fold {g}: {f.scores['all'].mae:.3f} m3 s-1 in {f.seconds:.0f} s", flush=True)
+                  + (f"(own feedback {f.own['all'].mae:.3f}) " if f.own else "")
+                  + (f"(inputs clamped {f.clamped['all'].mae:.3f}) " if f.clamped else "")
+                  + f"in {f.seconds:.0f} s", flush=True)
+            _append(args.log and f"{args.log}.folds", {"label": args.label, **hg.as_dict(f)})
     own = args.own_feedback and len(seeds) > 1
     print(hg.describe(folds, own))
+    if args.clamp_inputs:
+        print("\nthe same networks, inputs clamped to the padded training ranges:")
+        print(hg.describe(folds, own, clamped=True))
     summary = {"label": args.label, "holdout_groups": True, "settings": _settings(args, seeds[0]),
                "headline": "own_feedback" if own else "ensemble",
                "summary": hg.summarise(folds), "own_feedback": hg.summarise(folds, True)
-               if len(seeds) > 1 else None, "folds": [hg.as_dict(f) for f in folds],
+               if len(seeds) > 1 else None,
+               "clamped": hg.summarise(folds, clamped=True) if args.clamp_inputs else None,
+               "own_feedback_clamped": hg.summarise(folds, True, True)
+               if args.clamp_inputs and len(seeds) > 1 else None,
+               "folds": [hg.as_dict(f) for f in folds],
                "seconds": round(time.perf_counter() - t0, 1)}
     _append(args.log, summary)
     return 0

@@ -36,10 +36,9 @@ def test_a_fold_fits_on_the_other_groups_and_scores_the_whole_held_out_files(tmp
     of the PCA-NARX fitted (standardisation and PCA included) on the other file alone; with
     ``--clamp-inputs`` the same networks also scored with the inputs clamped to the padded
     ranges of that fit's training rows (the ranges its written model would carry)."""
-    from gateway.vsensor.loop import padded_ranges
     from training.vsensor import fit
     from training.vsensor.cli import main
-    from training.vsensor.train import prepare_segments, training_ranges, upper_limits
+    from training.vsensor.train import prepare_segments, upper_limits
 
     grower, controller = vd.train_files()
     paths = [tmp_path / "almeria-summer-grower.csv", tmp_path / "bleiswijk-autumn-controller.csv"]
@@ -66,8 +65,7 @@ def test_a_fold_fits_on_the_other_groups_and_scores_the_whole_held_out_files(tmp
     net, _ = fit.fit_ensemble("pca_narx", prep.split, prep.mean, prep.std, prep.loadings, [0, 1],
                               (8, 8), 6, 1, 6)
     held = fit.Split([segs[0]], upper_limits([segs[0]], gh, "almeria"), [0])
-    ranges = training_ranges(prep.split, prep.names)[0]
-    lo, hi = padded_ranges(np.array([ranges[n] for n in prep.names]))
+    lo, hi = prep.input_bounds()
     assert np.any((segs[0].inputs < lo) | (segs[0].inputs > hi))  # the clamp acts here
     for key, sims in (("scores", fit.simulate(net, held)),
                       ("own", fit.simulate_own_feedback(net, held)),

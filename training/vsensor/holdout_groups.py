@@ -115,8 +115,7 @@ def run_fold(group: str, segments: list[Segment], gh: Greenhouse, kind: str, see
              clamp: bool = False) -> Fold:
     """Fit on the files outside ``group`` and score the whole files inside it (``clamp``: also
     with the inputs clamped, the same networks)."""
-    from gateway.vsensor.loop import padded_ranges
-    from training.vsensor.train import prepare_segments, training_ranges, upper_limits
+    from training.vsensor.train import prepare_segments, upper_limits
 
     t0 = time.perf_counter()
     inside = [s for s in segments if group_of(Path(s.source).stem) == group]
@@ -133,9 +132,8 @@ def run_fold(group: str, segments: list[Segment], gh: Greenhouse, kind: str, see
     fold = Fold(group, stems, [Path(s.source).stem for s in outside], int(prep.loadings.shape[1]),
                 score_files(inside, shared), None if own is None else score_files(inside, own),
                 by_file, 0.0)
-    if clamp:  # the bounds the fold's written model would carry (training_ranges, padded)
-        ranges = training_ranges(prep.split, prep.names)[0]
-        bounds = padded_ranges(np.array([ranges[n] for n in prep.names]))
+    if clamp:  # the bounds the fold's written model would carry
+        bounds = prep.input_bounds()
         fold.clamped = score_files(inside, fit.simulate(_shared(net), held, bounds))
         if own is not None:
             fold.own_clamped = score_files(inside, fit.simulate_own_feedback(net, held, bounds))
@@ -165,12 +163,9 @@ def summarise(folds: list[Fold], own: bool = False, clamped: bool = False) -> di
     """Means over the folds (grower and controller apart) and the selection ``criterion``;
     ``own``: the figures of the members each on its own past; ``clamped``: with the inputs
     clamped (the folds must have been scored so)."""
-    def pick_(f: Fold) -> dict[str, Score | None]:
-        return pick(f, own, clamped)
-
     out: dict[str, float | None] = {}
     for key in ("all", "grower", "controller"):
-        got = [pick_(f)[key] for f in folds if pick_(f)[key] is not None]
+        got = [s for s in (pick(f, own, clamped)[key] for f in folds) if s is not None]
         out[f"{key}_mae"] = _mean([s.mae for s in got])
         out[f"{key}_pct"] = _mean([s.pct_range for s in got])
     for name, unit in (("criterion", "mae"), ("criterion_pct", "pct")):

@@ -25,6 +25,7 @@ from gateway.vsensor.features import (
     flow_limits,
     greenhouse_signature,
 )
+from gateway.vsensor.loop import Bounds, padded_ranges
 from gateway.vsensor.probe import code_probe
 from training.vsensor import fit, heldout, report
 from training.vsensor.dataset import Segment, build_segment, fingerprint
@@ -103,6 +104,12 @@ class Prepared:
     loadings: np.ndarray  # (F, kept)
     share: np.ndarray  # every component's share of the variance
     seconds: float
+
+    def input_bounds(self) -> Bounds:
+        """The padded training ranges a model fitted on these rows carries (its metadata's
+        ``training_ranges``, ``loop.padded_ranges``): the out-of-range flag's and the clamp's."""
+        ranges = training_ranges(self.split, self.names)[0]
+        return padded_ranges(np.array([ranges[n] for n in self.names]))
 
 
 def prepare(paths: list[str], gh: Greenhouse, kind: str, cache, overrides, seed: int,

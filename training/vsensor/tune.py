@@ -95,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
         own = (validation_metrics(net, prep.split, fit.simulate_own_feedback(net, prep.split))[0]
                if len(seeds) > 1 else None)
         clamped = (validation_metrics(net, prep.split, fit.simulate(net, prep.split,
-                                                                    _bounds(prep)))[0]
+                                                                    prep.input_bounds()))[0]
                    if args.clamp_inputs else None)
     summary = {"label": args.label, "components": int(prep.loadings.shape[1]),
                "variance": float(np.sum(prep.share[: prep.loadings.shape[1]])),
@@ -117,15 +117,6 @@ def run(args: argparse.Namespace) -> int:
     print(json.dumps(summary, indent=1))
     _append(args.log, summary)
     return 0
-
-
-def _bounds(prep):
-    """The padded training ranges a model fitted on ``prep`` would carry (loop.padded_ranges)."""
-    from gateway.vsensor.loop import padded_ranges
-    from training.vsensor.train import training_ranges
-
-    ranges = training_ranges(prep.split, prep.names)[0]
-    return padded_ranges(np.array([ranges[n] for n in prep.names]))
 
 
 def _settings(args: argparse.Namespace, net_seed: int) -> dict:

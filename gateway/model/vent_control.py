@@ -32,7 +32,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from gateway.model.terms import SUN_THRESHOLD, SUNLIT, FluxTerm, Index, Parameter
+from gateway.model.terms import SUN_THRESHOLD, SUNLIT, FluxTerm, Index, Parameter, row_columns
 
 SMOOTH_K = 0.5
 """[K] width w over which σ rounds the setpoint's corner."""
@@ -79,10 +79,13 @@ class ControlledVentilation(FluxTerm):
     def _gain(self, p, x, t: Index) -> np.ndarray | None:
         """C_vc ρ_a δ_sun [kg m-2 s-1 K-1]; None when no sample at ``t`` is sunlit (the flux is
         then 0 and the state's functions need not be evaluated: the night's steps cost nothing)."""
-        sun = self.derived(x, "_q_vent_control.sun", t)
-        if sun is None:
-            sun = self.rho * (np.asarray(x["i_glob"][t]) > SUN_THRESHOLD)
+        sun = self._sun(x, t)
         return p["c_vc"] * sun if sun.any() else None
+
+    def _sun(self, x, t: Index) -> np.ndarray:
+        """ρ_a δ_sun [kg m-3] at ``t``: from ``Model.prepare``'s column when there."""
+        sun = self.derived(x, "_q_vent_control.sun", t)
+        return self.rho * (np.asarray(x["i_glob"][t]) > SUN_THRESHOLD) if sun is None else sun
 
     def coefficients(self, p, x, t_in, t: Index):
         c = self._gain(p, x, t)
@@ -96,7 +99,24 @@ class ControlledVentilation(FluxTerm):
         c = self._gain(p, x, t)
         if c is None:
             return 0.0, 0.0, 0.0
-        t_out = x["t_out"][t]
+        return self._linearised(c, p, x["t_out"][t], t_in)
+
+    @staticmethod
+    def _linearised(c, p, t_out, t_in):
+        """(g, s, k) for the gain c = C_vc ρ_a δ_sun (``_gain``)."""
         z = t_in - p["t_vc"]
         s = c * soft_excess(z)
         return s * t_out, s, s + c * soft_step(z) * (t_in - t_out)
+
+    def bind(self, p, x, rows: slice):
+        """The gain once for the rows (``FluxTerm.bind``); rows without sun give 0."""
+        sun = self._sun(x, rows)
+        gain = row_columns(p["c_vc"] * sun, rows.stop - rows.start)
+        lit, t_out, a, linearised = sun != 0.0, x["t_out"], rows.start, self._linearised
+
+        def at(t_in: np.ndarray, t: int) -> tuple:
+            if not lit[t - a]:
+                return 0.0, 0.0, 0.0
+            return linearised(gain[t - a], p, t_out[t], t_in)
+
+        return at

@@ -177,6 +177,9 @@ class Stepper:
                  bind: Callable[[slice], Sums] | None = None) -> None:
         self.fixed, self.moving, self.bind = fixed, moving, bind
         self.c, self.dt, self.n, self.integration = c, dt, n, integration
+        # C and Δ as 0-d arrays for the per-step arithmetic: the same float64 operations, but
+        # numpy 2 converts a Python float operand on every call (~0.3 µs at small P).
+        self._c, self._dt = np.array(c, dtype=float), np.array(dt, dtype=float)
         self._key: Index | None = None
         self._cached: tuple = ()
         self._rows = (0, 0)  # rows [a, b) of the block held
@@ -191,7 +194,7 @@ class Stepper:
             a, b = t, min(t + self.BLOCK, self.n)
             self._rows = (a, b)
             g, s, k = self.fixed(state, slice(a, b))
-            sums = (g, s, k, np.asarray(k) / self.c)
+            sums = (g, s, k, np.asarray(k) / self._c)
             self._table = list(zip(*(row_columns(v, b - a) for v in sums), strict=True))
             if self.bind is not None:
                 self._bound = self.bind(slice(a, b))
@@ -215,14 +218,14 @@ class Stepper:
         """(r [K s-1], λ [s-1]) of all terms at ``state`` and ``t``."""
         gi, si, ki = self._fixed_at(state, t)
         gd, sd, kd = self._moving_at(state, t)
-        return ((gi + gd) - (si + sd) * state) / self.c, (ki + kd) / self.c
+        return ((gi + gd) - (si + sd) * state) / self._c, (ki + kd) / self._c
 
     def _moving_rates(self, state: np.ndarray, t: Index) -> tuple[np.ndarray, np.ndarray]:
         g, s, k = self._moving_at(state, t)
-        return (g - s * state) / self.c, k / self.c
+        return (g - s * state) / self._c, k / self._c
 
     def __call__(self, state: np.ndarray, t: Index) -> np.ndarray:
-        c, dt = self.c, self.dt
+        c, dt = self._c, self._dt
         r0, lam0 = self.rates(state, t)
         if self.integration.hold == "zero_order":
             return advance(state, r0, lam0, dt)
@@ -234,6 +237,6 @@ class Stepper:
             g1, s1, k1 = self.fixed(state, t1)
             self._key, self._cached = t1, (g1, s1, k1)
             k1_c = k1 / c
-        r1, lam1 = end_rates(self._moving_rates, state, r0, lam0, t1, dt,
+        r1, lam1 = end_rates(self._moving_rates, state, r0, lam0, t1, self.dt,
                              self.integration.relinearise, fixed=((g1 - s1 * state) / c, k1_c))
         return advance(state, r0, 0.5 * (lam0 + lam1), dt, r1)

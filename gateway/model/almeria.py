@@ -26,10 +26,13 @@ from gateway.model.terms import (
     FluxTerm,
     Index,
     Parameter,
+    const,
     row_columns,
+    row_values,
 )
 
 C_TSW = Parameter("c_tsw", "-", 0.1, 1.0, 0.56, None, SUNLIT, "cover solar transmission")
+_ZERO, _TINY = const(0.0), const(1e-300)  # 0-d operands of the per-step arithmetic (terms.const)
 
 
 class AirSolarAbsorption(FluxTerm):
@@ -133,7 +136,7 @@ class Transpiration(FluxTerm):
     def _latent(radiative, b_lai, p_ws, p_w_in):
         """The latent flux q = C_A (1 - e^-k LAI) I_in + C_B LAI VPD [W m-2] (III.29) for
         p_ws(T_in) and the measured p_w [kPa]."""
-        return radiative + b_lai * np.maximum(p_ws - p_w_in, 0.0)
+        return radiative + b_lai * np.maximum(p_ws - p_w_in, _ZERO)
 
     @classmethod
     def _linearised(cls, radiative, b_lai, p_w_in, t_in):
@@ -141,7 +144,7 @@ class Transpiration(FluxTerm):
         saturated: a warmer air transpires more (the VPD grows with T_in)."""
         p_ws, slope = psy.saturation_vapour_pressure_and_slope(t_in)
         q = cls._latent(radiative, b_lai, p_ws, p_w_in)
-        return -q, 0.0, np.where(p_ws > p_w_in, b_lai * slope, 0.0)
+        return -q, 0.0, np.where(p_ws > p_w_in, b_lai * slope, _ZERO)
 
     def coefficients(self, p, x, t_in, t: Index):
         q = self._latent(*self._parts(p, x, t), psy.saturation_vapour_pressure(t_in), x["p_w_in"][t])
@@ -153,8 +156,8 @@ class Transpiration(FluxTerm):
     def bind(self, p, x, rows: slice):
         """The parts once for the rows (``FluxTerm.bind``)."""
         radiative, b_lai = (row_columns(v, rows.stop - rows.start) for v in self._parts(p, x, rows))
-        p_w_in, a, linearised = x["p_w_in"], rows.start, self._linearised
-        return lambda t_in, t: linearised(radiative[t - a], b_lai[t - a], p_w_in[t], t_in)
+        p_w_in, a, linearised = row_values(x["p_w_in"], rows), rows.start, self._linearised
+        return lambda t_in, t: linearised(radiative[t - a], b_lai[t - a], p_w_in[t - a], t_in)
 
 
 class NaturalVentilation(FluxTerm):
@@ -180,6 +183,7 @@ class NaturalVentilation(FluxTerm):
     def __init__(self, gh: Greenhouse) -> None:
         self.height = gh.vents.height_difference
         self.rho_cp_a = gh.air_density * psy.CP_AIR / gh.floor_area
+        self._rho_cp_a = const(self.rho_cp_a)
 
     def derive(self, x) -> dict[str, np.ndarray]:
         return dict(zip(self.derives, self._buoyancy_wind(x, slice(None)), strict=True))
@@ -223,19 +227,21 @@ class NaturalVentilation(FluxTerm):
         still = self._still(b)
         buoyancy = 0.0 if still else b * np.abs(t_in - t_out)
         root = np.sqrt(buoyancy + c_w_w)
-        s = self.rho_cp_a * (p["c_ven_d"] * root + p["c_loss"])
+        s = self._rho_cp_a * (p["c_ven_d"] * root + p["c_loss"])
         if still:
             return s * t_out, s, s
         # root = 0 only where buoyancy = 0 (closed vents): the extra slope is 0 there
-        extra = half_d * buoyancy / np.maximum(root, 1e-300)
+        extra = half_d * buoyancy / np.maximum(root, _TINY)
         return s * t_out, s, s + extra
 
     def bind(self, p, x, rows: slice):
         """C_w W and rho c_p C_d / (2 A) once for the rows (``FluxTerm.bind``)."""
         b, w = self._drivers(x, rows)
         c_w_w = row_columns(p["c_ven_w"] * w, rows.stop - rows.start)
-        half_d, t_out, a = (0.5 * self.rho_cp_a) * p["c_ven_d"], x["t_out"], rows.start
-        return lambda t_in, t: self._linearised(b[t - a], c_w_w[t - a], half_d, p, t_out[t], t_in)
+        b, t_out = row_values(b, slice(0, len(b))), row_values(x["t_out"], rows)
+        half_d, a = (0.5 * self.rho_cp_a) * p["c_ven_d"], rows.start
+        return lambda t_in, t: self._linearised(b[t - a], c_w_w[t - a], half_d, p, t_out[t - a],
+                                                t_in)
 
 
 def kittas_drivers(a_roof, a_side, height: float, t_out, wind) -> tuple[np.ndarray, np.ndarray]:

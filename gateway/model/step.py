@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gateway.model.terms import Index, row_columns
+from gateway.model.terms import Index, const, row_columns
 
 HOLDS = ("first_order", "zero_order")
 
@@ -47,6 +47,8 @@ calibration cost's fast path): each temporary (32 kB) stays below glibc's mmap a
 thresholds (128 kB), so the ~40 temporaries of a block reuse heap memory instead of faulting
 fresh pages in (blocks of 16384 ran 1.6-2x slower for that alone, more than the loop over
 smaller blocks costs; measured with tests/bench/step.py's calibration cost)."""
+
+_HALF, _ONE, _Z_MIN = const(0.5), const(1.0), const(1e-6)  # 0-d operands (terms.const)
 
 Rates = Callable[[np.ndarray, Index], tuple[np.ndarray, np.ndarray]]
 """``rates(state, t) -> (r, λ)``: rate dT/dt [K s-1] at ``state`` and time index ``t``, and the
@@ -78,10 +80,10 @@ FROZEN = Integration("zero_order", relinearise=False)
 def phi(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(φ1(z), φ2(z)) for z ≥ 0. φ2 = (1 - φ1)/z: below z = 1e-6 (a step that barely relaxes)
     z is taken as 1e-6, which moves φ1 by < 5e-7 and keeps φ2 = 1/2 - z/6 to 4e-10."""
-    z = np.maximum(z, 1e-6)
+    z = np.maximum(z, _Z_MIN)
     nz = -z
     p1 = np.expm1(nz) / nz  # (1 - e^-z)/z: the same bits as -expm1(-z)/z, one operation less
-    return p1, (1.0 - p1) / z
+    return p1, (_ONE - p1) / z
 
 
 def phi1(z: np.ndarray) -> np.ndarray:
@@ -103,7 +105,8 @@ def advance(state: np.ndarray, r0: np.ndarray, lam: np.ndarray, dt: float,
 def midpoint(state: np.ndarray, r0: np.ndarray, lam0: np.ndarray, dt: float) -> np.ndarray:
     """Halfway to where the frozen step would end (the predictor the end of the step is
     evaluated at), with φ1(z) ≈ 1/(1 + z/2): exact to z²/12, bounded, and no exponential."""
-    return state + (0.5 * dt) * r0 / (1.0 + (0.5 * dt) * lam0)
+    half = const(0.5 * dt)
+    return state + half * r0 / (_ONE + half * lam0)
 
 
 def next_index(t: Index, n: int) -> Index:
@@ -239,4 +242,4 @@ class Stepper:
             k1_c = k1 / c
         r1, lam1 = end_rates(self._moving_rates, state, r0, lam0, t1, self.dt,
                              self.integration.relinearise, fixed=((g1 - s1 * state) / c, k1_c))
-        return advance(state, r0, 0.5 * (lam0 + lam1), dt, r1)
+        return advance(state, r0, _HALF * (lam0 + lam1), dt, r1)

@@ -32,22 +32,32 @@ from dataclasses import replace
 
 import numpy as np
 
-from gateway.model.terms import SUN_THRESHOLD, SUNLIT, FluxTerm, Index, Parameter, row_columns
+from gateway.model.terms import (
+    SUN_THRESHOLD,
+    SUNLIT,
+    FluxTerm,
+    Index,
+    Parameter,
+    const,
+    row_columns,
+    row_values,
+)
 
 SMOOTH_K = 0.5
 """[K] width w over which σ rounds the setpoint's corner."""
+_ZERO, _HALF, _ONE = const(0.0), const(0.5), const(1.0)  # 0-d operands (terms.const)
 
 
 def soft_excess(z: np.ndarray, w: float = SMOOTH_K) -> np.ndarray:
     """σ(z) = w ln(1 + e^{z/w}) [K]: ≈ max(0, z) beyond a few w, w ln 2 at z = 0 (NaN, a
     missing reading, stays NaN)."""
-    z = np.asarray(z, dtype=float)
-    return np.maximum(z, 0.0) + w * np.log1p(np.exp(-np.abs(z) / w))  # = w ln(1 + e^{z/w})
+    z, w = np.asarray(z, dtype=float), const(w)
+    return np.maximum(z, _ZERO) + w * np.log1p(np.exp(-np.abs(z) / w))  # = w ln(1 + e^{z/w})
 
 
 def soft_step(z: np.ndarray, w: float = SMOOTH_K) -> np.ndarray:
     """σ'(z) = 1 / (1 + e^{−z/w}) [-]: the logistic, the derivative of ``soft_excess``."""
-    return 0.5 * (1.0 + np.tanh(0.5 * np.asarray(z, dtype=float) / w))
+    return _HALF * (_ONE + np.tanh(_HALF * np.asarray(z, dtype=float) / const(w)))
 
 
 class ControlledVentilation(FluxTerm):
@@ -112,11 +122,12 @@ class ControlledVentilation(FluxTerm):
         """The gain once for the rows (``FluxTerm.bind``); rows without sun give 0."""
         sun = self._sun(x, rows)
         gain = row_columns(p["c_vc"] * sun, rows.stop - rows.start)
-        lit, t_out, a, linearised = sun != 0.0, x["t_out"], rows.start, self._linearised
+        lit, t_out = sun != 0.0, row_values(x["t_out"], rows)
+        a, linearised = rows.start, self._linearised
 
         def at(t_in: np.ndarray, t: int) -> tuple:
             if not lit[t - a]:
                 return 0.0, 0.0, 0.0
-            return linearised(gain[t - a], p, t_out[t], t_in)
+            return linearised(gain[t - a], p, t_out[t - a], t_in)
 
         return at

@@ -289,22 +289,18 @@ class OnlineEstimator:
         z = (cand - self.theta0[free]) / (self.upper[free] - self.lower[free])
         return g.prior * np.mean(z * z, axis=1)
 
-    def _candidate_columns(self, free: np.ndarray, t_start: float
-                           ) -> Callable[[np.ndarray], tuple[dict[str, np.ndarray], np.ndarray]]:
-        """``columns(cand) -> (p, start)``: the parameter columns (P, 1) of candidates (P, free)
-        for the free parameters, the others held (``Model.columns`` without its checks), and
-        the start state (P, 1). One buffer per population size, rewritten at every call: a cost
-        call reads them before the next call."""
-        base, names = self.theta, self._names
-        held: dict[int, tuple[np.ndarray, dict[str, np.ndarray], np.ndarray]] = {}
+    def _candidate_columns(self, free: np.ndarray, t_start: float) -> Callable[[np.ndarray], tuple]:
+        """``columns(cand) -> (p, start)``: the parameter columns (P, 1) of candidates (P, free),
+        the others held (``Model.columns`` without checks), and the start state (P, 1). One
+        buffer per population size, rewritten at every call (a cost call is done with it)."""
+        base, names, held = self.theta, self._names, {}
 
         def columns(cand: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
-            size = cand.shape[0]
-            if size not in held:
-                rows = np.repeat(base[:, None], size, axis=1)  # (k, P): one row a parameter
-                p = {name: rows[j, :, None] for j, name in names}
-                held[size] = rows, p, np.full((size, 1), t_start)
-            rows, p, start = held[size]
+            if cand.shape[0] not in held:
+                rows = np.repeat(base[:, None], cand.shape[0], axis=1)  # (k, P): a row a parameter
+                held[cand.shape[0]] = (rows, {name: rows[j, :, None] for j, name in names},
+                                       np.full((cand.shape[0], 1), t_start))
+            rows, p, start = held[cand.shape[0]]
             rows[free] = cand.T
             return p, start
 

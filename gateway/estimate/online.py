@@ -289,6 +289,23 @@ class OnlineEstimator:
         z = (cand - self.theta0[free]) / (self.upper[free] - self.lower[free])
         return g.prior * np.mean(z * z, axis=1)
 
+    def _candidate_columns(self, free: np.ndarray, t_start: float) -> Callable[[np.ndarray], tuple]:
+        """``columns(cand) -> (p, start)``: the parameter columns (P, 1) of candidates (P, free),
+        the others held (``Model.columns`` without checks), and the start state (P, 1). One
+        buffer per population size, rewritten at every call (a cost call is done with it)."""
+        base, names, held = self.theta, self._names, {}
+
+        def columns(cand: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray]:
+            if cand.shape[0] not in held:
+                rows = np.repeat(base[:, None], cand.shape[0], axis=1)  # (k, P): a row a parameter
+                held[cand.shape[0]] = (rows, {name: rows[j, :, None] for j, name in names},
+                                       np.full((cand.shape[0], 1), t_start))
+            rows, p, start = held[cand.shape[0]]
+            rows[free] = cand.T
+            return p, start
+
+        return columns
+
     def _estimate_air(self, g: GroupSettings) -> bool | None:
         """Virtual model of the temperature: free run over [t - n, t] for all bats at once."""
         n = g.window
@@ -306,23 +323,21 @@ class OnlineEstimator:
             return False
         model, c, dt = self.model, self.capacity_c, self.dt
         x = model.prepare(x)  # the terms' driver-only columns, once for every candidate
-        base = self.theta
         target = measured[1:]
-        names = self._names
+        columns = self._candidate_columns(free, measured[0])
 
         def cost(cand: np.ndarray) -> np.ndarray:
-            rows = np.repeat(base[:, None], cand.shape[0], axis=1)  # (k, P): one row a parameter
-            rows[free] = cand.T
-            p = {name: rows[j, :, None] for j, name in names}  # Model.columns without checks
+            p, start = columns(cand)
             # observation terms: simulate the true state behind the reading, compare readings
-            state = model.true_state(p, x, np.full((cand.shape[0], 1), measured[0]), 0)
+            state = model.true_state(p, x, start, 0)
             states = np.empty((cand.shape[0], n))
             step = model.stepper(p, x, c, dt)
             for s in range(n):  # III.23 integrated step by step from the measured T_in[t - n]
                 state = step(state, s)
                 states[:, s] = state[:, 0]
             err = model.reading(p, x, states, slice(1, n + 1)) - target
-            return np.add.reduce(err * err, axis=1) / n + self._penalty(g, free, cand)
+            mse = np.add.reduce(err * err, axis=1) / n
+            return mse + self._penalty(g, free, cand) if g.prior > 0 else mse
 
         lo, hi = self._box(free)
         res = self.search(cost, lo, hi, self._bat[g.output], "rsba", self.rng, x0=self.theta[free])

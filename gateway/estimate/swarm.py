@@ -10,6 +10,7 @@ the thesis does for both algorithms.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -73,8 +74,10 @@ ALMERIA_OFFLINE = BatSettings(
 """RSBA settings of §IV.2.2.1.A (Almería offline calibration and online estimator)."""
 
 
-def _to_raw(u: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
-    return lower + u * (upper - lower)
+def _to_raw(u: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+            width: np.ndarray | None = None) -> np.ndarray:
+    """x = lower + u (upper - lower); ``width`` = upper - lower when already known."""
+    return lower + u * (upper - lower if width is None else width)
 
 
 def _to_unit(x: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
@@ -90,8 +93,12 @@ def _redraw_outside(u: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return u
 
 
-def _safe_cost(cost: CostFn, x: np.ndarray) -> np.ndarray:
+def _safe_cost(cost: CostFn, x: np.ndarray, fresh: bool = False) -> np.ndarray:
+    """The costs of ``x`` with NaN and -inf as +inf. ``fresh``: the caller will not write into
+    the result, so all-finite costs are returned as the cost function gave them (no copy)."""
     c = np.asarray(cost(x), dtype=float)
+    if fresh and math.isfinite(np.add.reduce(c, axis=None)):  # one reduction: all finite
+        return c
     return np.where(np.isfinite(c), c, np.inf)
 
 
@@ -166,7 +173,8 @@ def bat(
     if x0 is not None:
         u[0] = _to_unit(np.asarray(x0, float), lower, upper)
     v = np.zeros((n, k))
-    fit = _safe_cost(cost, _to_raw(u, lower, upper))
+    width = upper - lower
+    fit = _safe_cost(cost, _to_raw(u, lower, upper, width))
     loud = np.full(n, s.loudness)
     rate = rng.random(n) if s.random_initial_rate else np.zeros(n)
     g = int(np.argmin(fit))
@@ -180,8 +188,9 @@ def bat(
         v = v + (u - best_u) * freq  # III.41
         new = u + v  # III.42
         local = rng.random(n) > rate
-        if local.any():
-            eps = rng.uniform(-1.0, 1.0, (int(local.sum()), k))
+        walkers = int(np.count_nonzero(local))
+        if walkers:
+            eps = rng.uniform(-1.0, 1.0, (walkers, k))
             if variant == "rsba":
                 new[local] = best_u + sigma * eps  # III.44
             else:
@@ -189,13 +198,14 @@ def bat(
         if variant == "rsba":
             sigma = s.sigma_min + (s.sigma_max - s.sigma_min) * rng.random()  # III.45
         new = _redraw_outside(new, rng)
-        new_fit = _safe_cost(cost, _to_raw(new, lower, upper))
+        new_fit = _safe_cost(cost, _to_raw(new, lower, upper, width), fresh=True)
         evaluations += n
         accept = (new_fit <= fit) & (rng.random(n) < loud)
-        u[accept], fit[accept] = new[accept], new_fit[accept]
-        loud[accept] *= s.alpha  # III.46
-        rate[accept] = s.r0 * (1.0 - np.exp(-s.gamma * it))
-        j = int(np.argmin(new_fit))
+        if accept.any():  # late in a search most iterations move no bat
+            u[accept], fit[accept] = new[accept], new_fit[accept]
+            loud[accept] *= s.alpha  # III.46
+            rate[accept] = s.r0 * (1.0 - np.exp(-s.gamma * it))
+        j = int(new_fit.argmin())
         if new_fit[j] <= best_cost:
             best_u, best_cost = new[j].copy(), float(new_fit[j])
         history.append(best_cost)

@@ -26,9 +26,13 @@ from gateway.model.terms import (
     FluxTerm,
     Index,
     Parameter,
+    const,
+    row_columns,
+    row_values,
 )
 
 C_TSW = Parameter("c_tsw", "-", 0.1, 1.0, 0.56, None, SUNLIT, "cover solar transmission")
+_ZERO, _TINY = const(0.0), const(1e-300)  # 0-d operands of the per-step arithmetic (terms.const)
 
 
 class AirSolarAbsorption(FluxTerm):
@@ -116,28 +120,44 @@ class Transpiration(FluxTerm):
     def derive(self, x) -> dict[str, np.ndarray]:
         return {"_q_trp.cover": self._cover(x["lai"])}
 
-    def _flux(self, p, x, p_ws, t: Index):
-        """The latent flux q [W m-2] and C_B LAI [W m-2 kPa-1] for p_ws(T_in) [kPa]."""
+    def _parts(self, p, x, t: Index) -> tuple[np.ndarray, np.ndarray]:
+        """What does not read the state: the radiative flux C_A (1 - e^-k LAI) I_in [W m-2]
+        and C_B LAI [W m-2 kPa-1] (C_Bd by day, C_Bn by night) at ``t``."""
         lai = x["lai"][t]
         i_out = x["i_glob"][t]
         i_in = p["c_tsw"] * i_out
         cover = self.derived(x, "_q_trp.cover", t)
         if cover is None:
             cover = self._cover(lai)
-        vpd = np.maximum(p_ws - x["p_w_in"][t], 0.0)
         b_lai = np.where(i_out > 5.0, p["c_bd"], p["c_bn"]) * lai
-        return p["c_a"] * cover * i_in + b_lai * vpd, b_lai
+        return p["c_a"] * cover * i_in, b_lai
+
+    @staticmethod
+    def _latent(radiative, b_lai, p_ws, p_w_in):
+        """The latent flux q = C_A (1 - e^-k LAI) I_in + C_B LAI VPD [W m-2] (III.29) for
+        p_ws(T_in) and the measured p_w [kPa]."""
+        return radiative + b_lai * np.maximum(p_ws - p_w_in, _ZERO)
+
+    @classmethod
+    def _linearised(cls, radiative, b_lai, p_w_in, t_in):
+        """(g, s, k) from the parts (``_parts``): k = C_B LAI dp_ws/dT where the air is not
+        saturated: a warmer air transpires more (the VPD grows with T_in)."""
+        p_ws, slope = psy.saturation_vapour_pressure_and_slope(t_in)
+        q = cls._latent(radiative, b_lai, p_ws, p_w_in)
+        return -q, 0.0, np.where(p_ws > p_w_in, b_lai * slope, _ZERO)
 
     def coefficients(self, p, x, t_in, t: Index):
-        return -self._flux(p, x, psy.saturation_vapour_pressure(t_in), t)[0], 0.0
+        q = self._latent(*self._parts(p, x, t), psy.saturation_vapour_pressure(t_in), x["p_w_in"][t])
+        return -q, 0.0
 
     def linearised(self, p, x, t_in, t: Index):
-        """Also the slope k = C_B LAI dp_ws/dT where the air is not saturated: a warmer
-        air transpires more (the VPD grows with T_in)."""
-        p_ws, slope = psy.saturation_vapour_pressure_and_slope(t_in)
-        q, b_lai = self._flux(p, x, p_ws, t)
-        dry = p_ws > x["p_w_in"][t]
-        return -q, 0.0, np.where(dry, b_lai * slope, 0.0)
+        return self._linearised(*self._parts(p, x, t), x["p_w_in"][t], t_in)
+
+    def bind(self, p, x, rows: slice):
+        """The parts once for the rows (``FluxTerm.bind``)."""
+        radiative, b_lai = (row_columns(v, rows.stop - rows.start) for v in self._parts(p, x, rows))
+        p_w_in, a, linearised = row_values(x["p_w_in"], rows), rows.start, self._linearised
+        return lambda t_in, t: linearised(radiative[t - a], b_lai[t - a], p_w_in[t - a], t_in)
 
 
 class NaturalVentilation(FluxTerm):
@@ -163,6 +183,7 @@ class NaturalVentilation(FluxTerm):
     def __init__(self, gh: Greenhouse) -> None:
         self.height = gh.vents.height_difference
         self.rho_cp_a = gh.air_density * psy.CP_AIR / gh.floor_area
+        self._rho_cp_a = const(self.rho_cp_a)
 
     def derive(self, x) -> dict[str, np.ndarray]:
         return dict(zip(self.derives, self._buoyancy_wind(x, slice(None)), strict=True))
@@ -195,19 +216,32 @@ class NaturalVentilation(FluxTerm):
         return s * x["t_out"][t], s
 
     def linearised(self, p, x, t_in, t: Index):
-        """Also the slope k = rho c_p (G + dG/dT (T_in - T_out)) / A: the buoyancy flow grows
-        with |T_in - T_out| (III.31), dG/dT (T_in - T_out) = C_d B |ΔT| / (2 sqrt(B |ΔT| + W))."""
         b, w = self._drivers(x, t)
-        t_out = x["t_out"][t]
+        return self._linearised(b, p["c_ven_w"] * w, (0.5 * self.rho_cp_a) * p["c_ven_d"], p,
+                                x["t_out"][t], t_in)
+
+    def _linearised(self, b, c_w_w, half_d, p, t_out, t_in):
+        """(g, s, k) with the slope k = rho c_p (G + dG/dT (T_in - T_out)) / A: the buoyancy flow
+        grows with |T_in - T_out| (III.31), dG/dT (T_in - T_out) = C_d B |ΔT| / (2 sqrt(B |ΔT| +
+        W)). ``c_w_w`` = C_w W and ``half_d`` = rho c_p C_d / (2 A) do not read the state."""
         still = self._still(b)
         buoyancy = 0.0 if still else b * np.abs(t_in - t_out)
-        root = np.sqrt(buoyancy + p["c_ven_w"] * w)
-        s = self.rho_cp_a * (p["c_ven_d"] * root + p["c_loss"])
+        root = np.sqrt(buoyancy + c_w_w)
+        s = self._rho_cp_a * (p["c_ven_d"] * root + p["c_loss"])
         if still:
             return s * t_out, s, s
         # root = 0 only where buoyancy = 0 (closed vents): the extra slope is 0 there
-        extra = (0.5 * self.rho_cp_a) * p["c_ven_d"] * buoyancy / np.maximum(root, 1e-300)
+        extra = half_d * buoyancy / np.maximum(root, _TINY)
         return s * t_out, s, s + extra
+
+    def bind(self, p, x, rows: slice):
+        """C_w W and rho c_p C_d / (2 A) once for the rows (``FluxTerm.bind``)."""
+        b, w = self._drivers(x, rows)
+        c_w_w = row_columns(p["c_ven_w"] * w, rows.stop - rows.start)
+        b, t_out = row_values(b, slice(0, len(b))), row_values(x["t_out"], rows)
+        half_d, a = (0.5 * self.rho_cp_a) * p["c_ven_d"], rows.start
+        return lambda t_in, t: self._linearised(b[t - a], c_w_w[t - a], half_d, p, t_out[t - a],
+                                                t_in)
 
 
 def kittas_drivers(a_roof, a_side, height: float, t_out, wind) -> tuple[np.ndarray, np.ndarray]:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
 
@@ -27,7 +28,7 @@ from gateway.greenhouse import Greenhouse
 from gateway.model import step as stepping
 from gateway.model.radiation import RadiationSubmodel
 from gateway.model.step import Integration
-from gateway.model.terms import FluxTerm, Index, Parameter, SensorTerm
+from gateway.model.terms import FluxTerm, Index, Linearised, Parameter, SensorTerm
 
 __all__ = ["Model", "OnlineGroup", "RadiationSubmodel", "check_columns"]
 
@@ -180,21 +181,8 @@ class Model:
         """``sums(state, t) -> (g, s, k)`` over ``terms``: coefficients and slopes
         (``FluxTerm.linearised``; the coefficient s as slope when not re-linearised)."""
         if self.integration.relinearise:
-            fns = [term.linearised for term in terms]
-        else:
-            fns = [_frozen_slope(term) for term in terms]
-        if not fns:
-            return lambda t_in, t: (0.0, 0.0, 0.0)
-        first, rest = fns[0], fns[1:]
-
-        def sums(t_in: np.ndarray, t: Index) -> tuple:
-            g_sum, s_sum, k_sum = first(p, x, t_in, t)
-            for fn in rest:
-                g, s, k = fn(p, x, t_in, t)
-                g_sum, s_sum, k_sum = g_sum + g, s_sum + s, k_sum + k
-            return g_sum, s_sum, k_sum
-
-        return sums
+            return _total([partial(term.linearised, p, x) for term in terms])
+        return _total([partial(_frozen_slope(term), p, x) for term in terms])
 
     def prepare(self, x: Mapping[str, np.ndarray]) -> Mapping[str, np.ndarray]:
         """The drivers plus the terms' driver-only columns (``FluxTerm.derive``), computed once
@@ -215,8 +203,14 @@ class Model:
         x = self.prepare(x)
         fixed = [term for term in self.terms if not term.state_dependent]
         moving = [term for term in self.terms if term.state_dependent]
+        bind = None
+        if self.integration.relinearise:
+
+            def bind(rows: slice) -> stepping.Sums:
+                return _total([term.bind(p, x, rows) for term in moving])
+
         return stepping.Stepper(self._sums(p, x, fixed), self._sums(p, x, moving), c, dt,
-                                len(x["t_out"]), self.integration)
+                                len(x["t_out"]), self.integration, bind)
 
     def rates(
         self, p: Mapping[str, np.ndarray], x: Mapping[str, np.ndarray], t_in: np.ndarray,
@@ -330,6 +324,22 @@ class Model:
             p = {n: theta[:, j] for j, n in enumerate(self.names)}
         t = slice(0, len(t_in))
         return {term.name: term.flux(p, x, t_in, t) for term in self.terms}
+
+
+def _total(fns: Sequence[Linearised]) -> stepping.Sums:
+    """``sums(state, t)``: the (g, s, k) of ``fns`` (each ``fn(state, t)``) added in order."""
+    if not fns:
+        return lambda t_in, t: (0.0, 0.0, 0.0)
+    first, rest = fns[0], fns[1:]
+
+    def sums(t_in: np.ndarray, t: Index) -> tuple:
+        g_sum, s_sum, k_sum = first(t_in, t)
+        for fn in rest:
+            g, s, k = fn(t_in, t)
+            g_sum, s_sum, k_sum = g_sum + g, s_sum + s, k_sum + k
+        return g_sum, s_sum, k_sum
+
+    return sums
 
 
 def _frozen_slope(term: FluxTerm) -> Callable:

@@ -14,12 +14,14 @@ import numpy as np
 
 from gateway.greenhouse import Greenhouse
 from gateway.model.model import Model
-from gateway.model.terms import ALWAYS, SUNLIT, FluxTerm, Index, Parameter
+from gateway.model.terms import ALWAYS, SUNLIT, FluxTerm, Index, Parameter, const, row_values
 from gateway.model.vent_control import ControlledVentilation
 
 # Variation ratios for online use: the thesis gives none for this model (table 12 is for the
 # Almería model); 10 % follows its "fast" class for convective and loss coefficients.
 _R_FAST = 0.10
+# h_i = 5.2 |T_in - T_out|^0.33 [W m-2 K-1] (III.10), as 0-d operands (terms.const)
+_H_I_COEF, _H_I_EXP = const(5.2), const(0.33)
 
 
 class SolarGain(FluxTerm):
@@ -50,9 +52,14 @@ class CoverConvection(FluxTerm):
     )
 
     @staticmethod
-    def _h(x, t_in, t: Index):
+    def _h_i(t_in, t_out):
+        """h_i [W m-2 K-1] (III.10)."""
+        return _H_I_COEF * np.abs(t_in - t_out) ** _H_I_EXP
+
+    @classmethod
+    def _h(cls, x, t_in, t: Index):
         h_o = x["h_o"][t]  # III.9
-        h_i = 5.2 * np.abs(t_in - x["t_out"][t]) ** 0.33  # III.10
+        h_i = cls._h_i(t_in, x["t_out"][t])
         return h_o, h_i, h_o * h_i / (h_o + h_i)  # U = (1/h_o + 1/h_i)^-1, safe when h_i = 0
 
     def coefficients(self, p, x, t_in, t: Index):
@@ -60,13 +67,22 @@ class CoverConvection(FluxTerm):
         return s * x["t_out"][t], s
 
     def linearised(self, p, x, t_in, t: Index):
-        """Also the slope k = -∂Q/∂T_in = C U (1 + 0.33 h_o / (h_o + h_i)): h_i grows with
-        |T_in - T_out| (III.10), so the loss grows faster than C U; finite at h_i = 0."""
-        h_o, t_out = x["h_o"][t], x["t_out"][t]
-        h_i = 5.2 * np.abs(t_in - t_out) ** 0.33  # III.10
+        return self._linearised(p["c_cnv_cnd"], x["h_o"][t], x["t_out"][t], t_in)
+
+    @classmethod
+    def _linearised(cls, c, h_o, t_out, t_in):
+        """(g, s, k) with the slope k = -∂Q/∂T_in = C U (1 + 0.33 h_o / (h_o + h_i)): h_i grows
+        with |T_in - T_out| (III.10), so the loss grows faster than C U; finite at h_i = 0."""
+        h_i = cls._h_i(t_in, t_out)
         share = h_o / (h_o + h_i)
-        s = p["c_cnv_cnd"] * (h_i * share)  # U = h_o h_i / (h_o + h_i)
-        return s * t_out, s, s + 0.33 * (s * share)
+        s = c * (h_i * share)  # U = h_o h_i / (h_o + h_i)
+        return s * t_out, s, s + _H_I_EXP * (s * share)
+
+    def bind(self, p, x, rows: slice):
+        """h_o and T_out as 0-d operands for the rows (``FluxTerm.bind``, ``terms.const``)."""
+        h_o, t_out = row_values(x["h_o"], rows), row_values(x["t_out"], rows)
+        c, a, linearised = p["c_cnv_cnd"], rows.start, self._linearised
+        return lambda t_in, t: linearised(c, h_o[t - a], t_out[t - a], t_in)
 
 
 class AirLeakage(FluxTerm):

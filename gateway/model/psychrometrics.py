@@ -29,6 +29,11 @@ CP_AIR = 1005.0
 GRAVITY = 9.81
 """Standard gravity [m s-2]."""
 
+# The Tetens coefficients of p_ws = A exp(B t / (t + C)) (III.5) as 0-d arrays: the same float64
+# operations as with Python floats, but numpy 2 converts a Python float operand at every call,
+# ~40 % of an operation on the (P, 1) arrays of a model step (the online estimator's candidates).
+_TETENS_A, _TETENS_B, _TETENS_C = np.array(0.61078), np.array(17.2694), np.array(237.3)
+
 
 def saturation_vapour_pressure(t: ArrayLike) -> np.ndarray:
     """Saturation vapour pressure p_ws [kPa] of air at temperature ``t`` [°C] (Tetens).
@@ -37,23 +42,23 @@ def saturation_vapour_pressure(t: ArrayLike) -> np.ndarray:
     °C: ``p_ws = 0.61078 exp(17.2694 t / (t + 237.3))`` (docs/model-notes.md §1).
     """
     t = np.asarray(t, dtype=float)
-    return _tetens(t, t + 237.3)
+    return _tetens(t, t + _TETENS_C)
 
 
 def _tetens(t: np.ndarray, d: np.ndarray) -> np.ndarray:
     """p_ws [kPa] at ``t`` [°C] given d = t + 237.3 (Tetens)."""
-    return 0.61078 * np.exp(17.2694 * t / d)
+    return _TETENS_A * np.exp(_TETENS_B * t / d)
 
 
 def _tetens_slope(p_ws: np.ndarray, d: np.ndarray) -> np.ndarray:
     """d p_ws / dT [kPa K-1] given p_ws and d = t + 237.3 (the Tetens form differentiated)."""
-    return p_ws * 17.2694 * 237.3 / d**2
+    return p_ws * _TETENS_B * _TETENS_C / d**2
 
 
 def saturation_vapour_pressure_slope(t: ArrayLike, p_ws: ArrayLike | None = None) -> np.ndarray:
     """d p_ws / dT [kPa K-1] of the Tetens form at ``t`` [°C]; ``p_ws`` when already known."""
     t = np.asarray(t, dtype=float)
-    d = t + 237.3
+    d = t + _TETENS_C
     return _tetens_slope(_tetens(t, d) if p_ws is None else np.asarray(p_ws, dtype=float), d)
 
 
@@ -61,7 +66,7 @@ def saturation_vapour_pressure_and_slope(t: ArrayLike) -> tuple[np.ndarray, np.n
     """(p_ws [kPa], d p_ws / dT [kPa K-1]) at ``t`` [°C], sharing the work (the exponential
     step's slope of transpiration needs both at every candidate state)."""
     t = np.asarray(t, dtype=float)
-    d = t + 237.3
+    d = t + _TETENS_C
     p_ws = _tetens(t, d)
     return p_ws, _tetens_slope(p_ws, d)
 

@@ -31,12 +31,13 @@ within the minute, the zero-order hold biases the four prototype parameters by ~
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from gateway.model.terms import Index
+from gateway.model.terms import Index, const, row_columns
 
 HOLDS = ("first_order", "zero_order")
 
@@ -46,6 +47,8 @@ calibration cost's fast path): each temporary (32 kB) stays below glibc's mmap a
 thresholds (128 kB), so the ~40 temporaries of a block reuse heap memory instead of faulting
 fresh pages in (blocks of 16384 ran 1.6-2x slower for that alone, more than the loop over
 smaller blocks costs; measured with tests/bench/step.py's calibration cost)."""
+
+_HALF, _ONE, _Z_MIN = const(0.5), const(1.0), const(1e-6)  # 0-d operands (terms.const)
 
 Rates = Callable[[np.ndarray, Index], tuple[np.ndarray, np.ndarray]]
 """``rates(state, t) -> (r, λ)``: rate dT/dt [K s-1] at ``state`` and time index ``t``, and the
@@ -77,10 +80,10 @@ FROZEN = Integration("zero_order", relinearise=False)
 def phi(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(φ1(z), φ2(z)) for z ≥ 0. φ2 = (1 - φ1)/z: below z = 1e-6 (a step that barely relaxes)
     z is taken as 1e-6, which moves φ1 by < 5e-7 and keeps φ2 = 1/2 - z/6 to 4e-10."""
-    z = np.maximum(z, 1e-6)
+    z = np.maximum(z, _Z_MIN)
     nz = -z
     p1 = np.expm1(nz) / nz  # (1 - e^-z)/z: the same bits as -expm1(-z)/z, one operation less
-    return p1, (1.0 - p1) / z
+    return p1, (_ONE - p1) / z
 
 
 def phi1(z: np.ndarray) -> np.ndarray:
@@ -102,7 +105,8 @@ def advance(state: np.ndarray, r0: np.ndarray, lam: np.ndarray, dt: float,
 def midpoint(state: np.ndarray, r0: np.ndarray, lam0: np.ndarray, dt: float) -> np.ndarray:
     """Halfway to where the frozen step would end (the predictor the end of the step is
     evaluated at), with φ1(z) ≈ 1/(1 + z/2): exact to z²/12, bounded, and no exponential."""
-    return state + (0.5 * dt) * r0 / (1.0 + (0.5 * dt) * lam0)
+    half = const(0.5 * dt)
+    return state + half * r0 / (_ONE + half * lam0)
 
 
 def next_index(t: Index, n: int) -> Index:
@@ -135,7 +139,7 @@ def end_rates(rates: Rates, state: np.ndarray, r0: np.ndarray, lam0: np.ndarray,
     if not check:
         return r1, lam1
     both = r1 + lam1
-    if not np.isfinite(np.add.reduce(both, axis=None)):  # one reduction, no temporary mask
+    if not math.isfinite(np.add.reduce(both, axis=None)):  # one reduction, no temporary mask
         bad = ~np.isfinite(both)
         r1, lam1 = np.where(bad, r0, r1), np.where(bad, lam0, lam1)
     return r1, lam1
@@ -153,72 +157,89 @@ def _same(a: Index, b: Index) -> bool:
     return a == b
 
 
-def _column(v: np.ndarray, j: int) -> np.ndarray:
-    """Column j of a block of sums (P or 1, rows); one that does not vary in time as it is."""
-    return v if v.ndim == 0 or v.shape[1] == 1 else v[:, j : j + 1]
-
-
 class Stepper:
     """The one exponential step of every model evaluation, bound to one set of drivers (of
     length ``n``) and parameters: ``stepper(state, t)`` steps from time index ``t``.
 
     ``fixed`` sums the terms whose coefficients do not read the state, ``moving`` the others.
-    The fixed terms' sums are evaluated once for a block of ``BLOCK`` rows when ``t`` is one step
-    (free runs, the online estimator's virtual model: their per-call cost dominates at small
-    populations), and consecutive calls with a slice or an array reuse the sums at t + 1 as the
-    next step's start, so the first-order hold costs the fixed terms one evaluation per step,
-    not two. The sums are the same numbers either way (element-wise operations).
+    When ``t`` is one step (free runs, the online estimator's virtual model: the per-call cost
+    of small arrays dominates at small populations) the work that does not read the state is
+    done once for a block of ``BLOCK`` rows: the fixed terms' sums (and their slope over C), and,
+    with ``bind`` (``bind(rows)``: the moving terms' sums with their state-free parts computed
+    for the rows, ``FluxTerm.bind``), the moving terms' parameter-and-driver parts. Consecutive
+    calls with a slice or an array reuse the fixed sums at t + 1 as the next step's start, so
+    the first-order hold costs the fixed terms one evaluation per step, not two. The numbers are
+    the same either way (element-wise operations).
     """
 
     BLOCK = 64
-    """Rows of the fixed terms' sums evaluated at once when stepping one time index at a time."""
+    """Rows of the state-free work done at once when stepping one time index at a time."""
 
     def __init__(self, fixed: Sums, moving: Sums, c: float, dt: float, n: int,
-                 integration: Integration = Integration()) -> None:
-        self.fixed, self.moving = fixed, moving
+                 integration: Integration = Integration(),
+                 bind: Callable[[slice], Sums] | None = None) -> None:
+        self.fixed, self.moving, self.bind = fixed, moving, bind
         self.c, self.dt, self.n, self.integration = c, dt, n, integration
+        # C and Δ as 0-d arrays for the per-step arithmetic: the same float64 operations, but
+        # numpy 2 converts a Python float operand on every call (~0.3 µs at small P).
+        self._c, self._dt = np.array(c, dtype=float), np.array(dt, dtype=float)
         self._key: Index | None = None
         self._cached: tuple = ()
-        self._rows = (0, 0)  # rows [a, b) held in self._table
-        self._table: tuple = ()
+        self._rows = (0, 0)  # rows [a, b) of the block held
+        self._table: list[tuple] = []  # fixed (g, s, k, k / C) per row of the block
+        self._bound: Sums = moving  # the moving sums bound to the block's rows
+
+    def _block(self, state: np.ndarray, t: int) -> int:
+        """Row ``t``'s position in the block held, computing the block first when ``t`` is not in
+        it."""
+        a, b = self._rows
+        if not a <= t < b:
+            a, b = t, min(t + self.BLOCK, self.n)
+            self._rows = (a, b)
+            g, s, k = self.fixed(state, slice(a, b))
+            sums = (g, s, k, np.asarray(k) / self._c)
+            self._table = list(zip(*(row_columns(v, b - a) for v in sums), strict=True))
+            if self.bind is not None:
+                self._bound = self.bind(slice(a, b))
+        return t - a
 
     def _fixed_at(self, state: np.ndarray, t: Index) -> tuple:
         if isinstance(t, (int, np.integer)):
-            a, b = self._rows
-            if not a <= t < b:
-                a, b = int(t), min(int(t) + self.BLOCK, self.n)
-                self._rows = (a, b)
-                # (P or 1, rows); a sum that does not vary in time stays (P, 1) or a scalar
-                self._table = tuple(v[None, :] if v.ndim == 1 else v
-                                    for v in map(np.asarray, self.fixed(state, slice(a, b))))
-            j = int(t) - a
-            g, s, k = self._table
-            return _column(g, j), _column(s, j), _column(k, j)
+            j = self._block(state, int(t))  # before reading self._table: it may replace it
+            return self._table[j][:3]
         if self._key is not None and _same(self._key, t):
             return self._cached
         return self.fixed(state, t)
 
+    def _moving_at(self, state: np.ndarray, t: Index) -> tuple:
+        if isinstance(t, (int, np.integer)):
+            self._block(state, int(t))
+            return self._bound(state, t)
+        return self.moving(state, t)
+
     def rates(self, state: np.ndarray, t: Index) -> tuple[np.ndarray, np.ndarray]:
         """(r [K s-1], λ [s-1]) of all terms at ``state`` and ``t``."""
         gi, si, ki = self._fixed_at(state, t)
-        gd, sd, kd = self.moving(state, t)
-        return ((gi + gd) - (si + sd) * state) / self.c, (ki + kd) / self.c
+        gd, sd, kd = self._moving_at(state, t)
+        return ((gi + gd) - (si + sd) * state) / self._c, (ki + kd) / self._c
 
     def _moving_rates(self, state: np.ndarray, t: Index) -> tuple[np.ndarray, np.ndarray]:
-        g, s, k = self.moving(state, t)
-        return (g - s * state) / self.c, k / self.c
+        g, s, k = self._moving_at(state, t)
+        return (g - s * state) / self._c, k / self._c
 
     def __call__(self, state: np.ndarray, t: Index) -> np.ndarray:
-        c, dt = self.c, self.dt
+        c, dt = self._c, self._dt
         r0, lam0 = self.rates(state, t)
         if self.integration.hold == "zero_order":
             return advance(state, r0, lam0, dt)
         t1 = next_index(t, self.n)
         if isinstance(t, (int, np.integer)):
-            g1, s1, k1 = self._fixed_at(state, t1)
+            j = self._block(state, int(t1))
+            g1, s1, _, k1_c = self._table[j]
         else:
             g1, s1, k1 = self.fixed(state, t1)
             self._key, self._cached = t1, (g1, s1, k1)
-        r1, lam1 = end_rates(self._moving_rates, state, r0, lam0, t1, dt,
-                             self.integration.relinearise, fixed=((g1 - s1 * state) / c, k1 / c))
-        return advance(state, r0, 0.5 * (lam0 + lam1), dt, r1)
+            k1_c = k1 / c
+        r1, lam1 = end_rates(self._moving_rates, state, r0, lam0, t1, self.dt,
+                             self.integration.relinearise, fixed=((g1 - s1 * state) / c, k1_c))
+        return advance(state, r0, _HALF * (lam0 + lam1), dt, r1)

@@ -32,22 +32,32 @@ from dataclasses import replace
 
 import numpy as np
 
-from gateway.model.terms import SUN_THRESHOLD, SUNLIT, FluxTerm, Index, Parameter
+from gateway.model.terms import (
+    SUN_THRESHOLD,
+    SUNLIT,
+    FluxTerm,
+    Index,
+    Parameter,
+    const,
+    row_columns,
+    row_values,
+)
 
 SMOOTH_K = 0.5
 """[K] width w over which σ rounds the setpoint's corner."""
+_ZERO, _HALF, _ONE = const(0.0), const(0.5), const(1.0)  # 0-d operands (terms.const)
 
 
 def soft_excess(z: np.ndarray, w: float = SMOOTH_K) -> np.ndarray:
     """σ(z) = w ln(1 + e^{z/w}) [K]: ≈ max(0, z) beyond a few w, w ln 2 at z = 0 (NaN, a
     missing reading, stays NaN)."""
-    z = np.asarray(z, dtype=float)
-    return np.maximum(z, 0.0) + w * np.log1p(np.exp(-np.abs(z) / w))  # = w ln(1 + e^{z/w})
+    z, w = np.asarray(z, dtype=float), const(w)
+    return np.maximum(z, _ZERO) + w * np.log1p(np.exp(-np.abs(z) / w))  # = w ln(1 + e^{z/w})
 
 
 def soft_step(z: np.ndarray, w: float = SMOOTH_K) -> np.ndarray:
     """σ'(z) = 1 / (1 + e^{−z/w}) [-]: the logistic, the derivative of ``soft_excess``."""
-    return 0.5 * (1.0 + np.tanh(0.5 * np.asarray(z, dtype=float) / w))
+    return _HALF * (_ONE + np.tanh(_HALF * np.asarray(z, dtype=float) / const(w)))
 
 
 class ControlledVentilation(FluxTerm):
@@ -79,10 +89,13 @@ class ControlledVentilation(FluxTerm):
     def _gain(self, p, x, t: Index) -> np.ndarray | None:
         """C_vc ρ_a δ_sun [kg m-2 s-1 K-1]; None when no sample at ``t`` is sunlit (the flux is
         then 0 and the state's functions need not be evaluated: the night's steps cost nothing)."""
-        sun = self.derived(x, "_q_vent_control.sun", t)
-        if sun is None:
-            sun = self.rho * (np.asarray(x["i_glob"][t]) > SUN_THRESHOLD)
+        sun = self._sun(x, t)
         return p["c_vc"] * sun if sun.any() else None
+
+    def _sun(self, x, t: Index) -> np.ndarray:
+        """ρ_a δ_sun [kg m-3] at ``t``: from ``Model.prepare``'s column when there."""
+        sun = self.derived(x, "_q_vent_control.sun", t)
+        return self.rho * (np.asarray(x["i_glob"][t]) > SUN_THRESHOLD) if sun is None else sun
 
     def coefficients(self, p, x, t_in, t: Index):
         c = self._gain(p, x, t)
@@ -96,7 +109,25 @@ class ControlledVentilation(FluxTerm):
         c = self._gain(p, x, t)
         if c is None:
             return 0.0, 0.0, 0.0
-        t_out = x["t_out"][t]
+        return self._linearised(c, p, x["t_out"][t], t_in)
+
+    @staticmethod
+    def _linearised(c, p, t_out, t_in):
+        """(g, s, k) for the gain c = C_vc ρ_a δ_sun (``_gain``)."""
         z = t_in - p["t_vc"]
         s = c * soft_excess(z)
         return s * t_out, s, s + c * soft_step(z) * (t_in - t_out)
+
+    def bind(self, p, x, rows: slice):
+        """The gain once for the rows (``FluxTerm.bind``); rows without sun give 0."""
+        sun = self._sun(x, rows)
+        gain = row_columns(p["c_vc"] * sun, rows.stop - rows.start)
+        lit, t_out = sun != 0.0, row_values(x["t_out"], rows)
+        a, linearised = rows.start, self._linearised
+
+        def at(t_in: np.ndarray, t: int) -> tuple:
+            if not lit[t - a]:
+                return 0.0, 0.0, 0.0
+            return linearised(gain[t - a], p, t_out[t - a], t_in)
+
+        return at

@@ -10,7 +10,8 @@ factor per day with intra-day fluctuation, a diurnal temperature cycle (maximum 
 time, amplitude reduced under cloud), a daily vapour pressure (RH follows the temperature), a
 daily mean wind with an afternoon breeze and gusts, and the sky temperature of Swinbank (1963)
 blended with the cloud-base temperature (cloudy skies radiate near air temperature).
-Climate normals are rough monthly values for Biskra (Köppen BWh) and Almería (BSh).
+Climate normals are rough monthly values for Biskra (Köppen BWh), Almería (BSh) and Sevilla (Csa,
+hot-dry inland summers; opt-in training data of the virtual sensor, docs/vsensor.md).
 """
 
 from __future__ import annotations
@@ -91,12 +92,18 @@ CLIMATES: dict[str, Climate] = {
     "biskra": Climate(34.722, 6.294, 11.5, 34.0, 13.0, 15.0, 0.75, 1.30, 0.12, 0.03, 4.0),
     # Las Palmerillas, Almería (thesis §II.3.1): mild, humid sea air, small diurnal range.
     "almeria": Climate(36.793, -2.720, 12.5, 26.0, 7.5, 8.0, 0.95, 2.20, 0.25, 0.05, 4.0),
+    # Sevilla Aeropuerto, AEMET normals 1981-2010, rounded (Jan/Jul mean 10.9/28.2 °C, max - min
+    # 10.3/15.7 K): an inland hot-dry site, the climate type a Mediterranean/North-African grower
+    # sees and the two sites above do not (mild sea air; the Dutch file). Chosen for its type
+    # before any measurement, and not the test site (vsensor corpus HOT_DRY, eleventh pass).
+    "seville": Climate(37.42, -5.90, 10.9, 28.2, 10.3, 15.7, 1.00, 1.65, 0.20, 0.02, 3.0),
 }
 WEATHER_SOURCES = ("bleiswijk", *CLIMATES)
 DEFAULT_START = {
     "bleiswijk": "2009-11-01",
     "biskra": "2019-01-26",
     "almeria": "2020-03-01",
+    "seville": "2021-07-12",
 }
 
 
@@ -113,7 +120,7 @@ def parse_start(text: str | np.datetime64) -> np.datetime64:
 def load_weather(
     source: str, start: np.datetime64, days: float, step: float = 60.0, seed: int = 0
 ) -> Weather:
-    """Weather from ``source`` ('bleiswijk', 'biskra' or 'almeria') for ``days`` [d] from ``start``.
+    """Weather from ``source`` ('bleiswijk' or a key of :data:`CLIMATES`) for ``days`` [d] from ``start``.
 
     ``step`` is the grid step [s]; ``seed`` only matters for synthetic sources.
     """
@@ -200,7 +207,7 @@ def _ar1(rng: np.random.Generator, n: int, tau_steps: float, sigma: float) -> np
 
 def synthetic(site: str, start: np.datetime64, days: float, step: float = 60.0,
               seed: int = 0) -> Weather:
-    """Seeded synthetic clear-sky/cloudy days for ``site`` ('biskra' or 'almeria')."""
+    """Seeded synthetic clear-sky/cloudy days for ``site`` (a key of :data:`CLIMATES`)."""
     clim = CLIMATES[site]
     rng = np.random.default_rng(np.random.SeedSequence([seed, 7919, len(site)]))
     time = _grid(start, days, step)

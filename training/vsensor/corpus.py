@@ -9,8 +9,9 @@
 
 ``TRAIN`` and ``TEST`` below are the split the README's figures use: the test site (Biskra)
 and season (spring) appear nowhere in training; ``OTHER`` is another house. ``python -m
-training.vsensor corpus --out DIR`` writes ``DIR/train``, ``DIR/test`` and ``DIR/other`` kit
-CSVs with the simulator's truth files.
+training.vsensor corpus --out DIR`` writes ``DIR/train``, ``DIR/test``, ``DIR/fresh`` and
+``DIR/other`` kit CSVs with the simulator's truth files; ``--hot-dry`` also writes the opt-in
+``HOT_DRY`` runs to ``DIR/hot-dry`` (a third climate, not in ``TRAIN``).
 """
 
 from __future__ import annotations
@@ -65,13 +66,20 @@ FRESH = (
 )
 """Second held-out set (seventh pass): a season never trained on at a training site, and
 another season at the test site; no setting was chosen with them (``out/fresh``)."""
+HOT_DRY = (
+    Run("seville-summer-grower", "sim", "seville", "2021-07-12", 6, "grower", 26),
+    Run("seville-autumn-controller", "sim", "seville", "2021-10-04", 6, "controller", 27),
+)
+"""Opt-in training runs at a third climate, inland hot-dry Sevilla (eleventh pass, candidate H:
+docs/vsensor.md): never spring (the test season), never Biskra weather; not in ``TRAIN``, so
+the shipped model and its figures do not depend on them (``corpus --hot-dry`` writes them)."""
 OTHER = (
     Run("other-house-spring", "sim", "almeria", "2020-04-15", 3, "controller", 31),
 )
 """Another house (2 roof flaps instead of 5, one side vent instead of two:
 docs/examples/other-house.toml), to show that the sensor flags it rather than trusting itself."""
 OTHER_HOUSE = {"roof_n": 2, "side_n": 1}
-UTC_OFFSET = {"almeria": -0.18, "biskra": 0.38, "bleiswijk": 0.3}
+UTC_OFFSET = {"almeria": -0.18, "biskra": 0.38, "bleiswijk": 0.3, "seville": -0.39}
 """Local solar time minus UTC [h] at each weather site (longitude / 15)."""
 GROWER_SHIFT = {"bleiswijk": -6.0}
 """A Dutch grower in November airs at lower temperatures [K] than the defaults (a house that
@@ -111,11 +119,17 @@ def generate(run: Run, path: Path) -> Path:
     return path
 
 
+def part_of(run: Run) -> str:
+    """The folder of ``run`` under a corpus: ``train``, ``test``, ``fresh``, ``other`` or
+    ``hot-dry`` (the opt-in runs stay out of ``train/``, whose files the docs glob)."""
+    return ("test" if run in TEST else "fresh" if run in FRESH else "other" if run in OTHER
+            else "hot-dry" if run in HOT_DRY else "train")
+
+
 def write_corpus(out: Path, runs: tuple[Run, ...] = TRAIN + TEST + FRESH + OTHER) -> list[Path]:
-    """Every run of ``runs`` under ``out/train``, ``out/test``, ``out/fresh`` or ``out/other``."""
+    """Every run of ``runs`` under ``out/<part_of(run)>`` (the default leaves ``HOT_DRY`` out)."""
     paths = []
     for run in runs:
-        part = ("test" if run in TEST else "fresh" if run in FRESH else "other" if run in OTHER
-                else "train")
+        part = part_of(run)
         paths.append(generate(run, out / part / f"{run.name}.csv"))
     return paths

@@ -110,8 +110,12 @@ class Rls:
     a time: ``fit`` over a series, the live gateway sample by sample)."""
 
     def __init__(self, forgetting: float = FORGETTING) -> None:
-        k = len(REGRESSORS)
         self.lam = float(forgetting)
+        self._reset()
+
+    def _reset(self) -> None:
+        """The initial state (no update yet)."""
+        k = len(REGRESSORS)
         self.w = np.zeros(k)
         self.p = P0 * np.eye(k)
         self.updates = 0
@@ -153,7 +157,7 @@ class Rls:
         p = 0.5 * (p + p.T)
         finite = bool(np.all(np.isfinite(w)) and np.all(np.isfinite(p)))
         if not finite or np.linalg.eigvalsh(p)[0] < -1e-9 * abs(np.trace(p)):
-            self.__init__(self.lam)  # the initial state
+            self._reset()
             return
         self.w, self.p = w, p
         self.updates = int(snap["updates"])

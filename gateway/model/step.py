@@ -78,7 +78,7 @@ FROZEN = Integration("zero_order", relinearise=False)
 """The step before issue 10: everything frozen at the start of the step."""
 
 
-def phi(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def phi(z: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
     """(φ1(z), φ2(z)) for z ≥ 0. φ2 = (1 - φ1)/z: below z = 1e-6 (a step that barely relaxes)
     z is taken as 1e-6, which moves φ1 by < 5e-7 and keeps φ2 = 1/2 - z/6 to 4e-10."""
     z = np.maximum(z, _Z_MIN)
@@ -87,13 +87,13 @@ def phi(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return p1, (_ONE - p1) / z
 
 
-def phi1(z: np.ndarray) -> np.ndarray:
+def phi1(z: np.ndarray | float) -> np.ndarray:
     """φ1(z) = (1 - e^-z)/z for z ≥ 0, 1 at z → 0."""
     z = np.maximum(z, 1e-12)
     return -np.expm1(-z) / z
 
 
-def advance(state: np.ndarray, r0: np.ndarray, lam: np.ndarray, dt: float | np.ndarray,
+def advance(state: np.ndarray, r0: np.ndarray, lam: np.ndarray | float, dt: float | np.ndarray,
             r1: np.ndarray | None = None) -> np.ndarray:
     """T + Δ [r0 φ1(z) + (r1 − r0) φ2(z)], z = λΔ: exact for a rate linear in T with slope -λ
     and a forcing linear in time from r0 to r1 (``r1`` None: constant forcing, φ1 only)."""

@@ -172,7 +172,7 @@ class NaturalVentilation(FluxTerm):
     equation = "III.31–III.32"
     description = "natural ventilation and leakage: -rho c_p G (T_in - T_out) / A"
     requires = ("t_out", "wind")
-    parameters = (
+    parameters: tuple[Parameter, ...] = (
         Parameter("c_ven_d", "-", 0.05, 1.0, 0.65, 0.07, VENTS_OPEN, "vent discharge coefficient"),
         Parameter("c_ven_w", "-", 0.01, 1.0, 0.09, 0.07, VENTS_OPEN, "wind pressure coefficient"),
         Parameter("c_loss", "m3 s-1", 0.1, 1.0, 0.2, 0.07, ALWAYS, "leakage air flow"),

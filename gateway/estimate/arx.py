@@ -38,7 +38,8 @@ P by 1/λ per sample without end (covariance wind-up); the bound keeps the updat
 bounds P only while P stays symmetric positive semi-definite, which ``Rls.update`` keeps."""
 
 
-def regressors(x: Mapping[str, np.ndarray], t_in: np.ndarray, t: np.ndarray | slice) -> np.ndarray:
+def regressors(x: Mapping[str, np.ndarray], t_in: np.ndarray,
+               t: int | np.ndarray | slice) -> np.ndarray:
     """φ (…, 5) at time index ``t`` for inside temperature ``t_in`` (broadcast against x[t])."""
     dt_out = x["t_out"][t] - t_in
     one = np.ones_like(dt_out)

@@ -239,9 +239,8 @@ class OnlineEstimator:
         the cloud fraction from the tracker (the same as over a whole series)."""
         cols = {k: np.array([v]) for k, v in values.items()}
         cloud = np.array([self._sky.update(time, values.get("i_glob", np.nan))])
-        # numpy's stubs have no datetime64(datetime64, unit) overload; numpy takes it
-        stamp = np.array([np.datetime64(0, "s") if time is None
-                          else np.datetime64(time, "s")])  # type: ignore[call-overload]
+        stamp = np.array([np.datetime64(0, "s") if time is None else
+                          np.datetime64(time, "s")])  # type: ignore[call-overload]  # numpy stub gap
         x = prepare_drivers(Series(stamp, self.dt, cols), self.gh, cloud=cloud)
         return {k: float(v[0]) for k, v in x.items()}
 

@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: run demo test bench bench-generality bench-forecasts images lint clean venv stubs
+.PHONY: run demo test bench bench-generality bench-forecasts images lint typecheck clean venv stubs
 
 # The wheel carries gateway/ only (pyproject.toml); training/ and the other repository tools
 # are importable in the dev venvs, from any folder and in subprocesses, through this .pth.
@@ -77,6 +77,11 @@ images: $(STAMP)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
+
+## typecheck: mypy on gateway/ ([tool.mypy] in pyproject.toml); apart from `make test`, whose time
+## it would add to (mcu/ is type-checked against the ESP32 stubs inside the suite)
+typecheck: $(STAMP)
+	$(PY) -m mypy gateway
 
 clean:
 	rm -rf $(VENV) $(BENCH_VENV) mcu/typings_esp32 images/build bench/results .pytest_cache .ruff_cache

@@ -261,7 +261,8 @@ def _parse_cell(path: Path, line: int, name: str, cell: str) -> float:
 
 def format_time(t: np.datetime64) -> str:
     """datetime64 (UTC) → ISO 8601 with a ``Z``."""
-    return str(np.datetime64(t, "s")) + "Z"
+    # numpy's stubs have no datetime64(datetime64, unit) overload; numpy takes it
+    return str(np.datetime64(t, "s")) + "Z"  # type: ignore[call-overload]
 
 
 def write_kit_csv(

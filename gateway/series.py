@@ -55,7 +55,8 @@ class Series:
 
     def index_of(self, stamp: np.datetime64) -> int:
         """Index of the first grid time at or after ``stamp``."""
-        return int(np.searchsorted(self.time, np.datetime64(stamp, "s")))
+        # numpy's stubs have no datetime64(datetime64, unit) overload; numpy takes it
+        return int(np.searchsorted(self.time, np.datetime64(stamp, "s")))  # type: ignore[call-overload]
 
 
 def resample(data: KitData, step: float = 60.0, max_gap: float = MAX_GAP_S) -> Series:

@@ -300,7 +300,7 @@ def progress_bar(label: str, total: int, enabled: bool) -> Iterator[Any]:
         task = bar.add_task(label, total=total, info="")
 
         def update(advance: int = 1, info: str = "", description: str | None = None) -> None:
-            kw = {"description": description} if description else {}
-            bar.update(task, advance=advance, info=info, **kw)
+            # description None: rich keeps the current one
+            bar.update(task, advance=advance, info=info, description=description or None)
 
         yield update

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import zenoh
@@ -40,10 +40,13 @@ class CloudHistory:
             for farm in farms:
                 self.queryables.append(session.declare_queryable(
                     f"{K.PREFIX}/{farm}/*/{K.HISTORY}/**",
-                    lambda q, farm=farm: self._on_query(q, farm), complete=complete))
+                    self._handler(farm), complete=complete))
         except BaseException:
             self.close()
             raise
+
+    def _handler(self, farm: str) -> Callable[[zenoh.Query], None]:
+        return lambda q: self._on_query(q, farm)
 
     def _on_query(self, query: zenoh.Query, farm: str) -> None:
         with query:

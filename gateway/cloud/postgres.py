@@ -76,16 +76,31 @@ class CloudStoreError(RuntimeError):
 
 
 class MessageLike(Protocol):
-    """What insert_batch reads from a message (the subscriber's record, or CloudMessage)."""
+    """What insert_batch reads from a message (the subscriber's record, or CloudMessage).
+    Read-only members, so a frozen dataclass (``Received``) is one."""
 
-    key: str
-    idem: str
-    farm: str
-    greenhouse: str
-    kind: str
-    t: float | None  # observed [unix s]; None: the message had no time (stored as received)
-    payload: str  # JSON text
-    received: float  # [unix s]
+    @property
+    def key(self) -> str: ...
+    @property
+    def idem(self) -> str: ...
+    @property
+    def farm(self) -> str: ...
+    @property
+    def greenhouse(self) -> str: ...
+    @property
+    def kind(self) -> str: ...
+    @property
+    def t(self) -> float | None:
+        """Observed [unix s]; None: the message had no time (stored as received)."""
+        ...
+    @property
+    def payload(self) -> str:
+        """JSON text."""
+        ...
+    @property
+    def received(self) -> float:
+        """[unix s]"""
+        ...
 
 
 CloudMessage = Received  # one record type for every cloud store (gateway.cloud.store)
@@ -245,7 +260,7 @@ class PgStore:
             return [Received(*row) for row in rows]
         return list(self._scan(query, args, limit, match))
 
-    def _scan(self, query: sql.Composable, args: list[Any], limit: int | None = None,
+    def _scan(self, query: sql.Composed, args: list[Any], limit: int | None = None,
               match: Callable[[str], bool] | None = None) -> Iterator[Received]:
         """Rows through a server-side cursor (never all in memory), filtered by `match`."""
         n = 0

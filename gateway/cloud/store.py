@@ -192,7 +192,8 @@ class SqliteCloudStore:
                 match: Callable[[str], bool] | None = None) -> list[Received]:
         if not 1 <= limit <= MAX_LIMIT:
             raise ValueError(f"limit {limit}: expected 1..{MAX_LIMIT}")
-        where, args = ["farm = ?", "t IS NOT NULL"], [farm]
+        where = ["farm = ?", "t IS NOT NULL"]
+        args: list[str | float] = [farm]
         if greenhouse is not None:
             where.append("greenhouse = ?")
             args.append(greenhouse)

@@ -115,8 +115,9 @@ class Subscriber:
         try:
             latest = self._latest()  # before anything new arrives: where the catch-up starts
             for key in self.keys:
-                sub = declare_advanced_subscriber(session, key, self._on_sample,
-                                                  recovery=RecoveryConfig(heartbeat=True))
+                # periodic_queries=None is zenoh's default; its stub marks the argument required
+                recovery = RecoveryConfig(periodic_queries=None, heartbeat=True)
+                sub = declare_advanced_subscriber(session, key, self._on_sample, recovery=recovery)
                 self.subs.append((sub, sub.sample_miss_listener(self._on_miss)))
             if self.history_farms:
                 self.history = CloudHistory(session, self.store, self.history_farms)

@@ -186,7 +186,7 @@ def calibrate_base(base: Model, gh: Greenhouse, x: dict, dt: float, s: int, hori
         k_new = len(new.names) - len(model.names)
         dbic = delta_bic(float(sse_new[0]), float(sse[0]), effective_samples(npair, dt), k_new)
         val_new = _validation(new, th, x, gh, dt, val_starts, horizon)
-        kept = dbic < 0 and (not inner or val_new < (1.0 - MIN_VALIDATION_GAIN) * val)
+        kept = dbic < 0 and (not inner or _validated(val_new, val))
         log.append({"structure": label, "detail": structure_detail(new), "kept": bool(kept),
                     "mse": float(sse_new[0] / npair), "delta_bic": dbic, "validation_mse": val_new})
         if kept:
@@ -197,6 +197,13 @@ def calibrate_base(base: Model, gh: Greenhouse, x: dict, dt: float, s: int, hori
         shoot = Shooting(model, x, gh, dt, whole, horizon)
         theta = fit(model, theta, shoot, gh, 0, seed)
     return model, theta, log
+
+
+def _validated(new: float | None, old: float | None) -> bool:
+    """Does ``new`` beat ``old`` by ``MIN_VALIDATION_GAIN`` on the inner validation windows?"""
+    if new is None or old is None:
+        raise ValueError("inner validation without validation windows")
+    return new < (1.0 - MIN_VALIDATION_GAIN) * old
 
 
 def _validation(model: Structured, theta: np.ndarray, x: dict, gh: Greenhouse, dt: float,

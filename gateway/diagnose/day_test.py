@@ -126,10 +126,11 @@ def _edges(parts: list[np.ndarray]) -> np.ndarray:
 
 
 def _units(times: list[np.ndarray], rs: list[np.ndarray],
-           states: list[dict[str, np.ndarray]] | None) -> tuple[list[np.ndarray], list[tuple]]:
+           states: list[dict[str, np.ndarray]] | None,
+           ) -> tuple[list[np.ndarray], list[tuple[str, float, float]]]:
     """Day units of each part, clock columns then state columns; days with less than half the
     clock bins are left out. Also (variable, lo, hi) per state column."""
-    cols: list[tuple] = []
+    cols: list[tuple[str, float, float]] = []
     out = []
     edges = {}
     if states:
@@ -141,7 +142,7 @@ def _units(times: list[np.ndarray], rs: list[np.ndarray],
         _, day = np.unique(sec // 86400, return_inverse=True)
         u = _clock_units(day, sec, r)
         keep = np.isfinite(u).sum(axis=1) >= u.shape[1] // 2
-        if edges:
+        if states and edges:  # edges only come with states
             step = float(np.median(np.diff(sec))) if len(sec) > 1 else BIN_S
             min_n = max(int(np.ceil(BIN_S / max(step, 1.0))), 1)
             u = np.hstack([u] + [_state_units(day, states[i][k], e, r, min_n)

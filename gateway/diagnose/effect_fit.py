@@ -16,8 +16,8 @@ from gateway.diagnose.base import carry, free_parameters
 from gateway.diagnose.bic import EFFECTIVE_S, delta_bic, effective_samples
 from gateway.diagnose.effects import Effect, compose
 from gateway.diagnose.fit import Scan, Shooting, fit_lm, scan_tau, window_starts
+from gateway.diagnose.structure import Structured
 from gateway.greenhouse import Greenhouse
-from gateway.model.model import Model
 
 __all__ = ["COARSE_TAU_S", "REFIT_LM_ITERATIONS", "TAU_ROUNDS", "Context", "EffectFit",
            "fit_effect", "fit_effect_at", "rank", "refit", "scan"]
@@ -43,7 +43,7 @@ class Context:
         self.last = jd.last_start(duration, float(x["_index"][split]))
         """The latest start an effect may have (judge.last_start)."""
 
-    def shooting(self, model: Model, segments: Segments) -> Shooting:
+    def shooting(self, model: Structured, segments: Segments) -> Shooting:
         """Multiple shooting of ``model`` over windows of the horizon inside ``segments``."""
         starts = window_starts(segments, self.horizon, skip=self.horizon)
         return Shooting(model, self.x, self.gh, self.dt, starts, self.horizon)
@@ -103,14 +103,14 @@ def scan(shoot: Shooting, theta: np.ndarray, e: Effect, last: float, segments: S
     return fine if fine.scores[fine.best] <= coarse.scores[coarse.best] * (1.0 + rel) else coarse
 
 
-def _evidence(e: Effect, model: Model, x: dict, theta: np.ndarray, segments: Segments,
+def _evidence(e: Effect, model: Structured, x: dict, theta: np.ndarray, segments: Segments,
               sc: Scan) -> float:
     """The second output's ΔBIC for ``e`` at the scan's best start and amplitude."""
     return e.evidence.delta_bic(model, x, theta, segments, float(sc.taus[sc.best]),
                                 float(sc.amps[sc.best]))
 
 
-def rank(ctx: Context, base: Model, model: Model, theta: np.ndarray, effects: list[Effect],
+def rank(ctx: Context, base: Structured, model: Structured, theta: np.ndarray, effects: list[Effect],
          candidates: list[Effect], segments: Segments) -> list[tuple[Scan, float]]:
     """Each candidate's τ scan (other parameters held) on ``segments``, added to ``model`` (the
     ``base`` + ``effects``, parameters ``theta``), sorted by ΔBIC (its second output's
@@ -128,7 +128,7 @@ def rank(ctx: Context, base: Model, model: Model, theta: np.ndarray, effects: li
     return out
 
 
-def refit(ctx: Context, model: Model, theta: np.ndarray, segments: Segments) -> np.ndarray:
+def refit(ctx: Context, model: Structured, theta: np.ndarray, segments: Segments) -> np.ndarray:
     """``model`` refitted on ``segments`` (base parameters and amplitudes, starts held), as
     :func:`fit_effect` refits a candidate: the judge's reference."""
     lo, hi = model.bounds(ctx.gh)
@@ -136,7 +136,7 @@ def refit(ctx: Context, model: Model, theta: np.ndarray, segments: Segments) -> 
                   REFIT_LM_ITERATIONS)
 
 
-def fit_effect_at(ctx: Context, new_model: Model, old_model: Model, theta_old: np.ndarray,
+def fit_effect_at(ctx: Context, new_model: Structured, old_model: Structured, theta_old: np.ndarray,
                   e: Effect, segments: Segments, tau: float) -> EffectFit:
     """``e`` fitted on ``segments`` as the search fits it (``fit_effect``: amplitude scan,
     joint refit of the base parameters and amplitude, ``TAU_ROUNDS`` alternations), but with
@@ -146,7 +146,7 @@ def fit_effect_at(ctx: Context, new_model: Model, old_model: Model, theta_old: n
     return fit_effect(ctx, new_model, old_model, theta_old, e, segments, latest=False, at=tau)
 
 
-def fit_effect(ctx: Context, new_model: Model, old_model: Model, theta_old: np.ndarray,
+def fit_effect(ctx: Context, new_model: Structured, old_model: Structured, theta_old: np.ndarray,
                e: Effect, segments: Segments, latest: bool = True,
                at: float | None = None) -> EffectFit:
     """τ scan (``scan``) then a joint refit (base parameters + amplitude, τ held) on
@@ -182,6 +182,8 @@ def fit_effect(ctx: Context, new_model: Model, old_model: Model, theta_old: np.n
         best, best_sse, sc_best = trial, sse, sc
         th = trial.copy()
         th[ja] = e.neutral  # the next scan starts from the refitted base without the effect
+    if best is None or sc_best is None:  # the first round always sets them
+        raise ValueError(f"fit_effect: no round ran (TAU_ROUNDS = {TAU_ROUNDS})")
     k = len(new_model.names) - len(old_model.names)  # amplitude, start (+ an added store's h)
     dbic = delta_bic(best_sse, float(sse_old[0]), effective_samples(npair, ctx.dt), k)
     return EffectFit(best, dbic + _evidence(e, new_model, ctx.x, best, segments, sc_best))

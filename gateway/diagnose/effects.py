@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 
@@ -122,6 +123,15 @@ class Drift(SensorTerm):
 # -- the library -----------------------------------------------------------------------------
 Part = FluxTerm | Modulation | SensorTerm | AddedStore
 Make = Callable[["Effect", Structured, Greenhouse, Parameter, Parameter], Part]
+PartT = TypeVar("PartT", FluxTerm, Modulation, SensorTerm, AddedStore)
+
+
+def part_as(e: Effect, part: Part, cls: type[PartT]) -> PartT:
+    """``part`` (built by ``e``) as the class its ``kind`` says it is."""
+    if not isinstance(part, cls):
+        raise TypeError(f"effect {e.name} (kind {e.kind}) built a {type(part).__name__}, "
+                        f"not a {cls.__name__}")
+    return part
 
 
 @dataclass(frozen=True)
@@ -267,11 +277,11 @@ def compose(base: Structured, effects: list[Effect], gh: Greenhouse, duration: f
     for e in effects:
         part = e.build(base, gh, duration)
         if e.kind == "flux":
-            model = model.with_terms(part)
+            model = model.with_terms(part_as(e, part, FluxTerm))
         elif e.kind == "modulation":
-            model = model.with_modulation(part)
+            model = model.with_modulation(part_as(e, part, Modulation))
         elif e.kind == "store":
-            model = model.with_store(part)
+            model = model.with_store(part_as(e, part, AddedStore))
         else:
-            model = model.with_sensors(part)
+            model = model.with_sensors(part_as(e, part, SensorTerm))
     return model

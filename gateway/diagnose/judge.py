@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -306,7 +307,7 @@ def judge(before: dict, reference: dict, after: dict, meas: np.ndarray, blocks: 
     day = np.array([int(a * dt // 86400.0) for a in kept])[after_tau]
     half = len(post_ref) // 2
     p_pieces, p_days = paired_p(post), day_p(post, day)
-    stats = {
+    stats: dict[str, Any] = {  # figures of several types, reported as JSON (Verdict.stats)
         "p": p_days if DAY_TEST else p_pieces, "p_pieces": p_pieces, "p_days": p_days,
         "day_means": [float(post[day == k].mean()) for k in np.unique(day)],
         "p_reference": paired_p(post_ref),

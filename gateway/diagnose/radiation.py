@@ -29,6 +29,14 @@ def _sunlit(x: dict[str, np.ndarray], z: np.ndarray, segments: list[tuple[int, i
     return use & np.isfinite(x["i_in"]) & np.isfinite(z) & (x["i_glob"] > SUN_THRESHOLD)
 
 
+def _c_tsw(model: Model) -> int:
+    """Index of the radiation sub-model's parameter (c_tsw) in ``model``'s vector."""
+    if model.radiation is None:
+        raise ValueError(f"{model.name}: a transmission change needs the radiation sub-model "
+                         "(i_in = c_tsw i_glob, III.35)")
+    return model.index(model.radiation.parameter.name)
+
+
 def radiation_change(model: Model, x: dict[str, np.ndarray], theta: np.ndarray,
                      segments: list[tuple[int, int]], first: float,
                      last: float = np.inf) -> tuple[float, float]:
@@ -36,7 +44,7 @@ def radiation_change(model: Model, x: dict[str, np.ndarray], theta: np.ndarray,
     measured inside radiation: ``i_in = c_tsw (1 + d [t ≥ τ]) i_glob`` (III.35), least squares
     over sunlit samples of ``segments``, every ``first`` ≤ τ ≤ ``last`` at once through reverse
     cumulative sums."""
-    j = model.index(model.radiation.parameter.name)
+    j = _c_tsw(model)
     z = theta[j] * x["i_glob"]  # predicted i_in
     r = x["i_in"] - z
     ok = _sunlit(x, z, segments) & np.isfinite(r)
@@ -56,7 +64,7 @@ def radiation_bic_delta(model: Model, x: dict[str, np.ndarray], theta: np.ndarra
                         segments: list[tuple[int, int]], tau: float, d: float) -> float:
     """ΔBIC of a transmission change (τ, d) on the measured inside radiation (III.35) over the
     sunlit samples of ``segments``: the second output a change of c_tsw has to explain."""
-    j = model.index(model.radiation.parameter.name)
+    j = _c_tsw(model)
     z = theta[j] * x["i_glob"]
     ok = _sunlit(x, z, segments)
     if ok.sum() < 10:

@@ -59,7 +59,7 @@ def electronic(sensors: Sequence[SensorTerm]) -> list[SensorTerm]:
 
 def vapour_in(sensors: Sequence[SensorTerm], p, x, t: Index) -> np.ndarray:
     """Inside vapour pressure from the reading corrected by the electronic offsets (III.4)."""
-    off = 0.0
+    off: np.ndarray | float = 0.0
     for sn in electronic(sensors):
         off = off + sn.offset(p, x, t)
     return psy.vapour_pressure(x["t_in"][t] - off, x["rh_in"][t])

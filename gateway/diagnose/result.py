@@ -7,11 +7,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gateway.diagnose import residuals as res
-from gateway.diagnose.effects import Effect
+from gateway.diagnose.effects import Effect, part_as
+from gateway.diagnose.heat_store import AddedStore
 from gateway.diagnose.judge import Verdict
-from gateway.diagnose.structure import INDEX, Structured, model_unit, physical_capacity
+from gateway.diagnose.structure import INDEX, Modulation, Structured, model_unit, physical_capacity
 from gateway.greenhouse import Greenhouse
 from gateway.model.model import Model
+from gateway.model.terms import SensorTerm
 from gateway.series import Series
 
 
@@ -38,7 +40,7 @@ class Finding:
 
     def to_json(self) -> dict:
         e = self.effect
-        out = {
+        out: dict[str, object] = {
             "effect": e.name,
             "start": self.start,
             "params": {e.amp_name: self.amplitude, "unit": e.unit},
@@ -125,13 +127,16 @@ def traces(findings: list[Finding], model: Structured, theta: np.ndarray, x, gh:
     for f in findings:
         part = f.effect.build(model, gh, duration)
         if f.effect.kind == "sensor":
-            f.trace = np.broadcast_to(part.offset(p, x, idx), (n,)).copy()
+            sensor = part_as(f.effect, part, SensorTerm)
+            f.trace = np.broadcast_to(sensor.offset(p, x, idx), (n,)).copy()
             f.trace_unit = "K"
         elif f.effect.kind == "modulation":
-            f.trace = np.broadcast_to(part.factor(p, x, idx), (n,)).copy()
+            mod = part_as(f.effect, part, Modulation)
+            f.trace = np.broadcast_to(mod.factor(p, x, idx), (n,)).copy()
             f.trace_unit = "factor"
         elif f.effect.kind == "store":
-            f.trace = part.flux(model, theta, x, float(x[INDEX][1] - x[INDEX][0]))
+            store = part_as(f.effect, part, AddedStore)
+            f.trace = store.flux(model, theta, x, float(x[INDEX][1] - x[INDEX][0]))
             f.trace_unit = "W m-2"
         else:
             f.trace = fluxes[part.name] / model_unit(model, gh)

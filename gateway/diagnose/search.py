@@ -35,6 +35,7 @@ from gateway.diagnose.effect_fit import Context, EffectFit, fit_effect, rank, re
 from gateway.diagnose.effects import LIBRARY, Effect, compose
 from gateway.diagnose.fit import HORIZON_S, Scan, coarsen, drivers
 from gateway.diagnose.result import Diagnosis, Finding, make_finding, to_json, traces
+from gateway.diagnose.structure import Structured
 from gateway.greenhouse import Greenhouse
 from gateway.model.model import Model
 from gateway.series import Series
@@ -80,7 +81,7 @@ class _Fit:
     on each fold's fit set; the base's are its calibration, the same for both) and on all
     data (the reported ones)."""
 
-    model: Model
+    model: Structured
     thetas: list[np.ndarray]
     theta_all: np.ndarray
 
@@ -108,7 +109,7 @@ class State:
     kept), its parameters per fold and on all data, its held-out prediction, and what was
     tried (``trials``) and rejected (``rejected``, with why)."""
 
-    def __init__(self, ctx: Context, model0: Model, theta: np.ndarray, held: Heldout) -> None:
+    def __init__(self, ctx: Context, model0: Structured, theta: np.ndarray, held: Heldout) -> None:
         self.ctx = ctx
         self.model0, self.model, self.held = model0, model0, held
         self.effects: list[Effect] = []
@@ -123,7 +124,7 @@ class State:
         """The model so far with its parameters per fold and on all data."""
         return _Fit(self.model, self.thetas, self.theta_all)
 
-    def heldout(self, model: Model, thetas: list[np.ndarray]) -> dict:
+    def heldout(self, model: Structured, thetas: list[np.ndarray]) -> dict:
         """Cross-fitted held-out predictions of ``model`` (judge.heldout)."""
         ctx = self.ctx
         return jd.heldout(model, thetas, ctx.x, ctx.gh, ctx.dt, self.held.folds, ctx.split,
@@ -172,7 +173,7 @@ class Tried:
     and the ΔBIC of its τ scan on all data that ranked it (None when not ranked)."""
 
     effect: Effect
-    model: Model
+    model: Structured
     fits: list[EffectFit]
     pred: dict
     verdict: jd.Verdict

@@ -190,7 +190,8 @@ class Structured(Model):
         inputs are built for (fit.coarsen: block means of the inputs over each step).
         ``given``: drivers at ``t`` the caller already computed (``_inputs``)."""
         x = self._inputs(q, x, t, given)
-        g_sum, s_sum = 0.0, 0.0
+        g_sum: np.ndarray | float = 0.0
+        s_sum: np.ndarray | float = 0.0
         for term in self.terms:
             g, s = term.coefficients(q, x, ta, t)
             g_sum, s_sum = g_sum + g, s_sum + s
@@ -204,7 +205,7 @@ class Structured(Model):
             g_sum, s_sum = g_sum + h * ts, s_sum + h
         c = c0 * q["m_cap"]
         ta_new = stepping.advance(ta, g_sum - s_sum * ta, s_sum, dt / c)
-        if tw is not None:
+        if tw is not None and self.added is not None:  # tw is only set with an added store
             tw = self.added.step(q, x, tw, ta_new, t, dt)
         if not self.store:
             return ta_new, (ts if tw is None else (ts, tw))

@@ -38,7 +38,8 @@ P by 1/λ per sample without end (covariance wind-up); the bound keeps the updat
 bounds P only while P stays symmetric positive semi-definite, which ``Rls.update`` keeps."""
 
 
-def regressors(x: Mapping[str, np.ndarray], t_in: np.ndarray, t: np.ndarray | slice) -> np.ndarray:
+def regressors(x: Mapping[str, np.ndarray], t_in: np.ndarray,
+               t: int | np.ndarray | slice) -> np.ndarray:
     """φ (…, 5) at time index ``t`` for inside temperature ``t_in`` (broadcast against x[t])."""
     dt_out = x["t_out"][t] - t_in
     one = np.ones_like(dt_out)
@@ -110,8 +111,12 @@ class Rls:
     a time: ``fit`` over a series, the live gateway sample by sample)."""
 
     def __init__(self, forgetting: float = FORGETTING) -> None:
-        k = len(REGRESSORS)
         self.lam = float(forgetting)
+        self._reset()
+
+    def _reset(self) -> None:
+        """The initial state (no update yet)."""
+        k = len(REGRESSORS)
         self.w = np.zeros(k)
         self.p = P0 * np.eye(k)
         self.updates = 0
@@ -153,7 +158,7 @@ class Rls:
         p = 0.5 * (p + p.T)
         finite = bool(np.all(np.isfinite(w)) and np.all(np.isfinite(p)))
         if not finite or np.linalg.eigvalsh(p)[0] < -1e-9 * abs(np.trace(p)):
-            self.__init__(self.lam)  # the initial state
+            self._reset()
             return
         self.w, self.p = w, p
         self.updates = int(snap["updates"])

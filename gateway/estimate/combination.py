@@ -32,7 +32,7 @@ combination, and its errors are scored as if it had forecast the range's edge: a
 times an exploded forecast is still an exploded forecast."""
 
 
-def implausible(f: np.ndarray) -> np.ndarray:
+def implausible(f: np.ndarray | float) -> np.ndarray:
     """True where a forecast is a number outside ``PLAUSIBLE_C`` (±inf included; NaN is not:
     a missing forecast stays missing)."""
     f = np.asarray(f, dtype=float)

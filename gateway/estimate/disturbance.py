@@ -132,7 +132,7 @@ def filter_series(model: Model, theta: np.ndarray, x: Mapping[str, np.ndarray], 
         return FilterResult(t_hat, b_hat, s)
     # rows without parameters are never stepped; any finite row keeps the vectorised call clean
     th = np.where(ok_theta[:, None], theta, theta[np.argmax(ok_theta)][None, :])
-    offset = 0.0
+    offset: np.ndarray | float = 0.0
     if model.sensors:
         offset = np.asarray(model.sensor_offset(model.columns(th), x, np.arange(n)[:, None]),
                             dtype=float).reshape(-1)

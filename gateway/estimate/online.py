@@ -239,7 +239,8 @@ class OnlineEstimator:
         the cloud fraction from the tracker (the same as over a whole series)."""
         cols = {k: np.array([v]) for k, v in values.items()}
         cloud = np.array([self._sky.update(time, values.get("i_glob", np.nan))])
-        stamp = np.array([np.datetime64(0, "s") if time is None else np.datetime64(time, "s")])
+        stamp = np.array([np.datetime64(0, "s") if time is None else
+                          np.datetime64(time, "s")])  # type: ignore[call-overload]  # numpy stub gap
         x = prepare_drivers(Series(stamp, self.dt, cols), self.gh, cloud=cloud)
         return {k: float(v[0]) for k, v in x.items()}
 
@@ -309,7 +310,7 @@ class OnlineEstimator:
     def _estimate_air(self, g: GroupSettings) -> bool | None:
         """Virtual model of the temperature: free run over [t - n, t] for all bats at once."""
         n = g.window
-        x = self._window(n + 1)
+        x: Mapping[str, np.ndarray] | None = self._window(n + 1)
         if x is None:
             return False
         now = {k: v[-1:] for k, v in x.items()}

@@ -76,6 +76,14 @@ class ReplayResult:
     def measured(self) -> np.ndarray:
         return self.x["t_in"]
 
+    def radiation(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(adaptive, constant) predictions of i_in [W m-2]; None without a radiation sub-model."""
+        if self.rad_adaptive is None:
+            return None
+        if self.rad_constant is None:  # replay() sets both together
+            raise ValueError("a replay result with an adaptive i_in prediction but no constant one")
+        return self.rad_adaptive, self.rad_constant
+
     @property
     def persistence(self) -> np.ndarray:
         out = np.full_like(self.measured, np.nan)
@@ -227,7 +235,9 @@ def _corrected(result: ReplayResult, reach: Mapping[int, int], suffix: str) -> N
     """``corrected{suffix}``: ``combined{suffix}`` with its online error correction
     (gateway/estimate/correction.py, the ARX stacked), on the series' grid, every horizon."""
     n = len(result.measured)
-    combined, arx, starts = {}, {}, {}
+    combined: dict[int, np.ndarray] = {}
+    arx: dict[int, np.ndarray] = {}
+    starts: dict[int, np.ndarray] = {}
     for minutes, steps in reach.items():
         f = result.horizons[minutes]
         if f"combined{suffix}" not in f:
@@ -265,11 +275,9 @@ def report(result: ReplayResult, warmup: int = 0) -> dict:
         names = [k for k in FORECASTS if k in f]
         horizons[str(h)] = _common(f["measured"], {k: f[k] for k in names}, keep_h)
     radiation = None
-    if result.rad_adaptive is not None:
+    if (rad := result.radiation()) is not None:
         sunlit = keep & (result.x["i_glob"] > SUN_THRESHOLD)
-        radiation = _common(
-            result.x["i_in"], {"adaptive": result.rad_adaptive, "constant": result.rad_constant}, sunlit
-        )
+        radiation = _common(result.x["i_in"], {"adaptive": rad[0], "constant": rad[1]}, sunlit)
     c = result.counters
     ms = result.step_ms[np.isfinite(result.step_ms)]
     return {
@@ -318,10 +326,9 @@ def write_predictions(result: ReplayResult, path: str | Path) -> None:
         "t_in_constant": result.constant,
         "t_in_persistence": result.persistence,
     }
-    if result.rad_adaptive is not None:
+    if (rad := result.radiation()) is not None:
         cols["i_in_measured"] = result.x["i_in"]
-        cols["i_in_adaptive"] = result.rad_adaptive
-        cols["i_in_constant"] = result.rad_constant
+        cols["i_in_adaptive"], cols["i_in_constant"] = rad
     for j, name in enumerate(model.names):
         cols[name] = result.theta[:, j]
     for name, q in fluxes.items():

@@ -255,5 +255,8 @@ def make_algorithm(name: str, model_name: str = "prototype", iterations: int | N
     if iterations is not None:
         st = replace(st, iterations=iterations)
     if population is not None:
-        st = replace(st, **({"particles": population} if name == "riwpso" else {"bats": population}))
+        if isinstance(st, PSOSettings):  # name == "riwpso"
+            st = replace(st, particles=population)
+        else:
+            st = replace(st, bats=population)
     return Algorithm(name, st)

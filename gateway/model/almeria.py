@@ -172,7 +172,7 @@ class NaturalVentilation(FluxTerm):
     equation = "III.31–III.32"
     description = "natural ventilation and leakage: -rho c_p G (T_in - T_out) / A"
     requires = ("t_out", "wind")
-    parameters = (
+    parameters: tuple[Parameter, ...] = (
         Parameter("c_ven_d", "-", 0.05, 1.0, 0.65, 0.07, VENTS_OPEN, "vent discharge coefficient"),
         Parameter("c_ven_w", "-", 0.01, 1.0, 0.09, 0.07, VENTS_OPEN, "wind pressure coefficient"),
         Parameter("c_loss", "m3 s-1", 0.1, 1.0, 0.2, 0.07, ALWAYS, "leakage air flow"),
@@ -238,10 +238,10 @@ class NaturalVentilation(FluxTerm):
         """C_w W and rho c_p C_d / (2 A) once for the rows (``FluxTerm.bind``)."""
         b, w = self._drivers(x, rows)
         c_w_w = row_columns(p["c_ven_w"] * w, rows.stop - rows.start)
-        b, t_out = row_values(b, slice(0, len(b))), row_values(x["t_out"], rows)
+        b_rows, t_out = row_values(b, slice(0, len(b))), row_values(x["t_out"], rows)
         half_d, a = (0.5 * self.rho_cp_a) * p["c_ven_d"], rows.start
-        return lambda t_in, t: self._linearised(b[t - a], c_w_w[t - a], half_d, p, t_out[t - a],
-                                                t_in)
+        return lambda t_in, t: self._linearised(b_rows[t - a], c_w_w[t - a], half_d, p,
+                                                t_out[t - a], t_in)
 
 
 def kittas_drivers(a_roof, a_side, height: float, t_out, wind) -> tuple[np.ndarray, np.ndarray]:

@@ -21,6 +21,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from functools import partial
+from typing import Self, TypeVar
 
 import numpy as np
 
@@ -28,9 +29,13 @@ from gateway.greenhouse import Greenhouse
 from gateway.model import step as stepping
 from gateway.model.radiation import RadiationSubmodel
 from gateway.model.step import Integration
-from gateway.model.terms import FluxTerm, Index, Linearised, Parameter, SensorTerm
+from gateway.model.terms import FluxTerm, Index, Parameter, SensorTerm
 
 __all__ = ["Model", "OnlineGroup", "RadiationSubmodel", "check_columns"]
+
+IndexT = TypeVar("IndexT")
+"""The time index a sum of terms takes: any ``Index`` (``FluxTerm.linearised``), or one row
+``int`` (``FluxTerm.bind``, whose bound values are per row)."""
 
 
 @dataclass(frozen=True)
@@ -94,7 +99,8 @@ class Model:
     @property
     def requires(self) -> list[str]:
         cols = ["t_in"]
-        for term in (*self.terms, *self.sensors):
+        parts: tuple[FluxTerm | SensorTerm, ...] = (*self.terms, *self.sensors)
+        for term in parts:
             cols += [c for c in term.requires if c not in cols]
         return cols
 
@@ -137,17 +143,18 @@ class Model:
                     r[j] = v
         return r
 
-    def with_terms(self, *terms: FluxTerm, name: str | None = None) -> Model:
+    def with_terms(self, *terms: FluxTerm, name: str | None = None) -> Self:
         """This model plus extra terms (what the diagnosis does when it adds an effect)."""
         return replace(self, name=name or self.name, terms=self.terms + tuple(terms))
 
-    def with_sensors(self, *sensors: SensorTerm) -> Model:
+    def with_sensors(self, *sensors: SensorTerm) -> Self:
         """This model plus observation terms (sensor errors)."""
         return replace(self, sensors=self.sensors + tuple(sensors))
 
-    def sensor_offset(self, p: Mapping[str, np.ndarray], x: Mapping[str, np.ndarray], t: Index):
+    def sensor_offset(self, p: Mapping[str, np.ndarray], x: Mapping[str, np.ndarray],
+                      t: Index) -> np.ndarray | float:
         """Measured minus true T_in [K] of the observation terms (0.0 when there are none)."""
-        total = 0.0
+        total: np.ndarray | float = 0.0
         for sensor in self.sensors:
             total = total + sensor.offset(p, x, t)
         return total
@@ -206,7 +213,7 @@ class Model:
         bind = None
         if self.integration.relinearise:
 
-            def bind(rows: slice) -> stepping.Sums:
+            def bind(rows: slice) -> stepping.RowSums:
                 return _total([term.bind(p, x, rows) for term in moving])
 
         return stepping.Stepper(self._sums(p, x, fixed), self._sums(p, x, moving), c, dt,
@@ -326,13 +333,15 @@ class Model:
         return {term.name: term.flux(p, x, t_in, t) for term in self.terms}
 
 
-def _total(fns: Sequence[Linearised]) -> stepping.Sums:
+def _total(
+    fns: Sequence[Callable[[np.ndarray, IndexT], tuple]],
+) -> Callable[[np.ndarray, IndexT], tuple]:
     """``sums(state, t)``: the (g, s, k) of ``fns`` (each ``fn(state, t)``) added in order."""
     if not fns:
         return lambda t_in, t: (0.0, 0.0, 0.0)
     first, rest = fns[0], fns[1:]
 
-    def sums(t_in: np.ndarray, t: Index) -> tuple:
+    def sums(t_in: np.ndarray, t: IndexT) -> tuple:
         g_sum, s_sum, k_sum = first(t_in, t)
         for fn in rest:
             g, s, k = fn(t_in, t)

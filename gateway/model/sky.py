@@ -86,8 +86,8 @@ def clear_sky_emissivity(t_air: ArrayLike, vapour_pressure: ArrayLike | None = N
 def cloud_fraction_from_index(k: ArrayLike) -> np.ndarray:
     """Cloud fraction c [0, 1] from the clear-sky index k [-] (Kasten & Czeplak 1980 inverted):
     k ≥ 1 is clear, k ≤ 0.25 overcast."""
-    k = np.clip(np.asarray(k, dtype=float), 1.0 - KC_A, 1.0)
-    return ((1.0 - k) / KC_A) ** (1.0 / KC_B)
+    kc = np.clip(np.asarray(k, dtype=float), 1.0 - KC_A, 1.0)
+    return ((1.0 - kc) / KC_A) ** (1.0 / KC_B)
 
 
 def sky_emissivity(eps_clear: ArrayLike, cloud: ArrayLike) -> np.ndarray:
@@ -179,7 +179,8 @@ class CloudTracker:
         """Take the sample at ``time`` (UTC); return the cloud fraction in force at it."""
         if self.site is None or time is None:
             return self.cloud
-        stamp = np.datetime64(time, "s")
+        # numpy's stubs have no datetime64(datetime64, unit) overload; numpy takes it
+        stamp = np.datetime64(time, "s")  # type: ignore[call-overload]
         t = float(stamp.astype(np.int64))
         clear = float(clear_sky(np.array([stamp]), *self.site)[0])
         while self._sun and self._sun[0][0] <= t - WINDOW_S:
@@ -208,9 +209,14 @@ class CloudTracker:
 
     def restore(self, state: dict) -> None:
         """Continue from a :meth:`state` (of a tracker of the same site and step)."""
-        self._sun = deque(tuple(map(float, b)) for b in state["sun"])
-        self._day = deque(tuple(map(float, b)) for b in state["day"])
+        # unpacked, so an entry of the wrong length fails here, not at a later update
+        self._sun = deque((float(t), float(i), float(c)) for t, i, c in state["sun"])
+        self._day = deque((float(t), float(c)) for t, c in state["day"])
         self._day_sum = float(state["day_sum"])
         last = state["last"]
-        self._last = tuple(map(float, last)) if last is not None else None
+        if last is None:
+            self._last = None
+        else:
+            t, c, prior = last
+            self._last = (float(t), float(c), float(prior))
         self.cloud = float(state["cloud"])

@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import overload
 
 import numpy as np
 
@@ -77,7 +78,7 @@ FROZEN = Integration("zero_order", relinearise=False)
 """The step before issue 10: everything frozen at the start of the step."""
 
 
-def phi(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def phi(z: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
     """(φ1(z), φ2(z)) for z ≥ 0. φ2 = (1 - φ1)/z: below z = 1e-6 (a step that barely relaxes)
     z is taken as 1e-6, which moves φ1 by < 5e-7 and keeps φ2 = 1/2 - z/6 to 4e-10."""
     z = np.maximum(z, _Z_MIN)
@@ -86,13 +87,13 @@ def phi(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return p1, (_ONE - p1) / z
 
 
-def phi1(z: np.ndarray) -> np.ndarray:
+def phi1(z: np.ndarray | float) -> np.ndarray:
     """φ1(z) = (1 - e^-z)/z for z ≥ 0, 1 at z → 0."""
     z = np.maximum(z, 1e-12)
     return -np.expm1(-z) / z
 
 
-def advance(state: np.ndarray, r0: np.ndarray, lam: np.ndarray, dt: float,
+def advance(state: np.ndarray, r0: np.ndarray, lam: np.ndarray | float, dt: float | np.ndarray,
             r1: np.ndarray | None = None) -> np.ndarray:
     """T + Δ [r0 φ1(z) + (r1 − r0) φ2(z)], z = λΔ: exact for a rate linear in T with slope -λ
     and a forcing linear in time from r0 to r1 (``r1`` None: constant forcing, φ1 only)."""
@@ -109,6 +110,10 @@ def midpoint(state: np.ndarray, r0: np.ndarray, lam0: np.ndarray, dt: float) -> 
     return state + half * r0 / (_ONE + half * lam0)
 
 
+@overload
+def next_index(t: int, n: int) -> int: ...
+@overload
+def next_index(t: Index, n: int) -> Index: ...
 def next_index(t: Index, n: int) -> Index:
     """The time index one step on, clipped to the last sample ``n - 1`` (there the step holds)."""
     if isinstance(t, slice):
@@ -148,6 +153,8 @@ def end_rates(rates: Rates, state: np.ndarray, r0: np.ndarray, lam0: np.ndarray,
 Sums = Callable[[np.ndarray, Index], tuple]
 """``sums(state, t) -> (g, s, k)``: a group of terms' summed coefficients (Q = g - s T) and
 slope k = -∂Q/∂T at ``state`` and time index ``t`` [W m-2, W m-2 K-1, W m-2 K-1]."""
+RowSums = Callable[[np.ndarray, int], tuple]
+"""``Sums`` for one row ``t`` at a time (the terms' ``FluxTerm.bind``)."""
 
 
 def _same(a: Index, b: Index) -> bool:
@@ -177,7 +184,7 @@ class Stepper:
 
     def __init__(self, fixed: Sums, moving: Sums, c: float, dt: float, n: int,
                  integration: Integration = Integration(),
-                 bind: Callable[[slice], Sums] | None = None) -> None:
+                 bind: Callable[[slice], RowSums] | None = None) -> None:
         self.fixed, self.moving, self.bind = fixed, moving, bind
         self.c, self.dt, self.n, self.integration = c, dt, n, integration
         # C and Δ as 0-d arrays for the per-step arithmetic: the same float64 operations, but
@@ -187,7 +194,7 @@ class Stepper:
         self._cached: tuple = ()
         self._rows = (0, 0)  # rows [a, b) of the block held
         self._table: list[tuple] = []  # fixed (g, s, k, k / C) per row of the block
-        self._bound: Sums = moving  # the moving sums bound to the block's rows
+        self._bound: RowSums = moving  # the moving sums bound to the block's rows
 
     def _block(self, state: np.ndarray, t: int) -> int:
         """Row ``t``'s position in the block held, computing the block first when ``t`` is not in
@@ -233,8 +240,8 @@ class Stepper:
         if self.integration.hold == "zero_order":
             return advance(state, r0, lam0, dt)
         t1 = next_index(t, self.n)
-        if isinstance(t, (int, np.integer)):
-            j = self._block(state, int(t1))
+        if isinstance(t1, int):  # exactly when t is one step, int or np.integer (next_index)
+            j = self._block(state, t1)
             g1, s1, _, k1_c = self._table[j]
         else:
             g1, s1, k1 = self.fixed(state, t1)

@@ -51,8 +51,8 @@ _ZERO, _HALF, _ONE = const(0.0), const(0.5), const(1.0)  # 0-d operands (terms.c
 def soft_excess(z: np.ndarray, w: float = SMOOTH_K) -> np.ndarray:
     """σ(z) = w ln(1 + e^{z/w}) [K]: ≈ max(0, z) beyond a few w, w ln 2 at z = 0 (NaN, a
     missing reading, stays NaN)."""
-    z, w = np.asarray(z, dtype=float), const(w)
-    return np.maximum(z, _ZERO) + w * np.log1p(np.exp(-np.abs(z) / w))  # = w ln(1 + e^{z/w})
+    z, w_ = np.asarray(z, dtype=float), const(w)
+    return np.maximum(z, _ZERO) + w_ * np.log1p(np.exp(-np.abs(z) / w_))  # = w ln(1 + e^{z/w})
 
 
 def soft_step(z: np.ndarray, w: float = SMOOTH_K) -> np.ndarray:

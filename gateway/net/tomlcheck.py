@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import builtins
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -12,7 +13,9 @@ class ConfigError(ValueError):
 
 
 class Table:
-    """A TOML table read with its dotted location (``router.toml: tls.key``) for errors."""
+    """A TOML table read with its dotted location (``router.toml: tls.key``) for errors.
+
+    (Below the methods ``str`` and ``bool`` the annotations name ``builtins.str``/``bool``.)"""
 
     def __init__(self, raw: Any, source: str, where: str = "") -> None:
         if not isinstance(raw, dict):
@@ -50,13 +53,14 @@ class Table:
             raise self.fail(key, f"must be a non-empty string, got {value!r}")
         return value
 
-    def bool(self, key: str, default: bool) -> bool:
+    def bool(self, key: builtins.str, default: bool) -> bool:
         value = self.raw.get(key, default)
         if not isinstance(value, bool):
             raise self.fail(key, f"must be true or false, got {value!r}")
         return value
 
-    def strings(self, key: str, default: Iterable[str] = ()) -> tuple[str, ...]:
+    def strings(self, key: builtins.str,
+                default: Iterable[builtins.str] = ()) -> tuple[builtins.str, ...]:
         value = self.raw.get(key, list(default))
         if not isinstance(value, list):
             raise self.fail(key, f"must be a list of strings, got {value!r}")
@@ -66,7 +70,7 @@ class Table:
                                   f"string, got {item!r}")
         return tuple(value)
 
-    def path(self, key: str, base: Path, required: bool = False) -> Path | None:
+    def path(self, key: builtins.str, base: Path, required: builtins.bool = False) -> Path | None:
         """A file path; a relative one is taken from the config file's folder."""
         text = self.str(key, required=required)
         if text is None:

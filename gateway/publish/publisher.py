@@ -63,7 +63,8 @@ class _Key:
         self.plain = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
 
     def matching(self) -> bool:
-        return bool(self.plain.matching_status.matching)
+        # zenoh's stub says matching_status is a bool; it is a MatchingStatus (zenoh 1.x)
+        return bool(self.plain.matching_status.matching)  # type: ignore[attr-defined]
 
     def close(self) -> None:
         for p in (self.adv, self.plain):

@@ -54,10 +54,12 @@ def registry() -> Registry:
         name = uri.removeprefix(SDM + "definitions/")  # upstream defect 2: exactly three URIs
         if name in _DEVICE_DEFS:
             return DRAFT202012.create_resource(device_defs[name])
-        raise NoSuchResource(ref=uri)  # never the network
+        # referencing's _attrs.pyi hides its attrs classes' fields from mypy (an old
+        # __dataclass_transform__ name): the field-wise __init__ is real
+        raise NoSuchResource(ref=uri)  # type: ignore[call-arg]  # never the network
 
     # Several files say "$schema": "http://json-schema.org/schema#" (no draft): read as 2020-12.
-    return Registry(retrieve=retrieve).with_resources(
+    return Registry(retrieve=retrieve).with_resources(  # type: ignore[call-arg]  # as above
         (uri, DRAFT202012.create_resource(doc)) for uri, doc in docs.items())
 
 

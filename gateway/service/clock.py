@@ -23,7 +23,8 @@ log = logging.getLogger("serra.gateway")
 
 
 class Clock(Protocol):
-    scale: float
+    @property
+    def scale(self) -> float: ...  # read-only: the clocks are frozen dataclasses
 
     def now(self) -> float:
         """Gateway time [unix s]."""

@@ -243,7 +243,7 @@ def _tls(z: _Table, base: Path, farm: str) -> TlsFiles | None:
         cn = common_name(load_certificate(tls.cert)) if tls is not None and tls.cert else None
     except CertError as e:
         raise ConfigError(str(e)) from None
-    if cn is not None and cn != farm:
+    if tls is not None and cn is not None and cn != farm:  # cn comes with tls
         z.fail("tls.cert", f"{tls.cert} is for {cn!r}, not this gateway's farm {farm!r}: the "
                            "routers' access control lets a gateway speak only under "
                            "serra/<its certificate's name>/** (python -m gateway certs --gateway FARM)")

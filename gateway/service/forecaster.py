@@ -94,7 +94,7 @@ class LiveForecaster:
         start = self.kf.estimate() if self.kf is not None else None
         made: dict[int, dict[str, float]] = {}
         for h in horizons:
-            if start is None:
+            if start is None or self.kf is None:  # start is None without a filter
                 out[h] = float(self.model.forecast(theta[None, :], x, self.gh, self.dt, rows, h)[0])
                 continue
             kf = float(disturbance.forecast(self.model, theta[None, :], x, self.gh, self.dt, rows,

@@ -237,7 +237,7 @@ class StoreSource:
     # -- kits ---------------------------------------------------------------------------------
     def _kits(self, now: float | None, ghs: list[S.GreenhouseView],
               status: dict[str, tuple[Any, float]]) -> list[S.Kit]:
-        roles: dict[int, list[str]] = {}
+        roles: dict[int | None, list[str]] = {}  # None: a greenhouse without that kit
         for g in ghs:
             if g.inside_device == g.outside_device:
                 roles.setdefault(g.inside_device, []).append(f"{g.name} in+out")

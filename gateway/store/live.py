@@ -125,7 +125,9 @@ def findings(conn: sqlite3.Connection, greenhouse: str | None = None) -> list[Fi
     args: tuple = ()
     if greenhouse is not None:
         sql, args = sql + " WHERE greenhouse=?", (greenhouse,)
-    return [FindingRow(*r[:8], json.loads(r[8])) for r in conn.execute(sql + " ORDER BY first_seen", args)]
+    # one starred tuple: mypy counts a *r[:8] before another argument as unbounded (mypy#16677)
+    return [FindingRow(*(*r[:8], json.loads(r[8])))
+            for r in conn.execute(sql + " ORDER BY first_seen", args)]
 
 
 @dataclass(frozen=True)

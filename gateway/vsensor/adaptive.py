@@ -122,6 +122,8 @@ def run_adaptive(
     flow = None
     if vents:
         term = next(t for t in model.terms if t.name == "q_vent")
+        if not isinstance(term, NaturalVentilation):  # explicit_model: Kittas' flow (III.31)
+            raise TypeError(f"{model.name}: q_vent is a {type(term).__name__}, which has no flow")
         p = {n: theta_f[:, j] for j, n in enumerate(model.names)}
         flow = np.asarray(term.flow(p, x, t_in, slice(0, len(t_in))), dtype=float)
         if kind == "prototype":  # the prototype's leakage adds to the vents' flow

@@ -87,6 +87,8 @@ def run_series(model_path: str | Path, series: Series, gh: Greenhouse, kind: str
     result = BatchResult(series.time, runs, dt_in_out=dt)
     if has_vents(series):
         vent = run_adaptive(kind, series, gh, vents=True, overrides=overrides, seed=seed, progress=progress)
+        if vent.flow is None:  # run_adaptive computes it with the vents
+            raise ValueError("the replay with the vents gave no explicit flow")
         result.reference_flow = vent.flow
         result.reference_q = heat_loss(vent.flow, dt, gh)
     if sensor.mismatch:
@@ -94,16 +96,17 @@ def run_series(model_path: str | Path, series: Series, gh: Greenhouse, kind: str
     return result
 
 
-def _m(ref: np.ndarray, est: np.ndarray, keep: np.ndarray) -> dict | None:
+def _m(ref: np.ndarray, est: np.ndarray, keep: np.ndarray) -> dict[str, object] | None:
     ok = keep & np.isfinite(ref) & np.isfinite(est)
     m = metrics(ref[ok], est[ok])
     if m is None:
         return None
     span = float(ref[ok].max() - ref[ok].min())
     m.pop("ef", None)
-    m["range"] = [float(ref[ok].min()), float(ref[ok].max())]
-    m["mae_pct_range"] = 100.0 * m["mae"] / span if span > 0 else None
-    return m
+    out: dict[str, object] = dict(m)
+    out["range"] = [float(ref[ok].min()), float(ref[ok].max())]
+    out["mae_pct_range"] = 100.0 * m["mae"] / span if span > 0 else None
+    return out
 
 
 def score(result: BatchResult, warmup: int = WARMUP_STEPS) -> dict:
@@ -115,7 +118,7 @@ def score(result: BatchResult, warmup: int = WARMUP_STEPS) -> dict:
     out = {}
     for name, run in result.runs.items():
         c = run.counts
-        block = {
+        block: dict[str, object] = {
             "steps": c.steps,
             "flagged": c.flagged,
             "out_of_range": c.out_of_range_steps,
@@ -127,10 +130,13 @@ def score(result: BatchResult, warmup: int = WARMUP_STEPS) -> dict:
             "flow": None, "q_vent": None, "flow_error_pct": None,
         }
         if result.reference_flow is not None:
-            block["flow"] = _m(result.reference_flow, run.flow, keep)
+            if result.reference_q is None:  # run_series sets both
+                raise ValueError("a batch result with a reference flow but no reference heat loss")
+            flow = _m(result.reference_flow, run.flow, keep)
+            block["flow"] = flow
             block["q_vent"] = _m(result.reference_q, run.q_vent, keep)
-            if block["flow"]:
-                block["flow_error_pct"] = block["flow"]["mae_pct_range"]
+            if flow:
+                block["flow_error_pct"] = flow["mae_pct_range"]
         out[name] = block
     return out
 

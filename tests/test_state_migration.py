@@ -114,3 +114,19 @@ def test_an_unusable_state_starts_anew_with_a_line_saying_so(tmp_path: Path) -> 
     line = b.resume(store.conn)
     assert "saved estimator state not used" in line and "no-such-model" in line
     assert b.est.counters.samples == 0
+
+
+def test_a_restore_that_fails_half_way_leaves_a_new_estimator(tmp_path: Path) -> None:
+    """The estimator's part restores, the forecaster's is broken: the line says the state was not
+    used, and nothing of it is left behind (before, the estimator kept the restored parameters and
+    counters under a line saying it started anew)."""
+    store, before, _, _ = run_then_switch(tmp_path, "prototype", "prototype", 60)
+    before["forecaster"]["disturbance"]["state"] = [1.0, 2.0]  # three of five values missing
+    store.conn.execute("UPDATE estimator_state SET state=?", (json.dumps(before),))
+    for model in ("prototype", VENTED_PROTOTYPE):
+        b = pipeline(model)
+        line = b.resume(store.conn)
+        assert "saved estimator state not used" in line and "starting anew" in line
+        assert b.est.counters.samples == 0 and b.forecaster.kf is not None
+        assert b.forecaster.kf.estimate() is None
+        np.testing.assert_array_equal(b.est.theta, b.est.theta0)

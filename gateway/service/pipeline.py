@@ -90,13 +90,19 @@ class GreenhousePipeline:
         self.outlook: Outlook = make_outlook(outlook, gh)
         self.gap_s = gap_s
         self.ventilation = ventilation
-        self.est = OnlineEstimator(model, gh, theta0, online_settings(model, gh), dt=DT, seed=seed)
-        self.forecaster = LiveForecaster(model, gh, DT, horizons, forecast)
+        self._fresh = (theta0, seed, forecast)  # what a new estimator and forecaster start from
+        self._start_fresh()
         self.cursor: int | None = None  # last minute stepped
         self.history_min = history_min
         self.hist: dict[str, deque[float]] = {c: deque(maxlen=history_min) for c in KIT_COLUMNS}
         self.hist_minute: int | None = None
         self.state = "waiting for data"
+
+    def _start_fresh(self) -> None:
+        theta0, seed, forecast = self._fresh
+        m, gh = self.model, self.gh
+        self.est = OnlineEstimator(m, gh, theta0, online_settings(m, gh), dt=DT, seed=seed)
+        self.forecaster = LiveForecaster(m, gh, DT, self.horizons, forecast)
 
     # -- start ------------------------------------------------------------------------------
     def resume(self, conn: sqlite3.Connection) -> str:
@@ -115,6 +121,7 @@ class GreenhousePipeline:
             except (ValueError, KeyError, TypeError, IndexError) as e:
                 msg = f"greenhouse {self.name}: saved estimator state not used ({e}); starting anew"
                 saved = None
+                self._start_fresh()  # a restore that failed half-way leaves nothing behind
             else:
                 self.cursor = saved.minute
                 self._load_history(conn)

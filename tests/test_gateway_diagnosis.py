@@ -10,7 +10,7 @@ from pathlib import Path
 
 from gateway import protocol as p
 from gateway.service.config import parse_config
-from gateway.service.diagnosis import DiagnosisScheduler
+from gateway.service.diagnosis import DiagnosisScheduler, diagnose_command
 from gateway.service.resources import prepare
 from gateway.store import Store
 from gateway.store.aggregate import aggregate
@@ -92,3 +92,23 @@ def test_scheduled_diagnosis_runs_in_a_subprocess_and_stores_its_findings(tmp_pa
     assert (first.revision, first.published_revision) == (1, 0)  # published once, by the worker
     assert float(store.get_meta("diagnosis_last")) == end  # next run one period later
     store.close()
+
+
+def test_a_vented_greenhouse_is_diagnosed_with_the_prototype(tmp_path: Path) -> None:
+    """The live default prototype+vent_control forecasts with the vent term; its diagnosis stays
+    the prototype's (whose base chooses that part itself); the other models pass through."""
+    cfg = parse_config({
+        "gateway": {"farm": "f1", "db": "gw.db", "keys": "keys.txt"},
+        "greenhouse": [
+            {"name": "north", "greenhouse": "biskra-prototype", "model": "prototype+vent_control",
+             "inside": 7},
+            {"name": "south", "greenhouse": "biskra-prototype", "model": "prototype", "inside": 8},
+            {"name": "east", "greenhouse": "almeria-palmerillas", "model": "almeria", "inside": 9}]},
+        "test.toml", tmp_path)
+    used = {}
+    for g in cfg.greenhouses:
+        cmd = diagnose_command(g, tmp_path / f"{g.name}.csv")
+        assert cmd[1:4] == ["-m", "gateway", "diagnose"] and cmd[-1] == "--json"
+        assert cmd[cmd.index("--data") + 1] == str(tmp_path / f"{g.name}.csv")
+        used[g.name] = cmd[cmd.index("--model") + 1]
+    assert used == {"north": "prototype", "south": "prototype", "east": "almeria"}

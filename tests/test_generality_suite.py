@@ -63,3 +63,15 @@ def test_the_seed_option_reaches_the_cases_and_the_results(monkeypatch, tmp_path
     assert suite.main(["--jobs", "1", "--no-docs", "--json", str(tmp_path / "d.json")]) == 0
     assert asked == [2, 1]
     assert json.loads(out.read_text(encoding="utf-8"))["meta"]["seed"] == 2
+
+
+def test_forecast_cases_replay_the_shipped_model_and_the_diagnosis_keeps_the_prototype():
+    """The forecast rows replay what the live gateway ships (images/gateway/gateway.toml's
+    greenhouse model, issue 10 item 3); the diagnosis cases keep the four-parameter prototype."""
+    import tomllib
+
+    shipped = tomllib.loads((suite.ROOT / "images" / "gateway" / "gateway.toml").read_text("utf-8"))
+    every = suite.all_cases()
+    assert {c.model for c in every if c.task == "forecast"} == {shipped["greenhouse"][0]["model"]}
+    assert {c.model for c in every if c.task == "diagnose"} == {"prototype"}
+    assert cases.FORECAST_MODEL == "prototype+vent_control" != cases.MODEL

@@ -18,6 +18,8 @@ from training.appliance import cli
 from training.kitsim import KitClock
 from training.simulate.weather import load_weather
 
+ROOT = Path(__file__).resolve().parents[1]
+
 
 def kit_weather_latitude() -> float:
     """The latitude of the weather the run's kit trace is simulated on (kitsim's default)."""
@@ -52,3 +54,19 @@ def test_the_run_calibrates_at_the_weather_site(tmp_path: Path) -> None:
     lat, lon = cli.weather_site()
     assert cmd[cmd.index("--site") + 1] == f"{lat},{lon}"
     assert cmd[cmd.index("--greenhouse") + 1] == cli.PRESET
+
+
+def test_the_run_uses_the_shipped_model_for_its_calibration_and_its_gateway(tmp_path: Path) -> None:
+    """make run runs the shipped example's model (images/gateway/gateway.toml), calibrated as such."""
+    shipped = tomllib.loads((ROOT / "images" / "gateway" / "gateway.toml").read_text("utf-8"))
+    model = shipped["greenhouse"][0]["model"]
+    cmd = cli.calibrate_command(tmp_path / "d.csv", tmp_path / "p.toml")
+    assert cmd[cmd.index("--model") + 1] == model
+    write_keys(tmp_path / "keys.txt", {cli.DEVICE: bytes(range(100, 116))})
+    cli.write_config(tmp_path, KitClock(120.0, 0.0), None)
+    assert load_config(tmp_path / "gateway.toml").greenhouses[0].model == model
+    # --model prototype: the four-parameter model, calibrated and run as such
+    cmd = cli.calibrate_command(tmp_path / "d.csv", tmp_path / "p.toml", "prototype")
+    assert cmd[cmd.index("--model") + 1] == "prototype"
+    cli.write_config(tmp_path, KitClock(120.0, 0.0), None, "prototype")
+    assert load_config(tmp_path / "gateway.toml").greenhouses[0].model == "prototype"

@@ -195,7 +195,7 @@ class OnlineEstimator:
         }
 
     def restore(self, snap: Mapping) -> None:
-        """Continue from a ``snapshot`` of an estimator of the same model (ValueError if not)."""
+        """Continue from a ``snapshot`` of the same model (ValueError if not: state_migration.py)."""
         if snap.get("model") != self.model.name or list(snap.get("names", [])) != self.model.names:
             raise ValueError(f"saved estimator state is for model {snap.get('model')!r} "
                              f"{snap.get('names')}, not {self.model.name!r} {self.model.names}")

@@ -6,8 +6,8 @@ from gateway.greenhouse import Greenhouse, GreenhouseError
 from gateway.model.model import Model
 
 VENTED_PROTOTYPE = "prototype+vent_control"
-"""The prototype with the air exchange of controller-moved vents the kit does not see
-(gateway/model/vent_control.py): for a house whose climate computer opens the vents."""
+"""The prototype with the air exchange of vents moved by a climate computer or by hand, which the
+kit does not see (gateway/model/vent_control.py); the shipped gateway.toml's model (issue 10)."""
 MODEL_NAMES = ("prototype", VENTED_PROTOTYPE, "almeria")
 
 

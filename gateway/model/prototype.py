@@ -137,7 +137,8 @@ def prototype_capacity(gh: Greenhouse) -> float:
 def build_prototype(gh: Greenhouse | None = None, vent_control: bool = False) -> Model:
     """The four-term model of III.14–III.22 (table 2 constants from ``gh``); ``vent_control``
     adds the air exchange of controller-moved vents (gateway/model/vent_control.py, two more
-    parameters; ``--model prototype+vent_control``, not the default: docs/effects.md, forecasts)."""
+    parameters; ``--model prototype+vent_control``, the shipped gateway.toml's model since issue
+    10 item 3: docs/effects.md, forecasts)."""
     rho = 1.205 if gh is None else gh.air_density
     terms: tuple[FluxTerm, ...] = (SolarGain(), CoverConvection(), AirLeakage(rho), SkyRadiation())
     if vent_control:

@@ -1,12 +1,14 @@
 """The daily diagnosis, in a separate process, and its findings with a stable identity.
 
 Every ``every_hours`` (gateway clock) each greenhouse's last ``days`` of minutes are written as a
-kit CSV and handed to ``python -m gateway diagnose --json`` (the diagnosis's own entry point) in a
-subprocess at low priority, so ingest and the estimators never wait for it. Its findings are
-stored under a stable identity: a finding of the same effect in the same greenhouse whose start
-is within ``MATCH_S`` of a known one *is* that one (a daily re-run moves the estimated start a
-little); it is published again only when it changed (start moved by more than ``MOVE_S`` or
-amplitude by more than ``CHANGE_REL``), as a new revision, never re-announced daily.
+kit CSV and handed to ``python -m gateway diagnose --json`` (the diagnosis's own entry point; a
+greenhouse running ``prototype+vent_control`` is diagnosed with ``--model prototype``, whose base
+chooses the vent controller part for itself: ``diagnose_command``) in a subprocess at low
+priority, so ingest and the estimators never wait for it. Its findings are stored under a stable
+identity: a finding of the same effect in the same greenhouse whose start is within ``MATCH_S``
+of a known one *is* that one (a daily re-run moves the estimated start a little); it is published
+again only when it changed (start moved by more than ``MOVE_S`` or amplitude by more than
+``CHANGE_REL``), as a new revision, never re-announced daily.
 """
 
 from __future__ import annotations
@@ -26,9 +28,10 @@ from typing import Any
 import numpy as np
 
 from gateway.kitcsv import write_kit_csv
+from gateway.model import VENTED_PROTOTYPE
 from gateway.service.minutes import KIT_COLUMNS, read_minutes
 from gateway.service.resources import GreenhouseResources
-from gateway.service.settings import GatewayConfig
+from gateway.service.settings import GatewayConfig, GreenhouseSettings
 from gateway.store.db import open_db, transaction
 
 log = logging.getLogger("serra.gateway")
@@ -48,6 +51,16 @@ def export_window(conn: sqlite3.Connection, r: GreenhouseResources, start: float
     cols = {c: np.array([m.values[c] for m in minutes], dtype=float) for c in KIT_COLUMNS}
     write_kit_csv(path, t, cols)
     return len(minutes)
+
+
+def diagnose_command(g: GreenhouseSettings, data: Path) -> list[str]:
+    """``gateway diagnose`` on a greenhouse's exported minutes, with its model, except that a
+    greenhouse running the vented prototype is diagnosed as the prototype: its base chooses the
+    vent controller part for itself (gateway/diagnose/base.py ``options``, on its inner validation
+    split), as the diagnosis was tuned and measured (the generality suite's diagnosis cases)."""
+    model = "prototype" if g.model == VENTED_PROTOTYPE else g.model  # as the diagnosis was tuned
+    return [sys.executable, "-m", "gateway", "diagnose", "--data", str(data), "--greenhouse",
+            g.greenhouse, "--model", model, "--json"]
 
 
 def _parse(start: str | None) -> float | None:
@@ -169,8 +182,7 @@ class DiagnosisScheduler:
                     f"(needs {d.min_days:g})")
             log.info(note)
             return DiagnosisRun(name, now, True, note)
-        cmd = [sys.executable, "-m", "gateway", "diagnose", "--data", str(path), "--greenhouse",
-               r.settings.greenhouse, "--model", r.settings.model, "--json"]
+        cmd = diagnose_command(r.settings, path)
         t0 = time.monotonic()
         self.proc = proc = await asyncio.create_subprocess_exec(
             *cmd, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE)

@@ -11,7 +11,10 @@ another. A hole in the data
 longer than ``gap_s`` restarts the estimator's window and keeps its parameters; shorter holes
 are stepped as missing minutes (the estimator dead-reckons through them, as in ``replay``).
 Each batch of minutes is one transaction: its rows and the estimator's snapshot after it, so a
-restart resumes exactly where the last commit left off.
+restart resumes exactly where the last commit left off. A snapshot of another model (the
+greenhouse's ``model =`` changed, e.g. ``prototype`` → ``prototype+vent_control``) is migrated
+(gateway/estimate/state_migration.py: the matching parameters keep their values, the start's log
+line names what was kept, added and dropped); one that cannot be used starts anew, saying why.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ import numpy as np
 
 from gateway.estimate.online import OnlineEstimator, online_settings
 from gateway.estimate.outlook import Outlook, make_outlook
+from gateway.estimate.state_migration import migrate_state
 from gateway.greenhouse import Greenhouse
 from gateway.model.drivers import prepare_drivers
 from gateway.model.model import Model
@@ -86,32 +90,44 @@ class GreenhousePipeline:
         self.outlook: Outlook = make_outlook(outlook, gh)
         self.gap_s = gap_s
         self.ventilation = ventilation
-        self.est = OnlineEstimator(model, gh, theta0, online_settings(model, gh), dt=DT, seed=seed)
-        self.forecaster = LiveForecaster(model, gh, DT, horizons, forecast)
+        self._fresh = (theta0, seed, forecast)  # what a new estimator and forecaster start from
+        self._start_fresh()
         self.cursor: int | None = None  # last minute stepped
         self.history_min = history_min
         self.hist: dict[str, deque[float]] = {c: deque(maxlen=history_min) for c in KIT_COLUMNS}
         self.hist_minute: int | None = None
         self.state = "waiting for data"
 
+    def _start_fresh(self) -> None:
+        theta0, seed, forecast = self._fresh
+        m, gh = self.model, self.gh
+        self.est = OnlineEstimator(m, gh, theta0, online_settings(m, gh), dt=DT, seed=seed)
+        self.forecaster = LiveForecaster(m, gh, DT, self.horizons, forecast)
+
     # -- start ------------------------------------------------------------------------------
     def resume(self, conn: sqlite3.Connection) -> str:
         """Load the saved state (or choose where a new estimator starts); returns a log line."""
         saved = load_state(conn, self.name)
         if saved is not None:
+            note = ""
             try:
-                self.est.restore(saved.state)
+                state = saved.state
+                if state.get("model") != self.model.name:  # the config's model changed
+                    state, moved = migrate_state(state, self.model, self.gh, self.est.theta0)
+                    note = "; " + moved.describe()
+                self.est.restore(state)
                 # a state saved before the forecaster existed starts it afresh
-                self.forecaster.restore(saved.state.get("forecaster"))
-            except (ValueError, KeyError, TypeError) as e:
+                self.forecaster.restore(state.get("forecaster"))
+            except (ValueError, KeyError, TypeError, IndexError) as e:
                 msg = f"greenhouse {self.name}: saved estimator state not used ({e}); starting anew"
                 saved = None
+                self._start_fresh()  # a restore that failed half-way leaves nothing behind
             else:
                 self.cursor = saved.minute
                 self._load_history(conn)
                 self.state = "running"
                 return (f"greenhouse {self.name}: estimator resumed at {_iso(saved.minute)} "
-                        f"({self.est.counters.samples} minutes stepped so far)")
+                        f"({self.est.counters.samples} minutes stepped so far){note}")
         else:
             msg = f"greenhouse {self.name}: new estimator ({self.model.name})"
         first = first_minute(conn, self.inside)

@@ -22,6 +22,11 @@ from tests.generality.generators import EXPECTED, ROW_S, generate
 from tests.generality.windows import Window, bleiswijk_window, load_window, summer
 
 MODEL = "prototype"
+"""The diagnosis cases' model (the diagnosis keeps `--model prototype` and chooses its base's parts)."""
+FORECAST_MODEL = "prototype+vent_control"
+"""The forecast cases' default: the live gateway's shipped model since issue 10 item 3
+(images/gateway/gateway.toml; the rule and figures in docs/effects.md, "Forecasts: the vent
+controller"); ``--model prototype`` in forecasts.py replays the four-parameter model."""
 START_TOLERANCE_H = 12.0
 MIN_CUT = 0.20
 ALPHA = 0.05

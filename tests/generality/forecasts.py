@@ -1,7 +1,8 @@
 """The forecast part of the generality suite alone: ``replay`` on the effect-free windows.
 
 Runs the suite's forecast cases (tests/generality/cases.py: each generator's kit data, 5-minute
-rows, prototype model, day 1 left out as the estimator's warm-up) and tabulates the 15/30/60-min
+rows, the live default model ``prototype+vent_control`` (``--model prototype``: the
+four-parameter one), day 1 left out as the estimator's warm-up) and tabulates the 15/30/60-min
 MAE of persistence, the RLS ARX, the adaptive model and the adaptive model with the disturbance
 filter (gateway/estimate/disturbance.py), each with the weather later measured and with the
 causal outlook. Writes ``bench/results/forecasts.json`` and prints the Markdown table of
@@ -9,7 +10,7 @@ docs/online-estimator.md ("Forecasts on greenhouses we did not build").
 
     nice -n 5 .venv/bin/python tests/generality/forecasts.py [--jobs 2]
         [--generators refsim,twonode,vanthoor] [--windows autumn,winter,summer] [--keep DIR]
-        [--model prototype+vent_control]
+        [--model prototype]    # default prototype+vent_control (the live gateway's default)
     .venv/bin/python tests/generality/forecasts.py --rescore DIR   # the forecasts again, no replay
 """
 
@@ -28,7 +29,7 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from tests.generality.cases import Case, run  # noqa: E402
+from tests.generality.cases import FORECAST_MODEL, Case, run  # noqa: E402
 from tests.generality.generators import GENERATORS, HELD_OUT  # noqa: E402
 from tests.generality.report import MAIN_WINDOWS, goals  # noqa: E402
 from tests.generality.suite import commit_id, init_worker  # noqa: E402
@@ -132,8 +133,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2, help="parallel processes (2)")
     ap.add_argument("--generators", default=",".join(GENERATORS))
     ap.add_argument("--windows", default=",".join(MAIN_WINDOWS))
-    ap.add_argument("--model", default="prototype", choices=("prototype", "prototype+vent_control"),
-                    help="the replayed model (prototype; +vent_control: gateway/model/vent_control.py)")
+    ap.add_argument("--model", default=FORECAST_MODEL, choices=("prototype", "prototype+vent_control"),
+                    help=f"the replayed model ({FORECAST_MODEL}, the live default; prototype: the "
+                    "four-parameter model without gateway/model/vent_control.py)")
     ap.add_argument("--json", default=str(RESULTS), help=f"results file ({RESULTS.relative_to(ROOT)})")
     ap.add_argument("--keep", metavar="DIR", help="also pickle each replay into DIR (to study the "
                     "forecasts without replaying again)")

@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from tests.generality.cases import EXTRA_WINDOWS, MODEL, Case, run  # noqa: E402
+from tests.generality.cases import EXTRA_WINDOWS, FORECAST_MODEL, MODEL, Case, run  # noqa: E402
 from tests.generality.generators import GENERATORS, HELD_OUT, KINDS, OUTSIDE  # noqa: E402
 from tests.generality.report import MAIN_WINDOWS, markdown, update_docs  # noqa: E402
 
@@ -44,7 +44,8 @@ def all_cases(generators=GENERATORS, windows=MAIN_WINDOWS, only: str | None = No
     generators' sensor noise and biases (and the visible-size reference, same seed)."""
     cases = []
     if only in (None, "forecast"):
-        cases += [Case("forecast", g, w, seed=seed) for g in generators for w in windows]
+        cases += [Case("forecast", g, w, seed=seed, model=FORECAST_MODEL)
+                  for g in generators for w in windows]
     if only in (None, "diagnose"):
         for g in generators:
             cases += [Case("diagnose", g, w, k, seed) for w in windows for k in kinds]
@@ -130,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
     meta = {"command": "make bench-generality", "cases": len(results), "jobs": a.jobs,
             "minutes": minutes, "runs": [{"minutes": minutes, "jobs": a.jobs}],
             "when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": commit_id(),
-            "model": MODEL, "generators": list(gens), "seed": a.seed}
+            "model": MODEL, "forecast_model": FORECAST_MODEL, "generators": list(gens), "seed": a.seed}
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"meta": meta, "results": results}, indent=1) + "\n", encoding="utf-8")
     print(f"wrote {out} in {minutes:.1f} min", flush=True)

@@ -37,6 +37,9 @@ DEVICE = 7
 GREENHOUSE = "north"
 START = "2009-11-01T08:00:00Z"  # the simulated weather's morning (Bleiswijk, real)
 PRESET = "biskra-prototype"  # the kit's greenhouse: the thesis's prototype (table 2)
+MODEL = "prototype+vent_control"  # the shipped example's (images/gateway/gateway.toml); on this
+# house's minutes, each model with its own calibration, its forecasts beat the plain prototype's
+# (docs/effects.md, "Forecasts: the vent controller", the demo house)
 FILES = ("serra.db", "serra.db-wal", "serra.db-shm", "cloud.db", "cloud.db-wal", "cloud.db-shm",
          "keys.txt", "gateway.toml", "greenhouse.toml", "trace.txt", "gateway.log", "subscribe.log",
          "summary.json", "calibration.csv", "calibration.truth.json", "calibration.truth.npz", "params.toml")
@@ -61,6 +64,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "minutes a second)")
     p.add_argument("--screen", choices=("auto", "yes", "no"), default="auto",
                    help="the status screen: auto = when stdin and stdout are a terminal")
+    p.add_argument("--model", default=MODEL, choices=("prototype", "prototype+vent_control"),
+                   help=f"the greenhouse's model, calibrated and run live (default {MODEL}, the "
+                   "shipped example's; prototype: the four-parameter model)")
     p.add_argument("--no-calibrate", dest="calibrate", action="store_false",
                    help="start the online estimator from the middle of the parameter box instead "
                    "of a calibration on two earlier simulated days")
@@ -78,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
         print("error: --minutes must be in (0, 20160]", file=sys.stderr)
         return 2
     demo = Demo(args.out, args.scale, minutes, interactive)
-    demo.calibrate_first = args.calibrate
+    demo.calibrate_first, demo.model = args.calibrate, args.model
     return demo.main()
 
 
@@ -92,6 +98,7 @@ class Demo:
         self.start_t: float | None = None
         self.stop = threading.Event()
         self.calibrate_first = True
+        self.model = MODEL
         self.why = ""  # why the run ended early
         self.epoch = float(__import__("numpy").datetime64(START.rstrip("Z"), "s").astype("int64"))
         self.clock = KitClock(scale, self.epoch)  # anchored again once the set-up is done
@@ -154,7 +161,7 @@ class Demo:
                  f"--keys {self.out}/keys.txt")
         params = self.calibrate() if self.calibrate_first else None
         self.clock = KitClock(self.scale, self.epoch)  # simulated time starts now, at START
-        write_config(self.out, self.clock, params)
+        write_config(self.out, self.clock, params, self.model)
 
     def calibrate(self) -> Path:
         """Fit the model offline on two simulated days before the run (data the run never
@@ -165,7 +172,7 @@ class Demo:
         data, params = self.out / "calibration.csv", self.out / "params.toml"
         simulate(plant="prototype", weather="bleiswijk", start="2009-10-30", days=2.0, seed=3,
                  step=60).write(data)
-        r = subprocess.run(calibrate_command(data, params), capture_output=True, text=True,
+        r = subprocess.run(calibrate_command(data, params, self.model), capture_output=True, text=True,
                            timeout=600)
         if r.returncode:
             raise ChildError(f"calibrate failed: {r.stderr.strip()[-500:]}")
@@ -309,11 +316,11 @@ def weather_site() -> tuple[float, float]:
     return BLEISWIJK_LATITUDE, BLEISWIJK_LONGITUDE
 
 
-def calibrate_command(data: Path, params: Path) -> list[str]:
+def calibrate_command(data: Path, params: Path, model: str = MODEL) -> list[str]:
     """``gateway calibrate`` on the two earlier days, at the weather's site."""
     lat, lon = weather_site()
     return [sys.executable, "-m", "gateway", "calibrate", "--data", str(data), "--greenhouse",
-            PRESET, "--model", "prototype", "--algorithm", "riwpso", "--seed", "1",
+            PRESET, "--model", model, "--algorithm", "riwpso", "--seed", "1",
             "--site", f"{lat},{lon}", "--out", str(params)]
 
 
@@ -332,12 +339,12 @@ def greenhouse_toml() -> str:
     return new
 
 
-def write_config(out: Path, clock: KitClock, params: Path | None) -> None:
+def write_config(out: Path, clock: KitClock, params: Path | None, model: str = MODEL) -> None:
     """``gateway.toml`` and the ``greenhouse.toml`` it names, under ``out``."""
     (out / "greenhouse.toml").write_text(greenhouse_toml(), encoding="utf-8")
     (out / "gateway.toml").write_text(CONFIG.format(
         scale=clock.scale, epoch=clock.epoch, anchor=clock.anchor, device=DEVICE,
-        greenhouse=GREENHOUSE) + (f'params = "{params.name}"\n' if params else ""))
+        greenhouse=GREENHOUSE, model=model) + (f'params = "{params.name}"\n' if params else ""))
 
 
 CONFIG = """# Written by python -m training run (make run): the shipped defaults
@@ -369,6 +376,6 @@ anchor = {anchor!r}
 [[greenhouse]]
 name = "{greenhouse}"
 greenhouse = "greenhouse.toml"
-model = "prototype"
+model = "{model}"
 inside = {device}
 """

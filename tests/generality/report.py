@@ -208,11 +208,13 @@ def markdown(results: list[dict], meta: dict, before: dict | None = None) -> str
         lines += _effects_table(groups[(g, "effects")]) + [""]
         was = {w: v for (gen, w), v in base_before.items() if gen == g}
         lines += ["Effect-free windows:", ""] + _free_table(groups[(g, "free")], was) + [""]
-    lines += ["### Forecasts (replay, prototype model)", "",
+    rows = [r for g in GENERATORS for r in groups[(g, "forecast")]]
+    models = sorted({r["case"].get("model") or "prototype" for r in rows}) or ["prototype"]
+    lines += [f"### Forecasts (replay, model {', '.join(f'`{m}`' for m in models)})", "",
               "Held-out-style figures: every forecast from day 2 on (day 1 is the estimator's warm-up), "
               "MAE [K] of T_in at 15/30/60 min; with the weather later measured (model skill) and "
               "with the causal `clear-sky-trend` outlook (what the live gateway can do).", ""]
-    lines += _forecast_table([r for g in GENERATORS for r in groups[(g, "forecast")]])
+    lines += _forecast_table(rows)
     lines += ["", END]
     return "\n".join(lines) + "\n"
 

@@ -1,6 +1,7 @@
 """The vsensor corpus's third climate (Sevilla, opt-in ``HOT_DRY``; docs/vsensor.md, eleventh
-pass): its synthetic weather against the normals it was set from, the runs written only when
-asked, and their own site x season groups."""
+pass; its winter run, twelfth pass): its synthetic weather against the normals it was set from,
+month by month and over each run's own days, the runs written only when asked, and their own
+site x season groups."""
 
 from __future__ import annotations
 
@@ -32,6 +33,29 @@ def test_sevilla_weather_has_the_normals_monthly_means(start):
     np.testing.assert_allclose(np.mean(got, axis=0), AEMET_SEVILLA[start], atol=1.5)
 
 
+def normals_of(run: corpus.Run) -> tuple[float, float, float] | None:
+    """The AEMET normals of the month ``run`` starts in (None: a month the table does not have)."""
+    return next((v for k, v in AEMET_SEVILLA.items() if k[:7] == run.start[:7]), None)
+
+
+@pytest.mark.parametrize("run", [r for r in corpus.HOT_DRY if normals_of(r) is not None],
+                         ids=lambda r: r.name)
+def test_hot_dry_runs_days_have_their_months_normals(run):
+    """A run's own days (6 of them, not the month) over 8 seeds: mean, mean daily max and min
+    within 1.5 K of its month's normals (one seed's 6-day window spreads by ~1.1 K, 8 seeds' mean
+    by ~0.4 K), and the run's own seed within 3.5 K (three of that one-seed spread): the file is
+    plausibly that month at Sevilla, not merely the climate's average."""
+    normals = normals_of(run)
+
+    def stats(seed: int) -> tuple[float, float, float]:
+        t = synthetic(run.weather, np.datetime64(run.start), float(run.days), seed=seed).t_out
+        daily = t.reshape(int(run.days), -1)
+        return t.mean(), daily.max(axis=1).mean(), daily.min(axis=1).mean()
+
+    np.testing.assert_allclose(np.mean([stats(s) for s in range(8)], axis=0), normals, atol=1.5)
+    np.testing.assert_allclose(stats(run.seed), normals, atol=3.5)
+
+
 def fake_generate(run: corpus.Run, path: Path) -> Path:
     """Stands in for the simulator: the file says which run it is."""
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -58,16 +82,18 @@ def test_corpus_writes_the_hot_dry_runs_only_when_asked(tmp_path, monkeypatch, c
     assert all((tmp_path / "all" / "hot-dry" / f"{r.name}.csv").read_text() == "seville\n"
                for r in corpus.HOT_DRY)
 
-    name = corpus.HOT_DRY[0].name  # an opt-in run is not known without the flag
-    assert vsensor_main(["corpus", "--out", str(tmp_path / "c"), "--only", name]) == 2
-    assert f"no run named {name}" in capsys.readouterr().err
-    assert vsensor_main(["corpus", "--out", str(tmp_path / "c"), "--only", name,
-                         "--hot-dry"]) == 0
-    assert written(tmp_path / "c") == {"hot-dry": [name]}
+    for run in corpus.HOT_DRY:  # an opt-in run is not known without the flag, alone with it
+        name, out = run.name, tmp_path / run.name
+        assert vsensor_main(["corpus", "--out", str(out), "--only", name]) == 2
+        assert f"no run named {name}" in capsys.readouterr().err
+        assert vsensor_main(["corpus", "--out", str(out), "--only", name, "--hot-dry"]) == 0
+        assert written(out) == {"hot-dry": [name]}
 
 
 def test_hot_dry_runs_are_their_own_groups_and_never_the_test_site_or_season():
-    assert [hg.group_of(r.name) for r in corpus.HOT_DRY] == ["seville-summer", "seville-autumn"]
+    groups = [hg.group_of(r.name) for r in corpus.HOT_DRY]
+    assert groups == ["seville-summer", "seville-autumn", "seville-winter"]
+    assert len(set(groups)) == len(groups)  # one run per season: no group of two
     train_groups = {hg.group_of(r.name) for r in corpus.TRAIN}
     assert not train_groups & {hg.group_of(r.name) for r in corpus.HOT_DRY}
     assert not set(corpus.HOT_DRY) & set(corpus.TRAIN + corpus.TEST + corpus.FRESH + corpus.OTHER)

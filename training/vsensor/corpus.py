@@ -69,10 +69,13 @@ another season at the test site; no setting was chosen with them (``out/fresh``)
 HOT_DRY = (
     Run("seville-summer-grower", "sim", "seville", "2021-07-12", 6, "grower", 26),
     Run("seville-autumn-controller", "sim", "seville", "2021-10-04", 6, "controller", 27),
+    Run("seville-winter-controller", "sim", "seville", "2021-01-18", 6, "controller", 28),
 )
-"""Opt-in training runs at a third climate, inland hot-dry Sevilla (eleventh pass, candidate H:
-docs/vsensor.md): never spring (the test season), never Biskra weather; not in ``TRAIN``, so
-the shipped model and its figures do not depend on them (``corpus --hot-dry`` writes them)."""
+"""Opt-in training runs at a third climate, inland hot-dry Sevilla (eleventh pass, candidate H;
+the winter run added by the twelfth, candidate I, to give the climate its cold season as
+Almería has: docs/vsensor.md): never spring (the test season), never Biskra weather; not in
+``TRAIN``, so the shipped model and its figures do not depend on them (``corpus --hot-dry``
+writes them)."""
 OTHER = (
     Run("other-house-spring", "sim", "almeria", "2020-04-15", 3, "controller", 31),
 )

@@ -179,3 +179,45 @@ def test_live_steps_resume_from_a_snapshot():
             got[t] = live.correct(H, float(forecast[t]), float(measured[t]), row)
         live.add()
     np.testing.assert_allclose(got, whole, rtol=0, atol=1e-12)
+
+
+def test_a_forecast_that_misses_its_own_weather_change_is_corrected(monkeypatch):
+    """A forecast that under-responds to the change of its drivers over its horizon (half the
+    warming of a sunny spell that starts within it is missed): the Δ features (``ahead_change``
+    of the drivers the forecast reads) learn it; with them held at 0 the rest of φ does not."""
+    rng = np.random.default_rng(11)
+    n = 2000
+    spells = np.repeat(rng.uniform(0.0, 600.0, n // 12 + 1), 12)[:n]  # an hour of sun or cloud
+    x = {"i_glob": spells, "wind": np.full(n, 2.0), "t_out": np.full(n, 12.0)}
+    warmed = 4e-3 * np.concatenate([[0.0], spells[:-1]])  # [K]: the house follows the sun
+    measured = 18.0 + warmed + rng.normal(0.0, 0.05, n)
+    time = np.datetime64("2020-01-01T00:00", "s") + np.arange(n) * np.timedelta64(300, "s")
+    starts = np.arange(n - H)
+    change = correction.ahead_change(x, starts, H)
+    forecast = np.full(n, np.nan)  # right but for half the warming its sun brings
+    forecast[starts] = 18.0 + warmed[starts + H] - 0.5 * 4e-3 * change["d_i_glob"]
+    ahead = {H: {k: np.concatenate([v, np.full(H, np.nan)]) for k, v in change.items()}}
+    corrected = correct_series({H: forecast}, measured, x, time, DT, ahead=ahead)[H]
+    mask = np.array([0.0 if n.endswith(" ahead") else 1.0 for n in FEATURES])
+    full = correction.features
+    monkeypatch.setattr(correction, "features", lambda *a: full(*a) * mask)
+    without = correct_series({H: forecast}, measured, x, time, DT, ahead=ahead)[H]
+    err = {k: _mae_late(measured, f) for k, f in
+           (("before", forecast), ("without", without), ("after", corrected))}
+    assert err["after"] < 0.5 * err["before"] and err["after"] < 0.6 * err["without"], err
+
+
+def test_the_weather_change_is_read_from_the_rows_the_forecast_reads():
+    """``ahead_change`` of a start is its last driver row (start + h − 1) less its first: the
+    same from a series and from a block laid out per start (gateway/estimate/horizon.py)."""
+    rng = np.random.default_rng(12)
+    n = 50
+    x = {c: rng.normal(0.0, 1.0, n) for c in correction.AHEAD}
+    starts = np.arange(0, n - H)
+    blocks = {c: np.stack([v[s: s + H + 1] for s in starts]).ravel() for c, v in x.items()}
+    from_series = correction.ahead_change(x, starts, H)
+    from_blocks = correction.ahead_change(blocks, starts * (H + 1), H)
+    for c in correction.AHEAD:
+        np.testing.assert_array_equal(from_series[f"d_{c}"], from_blocks[f"d_{c}"])
+        np.testing.assert_array_equal(from_series[f"d_{c}"], x[c][starts + H - 1] - x[c][starts])
+    assert np.all(correction.ahead_change(x, starts, 1)["d_i_glob"] == 0.0)  # one step: no change

@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 from test_online import ALMERIA, FAST, GH, model_data
 
+from gateway.estimate import correction
 from gateway.estimate.online import online_settings
-from gateway.estimate.replay import replay
+from gateway.estimate.replay import replay, score_forecasts, steps_of
 from gateway.service.forecaster import KINDS, LiveForecaster
 
 HORIZONS = (15, 60)
@@ -48,6 +49,37 @@ def test_step_by_step_is_the_replay_forecast(result, kind):
         ok = keep & np.isfinite(f[kind])
         assert ok.sum() > 300
         np.testing.assert_allclose(got[h][starts[ok]], f[kind][ok], rtol=0, atol=1e-9)
+
+
+def test_the_applied_correction_is_the_replays(result, monkeypatch):
+    """With the correction applied from an hour on (the 8-hour series has no day to learn
+    from), the live forecaster's ``corrected``, its φ with the change of the weather it is given
+    (the block's rows), is replay's row again, and differs from ``combined``."""
+    from dataclasses import replace as copy_with
+
+    class Quick(correction.Corrector):
+        def __init__(self, horizons, dt, *args) -> None:
+            super().__init__(horizons, dt, correction.MEMORY_S, correction.RIDGE, 3600.0)
+
+    monkeypatch.setattr(correction, "Corrector", Quick)
+    res = copy_with(result, horizons={})
+    score_forecasts(res, steps_of(HORIZONS, res.dt))
+    x, theta, n = res.x, res.theta, len(res.measured)
+    live = LiveForecaster(ALMERIA, GH, res.dt, HORIZONS, "corrected")
+    got = {h: np.full(n, np.nan) for h in HORIZONS}
+    stop = n - max(HORIZONS) - 1
+    for t in range(stop):
+        live.update({k: float(v[t]) for k, v in x.items()}, theta[t], res.time[t])
+        if np.isfinite(res.measured[t]):
+            block = {k: v[t: t + max(HORIZONS) + 1] for k, v in x.items()}
+            for h, v in live.forecasts(theta[t], block, HORIZONS).items():
+                got[h][t] = v
+    for h in HORIZONS:
+        f = res.horizons[h]
+        starts = f["target"] - h
+        ok = (starts < stop) & np.isfinite(f["corrected"])
+        assert np.mean(np.abs(f["corrected"][ok] - f["combined"][ok]) > 1e-3) > 0.5
+        np.testing.assert_allclose(got[h][starts[ok]], f["corrected"][ok], rtol=0, atol=1e-9)
 
 
 def test_unknown_kind_and_a_foreign_state():

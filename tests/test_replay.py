@@ -225,3 +225,40 @@ def test_an_outlook_of_the_measured_future_gives_the_measured_weather_forecasts(
     np.testing.assert_allclose(f["arx_outlook"][ok], f["arx"][ok], atol=1e-9)
     np.testing.assert_allclose(f["adaptive_kf_outlook"][ok], f["adaptive_kf"][ok], atol=1e-9)
     np.testing.assert_allclose(f["combined_outlook"][ok], f["combined"][ok], atol=1e-9)
+
+
+def test_the_outlook_correction_reads_the_outlook_blocks(result, monkeypatch):
+    """The error correction's change of the weather over the horizon comes from the forecast's
+    own drivers: with an outlook of the measured future, ``corrected_outlook`` is ``corrected``
+    (the correction applied from an hour on: the series has no day to learn from)."""
+    from dataclasses import replace as copy_with
+
+    from gateway.estimate import correction
+    from gateway.estimate.horizon import outlook_drivers
+    from gateway.estimate.replay import score_forecasts, steps_of
+
+    class Measured:
+        name = "measured"
+
+        def drivers_at(self, columns, time, starts, horizon, dt):
+            idx = np.minimum(starts[:, None] + np.arange(1, horizon + 1)[None, :], len(time) - 1)
+            return {k: np.asarray(v, float)[idx] for k, v in columns.items()}
+
+    class Quick(correction.Corrector):
+        def __init__(self, horizons, dt, *args) -> None:
+            super().__init__(horizons, dt, correction.MEMORY_S, correction.RIDGE, 3600.0)
+
+    monkeypatch.setattr(correction, "Corrector", Quick)
+    kit = ["t_in", "rh_in", "t_out", "rh_out", "i_glob", "wind", "i_in", "t_soil", "vent_roof",
+           "vent_side", "lai"]
+    n = len(result.measured)
+    reach = steps_of((15, 60), result.dt)
+    ahead = outlook_drivers(Measured(), result.x, kit, result.time, result.dt, result.gh,
+                            np.arange(n - 1), max(reach.values()))
+    res = copy_with(result, ahead=ahead, horizons={})
+    score_forecasts(res, reach)
+    for f in res.horizons.values():
+        ok = np.isfinite(f["corrected"]) & np.isfinite(f["corrected_outlook"])
+        assert ok.sum() > 1000
+        assert np.mean(np.abs(f["corrected"][ok] - f["combined"][ok]) > 1e-3) > 0.5
+        np.testing.assert_allclose(f["corrected_outlook"][ok], f["corrected"][ok], atol=1e-9)

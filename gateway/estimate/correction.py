@@ -10,15 +10,19 @@ follows the season. For each horizon h, with the error e(t) = T_in[t + h] − f(
     ê(t) = β(t) · φ(t),     corrected f(t) + ê(t),
     φ(t) = (1, f(t) − T_in[t], e(t − h), I_glob[t] / 1 kW m-2, (T_out − T_in)[t] / 10 K,
             g(t) − f(t), (T_in[t] − 20 °C) / 10 K, (T_in[t] − T̄_in(t)) / 10 K,
-            sin ωτ(t), cos ωτ(t)),    ω = 2π / 24 h, τ the UTC hour,
+            sin ωτ(t), cos ωτ(t), ΔI_glob(t) / 100 W m-2, Δu(t) / 1 m s-1, ΔT_out(t) / 1 K),
+    ω = 2π / 24 h, τ the UTC hour,
 
 ``T̄_in(t)`` the mean reading of the last day up to t (a controlled house goes back to its
 setpoints and its usual temperature: the level and the departure from the day's mean let the
 regression learn how far and how fast), ``g`` a second forecast of the same target (the ARX
 baseline: the regression re-weights the two, stacking, Wolpert 1992, "Stacked generalization",
-Neural Networks 5, 241-259), ``e(t − h)``
-the last error already measured at t. β(t) is the exponentially weighted least squares estimate
-with a constant ridge toward "no correction" (Gunnarsson 1996, "Combining tracking and
+Neural Networks 5, 241-259), ``e(t − h)`` the last error already measured at t, and Δ the
+change of the forecast's own drivers from its start to the last step it reads
+(``ahead_change``: the measured weather for the model-skill forecast, the outlook's for the
+live one; the grey box under-responds to a change of its weather, docs/effects.md, "The
+correction on the forecast's own weather"). β(t) is the exponentially weighted least squares
+estimate with a constant ridge toward "no correction" (Gunnarsson 1996, "Combining tracking and
 regularization in recursive least squares identification", Proc. 35th IEEE CDC, 2551-2552):
 
     β(t) = (R(t) + ρ I)⁻¹ r(t),   R(t) = Σ_s λ^(t−s) φ(s) φ(s)ᵀ,   r(t) = Σ_s λ^(t−s) φ(s) e(s),
@@ -46,12 +50,13 @@ MEMORY_S = 4 * 86400.0
 RIDGE = 50.0
 """ρ [-], in units of one start's weight: the correction's prior toward zero."""
 FEATURES = ("1", "f - t_in", "last error", "i_glob", "t_out - t_in", "arx - f", "t_in level",
-            "t_in - day mean", "sin hour", "cos hour")
-"""Names of φ, in order: the last two are the hour of the day (UTC) as a daily harmonic, so a
-repeated daily error (the sun stored and given back later in the day) is learnt by phase."""
-SCALE = np.array([1.0, 1.0, 1.0, 1e-3, 0.1, 1.0, 0.1, 0.1, 1.0, 1.0])
-"""φ in these units (I_glob per kW m-2, temperature differences per 10 K) so one ridge suits
-all."""
+            "t_in - day mean", "sin hour", "cos hour", "i_glob ahead", "wind ahead", "t_out ahead")
+"""Names of φ, in order: "sin/cos hour" are the hour of the day (UTC) as a daily harmonic, so a
+repeated daily error (the sun stored and given back later in the day) is learnt by phase; the
+last three are the change of the forecast's own drivers over its horizon (``ahead``)."""
+SCALE = np.array([1.0, 1.0, 1.0, 1e-3, 0.1, 1.0, 0.1, 0.1, 1.0, 1.0, 1e-2, 1.0, 1.0])
+"""φ in these units (I_glob per kW m-2, temperature differences per 10 K; the changes over the
+horizon per 100 W m-2, 1 m s-1 and 1 K, a typical hour's change) so one ridge suits all."""
 T_LEVEL_C = 20.0
 """[°C] the reading's level is counted from here (a greenhouse's usual air temperature; the
 constant column takes the rest)."""
@@ -64,6 +69,22 @@ MAX_CORRECTION_K = 3.0
 """[K] bound on |ê|: a correction larger than that is a fit gone wrong, not a forecast."""
 
 
+AHEAD = ("i_glob", "wind", "t_out")
+"""Drivers whose change over the horizon φ carries (the row keys ``d_i_glob`` …)."""
+
+
+def ahead_change(x: Mapping[str, np.ndarray], rows: np.ndarray, horizon: int) -> dict[str, np.ndarray]:
+    """{``d_<driver>``: (N,)} for a forecast of ``horizon`` steps from each row of ``rows``: the
+    driver at the last row the forecast reads (r + horizon − 1 of ``x``: the measured weather,
+    or an outlook's block) less its value at the start r, i.e. how the forecast's own weather
+    moves over its horizon (model output statistics regress on the model's inputs as well as on
+    its output: Glahn & Lowry 1972)."""
+    rows = np.asarray(rows, dtype=int)
+    last = rows + max(horizon, 1) - 1
+    return {f"d_{c}": np.asarray(x[c], dtype=float)[last] - np.asarray(x[c], dtype=float)[rows]
+            for c in AHEAD}
+
+
 def forgetting(dt: float, memory_s: float = MEMORY_S) -> float:
     """λ per model step of ``dt`` [s]."""
     return math.exp(-dt / memory_s)
@@ -72,13 +93,16 @@ def forgetting(dt: float, memory_s: float = MEMORY_S) -> float:
 def features(f: float, t_in: float, last_error: float, row: Mapping[str, float],
              arx: float, day_mean: float = math.nan) -> np.ndarray:
     """φ (scaled, ``FEATURES``) at one start: ``row`` holds ``i_glob``, ``t_out`` and ``hour``
-    (UTC, 0-24) at the start, ``day_mean`` the mean reading of the last day. A missing last
-    error, ARX forecast or day mean counts as 0; a missing driver makes φ NaN (no correction)."""
+    (UTC, 0-24) at the start and the changes ``d_<driver>`` over the horizon (``ahead_change``),
+    ``day_mean`` the mean reading of the last day. A missing last error, ARX forecast, day mean
+    or change counts as 0; a missing driver makes φ NaN (no correction)."""
     w = 2.0 * math.pi * row.get("hour", math.nan) / 24.0
+    ahead = [row.get(f"d_{c}", math.nan) for c in AHEAD]
     raw = np.array([1.0, f - t_in, last_error if math.isfinite(last_error) else 0.0,
                     row.get("i_glob", math.nan), row.get("t_out", math.nan) - t_in,
                     arx - f if math.isfinite(arx) else 0.0, t_in - T_LEVEL_C,
-                    t_in - day_mean if math.isfinite(day_mean) else 0.0, math.sin(w), math.cos(w)])
+                    t_in - day_mean if math.isfinite(day_mean) else 0.0, math.sin(w), math.cos(w),
+                    *(d if math.isfinite(d) else 0.0 for d in ahead)])
     return raw * SCALE
 
 
@@ -200,10 +224,13 @@ class Corrector:
 def correct_series(forecasts: Mapping[int, np.ndarray], measured: np.ndarray,
                    x: Mapping[str, np.ndarray], time: np.ndarray, dt: float,
                    arx: Mapping[int, np.ndarray] | None = None, memory_s: float = MEMORY_S,
-                   ridge: float = RIDGE, warmup_s: float = WARMUP_S) -> dict[int, np.ndarray]:
+                   ridge: float = RIDGE, warmup_s: float = WARMUP_S,
+                   ahead: Mapping[int, Mapping[str, np.ndarray]] | None = None,
+                   ) -> dict[int, np.ndarray]:
     """``forecasts`` {h: (T,) forecast of T_in[t + h] made at t}, on the series' grid (NaN where
-    none was made; ``arx`` the same for the ARX, stacked), corrected by ``Corrector`` run step by
-    step: the figures the live gateway gives."""
+    none was made; ``arx`` the same for the ARX, stacked; ``ahead`` {h: ``ahead_change`` of each
+    start, (T,) per key}), corrected by ``Corrector`` run step by step: the figures the live
+    gateway gives."""
     n = len(measured)
     corr = Corrector(list(forecasts), dt, memory_s, ridge, warmup_s)
     out = {h: np.full(n, np.nan) for h in forecasts}
@@ -215,6 +242,7 @@ def correct_series(forecasts: Mapping[int, np.ndarray], measured: np.ndarray,
         row = {k: float(v[t]) for k, v in cols.items()}
         for h, f in forecasts.items():
             if math.isfinite(f[t]):
-                out[h][t] = corr.correct(h, float(f[t]), float(measured[t]), row, float(g[h][t]))
+                row_h = row | {k: float(v[t]) for k, v in (ahead or {}).get(h, {}).items()}
+                out[h][t] = corr.correct(h, float(f[t]), float(measured[t]), row_h, float(g[h][t]))
         corr.add()
     return out

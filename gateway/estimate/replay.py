@@ -238,6 +238,7 @@ def _corrected(result: ReplayResult, reach: Mapping[int, int], suffix: str) -> N
     combined: dict[int, np.ndarray] = {}
     arx: dict[int, np.ndarray] = {}
     starts: dict[int, np.ndarray] = {}
+    ahead: dict[int, dict[str, np.ndarray]] = {}
     for minutes, steps in reach.items():
         f = result.horizons[minutes]
         if f"combined{suffix}" not in f:
@@ -246,10 +247,27 @@ def _corrected(result: ReplayResult, reach: Mapping[int, int], suffix: str) -> N
         for into, name in ((combined, "combined"), (arx, "arx")):
             into[steps] = np.full(n, np.nan)
             into[steps][starts[minutes]] = f[f"{name}{suffix}"]
+        ahead[steps] = _ahead_change(result, starts[minutes], steps, suffix)
     out = correction.correct_series(combined, result.measured, result.x, result.time, result.dt,
-                                    arx)
+                                    arx, ahead=ahead)
     for minutes, steps in reach.items():
         result.horizons[minutes][f"corrected{suffix}"] = out[steps][starts[minutes]]
+
+
+def _ahead_change(result: ReplayResult, starts: np.ndarray, steps: int,
+                  suffix: str) -> dict[str, np.ndarray]:
+    """correction.ahead_change of each start's drivers (the measured weather, or the outlook's
+    block for ``_outlook``), on the series' grid (NaN where no forecast starts)."""
+    n = len(result.measured)
+    if suffix and result.ahead is not None:
+        x, rows = result.ahead.x, result.ahead.rows[np.searchsorted(result.ahead.starts, starts)]
+    else:
+        x, rows = result.x, starts
+    out = {}
+    for key, v in correction.ahead_change(x, rows, steps).items():
+        out[key] = np.full(n, np.nan)
+        out[key][starts] = v
+    return out
 
 
 def _common(measured: np.ndarray, preds: Mapping[str, np.ndarray], keep: np.ndarray) -> dict:

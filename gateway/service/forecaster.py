@@ -109,8 +109,9 @@ class LiveForecaster:
                 if math.isfinite(mixed):
                     out[h] = mixed
                 if self.corr is not None and math.isfinite(mixed):
+                    ahead = {k: float(v[0]) for k, v in correction.ahead_change(x, rows, h).items()}
                     out[h] = self.corr.correct(h, mixed, self._row.get("t_in", math.nan),
-                                                self._row, arx)
+                                                self._row | ahead, arx)
         if self.comb is not None and not self._added:
             self.comb.add(made)
             if self.corr is not None:

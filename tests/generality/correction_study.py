@@ -25,7 +25,11 @@ if str(ROOT) not in sys.path:
 
 from gateway.estimate import correction  # noqa: E402
 from gateway.estimate import replay as rp  # noqa: E402
-from tests.generality.outlook_variants import forecasts_by_steps, tuning_replays  # noqa: E402
+from tests.generality.outlook_variants import (  # noqa: E402
+    ahead_by_steps,
+    forecasts_by_steps,
+    tuning_replays,
+)
 
 MARKED = ("combined", "corrected")
 
@@ -38,7 +42,8 @@ def _corrected(res, mask: np.ndarray, memory_s: float, ridge: float) -> None:
         for suffix in ("", "_outlook"):
             comb, arx, starts = forecasts_by_steps(res, suffix)
             got = correction.correct_series(comb, res.measured, res.x, res.time, res.dt, arx,
-                                            memory_s, ridge)
+                                            memory_s, ridge,
+                                            ahead=ahead_by_steps(res, suffix, starts))
             for minutes, f in res.horizons.items():
                 f[f"corrected{suffix}"] = got[int(round(minutes * 60.0 / res.dt))][starts[minutes]]
     finally:

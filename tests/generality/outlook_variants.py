@@ -183,12 +183,25 @@ def forecasts_by_steps(res, suffix: str) -> tuple[dict[int, np.ndarray], dict[in
     return comb, arx, starts
 
 
+def ahead_by_steps(res, suffix: str, starts: Mapping[int, np.ndarray]) -> dict[int, dict[str, np.ndarray]]:
+    """The correction's change of the forecast's own drivers over each horizon (replay's, by lead
+    time in steps, on the replay's time axis), for ``correction.correct_series``'s ``ahead``."""
+    from gateway.estimate import replay as rp
+
+    out = {}
+    for minutes, s in starts.items():
+        steps = int(round(minutes * 60.0 / res.dt))
+        out[steps] = rp._ahead_change(res, s, steps, suffix)
+    return out
+
+
 def correct_with(res, extra: Mapping[int, np.ndarray], suffix: str) -> None:
     """Replace ``corrected{suffix}`` of the scored replay ``res`` by the correction with the
     columns ``extra[steps]`` (T, m) (their values at each start, NaN counted as 0) appended to
     φ; ``extra`` empty gives gateway/estimate/correction.py's own figures."""
     n = len(res.measured)
     comb, arx, starts = forecasts_by_steps(res, suffix)
+    ahead = ahead_by_steps(res, suffix, starts)
     m = next(iter(extra.values())).shape[1] if extra else 0
     base_features, base_names = correction.features, correction.FEATURES
     now: dict[str, np.ndarray] = {"extra": np.zeros(m)}
@@ -205,7 +218,8 @@ def correct_with(res, extra: Mapping[int, np.ndarray], suffix: str) -> None:
             for h, f in comb.items():
                 if math.isfinite(f[t]):
                     now["extra"] = np.nan_to_num(extra[h][t]) if m else np.zeros(0)
-                    out[h][t] = corr.correct(h, float(f[t]), float(res.measured[t]), row,
+                    row_h = row | {k: float(v[t]) for k, v in ahead[h].items()}
+                    out[h][t] = corr.correct(h, float(f[t]), float(res.measured[t]), row_h,
                                              float(arx[h][t]))
             corr.add()
     finally:

@@ -7,10 +7,12 @@ in blocks ``[now, now + 1, …, now + H]``, one block per start, so that ``Model
 ARX baseline run on them unchanged (block b starts at row b (H + 1)).
 
 Derived drivers (sky temperature, outside convection, vapour pressures, vent areas) are made by
-the model layer's ``prepare_drivers`` from the outlook's columns, once per lead time k: the
-k-step-ahead outlooks of consecutive starts form a regular time series (times t + k dt), so
-whatever the model layer derives from a series, including what it carries through time, is
-derived the same way as for measured data, from values known at each start.
+the model layer's ``prepare_drivers`` from the outlook's columns, once per lead time k (the
+k-step-ahead outlooks of consecutive starts form a regular time series, times t + k dt). The
+cloud fraction is not read again from the outlook's radiation: it is held at the start's value
+(what the estimator's tracker carries, gateway/model/sky.py) over the horizon, because that is
+all the live gateway knows when it forecasts one block (``live_block``, which the service calls:
+one derivation for replay and live).
 """
 
 from __future__ import annotations
@@ -53,12 +55,27 @@ def outlook_drivers(outlook: Outlook, x: Mapping[str, np.ndarray], kit_columns: 
     for name in x:
         blocks[name][:, 0] = np.asarray(x[name], dtype=float)[starts]
     step = np.timedelta64(int(round(dt)), "s")
+    held = np.asarray(x["cloud"], dtype=float) if "cloud" in x else None  # each start's cloud
     for k in range(1, horizon + 1):
         cols = {c: v[:, k - 1] for c, v in ahead.items()}
-        xk = prepare_drivers(Series(time + k * step, dt, cols), gh)
+        xk = prepare_drivers(Series(time + k * step, dt, cols), gh, cloud=held)
         for name in x:
             if name in xk:
                 blocks[name][:, k] = np.asarray(xk[name], dtype=float)[starts]
     rows = np.arange(len(starts)) * (horizon + 1)
     flat = {name: b.ravel() for name, b in blocks.items()}
     return HorizonDrivers(flat, rows, starts, horizon, getattr(outlook, "name", type(outlook).__name__))
+
+
+def live_block(outlook: Outlook, history: Mapping[str, np.ndarray], time: np.ndarray,
+               horizon: int, dt: float, gh: Greenhouse, cloud: float) -> dict[str, np.ndarray]:
+    """The drivers of the one forecast the live gateway makes now (the last row of ``history``):
+    rows ``[now, now + 1, …, now + horizon - 1]``, row 0 the latest readings, the others the
+    outlook's, derived as ``outlook_drivers`` derives a block's rows: with the cloud fraction
+    ``cloud`` [-] (the estimator's at now) held over the horizon."""
+    ahead = outlook.drivers(history, time, horizon, dt)
+    cols = {c: np.concatenate([np.asarray(history[c], float)[-1:], ahead[c][: horizon - 1]])
+            for c in history}
+    grid = time[-1] + np.arange(horizon) * np.timedelta64(int(round(dt)), "s")
+    held = np.full(horizon, cloud) if np.isfinite(cloud) else None
+    return prepare_drivers(Series(grid, dt, cols), gh, cloud=held)

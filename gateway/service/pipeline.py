@@ -29,13 +29,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gateway.estimate.horizon import live_block
 from gateway.estimate.online import OnlineEstimator, online_settings
 from gateway.estimate.outlook import Outlook, make_outlook
 from gateway.estimate.state_migration import migrate_state
 from gateway.greenhouse import Greenhouse
-from gateway.model.drivers import prepare_drivers
 from gateway.model.model import Model
-from gateway.series import Series
 from gateway.service.forecaster import LiveForecaster
 from gateway.service.minutes import KIT_COLUMNS, Minute, final_before, first_minute, read_minutes
 from gateway.service.settings import EstimatorSettings, GreenhouseSettings
@@ -248,11 +247,8 @@ class GreenhousePipeline:
         n_hist = len(self.hist["t_in"])
         time = np.datetime64(int(t), "s") + np.arange(-n_hist + 1, 1) * np.timedelta64(60, "s")
         history = {c: np.fromiter(v, float, n_hist) for c, v in self.hist.items()}
-        horizon = max(self.horizons)
-        ahead = self.outlook.drivers(history, time, horizon, DT)
-        cols = {c: np.concatenate([history[c][-1:], ahead[c][: horizon - 1]]) for c in history}
-        grid = time[-1] + np.arange(horizon) * np.timedelta64(60, "s")
-        x = prepare_drivers(Series(grid, DT, cols), self.gh)
+        cloud = self.est.last_row.get("cloud", math.nan)  # the estimator's, as replay holds it
+        x = live_block(self.outlook, history, time, max(self.horizons), DT, self.gh, cloud)
         got = self.forecaster.forecasts(theta, x, self.horizons)
         return [(h, v) for h, v in got.items() if math.isfinite(v)]
 

@@ -13,6 +13,8 @@ shipped day test cannot judge anything (``judge.MIN_DAYS``). The day test itself
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -76,14 +78,19 @@ def piece_judge(monkeypatch):
     monkeypatch.setattr(jd, "DAY_TEST", False)
 
 
+@functools.cache
+def _first_time(plant: str, days: int) -> np.datetime64:
+    """The clean record's first time: one clean simulation per plant and length per worker (it
+    was run again for every effect case only to read this)."""
+    return simulate(plant=plant, weather="almeria", days=days, seed=2, step=60).time[0]
+
+
 def _data(tmp_path, plant: str, effect: str | None, post=None, at: float = 3.6,
           days: int | None = None):
     days = DAYS if days is None else days  # read at call time (day_test_study.py sets DAYS)
-    clean = simulate(plant=plant, weather="almeria", days=days, seed=2, step=60)
-    t0 = str(clean.time[0] + np.timedelta64(int(at * 86400), "s"))
+    t0 = str(_first_time(plant, days) + np.timedelta64(int(at * 86400), "s"))
     effects = [] if effect is None else [f"{effect}@{t0}:{SPECS[effect][plant]}"]
-    r = clean if effect is None else simulate(plant=plant, weather="almeria", days=days, seed=2,
-                                              step=60, effects=effects)
+    r = simulate(plant=plant, weather="almeria", days=days, seed=2, step=60, effects=effects)
     if post is not None:
         post(r)
     path = tmp_path / f"{plant}.csv"
@@ -91,6 +98,18 @@ def _data(tmp_path, plant: str, effect: str | None, post=None, at: float = 3.6,
     gh = load_greenhouse(PRESET[plant])
     model = build_model(plant, gh)
     return load_series(path, step=STEP, required=model.requires), gh, model, t0
+
+
+@pytest.fixture(scope="module")
+def whitened_prototype(tmp_path_factory):
+    """(series, gh, model, t0, diagnosis) of the 6-day prototype record whitened at day 3.6,
+    diagnosed with the piece judge: computed once for the two tests that only read it (its
+    first-finding case and the public-entry round, which compares its search with it)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(jd, "DAY_TEST", False)  # as ``piece_judge``
+        series, gh, model, t0 = _data(tmp_path_factory.mktemp("whitened"), "prototype",
+                                      "cover_transmission")
+        return series, gh, model, t0, diagnose(series, gh, model)
 
 
 def test_library_is_documented_and_bounded():
@@ -109,8 +128,11 @@ def test_library_is_documented_and_bounded():
 def test_injected_effect_is_first_finding(tmp_path, plant, effect, request):
     if (plant, effect) in KNOWN_MISSES:
         request.applymarker(pytest.mark.xfail(reason="known miss, see docs/effects.md", strict=False))
-    series, gh, model, t0 = _data(tmp_path, plant, effect)
-    d = diagnose(series, gh, model)
+    if (plant, effect) == ("prototype", "cover_transmission"):  # the record the next tests use
+        series, gh, model, t0, d = request.getfixturevalue("whitened_prototype")
+    else:
+        series, gh, model, t0 = _data(tmp_path, plant, effect)
+        d = diagnose(series, gh, model)
     assert d.findings, f"nothing found; rejected: {d.rejected}"
     first = d.findings[0]
     assert first.effect.name in EQUIVALENT[effect]
@@ -206,7 +228,7 @@ def test_effect_outside_library_is_reported_unexplained(tmp_path):
 
 
 @pytest.mark.usefixtures("piece_judge")
-def test_a_round_through_the_public_entry_is_the_diagnosis_first(tmp_path):
+def test_a_round_through_the_public_entry_is_the_diagnosis_first(whitened_prototype):
     """``search.prepare`` and ``search.search_round`` (the entry tests/generality/headroom.py
     replays the search through) on the 6-day prototype record whitened at day 3.6: the round
     tries what the diagnosis's first round tried, with the same verdicts, and picks its first
@@ -215,8 +237,7 @@ def test_a_round_through_the_public_entry_is_the_diagnosis_first(tmp_path):
     ``at`` holds the start there."""
     from gateway.diagnose import search
 
-    series, gh, model, _ = _data(tmp_path, "prototype", "cover_transmission")
-    d = diagnose(series, gh, model)
+    series, gh, model, _, d = whitened_prototype
     st = search.prepare(series, gh, model).state
     r = search.search_round(st, LIBRARY)
     assert [(t.effect.name, t.verdict.ok, t.verdict.delta_bic) for t in r.tried] == [

@@ -9,6 +9,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from gateway import protocol as p
 from gateway.greenhouse import load_greenhouse
@@ -16,7 +17,7 @@ from gateway.model import build_model
 from gateway.publish import validate
 from gateway.publish.payloads import Place
 from gateway.service.diagnosis import store_findings
-from gateway.service.pipeline import GreenhousePipeline
+from gateway.service.pipeline import GreenhousePipeline, StepReport
 from gateway.service.producers import GreenhouseInfo, Producers
 from gateway.store import Store
 from gateway.store.aggregate import aggregate
@@ -66,12 +67,20 @@ def end(k: int) -> float:
     return EPOCH + 60 * k + 31
 
 
-def test_estimator_resumes_exactly_from_its_saved_state(tmp_path: Path) -> None:
-    whole = Store(tmp_path / "a.db")
-    fill(whole, range(100))
+@pytest.fixture(scope="module")
+def whole_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Store, StepReport]:
+    """The first 100 minutes stepped by one pipeline in one go, and its report: the run that the
+    resume test splits and the causality test changes the future of (both only read it)."""
+    store = Store(tmp_path_factory.mktemp("whole") / "a.db")
+    fill(store, range(100))
     pa = pipeline()
-    pa.resume(whole.conn)
-    rep = pa.step_pending(whole.conn, end(99), 0.0, 600.0)
+    pa.resume(store.conn)
+    return store, pa.step_pending(store.conn, end(99), 0.0, 600.0)
+
+
+def test_estimator_resumes_exactly_from_its_saved_state(
+        whole_run: tuple[Store, StepReport], tmp_path: Path) -> None:
+    whole, rep = whole_run
     assert rep.stepped == 99 and rep.restarts == 0
     split = Store(tmp_path / "b.db")
     fill(split, range(51))
@@ -93,14 +102,12 @@ def test_estimator_resumes_exactly_from_its_saved_state(tmp_path: Path) -> None:
     assert {r[4] for r in fc} == {"hold-latest"}  # each forecast names its outlook
 
 
-def test_forecasts_are_causal(tmp_path: Path) -> None:
-    a, b = Store(tmp_path / "a.db"), Store(tmp_path / "b.db")
-    fill(a, range(100))
-    fill(b, range(100), change_after=60)  # the same past, another future
-    for s in (a, b):
-        pl = pipeline()
-        pl.resume(s.conn)
-        pl.step_pending(s.conn, end(99), 0.0, 600.0)
+def test_forecasts_are_causal(whole_run: tuple[Store, StepReport], tmp_path: Path) -> None:
+    a, b = whole_run[0], Store(tmp_path / "b.db")
+    fill(b, range(100), change_after=60)  # the same past as ``whole_run``, another future
+    pl = pipeline()
+    pl.resume(b.conn)
+    pl.step_pending(b.conn, end(99), 0.0, 600.0)
     upto = EPOCH + 60 * 60
     fa = [r for r in rows(a, "forecast") if r[0] <= upto]
     fb = [r for r in rows(b, "forecast") if r[0] <= upto]

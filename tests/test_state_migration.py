@@ -5,6 +5,7 @@ gateway's pipeline in a real SQLite store after stepping the reference simulator
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -30,18 +31,36 @@ def saved(store: Store) -> dict:
 
 
 def run_then_switch(tmp_path: Path, first: str, second: str, minutes: int,
-                    theta0: np.ndarray | None = None) -> tuple[Store, dict, GreenhousePipeline, str]:
+                    theta0: np.ndarray | None = None,
+                    ran: Path | None = None) -> tuple[Store, dict, GreenhousePipeline, str]:
     """``first`` steps ``minutes`` minutes and saves; a gateway restarted with ``second``
-    resumes from the same store file."""
+    resumes from the same store file. ``ran``: a closed store file in which that run was made
+    already (``prototype_hour``), resumed from a copy of it."""
+    if ran is not None:
+        shutil.copyfile(ran, tmp_path / "serra.db")
     store = Store(tmp_path / "serra.db")
-    fill(store, range(minutes + 1))
-    a = pipeline(first)
-    a.resume(store.conn)
-    a.step_pending(store.conn, end(minutes), 0.0, 600.0)
+    if ran is None:
+        fill(store, range(minutes + 1))
+        a = pipeline(first)
+        a.resume(store.conn)
+        a.step_pending(store.conn, end(minutes), 0.0, 600.0)
     before = saved(store)
     assert before["model"] == first and before["counters"]["samples"] == minutes
     b = pipeline(second, theta0)
     return store, before, b, b.resume(store.conn)
+
+
+@pytest.fixture(scope="module")
+def prototype_hour(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A closed store file in which the prototype stepped the first 60 minutes and saved its
+    state: made once for the three tests that resume such a state (each on its own copy)."""
+    store = Store(tmp_path_factory.mktemp("prototype-hour") / "serra.db")
+    fill(store, range(61))
+    a = pipeline("prototype")
+    a.resume(store.conn)
+    a.step_pending(store.conn, end(60), 0.0, 600.0)
+    store.close()  # the last connection: SQLite folds the WAL into the file, which is then whole
+    return store.path
 
 
 def test_a_prototype_state_resumes_in_the_vented_model(tmp_path: Path) -> None:
@@ -83,11 +102,13 @@ def test_a_vented_state_resumes_in_the_prototype(tmp_path: Path) -> None:
     assert after["model"] == "prototype" and after["names"] == build_model("prototype", GH).names
 
 
-def test_new_parameters_start_from_the_params_file_values(tmp_path: Path) -> None:
+def test_new_parameters_start_from_the_params_file_values(tmp_path: Path,
+                                                         prototype_hour: Path) -> None:
     """With a params file the new parameters start at its values (the estimator's theta0)."""
     theta0 = build_model(VENTED_PROTOTYPE, GH).defaults(GH)
     theta0[4:] = [2e-4, 22.0]
-    _, before, b, line = run_then_switch(tmp_path, "prototype", VENTED_PROTOTYPE, 60, theta0)
+    _, before, b, line = run_then_switch(tmp_path, "prototype", VENTED_PROTOTYPE, 60, theta0,
+                                         prototype_hour)
     assert "c_vc = 0.0002, t_vc = 22" in line
     np.testing.assert_array_equal(b.est.theta, before["theta"] + [2e-4, 22.0])
 
@@ -106,8 +127,10 @@ def test_an_unrelated_model_is_not_migrated() -> None:
         migrate_state(est.snapshot(), proto, ALMERIA_GH, proto.defaults(ALMERIA_GH))
 
 
-def test_an_unusable_state_starts_anew_with_a_line_saying_so(tmp_path: Path) -> None:
-    store, before, _, _ = run_then_switch(tmp_path, "prototype", "prototype", 30)
+def test_an_unusable_state_starts_anew_with_a_line_saying_so(tmp_path: Path,
+                                                            prototype_hour: Path) -> None:
+    store, before, _, _ = run_then_switch(tmp_path, "prototype", "prototype", 60,
+                                          ran=prototype_hour)
     before["model"] = "no-such-model"
     store.conn.execute("UPDATE estimator_state SET state=?", (json.dumps(before),))
     b = pipeline(VENTED_PROTOTYPE)
@@ -116,11 +139,13 @@ def test_an_unusable_state_starts_anew_with_a_line_saying_so(tmp_path: Path) -> 
     assert b.est.counters.samples == 0
 
 
-def test_a_restore_that_fails_half_way_leaves_a_new_estimator(tmp_path: Path) -> None:
+def test_a_restore_that_fails_half_way_leaves_a_new_estimator(tmp_path: Path,
+                                                             prototype_hour: Path) -> None:
     """The estimator's part restores, the forecaster's is broken: the line says the state was not
     used, and nothing of it is left behind (before, the estimator kept the restored parameters and
     counters under a line saying it started anew)."""
-    store, before, _, _ = run_then_switch(tmp_path, "prototype", "prototype", 60)
+    store, before, _, _ = run_then_switch(tmp_path, "prototype", "prototype", 60,
+                                          ran=prototype_hour)
     before["forecaster"]["disturbance"]["state"] = [1.0, 2.0]  # three of five values missing
     store.conn.execute("UPDATE estimator_state SET state=?", (json.dumps(before),))
     for model in ("prototype", VENTED_PROTOTYPE):

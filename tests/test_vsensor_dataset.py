@@ -78,9 +78,22 @@ def test_dataset_refuses_a_file_without_vents(tmp_path):
         build_segment(path, gh, "almeria", None, vd.TINY)
 
 
-def test_reference_study_describes_the_training_target_beside_the_truth():
+def test_reference_study_describes_the_training_target_beside_the_truth(monkeypatch):
+    from training.vsensor import reference
     from training.vsensor.reference import describe, study
 
+    # Both studies below replay the same file with the same settings and seed; only ``above``
+    # differs, and it is applied after the replay: the second study takes the first's replay.
+    real, runs = reference.run_adaptive, []
+
+    def replay_once(kind, series, gh, **kwargs):
+        if not runs:
+            runs.append((kind, series, kwargs, real(kind, series, gh, **kwargs)))
+        assert kind == runs[0][0] and kwargs == runs[0][2]  # the same replay asked for
+        np.testing.assert_array_equal(series.time, runs[0][1].time)
+        return runs[0][3]
+
+    monkeypatch.setattr(reference, "run_adaptive", replay_once)
     gh = load_greenhouse(vd.GREENHOUSE)
     path = vd.train_files()[0]
     seg = build_segment(path, gh, "almeria", vd.workdir() / "cache", vd.TINY)

@@ -38,13 +38,22 @@ def test_a_fold_fits_on_the_other_groups_and_scores_the_whole_held_out_files(tmp
     ranges of that fit's training rows (the ranges its written model would carry)."""
     from training.vsensor import fit
     from training.vsensor.cli import main
+    from training.vsensor.dataset import build_segment
     from training.vsensor.train import prepare_segments, upper_limits
 
-    grower, controller = vd.train_files()
+    gh = load_greenhouse(vd.GREENHOUSE)
     paths = [tmp_path / "almeria-summer-grower.csv", tmp_path / "bleiswijk-autumn-controller.csv"]
-    shutil.copy(grower, paths[0])
-    shutil.copy(controller, paths[1])
     cache, log = tmp_path / "cache", tmp_path / "tune.jsonl"
+    cache.mkdir()
+    for src, dst in zip(vd.train_files(), paths, strict=True):
+        shutil.copy(src, dst)
+        # The replays the vsensor tests share (the tiny sensor's, in this worker's cache), under
+        # the fold's file names: a cache entry is named <stem>-<key of the CSV's content,
+        # greenhouse, kind, settings, seed, code>, so the same content under another name is the
+        # same entry; tune reads them instead of replaying both files again.
+        build_segment(src, gh, "almeria", vd.workdir() / "cache", vd.TINY, 0)
+        for entry in (vd.workdir() / "cache").glob(f"{src.stem}-*.npz"):
+            shutil.copy(entry, cache / entry.name.replace(src.stem, dst.stem, 1))
     sets = [a for k, v in vd.TINY.items() for n, x in v.items() for a in ("--set", f"{k}.{n}={x}")]
     assert main(["tune", "--data", *map(str, paths), "--greenhouse", vd.GREENHOUSE, "--model",
                  "almeria", "--cache", str(cache), *sets, "--hidden", "8,8", "--epochs", "6",
@@ -56,9 +65,6 @@ def test_a_fold_fits_on_the_other_groups_and_scores_the_whole_held_out_files(tmp
     assert folds["almeria-summer"]["trained_on"] == ["bleiswijk-autumn-controller"]
     assert folds["almeria-summer"]["scores"]["controller"] is None
     assert folds["bleiswijk-autumn"]["scores"]["grower"] is None
-
-    gh = load_greenhouse(vd.GREENHOUSE)
-    from training.vsensor.dataset import build_segment
 
     segs = [build_segment(p, gh, "almeria", cache, vd.TINY, 0) for p in paths]
     prep = prepare_segments([segs[1]], gh, "almeria", 0, 0.90)

@@ -119,8 +119,8 @@ def test_what_the_config_names_is_checked_before_start(tmp_path: Path) -> None:
 
 
 def test_the_vented_prototype_is_a_model_a_greenhouse_can_name(tmp_path: Path) -> None:
-    """``prototype+vent_control``: six parameters; a virtual sensor trained on another model kind
-    is refused, naming the key."""
+    """``prototype+vent_control``: six parameters; a virtual sensor of a model kind the kit cannot
+    feed (almeria: t_soil) is refused, naming the key and the column."""
     from gateway.vsensor.models import __file__ as models_init
 
     write_keys(tmp_path / "keys.txt", {7: KEY})
@@ -129,7 +129,7 @@ def test_the_vented_prototype_is_a_model_a_greenhouse_can_name(tmp_path: Path) -
     assert res.model.name == "prototype+vent_control"
     assert res.model.names[-2:] == ["c_vc", "t_vc"] and len(res.model.names) == 6
     shipped = Path(models_init).with_name("almeria.onnx")
-    with pytest.raises(ConfigError, match=r"greenhouse\[1\]\.vsensor: .*prototype\+vent_control"):
+    with pytest.raises(ConfigError, match=r"greenhouse\[1\]\.vsensor: .*'almeria' model, which needs t_soil"):
         prepare(parse_config(with_("greenhouse.0.vsensor", str(shipped), vented), "gw.toml", tmp_path))
 
 

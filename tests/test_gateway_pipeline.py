@@ -253,7 +253,7 @@ def test_trace_is_usable() -> None:
 def test_a_ventilation_sensor_feeds_the_ventilation_messages(tmp_path: Path) -> None:
     """The hook the virtual ventilation sensor plugs into: whatever gives flow and heat loss each
     minute is stored and published as ``ventilation`` (a stand-in sensor here)."""
-    from gateway.service.pipeline import VentilationEstimate
+    from gateway.service.ventilation import VentilationEstimate, VentilationSensor
 
     calls = []
 
@@ -265,7 +265,8 @@ def test_a_ventilation_sensor_feeds_the_ventilation_messages(tmp_path: Path) -> 
     outbox = Outbox(s.conn)
     prod = Producers(s.conn, "f1", infos(), outbox)
     fill(s, range(20))
-    pl = GreenhousePipeline("north", GH, MODEL, 7, 7, None, ventilation=sensor)
+    pl = GreenhousePipeline("north", GH, MODEL, 7, 7, None,
+                            ventilation=VentilationSensor(sensor, MODEL))
     pl.resume(s.conn)
     pl.step_pending(s.conn, end(19), 0.0, 600.0)
     assert calls and calls[0][1] == ["q_cnv_cnd", "q_loss", "q_solar", "q_thermal"]
@@ -279,19 +280,21 @@ def test_a_ventilation_sensor_feeds_the_ventilation_messages(tmp_path: Path) -> 
 
 
 def test_the_shipped_virtual_sensor_plugs_into_the_service() -> None:
-    """resources.load_ventilation wraps the real ONNX sensor: finite, non-negative flows with
-    their heat loss each minute, flagged steps published as out of range, and a model trained
-    for another model kind refused with the mismatch named."""
+    """ventilation.load_ventilation wraps the real ONNX sensor for the model kind it was trained
+    on: finite, non-negative flows with their heat loss each minute, flagged steps published as
+    out of range; the shipped almeria-kind sensor is refused, naming t_soil (a kit has none)."""
     import pytest
 
-    from gateway.service.resources import load_ventilation
+    from gateway.service.ventilation import load_ventilation
     from gateway.vsensor.features import feature_names
     from gateway.vsensor.models import shipped_model
+    from tests.vsensor_data import tiny_model
 
     gh = load_greenhouse("almeria-palmerillas")
-    model = build_model("almeria", gh)
-    step = load_ventilation(shipped_model("almeria"), model, gh)
-    fluxes = dict.fromkeys(feature_names("almeria")[3:], 20.0)
+    sensor = load_ventilation(tiny_model("prototype", kind="prototype"), gh)
+    assert sensor.model.name == "prototype"
+    step = sensor.step
+    fluxes = dict.fromkeys(feature_names("prototype")[3:], 0.01)
     drivers = {"t_in": 24.0, "t_out": 18.0, "rh_in": 70.0, "rh_out": 55.0, "wind": 2.0}
     out = [step(EPOCH + 60.0 * k, drivers, fluxes) for k in range(10)]
     out.append(step(EPOCH + 3600.0, drivers, fluxes))  # after a gap: the history restarts
@@ -300,5 +303,5 @@ def test_the_shipped_virtual_sensor_plugs_into_the_service() -> None:
     assert out[-1].heat_loss >= 0.0  # warmer inside: the house loses heat through its vents
     missing = step(EPOCH + 3660.0, {**drivers, "t_in": math.nan}, fluxes)
     assert missing.out_of_range and math.isfinite(missing.flow)
-    with pytest.raises(ValueError, match="prototype|almeria"):
-        load_ventilation(shipped_model("almeria"), MODEL, GH)
+    with pytest.raises(ValueError, match="'almeria' model, which needs t_soil"):
+        load_ventilation(shipped_model("almeria"), gh)

@@ -45,9 +45,9 @@ def test_file() -> Path:
 
 
 @functools.cache
-def tiny_model(tag: str = "a", ensemble: int = 1, **options) -> Path:
-    """Train the tiny sensor (cache shared between tags, so a second tag only re-fits);
-    ``options``: more keyword arguments of ``train`` (e.g. ``target``)."""
+def tiny_model(tag: str = "a", ensemble: int = 1, kind: str = "almeria", **options) -> Path:
+    """Train the tiny sensor on the fluxes of the ``kind`` model (cache shared between tags, so
+    a second tag only re-fits); ``options``: more keyword arguments of ``train`` (e.g. ``target``)."""
     from threadpoolctl import threadpool_limits
 
     from gateway.greenhouse import load_greenhouse
@@ -55,7 +55,7 @@ def tiny_model(tag: str = "a", ensemble: int = 1, **options) -> Path:
 
     out = workdir() / tag / "tiny.onnx"
     with threadpool_limits(1):
-        train([str(p) for p in train_files()], load_greenhouse(GREENHOUSE), "almeria", out,
+        train([str(p) for p in train_files()], load_greenhouse(GREENHOUSE), kind, out,
               workdir() / "cache", TINY, seed=0, hidden=(8, 8), epochs=8, rounds=1,
               ensemble=ensemble, **options)
     return out

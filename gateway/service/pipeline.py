@@ -15,6 +15,9 @@ restart resumes exactly where the last commit left off. A snapshot of another mo
 greenhouse's ``model =`` changed, e.g. ``prototype`` → ``prototype+vent_control``) is migrated
 (gateway/estimate/state_migration.py: the matching parameters keep their values, the start's log
 line names what was kept, added and dropped); one that cannot be used starts anew, saying why.
+A virtual ventilation sensor reads the fluxes of its own model kind: the forecasting estimator's
+when the kinds agree, else those of a second estimator of its kind stepped on the same minutes
+(gateway/service/ventilation.py; its state is saved beside the forecasting one).
 """
 
 from __future__ import annotations
@@ -24,7 +27,6 @@ import math
 import sqlite3
 import time
 from collections import deque
-from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -38,6 +40,7 @@ from gateway.model.model import Model
 from gateway.service.forecaster import LiveForecaster
 from gateway.service.minutes import KIT_COLUMNS, Minute, final_before, first_minute, read_minutes
 from gateway.service.settings import EstimatorSettings, GreenhouseSettings
+from gateway.service.ventilation import STATE_KEY, SensorFeed, VentilationSensor, model_fluxes
 from gateway.store.db import transaction
 from gateway.store.live import EstimateRow, add_estimates, load_state, save_state
 
@@ -45,18 +48,6 @@ log = logging.getLogger("serra.gateway")
 DT = 60.0
 BATCH = 30  # minutes per transaction while catching up
 COMMIT_S = 0.5  # [wall s] a batch is committed early when it takes longer than this
-
-
-@dataclass
-class VentilationEstimate:
-    flow: float  # [m3 s-1]
-    heat_loss: float  # [W m-2 of floor]
-    out_of_range: bool = False
-
-
-Ventilation = Callable[[float, Mapping[str, float], Mapping[str, float]], VentilationEstimate | None]
-"""The virtual ventilation sensor's per-minute call (gateway/service/ventilation.py):
-``(t, drivers of the minute, heat fluxes [W m-2]) → estimate or None``."""
 
 
 @dataclass
@@ -78,7 +69,7 @@ class GreenhousePipeline:
                  outlook: str = GreenhouseSettings.outlook, seed: int = EstimatorSettings.seed,
                  gap_s: float = EstimatorSettings.gap_s,
                  history_min: int = EstimatorSettings.history_min,
-                 ventilation: Ventilation | None = None,
+                 ventilation: VentilationSensor | None = None,
                  forecast: str = EstimatorSettings.forecast) -> None:
         """The keyword defaults are the config's ([estimator] and [[greenhouse]] outlook), read
         from its dataclasses so that they cannot drift apart."""
@@ -89,6 +80,7 @@ class GreenhousePipeline:
         self.outlook: Outlook = make_outlook(outlook, gh)
         self.gap_s = gap_s
         self.ventilation = ventilation
+        self.vent: SensorFeed | None = None
         self._fresh = (theta0, seed, forecast)  # what a new estimator and forecaster start from
         self._start_fresh()
         self.cursor: int | None = None  # last minute stepped
@@ -102,6 +94,8 @@ class GreenhousePipeline:
         m, gh = self.model, self.gh
         self.est = OnlineEstimator(m, gh, theta0, online_settings(m, gh), dt=DT, seed=seed)
         self.forecaster = LiveForecaster(m, gh, DT, self.horizons, forecast)
+        if self.ventilation is not None:
+            self.vent = SensorFeed(self.ventilation, m, gh, seed, DT)
 
     # -- start ------------------------------------------------------------------------------
     def resume(self, conn: sqlite3.Connection) -> str:
@@ -117,6 +111,8 @@ class GreenhousePipeline:
                 self.est.restore(state)
                 # a state saved before the forecaster existed starts it afresh
                 self.forecaster.restore(state.get("forecaster"))
+                if self.vent is not None:  # the state as saved: it may hold the sensor's kind
+                    note += self.vent.restore(saved.state)
             except (ValueError, KeyError, TypeError, IndexError) as e:
                 msg = f"greenhouse {self.name}: saved estimator state not used ({e}); starting anew"
                 saved = None
@@ -129,6 +125,8 @@ class GreenhousePipeline:
                         f"({self.est.counters.samples} minutes stepped so far){note}")
         else:
             msg = f"greenhouse {self.name}: new estimator ({self.model.name})"
+        if self.vent is not None:
+            msg += self.vent.describe()
         first = first_minute(conn, self.inside)
         if first is not None:  # a store with history: warm up on its last `history_min` minutes
             last = conn.execute("SELECT max(minute) FROM minute WHERE device_id=?",
@@ -175,6 +173,9 @@ class GreenhousePipeline:
     def _snapshot(self) -> dict:
         snap = self.est.snapshot()
         snap["forecaster"] = self.forecaster.snapshot()
+        vent = self.vent.snapshot() if self.vent is not None else None
+        if vent is not None:
+            snap[STATE_KEY] = vent
         return snap
 
     def _advance_to(self, m: Minute, report: StepReport) -> list[EstimateRow]:
@@ -183,6 +184,8 @@ class GreenhousePipeline:
             gap_h = (m.minute - self.cursor) / 3600
             self.est.restart_window()
             self.forecaster.reset()
+            if self.vent is not None:
+                self.vent.restart_window()
             report.restarts += 1
             report.notes.append(f"greenhouse {self.name}: window restarted after a {gap_h:.1f} h "
                                 f"gap in the data (parameters kept)")
@@ -206,8 +209,11 @@ class GreenhousePipeline:
 
     def _step(self, m: Minute) -> list[EstimateRow]:
         self._remember(m)
-        pred = self.est.update(m.values, time=np.datetime64(int(m.minute), "s"))
-        self.forecaster.update(self.est.last_row, pred.theta, np.datetime64(int(m.minute), "s"))
+        when = np.datetime64(int(m.minute), "s")
+        pred = self.est.update(m.values, time=when)
+        self.forecaster.update(self.est.last_row, pred.theta, when)
+        if self.vent is not None:
+            self.vent.update(m.values, when)
         self.cursor = m.minute
         self.state = "running"
         t, g = float(m.minute), self.name
@@ -221,24 +227,18 @@ class GreenhousePipeline:
             rows.append(EstimateRow(g, t, "online", "t_in_next", pred.t_in, "degC", info))
         if not math.isfinite(t_in):
             return rows
-        flux = self._fluxes(pred.theta, t_in)
+        flux = model_fluxes(self.model, pred.theta, self.est.last_row, t_in)
         rows += [EstimateRow(g, t, "flux", n, v, "W m-2") for n, v in flux.items()]
         rows += [EstimateRow(g, t, "forecast", f"t_in+{h}min", v, "degC", self.outlook.name)
                  for h, v in self._forecasts(pred.theta, t)]
-        if self.ventilation is not None and flux:
-            vent = self.ventilation(t, self.est.last_row, flux)
+        if self.vent is not None:
+            vent = self.vent.estimate(t, t_in, self.est.last_row, flux)
             if vent is not None:
                 flag = "out_of_range" if vent.out_of_range else ""
                 rows += [EstimateRow(g, t, "vsensor", "ventilation_flow", vent.flow, "m3 s-1", flag),
                          EstimateRow(g, t, "vsensor", "ventilation_heat_loss", vent.heat_loss,
                                      "W m-2", flag)]
         return rows
-
-    def _fluxes(self, theta: np.ndarray, t_in: float) -> dict[str, float]:
-        x = {k: np.array([v]) for k, v in self.est.last_row.items()}
-        q = self.model.fluxes(theta, x, np.array([t_in]))
-        out = {k: float(np.asarray(v).reshape(-1)[0]) for k, v in q.items()}
-        return out if all(math.isfinite(v) for v in out.values()) else {}
 
     def _forecasts(self, theta: np.ndarray, t: float) -> list[tuple[int, float]]:
         """T_in at t + h for each horizon (the forecaster's kind: from the measured T_in at t

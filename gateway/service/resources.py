@@ -6,9 +6,7 @@ start with but should be told (a starting parameter outside its hard box) is a w
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from pathlib import Path
 
 import numpy as np
 
@@ -18,8 +16,8 @@ from gateway.model.model import Model
 from gateway.model.params_file import ParamsFileError, outside_box, read_params
 from gateway.service.config import ConfigError
 from gateway.service.minutes import KIT_COLUMNS
-from gateway.service.pipeline import Ventilation, VentilationEstimate
 from gateway.service.settings import GatewayConfig, GreenhouseSettings
+from gateway.service.ventilation import VentilationSensor, load_ventilation
 from gateway.store.keys import KeyFileError, load_keys
 
 
@@ -29,7 +27,7 @@ class GreenhouseResources:
     gh: Greenhouse
     model: Model
     theta0: np.ndarray | None
-    ventilation: Ventilation | None
+    ventilation: VentilationSensor | None
     warnings: tuple[str, ...] = ()  # one line each, naming the config key: not errors
 
 
@@ -41,37 +39,6 @@ def params_warnings(where: str, g: GreenhouseSettings, theta0: np.ndarray, model
     bounds were narrowed still starts (the value used is inside the box)."""
     return tuple(f"{where}.params ({g.name}): {o.describe(g.params or '')}"
                  for o in outside_box(theta0, model, gh))
-
-
-VENT_GAP_S = 90.0
-"""A longer step between two calls restarts the sensor's history (its filters, input delays and
-fed-back outputs), as the estimator restarts its window after a gap."""
-
-
-def load_ventilation(path: Path, model: Model, gh: Greenhouse) -> Ventilation:
-    """The virtual ventilation sensor (gateway/vsensor, docs/vsensor.md) for ``model``.
-
-    The pipeline calls the returned function once per minute with (t, the minute's drivers, the
-    adaptive model's heat fluxes [W m-2]) and publishes what it returns under ``ventilation``.
-    The ONNX model must have been trained for this model kind (its metadata is checked: a
-    mismatch is a ValueError naming it); a step with flagged inputs (missing, outside the
-    training ranges, another greenhouse's vents) is published with ``out_of_range`` set."""
-    from gateway.vsensor import VentSensor
-
-    if not path.exists():
-        raise ValueError(f"{path}: no such ONNX model")
-    sensor = VentSensor(path, gh, model.name, threads=1)
-    last: list[float] = []
-
-    def step(t: float, drivers: Mapping[str, float],
-             fluxes: Mapping[str, float]) -> VentilationEstimate:
-        if last and t - last[0] > VENT_GAP_S:
-            sensor.reset()
-        last[:] = [t]
-        est = sensor.step(drivers, fluxes)
-        return VentilationEstimate(est.flow, est.q_vent, out_of_range=not est.valid)
-
-    return step
 
 
 def prepare(cfg: GatewayConfig) -> list[GreenhouseResources]:
@@ -121,7 +88,7 @@ def prepare(cfg: GatewayConfig) -> list[GreenhouseResources]:
         vent = None
         if g.vsensor is not None:
             try:
-                vent = load_ventilation(g.vsensor, model, gh)
+                vent = load_ventilation(g.vsensor, gh)  # its own kind (ventilation.py)
             except (ValueError, OSError) as e:
                 raise ConfigError(f"{where}.vsensor: {e}") from None
         out.append(GreenhouseResources(g, gh, model, theta0, vent, warnings))

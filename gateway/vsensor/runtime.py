@@ -217,8 +217,11 @@ def _mixed_needs_driver(info: ModelInfo) -> bool:
 class VentSensor:
     """The deployed sensor for one greenhouse (see the module docstring)."""
 
-    def __init__(self, model_path: str | Path, gh: Greenhouse, model_kind: str,
+    def __init__(self, model_path: str | Path, gh: Greenhouse, model_kind: str | None,
                  threads: int = 1, clamp_inputs: bool = False) -> None:
+        """``model_kind``: the model whose fluxes will be fed (a model trained on another kind
+        is refused); None: the kind the model was trained on (its metadata's ``model_kind``),
+        for a caller that feeds whatever the model reads (gateway/service/ventilation.py)."""
         import onnxruntime as ort
 
         opts = ort.SessionOptions()
@@ -231,6 +234,7 @@ class VentSensor:
         except Exception as exc:  # onnxruntime raises its own exception types
             raise ModelMismatch(f"{model_path}: cannot load as an ONNX model: {exc}") from None
         self.info = read_info(model_path, self.session)
+        model_kind = self.info.kind if model_kind is None else model_kind
         shape = self.session.get_inputs()[0].shape
         check_model(self.info, model_kind, shape[-1] if isinstance(shape[-1], int) else None)
         self.gh, self.kind = gh, model_kind

@@ -1,0 +1,155 @@
+"""The virtual ventilation sensor in the live service, and the estimator that feeds it.
+
+A sensor reads the heat fluxes of the adaptive model kind it was trained on (its ONNX metadata's
+``model_kind``, ``prototype`` or ``almeria``: docs/vsensor.md). When the greenhouse's forecasting
+model is that kind, the forecasting estimator's fluxes feed it (one estimator). When it is another
+(e.g. ``prototype+vent_control``), a second :class:`OnlineEstimator` of the sensor's kind steps on
+the same minutes' drivers with its own parameters and state; its fluxes go only to the sensor (the
+published fluxes and forecasts stay the forecasting model's). Its snapshot rides in the pipeline's
+saved state under :data:`STATE_KEY`, so a restart resumes it too.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gateway.estimate.online import OnlineEstimator, online_settings
+from gateway.greenhouse import Greenhouse
+from gateway.model import build_model
+from gateway.model.model import Model
+from gateway.service.minutes import KIT_COLUMNS
+
+VENT_GAP_S = 90.0
+"""A longer step between two calls restarts the sensor's history (its filters, input delays and
+fed-back outputs), as the estimator restarts its window after a gap."""
+STATE_KEY = "vsensor_estimator"
+"""Where the sensor's own estimator's snapshot sits in the pipeline's saved state."""
+
+
+@dataclass
+class VentilationEstimate:
+    flow: float  # [m3 s-1]
+    heat_loss: float  # [W m-2 of floor]
+    out_of_range: bool = False
+
+
+Ventilation = Callable[[float, Mapping[str, float], Mapping[str, float]], VentilationEstimate | None]
+"""The sensor's per-minute call: ``(t, drivers of the minute, heat fluxes [W m-2]) → estimate or
+None``."""
+
+
+@dataclass(frozen=True)
+class VentilationSensor:
+    """The per-minute call and the model whose fluxes it reads (built for the greenhouse)."""
+
+    step: Ventilation
+    model: Model
+
+
+def load_ventilation(path: Path, gh: Greenhouse) -> VentilationSensor:
+    """The ONNX sensor (gateway/vsensor) at ``path`` for the model kind it was trained on.
+
+    ValueError (naming the file) when it cannot be loaded or when that kind needs a column a
+    Serra kit does not measure (the ``almeria`` kind needs ``t_soil``). A step with flagged inputs
+    (missing, outside the training ranges, another greenhouse's vents) is returned with
+    ``out_of_range`` set."""
+    from gateway.vsensor import VentSensor
+
+    if not path.exists():
+        raise ValueError(f"{path}: no such ONNX model")
+    sensor = VentSensor(path, gh, None, threads=1)  # ModelMismatch is a ValueError
+    model = build_model(sensor.kind, gh)
+    missing = [c for c in model.requires if c not in KIT_COLUMNS]
+    if missing:
+        raise ValueError(f"{path}: trained on the fluxes of the '{sensor.kind}' model, which needs "
+                         f"{', '.join(missing)}, which a Serra kit does not measure (kit: "
+                         f"{', '.join(KIT_COLUMNS)}); use a sensor trained with --model prototype")
+    last: list[float] = []
+
+    def step(t: float, drivers: Mapping[str, float],
+             fluxes: Mapping[str, float]) -> VentilationEstimate:
+        if last and t - last[0] > VENT_GAP_S:
+            sensor.reset()
+        last[:] = [t]
+        est = sensor.step(drivers, fluxes)
+        return VentilationEstimate(est.flow, est.q_vent, out_of_range=not est.valid)
+
+    return VentilationSensor(step, model)
+
+
+def model_fluxes(model: Model, theta: np.ndarray, row: Mapping[str, float],
+                 t_in: float) -> dict[str, float]:
+    """Every term's flux [W m-2] on one minute's drivers with ``theta``; {} when one is not finite."""
+    x = {k: np.array([v]) for k, v in row.items()}
+    q = model.fluxes(theta, x, np.array([t_in]))
+    out = {k: float(np.asarray(v).reshape(-1)[0]) for k, v in q.items()}
+    return out if all(math.isfinite(v) for v in out.values()) else {}
+
+
+class SensorFeed:
+    """The sensor and what feeds it: the forecasting estimator, or its own estimator."""
+
+    def __init__(self, sensor: VentilationSensor, model: Model, gh: Greenhouse, seed: int,
+                 dt: float) -> None:
+        self.sensor = sensor
+        self._fresh = (gh, seed, dt)
+        self.own: OnlineEstimator | None = None
+        if sensor.model.name != model.name:
+            self._start_fresh()
+
+    def _start_fresh(self) -> None:
+        gh, seed, dt = self._fresh
+        m = self.sensor.model
+        # the forecasting estimator's settings and seed: the same flows as a greenhouse whose
+        # forecasting model is the sensor's kind (tests/test_gateway_ventilation.py)
+        self.own = OnlineEstimator(m, gh, None, online_settings(m, gh), dt=dt, seed=seed)
+
+    def describe(self) -> str:
+        return "" if self.own is None else (
+            f"; ventilation sensor fed by its own '{self.sensor.model.name}' estimator")
+
+    def update(self, values: Mapping[str, float], time: np.datetime64) -> None:
+        """Step the sensor's own estimator (if any) on the minute the forecasting one just took."""
+        if self.own is not None:
+            self.own.update(values, time=time)
+
+    def restart_window(self) -> None:
+        if self.own is not None:
+            self.own.restart_window()
+
+    def estimate(self, t: float, t_in: float, drivers: Mapping[str, float],
+                 fluxes: Mapping[str, float]) -> VentilationEstimate | None:
+        """The sensor's estimate for minute ``t``: ``drivers`` and ``fluxes`` are the forecasting
+        estimator's, used when the sensor reads that model; else its own estimator's."""
+        if self.own is not None:
+            drivers = self.own.last_row
+            fluxes = model_fluxes(self.own.model, self.own.theta, drivers, t_in)
+        return self.sensor.step(t, drivers, fluxes) if fluxes else None
+
+    def snapshot(self) -> dict | None:
+        return None if self.own is None else self.own.snapshot()
+
+    def restore(self, saved: Mapping) -> str:
+        """Resume the own estimator from the pipeline's saved state (as saved, before any
+        migration): its snapshot under :data:`STATE_KEY`, or the forecasting estimator's when that
+        was of the sensor's kind (the greenhouse's ``model =`` changed from it). Else it starts
+        anew. Returns the note for the start's log line; the forecasting state is never touched."""
+        if self.own is None:
+            return ""
+        kind = self.sensor.model.name
+        for snap, how in ((saved.get(STATE_KEY), "resumed"),
+                          (saved, "resumed from the saved forecasting estimator")):
+            if not isinstance(snap, Mapping) or snap.get("model") != kind:
+                continue
+            try:
+                self.own.restore(snap)
+                return f"; ventilation sensor's '{kind}' estimator {how}"
+            except (ValueError, KeyError, TypeError, IndexError) as e:
+                self._start_fresh()  # a restore that failed half-way leaves nothing behind
+                return f"; ventilation sensor's '{kind}' estimator starts anew (its state: {e})"
+        return f"; ventilation sensor's '{kind}' estimator starts anew (no saved state of it)"

@@ -23,25 +23,33 @@ def result():
     return replay(ALMERIA, series, GH, settings=online_settings(ALMERIA, GH, FAST), horizons=HORIZONS)
 
 
+def live_forecasts(res, kind: str, restart: bool = False) -> tuple[dict[int, np.ndarray], int]:
+    """The live forecaster fed ``res``'s rows and parameters step by step, the weather later
+    measured as its outlook: {h: forecast made at t} and the first start not run (with
+    ``restart``, through a JSON round trip of its state half-way)."""
+    x, theta, n = res.x, res.theta, len(res.measured)
+    live = LiveForecaster(ALMERIA, GH, res.dt, HORIZONS, kind)
+    got = {h: np.full(n, np.nan) for h in HORIZONS}
+    stop = n - max(HORIZONS) - 1
+    for t in range(stop):
+        if restart and t == stop // 2:
+            snap = json.loads(json.dumps(live.snapshot()))
+            live = LiveForecaster(ALMERIA, GH, res.dt, HORIZONS, kind)
+            live.restore(snap)
+        live.update({k: float(v[t]) for k, v in x.items()}, theta[t], res.time[t])
+        if np.isfinite(res.measured[t]):
+            block = {k: v[t: t + max(HORIZONS) + 1] for k, v in x.items()}
+            for h, v in live.forecasts(theta[t], block, HORIZONS).items():
+                got[h][t] = v
+    return got, stop
+
+
 @pytest.mark.parametrize("kind", KINDS)
 def test_step_by_step_is_the_replay_forecast(result, kind):
     """Fed the replay's rows and parameters, with the weather later measured as its outlook, the
     live forecaster reproduces replay's row of the same name (through a JSON round trip of its
     state half-way)."""
-    x, theta, n = result.x, result.theta, len(result.measured)
-    live = LiveForecaster(ALMERIA, GH, result.dt, HORIZONS, kind)
-    got = {h: np.full(n, np.nan) for h in HORIZONS}
-    stop = n - max(HORIZONS) - 1
-    for t in range(stop):
-        if t == stop // 2:
-            snap = json.loads(json.dumps(live.snapshot()))
-            live = LiveForecaster(ALMERIA, GH, result.dt, HORIZONS, kind)
-            live.restore(snap)
-        live.update({k: float(v[t]) for k, v in x.items()}, theta[t], result.time[t])
-        if np.isfinite(result.measured[t]):
-            block = {k: v[t: t + max(HORIZONS) + 1] for k, v in x.items()}
-            for h, v in live.forecasts(theta[t], block, HORIZONS).items():
-                got[h][t] = v
+    got, stop = live_forecasts(result, kind, restart=True)
     for h in HORIZONS:
         f = result.horizons[h]
         starts = f["target"] - h
@@ -64,16 +72,7 @@ def test_the_applied_correction_is_the_replays(result, monkeypatch):
     monkeypatch.setattr(correction, "Corrector", Quick)
     res = copy_with(result, horizons={})
     score_forecasts(res, steps_of(HORIZONS, res.dt))
-    x, theta, n = res.x, res.theta, len(res.measured)
-    live = LiveForecaster(ALMERIA, GH, res.dt, HORIZONS, "corrected")
-    got = {h: np.full(n, np.nan) for h in HORIZONS}
-    stop = n - max(HORIZONS) - 1
-    for t in range(stop):
-        live.update({k: float(v[t]) for k, v in x.items()}, theta[t], res.time[t])
-        if np.isfinite(res.measured[t]):
-            block = {k: v[t: t + max(HORIZONS) + 1] for k, v in x.items()}
-            for h, v in live.forecasts(theta[t], block, HORIZONS).items():
-                got[h][t] = v
+    got, stop = live_forecasts(res, "corrected")
     for h in HORIZONS:
         f = res.horizons[h]
         starts = f["target"] - h

@@ -1,15 +1,15 @@
 """Study: the sky the live gateway's forecasts see, against replay's (issue 10, noticed by fs).
 
-The estimator reads the cloud fraction from a tracker carried sample to sample
-(gateway/model/sky.py ``CloudTracker``) and replay's outlook blocks derive it per lead time from
-the series of outlooks (gateway/estimate/horizon.py). The live pipeline
-(gateway/service/pipeline.py ``_forecasts``) runs ``prepare_drivers`` on the one-hour block it
-forecasts with, so the cloud is read from that block alone: ``DEFAULT_CLOUD`` at night and until
-the block holds 30 min of strong sun. This rescores the replays kept by
-``tests/generality/forecasts.py --keep DIR`` with the outlook blocks' cloud (and the sky
-temperature made from it) replaced:
+Before commit 490fabd the estimator read the cloud fraction from a tracker carried sample to
+sample (gateway/model/sky.py ``CloudTracker``) and replay's outlook blocks derived it per lead
+time from the series of outlooks, while the live pipeline (gateway/service/pipeline.py
+``_forecasts``) ran ``prepare_drivers`` on the one-hour block it forecast with, so its cloud was
+read from that block alone: ``DEFAULT_CLOUD`` at night and until the block held 30 min of strong
+sun. Both now hold the estimator's cloud at the start (gateway/estimate/horizon.py). This
+rescores replays kept by ``tests/generality/forecasts.py --keep DIR`` (made before that commit)
+with the outlook blocks' cloud (and the sky temperature made from it) replaced:
 
-- ``block``: derived from each block alone, as the live pipeline does;
+- ``block``: derived from each block alone, as the live pipeline did;
 - ``held``: the estimator's cloud at the start, held over the horizon.
 
 Never reads the held-out generator's replays. Writes a results file like ``forecasts.py``'s

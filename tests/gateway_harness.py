@@ -218,3 +218,27 @@ def sim_trace(days: float = 1.0, start: str = "2009-11-01") -> dict[str, np.ndar
     sim = simulate(plant="prototype", weather="bleiswijk", start=start, days=days, seed=0, step=60)
     skip = 6 * 60  # the trace starts at EPOCH (06:00)
     return {c: np.asarray(sim.columns[c][skip:], dtype=float) for c in p.CHANNELS}
+
+
+def store_trace(store, trace: dict[str, np.ndarray], minutes: range, device: int = 7,
+                change_after: int | None = None, boot: int = 0) -> None:
+    """Records of ``trace`` (``sim_trace``'s columns), one per minute from EPOCH, stamped
+    mid-minute, written to the gateway store ``store`` and aggregated into minutes; with
+    ``change_after``, t_out and i_glob are +5 after that minute (another future, same past)."""
+    from gateway.store.aggregate import aggregate
+
+    items = []
+    for k in minutes:
+        vals, st = [], []
+        for c in p.CHANNELS:
+            v = float(trace[c][k])
+            if change_after is not None and k > change_after and c in ("t_out", "i_glob"):
+                v = v + 5.0
+            ok = math.isfinite(v)
+            vals.append(v if ok else None)
+            st.append(p.ST_OK if ok else p.ST_TIMEOUT)
+        items.append((p.Record(device, boot, k, k * 60_000, 0, 60.0, tuple(vals), tuple(st)),
+                      EPOCH + 60 * k + 30))
+    store.write_batch(items)
+    while aggregate(store.conn):
+        pass

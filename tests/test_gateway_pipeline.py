@@ -11,7 +11,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gateway import protocol as p
 from gateway.greenhouse import load_greenhouse
 from gateway.model import build_model
 from gateway.publish import validate
@@ -20,10 +19,9 @@ from gateway.service.diagnosis import store_findings
 from gateway.service.pipeline import GreenhousePipeline, StepReport
 from gateway.service.producers import GreenhouseInfo, Producers
 from gateway.store import Store
-from gateway.store.aggregate import aggregate
 from gateway.store.live import findings
 from gateway.store.outbox import Outbox
-from tests.gateway_harness import EPOCH, sim_trace
+from tests.gateway_harness import EPOCH, sim_trace, store_trace
 
 GH = load_greenhouse("biskra-prototype")
 MODEL = build_model("prototype", GH)
@@ -33,21 +31,7 @@ TRACE = sim_trace(days=1.0)
 def fill(store: Store, minutes: range, device: int = 7, change_after: int | None = None,
          boot: int = 0) -> None:
     """Records of the simulated trace, one per minute, stamped mid-minute."""
-    items = []
-    for k in minutes:
-        vals, st = [], []
-        for c in p.CHANNELS:
-            v = float(TRACE[c][k])
-            if change_after is not None and k > change_after and c in ("t_out", "i_glob"):
-                v = v + 5.0  # a different future
-            ok = math.isfinite(v)
-            vals.append(v if ok else None)
-            st.append(p.ST_OK if ok else p.ST_TIMEOUT)
-        items.append((p.Record(device, boot, k, k * 60_000, 0, 60.0, tuple(vals), tuple(st)),
-                      EPOCH + 60 * k + 30))
-    store.write_batch(items)
-    while aggregate(store.conn):
-        pass
+    store_trace(store, TRACE, minutes, device, change_after, boot)
 
 
 def pipeline() -> GreenhousePipeline:

@@ -13,17 +13,15 @@ from pathlib import Path
 
 import pytest
 
-from gateway import protocol as p
 from gateway.service.clock import WallClock
 from gateway.service.config import ConfigError, load_config
 from gateway.service.resources import prepare
 from gateway.service.ventilation import STATE_KEY
 from gateway.service.worker import Worker
 from gateway.store import Store
-from gateway.store.aggregate import aggregate
 from gateway.store.keys import write_keys
 from gateway.vsensor.models import shipped_model
-from tests.gateway_harness import EPOCH, KEY, sim_trace
+from tests.gateway_harness import EPOCH, KEY, sim_trace, store_trace
 from tests.vsensor_data import tiny_model
 
 TRACE = sim_trace(days=0.5)  # 6 h from 06:00
@@ -50,16 +48,7 @@ def write(folder: Path, models: dict[str, str], vsensor: Path) -> Path:
 
 def fill(store: Store, minutes: range) -> None:
     """Records of the simulated trace, one per minute, stamped mid-minute."""
-    items = []
-    for k in minutes:
-        vals = [float(TRACE[c][k]) for c in p.CHANNELS]
-        st = [p.ST_OK if math.isfinite(v) else p.ST_TIMEOUT for v in vals]
-        items.append((p.Record(7, 0, k, k * 60_000, 0, 60.0,
-                               tuple(v if math.isfinite(v) else None for v in vals), tuple(st)),
-                      EPOCH + 60 * k + 30))
-    store.write_batch(items)
-    while aggregate(store.conn):
-        pass
+    store_trace(store, TRACE, minutes)
 
 
 def start(cfg: Path, store: Store, caplog) -> Worker:

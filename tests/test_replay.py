@@ -198,6 +198,21 @@ def test_report_has_the_arx_baseline_and_the_outlook_forecasts(result):
         assert len({m["n"] for m in block.values()}) == 1  # one set of samples per comparison
 
 
+KIT = ["t_in", "rh_in", "t_out", "rh_out", "i_glob", "wind", "i_in", "t_soil", "vent_roof",
+       "vent_side", "lai"]
+"""The almeria model's columns, the kit's and the house's: what an outlook is asked for."""
+
+
+class MeasuredFuture:
+    """An outlook that returns what was later measured (to check the blocks' layout)."""
+
+    name = "measured"
+
+    def drivers_at(self, columns, time, starts, horizon, dt):
+        idx = np.minimum(starts[:, None] + np.arange(1, horizon + 1)[None, :], len(time) - 1)
+        return {k: np.asarray(v, float)[idx] for k, v in columns.items()}
+
+
 def steady_sky(result):
     """``result`` with one cloud fraction all along (its sky temperature made from it): an
     outlook holds the start's cloud over its horizon (gateway/estimate/horizon.py), so only
@@ -220,19 +235,9 @@ def test_an_outlook_of_the_measured_future_gives_the_measured_weather_forecasts(
 
     from gateway.estimate.horizon import outlook_drivers
 
-    class Measured:
-        name = "measured"
-
-        def drivers_at(self, columns, time, starts, horizon, dt):
-            n = len(time)
-            idx = np.minimum(starts[:, None] + np.arange(1, horizon + 1)[None, :], n - 1)
-            return {k: np.asarray(v, float)[idx] for k, v in columns.items()}
-
-    kit = ["t_in", "rh_in", "t_out", "rh_out", "i_glob", "wind", "i_in", "t_soil", "vent_roof",
-           "vent_side", "lai"]
     n = len(result.measured)
     steady = steady_sky(result)
-    ahead = outlook_drivers(Measured(), steady.x, kit, result.time, result.dt, result.gh,
+    ahead = outlook_drivers(MeasuredFuture(), steady.x, KIT, result.time, result.dt, result.gh,
                             np.arange(n - 1), 15)
     f = forecasts(copy_with(steady, ahead=ahead), 15)
     ok = np.isfinite(f["adaptive"])
@@ -253,24 +258,15 @@ def test_the_outlook_correction_reads_the_outlook_blocks(result, monkeypatch):
     from gateway.estimate.horizon import outlook_drivers
     from gateway.estimate.replay import score_forecasts, steps_of
 
-    class Measured:
-        name = "measured"
-
-        def drivers_at(self, columns, time, starts, horizon, dt):
-            idx = np.minimum(starts[:, None] + np.arange(1, horizon + 1)[None, :], len(time) - 1)
-            return {k: np.asarray(v, float)[idx] for k, v in columns.items()}
-
     class Quick(correction.Corrector):
         def __init__(self, horizons, dt, *args) -> None:
             super().__init__(horizons, dt, correction.MEMORY_S, correction.RIDGE, 3600.0)
 
     monkeypatch.setattr(correction, "Corrector", Quick)
-    kit = ["t_in", "rh_in", "t_out", "rh_out", "i_glob", "wind", "i_in", "t_soil", "vent_roof",
-           "vent_side", "lai"]
     n = len(result.measured)
     reach = steps_of((15, 60), result.dt)
     steady = steady_sky(result)
-    ahead = outlook_drivers(Measured(), steady.x, kit, result.time, result.dt, result.gh,
+    ahead = outlook_drivers(MeasuredFuture(), steady.x, KIT, result.time, result.dt, result.gh,
                             np.arange(n - 1), max(reach.values()))
     res = copy_with(steady, ahead=ahead, horizons={})
     score_forecasts(res, reach)

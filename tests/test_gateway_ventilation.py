@@ -1,8 +1,10 @@
 """The virtual ventilation sensor in the live gateway (gateway/service/ventilation.py), on a real
 SQLite file with the real config loader, worker set-up, pipelines and ONNX sensor (a tiny
-prototype-kind model trained here, tests/vsensor_data.py): a greenhouse whose forecasting model
-is not the sensor's kind feeds the sensor from a second estimator of that kind, with the same
-flows as a greenhouse forecasting with that kind; a sensor the kit cannot feed is refused."""
+prototype-kind model trained here, tests/vsensor_data.py, with a small estimator budget): a
+greenhouse whose forecasting model is not the sensor's kind, or whose estimator settings are not
+the ones the sensor was trained with, feeds the sensor from a second estimator of that kind and
+those settings, with the same flows whatever the forecasting model; a sensor the kit cannot feed
+is refused."""
 
 from __future__ import annotations
 
@@ -20,9 +22,10 @@ from gateway.service.ventilation import STATE_KEY
 from gateway.service.worker import Worker
 from gateway.store import Store
 from gateway.store.keys import write_keys
+from gateway.vsensor.adaptive import settings_for
 from gateway.vsensor.models import shipped_model
 from tests.gateway_harness import EPOCH, KEY, sim_trace, store_trace
-from tests.vsensor_data import tiny_model
+from tests.vsensor_data import TINY, rewrite_metadata, tiny_model
 
 TRACE = sim_trace(days=0.5)  # 6 h from 06:00
 VENTED = "prototype+vent_control"
@@ -30,8 +33,16 @@ VENTED = "prototype+vent_control"
 
 @pytest.fixture(scope="module")
 def sensor() -> Path:
-    """A prototype-kind sensor (kit columns only), trained on the Almería house with vents."""
+    """A prototype-kind sensor (kit columns only), trained on the Almería house with vents on
+    the fluxes of an estimator with the TINY budget (its metadata's online_overrides)."""
     return tiny_model("prototype", kind="prototype")
+
+
+@pytest.fixture(scope="module")
+def live_settings_sensor(sensor, tmp_path_factory) -> Path:
+    """The same sensor as if trained with the live estimator's own settings (no overrides)."""
+    return rewrite_metadata(sensor, tmp_path_factory.mktemp("live") / "live.onnx",
+                            online_overrides={})
 
 
 def write(folder: Path, models: dict[str, str], vsensor: Path) -> Path:
@@ -81,7 +92,7 @@ def test_a_vented_forecasting_model_runs_a_prototype_sensor_every_minute(tmp_pat
     store = Store(tmp_path / "gw.db")
     fill(store, range(61))
     worker = start(write(tmp_path, {"north": VENTED}, sensor), store, caplog)
-    assert "ventilation sensor fed by its own 'prototype' estimator" in caplog.text
+    assert "ventilation sensor fed by its own 'prototype' estimator (its kind)" in caplog.text
     step(worker, store, 60)
     measured = [t for (t,) in store.conn.execute(
         "SELECT t FROM estimates WHERE source='measured' AND name='t_in' ORDER BY t")]
@@ -97,19 +108,40 @@ def test_a_vented_forecasting_model_runs_a_prototype_sensor_every_minute(tmp_pat
     assert [d["ventilationFlow"]["value"] for d in vent] == list(got.values())
 
 
-def test_the_sensor_gives_the_same_flows_whatever_the_forecasting_model(tmp_path, sensor, caplog):
-    """Same data, same seed: the vented greenhouse's sensor (fed by its own prototype estimator)
-    publishes exactly the flows of a prototype greenhouse's sensor (fed by its forecasting one)."""
+def test_the_sensor_is_fed_with_its_training_settings_whatever_the_forecasting_model(
+        tmp_path, sensor, caplog):
+    """A sensor trained on an estimator with other settings (TINY, not the live budget) gets its
+    own estimator with those settings even where the forecasting model is its kind; the vented
+    and the prototype greenhouse then publish exactly the same flows (same data, same seed)."""
     store = Store(tmp_path / "gw.db")
     fill(store, range(91))
     worker = start(write(tmp_path, {"plain": "prototype", "vented": VENTED}, sensor), store, caplog)
+    assert "own 'prototype' estimator (its training settings)" in caplog.text
+    trained = settings_for(worker.pipelines[0].model, worker.pipelines[0].gh, TINY)
+    for pl in worker.pipelines:
+        assert pl.vent is not None and pl.vent.own is not None
+        assert pl.vent.own.settings == trained and pl.est.settings != trained
     step(worker, store, 90)
     plain, vented = flows(store, "plain"), flows(store, "vented")
     assert len(plain) >= 80 and vented == plain
     assert len(set(plain.values())) > 1  # the sensor moves with the data
 
 
-def test_the_sensors_estimator_resumes_with_the_forecasting_one(tmp_path, sensor, caplog):
+def test_a_sensor_trained_on_the_live_settings_reads_the_forecasting_estimator(
+        tmp_path, live_settings_sensor, caplog):
+    """Same kind, same settings: one estimator, whose fluxes feed the sensor."""
+    store = Store(tmp_path / "gw.db")
+    fill(store, range(31))
+    worker = start(write(tmp_path, {"plain": "prototype"}, live_settings_sensor), store, caplog)
+    assert "fed by its own" not in caplog.text
+    pl = worker.pipelines[0]
+    assert pl.vent is not None and pl.vent.own is None
+    step(worker, store, 30)
+    assert len(flows(store, "plain")) >= 25
+
+
+def test_the_sensors_estimator_resumes_with_the_forecasting_one(tmp_path, live_settings_sensor,
+                                                                caplog):
     """A restart resumes both estimators exactly (the sensor's rides in the saved state); a
     greenhouse moved from ``prototype`` to the vented model resumes the sensor's estimator from
     the saved prototype estimator, and its forecasting state is migrated as before."""
@@ -118,14 +150,14 @@ def test_the_sensors_estimator_resumes_with_the_forecasting_one(tmp_path, sensor
         fill(s, range(91))
     (tmp_path / "a").mkdir()
     (tmp_path / "b").mkdir()
-    cfg_a = write(tmp_path / "a", {"north": VENTED}, sensor)
+    cfg_a = write(tmp_path / "a", {"north": VENTED}, live_settings_sensor)
     ref = start(cfg_a, whole, caplog)
     step(ref, whole, 90)
-    cfg_b = write(tmp_path / "b", {"north": "prototype"}, sensor)
+    cfg_b = write(tmp_path / "b", {"north": "prototype"}, live_settings_sensor)
     first = start(cfg_b, split, caplog)
     step(first, split, 45)
     saved = json.loads(split.conn.execute("SELECT state FROM estimator_state").fetchone()[0])
-    assert STATE_KEY not in saved  # one estimator while the kinds agree
+    assert STATE_KEY not in saved  # one estimator while kind and settings agree
     caplog.clear()
     cfg_b.write_text(cfg_b.read_text().replace('"prototype"', f'"{VENTED}"'))
     second = start(cfg_b, split, caplog)

@@ -3,8 +3,11 @@
 A sensor reads the heat fluxes of the adaptive model kind it was trained on (its ONNX metadata's
 ``model_kind``, ``prototype`` or ``almeria``: docs/vsensor.md). When the greenhouse's forecasting
 model is that kind, the forecasting estimator's fluxes feed it (one estimator). When it is another
-(e.g. ``prototype+vent_control``), a second :class:`OnlineEstimator` of the sensor's kind steps on
-the same minutes' drivers with its own parameters and state; its fluxes go only to the sensor (the
+(e.g. ``prototype+vent_control``), or when the sensor was trained on an estimator with other
+settings (its metadata's ``online_overrides``, e.g. 15 air-temperature iterations against the
+live 50), a second :class:`OnlineEstimator` of the sensor's kind and training settings steps on
+the same minutes' drivers with its own parameters and state: the sensor reads the fluxes it was
+trained on, as ``python -m gateway vsensor`` computes them. Its fluxes go only to the sensor (the
 published fluxes and forecasts stay the forecasting model's). Its snapshot rides in the pipeline's
 saved state under :data:`STATE_KEY`, so a restart resumes it too.
 """
@@ -19,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from gateway.estimate.online import OnlineEstimator, online_settings
+from gateway.estimate.settings import GroupSettings
 from gateway.greenhouse import Greenhouse
 from gateway.model import build_model
 from gateway.model.model import Model
@@ -45,10 +49,13 @@ None``."""
 
 @dataclass(frozen=True)
 class VentilationSensor:
-    """The per-minute call and the model whose fluxes it reads (built for the greenhouse)."""
+    """The per-minute call, the model whose fluxes it reads (built for the greenhouse) and the
+    online estimator's settings it was trained with (the model's, with the metadata's
+    ``online_overrides``; None: the model's own for the greenhouse)."""
 
     step: Ventilation
     model: Model
+    settings: tuple[GroupSettings, ...] | None = None
 
 
 def load_ventilation(path: Path, gh: Greenhouse) -> VentilationSensor:
@@ -59,6 +66,7 @@ def load_ventilation(path: Path, gh: Greenhouse) -> VentilationSensor:
     (missing, outside the training ranges, another greenhouse's vents) is returned with
     ``out_of_range`` set."""
     from gateway.vsensor import VentSensor
+    from gateway.vsensor.adaptive import settings_for
 
     if not path.exists():
         raise ValueError(f"{path}: no such ONNX model")
@@ -79,7 +87,11 @@ def load_ventilation(path: Path, gh: Greenhouse) -> VentilationSensor:
         est = sensor.step(drivers, fluxes)
         return VentilationEstimate(est.flow, est.q_vent, out_of_range=not est.valid)
 
-    return VentilationSensor(step, model)
+    try:  # the estimator settings it was trained with: what it must be fed with
+        settings = settings_for(model, gh, sensor.info.meta.get("online_overrides"))
+    except (ValueError, TypeError, AttributeError) as e:
+        raise ValueError(f"{path}: its metadata's online_overrides: {e}") from None
+    return VentilationSensor(step, model, settings)
 
 
 def model_fluxes(model: Model, theta: np.ndarray, row: Mapping[str, float],
@@ -99,19 +111,26 @@ class SensorFeed:
         self.sensor = sensor
         self._fresh = (gh, seed, dt)
         self.own: OnlineEstimator | None = None
+        self.why = ""
+        self.settings = sensor.settings or online_settings(sensor.model, gh)
         if sensor.model.name != model.name:
+            self.why = "its kind"
+        elif self.settings != online_settings(model, gh):
+            self.why = "its training settings"
+        if self.why:
             self._start_fresh()
 
     def _start_fresh(self) -> None:
         gh, seed, dt = self._fresh
         m = self.sensor.model
-        # the forecasting estimator's settings and seed: the same flows as a greenhouse whose
-        # forecasting model is the sensor's kind (tests/test_gateway_ventilation.py)
-        self.own = OnlineEstimator(m, gh, None, online_settings(m, gh), dt=dt, seed=seed)
+        # the training's settings, the forecasting estimator's seed: the same flows whatever the
+        # forecasting model (tests/test_gateway_ventilation.py)
+        self.own = OnlineEstimator(m, gh, None, self.settings, dt=dt, seed=seed)
 
     def describe(self) -> str:
         return "" if self.own is None else (
-            f"; ventilation sensor fed by its own '{self.sensor.model.name}' estimator")
+            f"; ventilation sensor fed by its own '{self.sensor.model.name}' estimator "
+            f"({self.why})")
 
     def update(self, values: Mapping[str, float], time: np.datetime64) -> None:
         """Step the sensor's own estimator (if any) on the minute the forecasting one just took."""

@@ -146,8 +146,8 @@ def test_the_sensors_estimator_resumes_with_the_forecasting_one(tmp_path, live_s
     greenhouse moved from ``prototype`` to the vented model resumes the sensor's estimator from
     the saved prototype estimator, and its forecasting state is migrated as before."""
     whole, split = Store(tmp_path / "whole.db"), Store(tmp_path / "split.db")
-    for s in (whole, split):
-        fill(s, range(91))
+    fill(whole, range(91))
+    fill(split, range(46))  # the records up to the switch: the restart is a real one
     (tmp_path / "a").mkdir()
     (tmp_path / "b").mkdir()
     cfg_a = write(tmp_path / "a", {"north": VENTED}, live_settings_sensor)
@@ -158,6 +158,7 @@ def test_the_sensors_estimator_resumes_with_the_forecasting_one(tmp_path, live_s
     step(first, split, 45)
     saved = json.loads(split.conn.execute("SELECT state FROM estimator_state").fetchone()[0])
     assert STATE_KEY not in saved  # one estimator while kind and settings agree
+    fill(split, range(46, 91))
     caplog.clear()
     cfg_b.write_text(cfg_b.read_text().replace('"prototype"', f'"{VENTED}"'))
     second = start(cfg_b, split, caplog)
@@ -175,6 +176,27 @@ def test_the_sensors_estimator_resumes_with_the_forecasting_one(tmp_path, live_s
     third_own = third.pipelines[0].vent
     assert third_own is not None and third_own.own is not None
     assert same(third_own.own.snapshot(), own.own.snapshot())
+
+
+def test_a_restart_resumes_the_sensors_closed_loop(tmp_path, sensor, caplog):
+    """Stopped after 45 minutes and started again, the gateway publishes the same flows as one
+    that ran through: the sensor's history (filters, delays, fed-back outputs) is saved with the
+    estimators' state and resumed, not settled again from nothing."""
+    whole, split = Store(tmp_path / "whole.db"), Store(tmp_path / "split.db")
+    fill(whole, range(91))
+    fill(split, range(46))  # the kit's records up to the stop: the stop is a real one
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    step(start(write(tmp_path / "a", {"north": VENTED}, sensor), whole, caplog), whole, 90)
+    cfg = write(tmp_path / "b", {"north": VENTED}, sensor)
+    step(start(cfg, split, caplog), split, 45)
+    assert max(flows(split, "north")) < max(flows(whole, "north"))
+    fill(split, range(46, 91))
+    caplog.clear()
+    step(start(cfg, split, caplog), split, 90)
+    assert "ventilation sensor's history resumed" in caplog.text
+    ran, restarted = flows(whole, "north"), flows(split, "north")
+    assert len(ran) >= 80 and restarted == ran
 
 
 def test_a_sensor_the_kit_cannot_feed_is_refused_naming_the_key_and_column(tmp_path, caplog):

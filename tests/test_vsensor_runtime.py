@@ -241,6 +241,35 @@ def test_fluxes_now_feeds_the_sensor_live(gh, model_path):
     assert sensor.counts.steps == 30 and sensor.counts.missing_steps == 0
 
 
+def test_a_snapshot_resumes_the_closed_loop_exactly(gh, model_path, novent, tmp_path):
+    """snapshot → JSON → restore into a new VentSensor of the same file: the next steps are the
+    ones the first sensor takes; another model file's snapshot is refused, history untouched."""
+    names = feature_names("almeria")[3:]
+
+    def rows(lo: int, hi: int):
+        for t in range(lo, hi):
+            yield ({k: float(v[t]) for k, v in novent.x.items()},
+                   {k: float(novent.fluxes[k][t]) for k in names})
+
+    first = VentSensor(model_path, gh, "almeria")
+    for m, q in rows(0, 120):
+        first.step(m, q)
+    saved = json.loads(json.dumps(first.snapshot()))
+    again = VentSensor(model_path, gh, "almeria")
+    again.restore(saved)
+    a = [first.step(m, q).flow for m, q in rows(120, 180)]
+    b = [again.step(m, q).flow for m, q in rows(120, 180)]
+    fresh = VentSensor(model_path, gh, "almeria")
+    c = [fresh.step(m, q).flow for m, q in rows(120, 180)]
+    assert a == b and a != c  # the history matters, and it is carried whole
+    other = VentSensor(vd.rewrite_metadata(model_path, tmp_path / "o.onnx", version="other"), gh,
+                       "almeria")
+    before = other.snapshot()
+    with pytest.raises(ValueError, match="another model"):
+        other.restore(saved)
+    assert json.dumps(other.snapshot()) == json.dumps(before)
+
+
 def test_cli_json_scores_against_the_explicit_flow_beside_the_baselines(tmp_path, model_path, capsys):
     out = tmp_path / "flows.csv"
     code = gateway_main(["vsensor", "--model", str(model_path), "--data", str(vd.test_file()),

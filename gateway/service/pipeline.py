@@ -40,7 +40,7 @@ from gateway.model.model import Model
 from gateway.service.forecaster import LiveForecaster
 from gateway.service.minutes import KIT_COLUMNS, Minute, final_before, first_minute, read_minutes
 from gateway.service.settings import EstimatorSettings, GreenhouseSettings
-from gateway.service.ventilation import STATE_KEY, SensorFeed, VentilationSensor, model_fluxes
+from gateway.service.ventilation import HISTORY_KEY, STATE_KEY, SensorFeed, VentilationSensor, model_fluxes
 from gateway.store.db import transaction
 from gateway.store.live import EstimateRow, add_estimates, load_state, save_state
 
@@ -173,9 +173,10 @@ class GreenhousePipeline:
     def _snapshot(self) -> dict:
         snap = self.est.snapshot()
         snap["forecaster"] = self.forecaster.snapshot()
-        vent = self.vent.snapshot() if self.vent is not None else None
-        if vent is not None:
-            snap[STATE_KEY] = vent
+        if self.vent is not None:
+            for key, part in ((STATE_KEY, self.vent.snapshot()), (HISTORY_KEY, self.vent.history())):
+                if part is not None:
+                    snap[key] = part
         return snap
 
     def _advance_to(self, m: Minute, report: StepReport) -> list[EstimateRow]:

@@ -9,7 +9,9 @@ live 50), a second :class:`OnlineEstimator` of the sensor's kind and training se
 the same minutes' drivers with its own parameters and state: the sensor reads the fluxes it was
 trained on, as ``python -m gateway vsensor`` computes them. Its fluxes go only to the sensor (the
 published fluxes and forecasts stay the forecasting model's). Its snapshot rides in the pipeline's
-saved state under :data:`STATE_KEY`, so a restart resumes it too.
+saved state under :data:`STATE_KEY`, so a restart resumes it too; the sensor's own history (its
+filters, input delays and fed-back outputs) rides under :data:`HISTORY_KEY`, so the closed loop
+goes on where it stopped instead of settling again.
 """
 
 from __future__ import annotations
@@ -33,6 +35,8 @@ VENT_GAP_S = 90.0
 fed-back outputs), as the estimator restarts its window after a gap."""
 STATE_KEY = "vsensor_estimator"
 """Where the sensor's own estimator's snapshot sits in the pipeline's saved state."""
+HISTORY_KEY = "vsensor_history"
+"""Where the sensor's history (runtime.VentSensor.snapshot and the minute it last stepped) sits."""
 
 
 @dataclass
@@ -56,6 +60,8 @@ class VentilationSensor:
     step: Ventilation
     model: Model
     settings: tuple[GroupSettings, ...] | None = None
+    history: Callable[[], dict] | None = None  # the sensor's history, JSON-able
+    resume: Callable[[Mapping], None] | None = None  # ValueError when not this sensor's
 
 
 def load_ventilation(path: Path, gh: Greenhouse) -> VentilationSensor:
@@ -81,7 +87,7 @@ def load_ventilation(path: Path, gh: Greenhouse) -> VentilationSensor:
 
     def step(t: float, drivers: Mapping[str, float],
              fluxes: Mapping[str, float]) -> VentilationEstimate:
-        if last and t - last[0] > VENT_GAP_S:
+        if last and not 0.0 < t - last[0] <= VENT_GAP_S:  # a gap, or time went back: anew
             sensor.reset()
         last[:] = [t]
         est = sensor.step(drivers, fluxes)
@@ -91,7 +97,15 @@ def load_ventilation(path: Path, gh: Greenhouse) -> VentilationSensor:
         settings = settings_for(model, gh, sensor.info.meta.get("online_overrides"))
     except (ValueError, TypeError, AttributeError) as e:
         raise ValueError(f"{path}: its metadata's online_overrides: {e}") from None
-    return VentilationSensor(step, model, settings)
+    def history() -> dict:
+        return {"t": last[0] if last else None, **sensor.snapshot()}
+
+    def resume(snap: Mapping) -> None:
+        t = snap.get("t")
+        sensor.restore(snap)
+        last[:] = [] if t is None else [float(t)]
+
+    return VentilationSensor(step, model, settings, history, resume)
 
 
 def model_fluxes(model: Model, theta: np.ndarray, row: Mapping[str, float],
@@ -153,11 +167,27 @@ class SensorFeed:
     def snapshot(self) -> dict | None:
         return None if self.own is None else self.own.snapshot()
 
+    def history(self) -> dict | None:
+        return None if self.sensor.history is None else self.sensor.history()
+
     def restore(self, saved: Mapping) -> str:
-        """Resume the own estimator from the pipeline's saved state (as saved, before any
-        migration): its snapshot under :data:`STATE_KEY`, or the forecasting estimator's when that
-        was of the sensor's kind (the greenhouse's ``model =`` changed from it). Else it starts
-        anew. Returns the note for the start's log line; the forecasting state is never touched."""
+        """Resume from the pipeline's saved state (as saved, before any migration) the sensor's
+        history and the own estimator: its snapshot under :data:`STATE_KEY`, or the forecasting
+        estimator's when that was of the sensor's kind (the greenhouse's ``model =`` changed from
+        it). Else they start anew. Returns the note for the start's log line; the forecasting
+        state is never touched."""
+        return self._restore_own(saved) + self._restore_history(saved.get(HISTORY_KEY))
+
+    def _restore_history(self, snap) -> str:
+        if self.sensor.resume is None or not isinstance(snap, Mapping):
+            return ""
+        try:
+            self.sensor.resume(snap)
+        except (ValueError, KeyError, TypeError) as e:
+            return f"; ventilation sensor's history starts anew ({e})"
+        return "; ventilation sensor's history resumed"
+
+    def _restore_own(self, saved: Mapping) -> str:
         if self.own is None:
             return ""
         kind = self.sensor.model.name

@@ -17,6 +17,7 @@ counted in ``counts.inputs_clamped``), as ``loop.closed_loop(..., bounds=...)`` 
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from collections.abc import Mapping
@@ -253,6 +254,7 @@ class VentSensor:
         self._flux_names = flux_names(model_kind)
         self._out = [self.session.get_outputs()[0].name]
         self.histories = _histories(model_path, self.session, self.info)
+        self.model_id = hashlib.sha256(Path(model_path).read_bytes()).hexdigest()[:16]
         self._feeds: dict[str, np.ndarray] = {}
         self.counts = SensorCounts()
         self.reset()
@@ -267,6 +269,28 @@ class VentSensor:
         self._y_feed = self._y if self.histories > 1 else self._y[:, 0]
         self._started = False
         self._last_dt = 0.0
+
+    def snapshot(self) -> dict:
+        """The history (filter states, input delays, past outputs) as JSON-able values, for a
+        restart to resume the closed loop where it stopped (:meth:`restore`)."""
+        return {"model": self.model_id, "state": list(self._state), "u": self._u.tolist(),
+                "y": self._y.tolist(), "started": self._started, "last_dt": self._last_dt}
+
+    def restore(self, snap: Mapping) -> None:
+        """Resume a :meth:`snapshot` of this same model file (ValueError otherwise: the
+        history is left as it was)."""
+        if snap.get("model") != self.model_id:
+            raise ValueError(f"the saved history is of another model ({snap.get('model')!r}, "
+                             f"this one is {self.model_id!r})")
+        state = [float(v) for v in snap["state"]]
+        u = np.asarray(snap["u"], dtype=np.float32)
+        y = np.asarray(snap["y"], dtype=np.float32)
+        if len(state) != len(self._state) or u.shape != self._u.shape or y.shape != self._y.shape:
+            raise ValueError("the saved history has the wrong shape")
+        started, last_dt = bool(snap["started"]), float(snap["last_dt"])
+        self._state, self._u, self._y = state, u, y
+        self._y_feed = self._y if self.histories > 1 else self._y[:, 0]
+        self._started, self._last_dt = started, last_dt
 
     def step(self, measurements: Mapping[str, float], fluxes: Mapping[str, float]) -> VentEstimate:
         """One minute: measurements (kit columns) and the no-vent adaptive model's fluxes."""

@@ -68,3 +68,15 @@ def test_the_blend_goes_from_the_current_index_to_the_reference():
     # online weights: in [0, 1] and falling with lead time on a mean-reverting index
     wts = OnlineBlend(SITE).weights(w["i_glob"], unix, 12, DT)[s[0]]
     assert np.all((wts >= 0.0) & (wts <= 1.0)) and wts[0] > wts[-1]
+
+
+def test_the_blends_live_call_is_its_replay_block():
+    """The ol candidate ``index-blend`` (tests/generality/outlook_costs.py): the live gateway's
+    single-start call on the history up to now equals replay's batch call for that start."""
+    time, w = _weather()
+    blend = IndexBlend(SITE, 86400.0, 3600.0)
+    for s in (3 * 288 + 40, 3 * 288 + 130, 4 * 288 + 150):
+        live = blend.drivers({k: v[: s + 1] for k, v in w.items()}, time[: s + 1], 12, DT)
+        batch = blend.drivers_at(w, time, np.array([s]), 12, DT)
+        for k in w:
+            np.testing.assert_array_equal(live[k], batch[k][0], err_msg=f"{k} at {s}")

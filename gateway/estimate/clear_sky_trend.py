@@ -90,6 +90,24 @@ def forward_fill(v: np.ndarray) -> np.ndarray:
     return np.where(idx >= 0, v[np.maximum(idx, 0)], np.nan)
 
 
+SKY_SCALE_BOUNDS = (1.0 / 3.0, 3.0)
+"""Bounds of ``sky_scale`` [-]: a near-zero index (deep overcast, first light) must not wipe or
+blow up the daily shape."""
+
+
+def sky_scale(index_now: np.ndarray, index_then: np.ndarray) -> np.ndarray:
+    """How much larger the coming change of the outside temperature is than an earlier day's over
+    the same clock interval: the ratio of the clear-sky indices now and then, bounded by
+    ``SKY_SCALE_BOUNDS`` (1 where it is undefined: an index missing, or zero then). The diurnal range of the air temperature
+    grows with the clearness of the sky (sun by day, long-wave loss by night; clouds are the
+    strongest damper of it: Dai, Trenberth & Karl 1999, "Effects of clouds, soil moisture,
+    precipitation, and water vapor on diurnal temperature range", J. Climate 12, 2451-2473), so
+    the change is taken proportional to the index."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = np.asarray(index_now, float) / np.asarray(index_then, float)
+    return np.where(np.isfinite(r), np.clip(r, *SKY_SCALE_BOUNDS), 1.0)
+
+
 class ClearSkyTrend:
     """The ``clear-sky-trend`` outlook for a greenhouse at ``site`` (see the module doc).
 
@@ -97,7 +115,9 @@ class ClearSkyTrend:
     stretch 2009-11-04..24, outside the generality windows): ``index_window`` [s] of the
     clear-sky index, ``trend_window`` [s] of the level and trend lines, ``wind_window`` [s],
     ``trend_damping`` [s] e-folding time of the extrapolated trends, ``shape_days`` days of
-    daily shape and its weight ``shape_weight`` [-].
+    daily shape and its weight ``shape_weight`` [-]; ``shape_by_index`` scales each earlier
+    day's change by ``sky_scale`` (a candidate, off by default: docs/effects.md, "The outlook's
+    drivers, one at a time").
     """
 
     name = "clear-sky-trend"
@@ -108,8 +128,9 @@ class ClearSkyTrend:
 
     def __init__(self, site: Site, index_window: float = 900.0, trend_window: float = 1800.0,
                  wind_window: float = 900.0, trend_damping: float = 900.0, shape_days: int = 3,
-                 shape_weight: float = 0.5) -> None:
+                 shape_weight: float = 0.5, shape_by_index: bool = False) -> None:
         self.site = site
+        self.shape_by_index = shape_by_index
         self.index_window, self.trend_window, self.wind_window = index_window, trend_window, wind_window
         self.trend_damping, self.shape_days, self.shape_weight = trend_damping, shape_days, shape_weight
 
@@ -158,7 +179,10 @@ class ClearSkyTrend:
             out["i_glob"] = index[starts][:, None] * self._clear(future.ravel()).reshape(future.shape)
         t_fc = None
         if "t_out" in columns:
-            t_fc = self._temperature(np.asarray(columns["t_out"], float), starts, k, dt)
+            index = None
+            if self.shape_by_index and "i_glob" in columns:
+                index = self.clear_sky_index(np.asarray(columns["i_glob"], float), unix, dt)
+            t_fc = self._temperature(np.asarray(columns["t_out"], float), starts, k, dt, index)
             out["t_out"] = t_fc
         if "rh_out" in columns and t_fc is not None:
             e = saturation_vapour_pressure(np.asarray(columns["t_out"], float)) \
@@ -181,7 +205,10 @@ class ClearSkyTrend:
         return r * (1.0 - r ** k) / (1.0 - r)
 
     def _temperature(self, t_out: np.ndarray, starts: np.ndarray, k: np.ndarray,
-                     dt: float) -> np.ndarray:
+                     dt: float, index: np.ndarray | None = None) -> np.ndarray:
+        """Level + ``shape_weight`` × the mean change of the earlier days over the same clock
+        interval (each scaled by ``sky_scale`` when ``index``, the clear-sky index, is given)
+        + the damped trend."""
         level, slope = trailing_line(t_out, max(int(round(self.trend_window / dt)), 2))
         per_day = int(round(DAY_S / dt))
         n = len(t_out)
@@ -193,6 +220,8 @@ class ClearSkyTrend:
             a_c = np.clip(a, 0, n - 1)
             b_c = np.clip(a[:, None] + k[None, :], 0, n - 1)
             change = t_out[b_c] - t_out[a_c][:, None]
+            if index is not None:
+                change = change * sky_scale(index[starts], index[a_c])[:, None]
             good = ok & np.isfinite(change)
             full = np.all(good, axis=1, keepdims=True)
             shape += np.where(full, np.where(good, change, 0.0), 0.0)

@@ -176,7 +176,8 @@ def test_sky_scale_is_the_bounded_ratio_of_the_indices():
                                [0.5, 3.0, 1.0 / 3.0, 1.0, 1.0])  # no ratio of a zero index
 
 
-@pytest.mark.parametrize("settings", [{"shape_by_index": True}])
+@pytest.mark.parametrize("settings", [{"shape_by_index": True}, {"shape_memory": 2 * 86400.0},
+                                      {"shape_by_index": True, "shape_memory": 2 * 86400.0}])
 def test_a_candidates_live_call_is_its_replay_block(settings):
     """One code path: the live gateway's single-start call on the history up to now equals
     replay's batch call for that start on the whole series (which also reads nothing later)."""
@@ -189,3 +190,25 @@ def test_a_candidates_live_call_is_its_replay_block(settings):
         batch = outlook.drivers_at(w, time, np.array([s]), 12, DT)
         for k in w:
             np.testing.assert_array_equal(live[k], batch[k][0], err_msg=f"{k} at {s}")
+
+
+def test_the_online_shape_weight_is_one_on_a_daily_cycle_and_none_on_a_random_walk():
+    """``shape_memory`` (a candidate, off by default): the weight of the daily shape learnt from
+    matured pairs is the mean-square-optimal one (Yang 2019): ~1 where the outside temperature
+    repeats its day exactly, ~0 where it has no daily cycle (a random walk), ``shape_weight``
+    before enough pairs."""
+    time = _days(5)
+    k = np.arange(1, 13)
+    hours = (time - time.astype("datetime64[D]")).astype(float) / 3600.0
+    cycle = 6.0 + 4.0 * np.sin(2 * np.pi * (hours - 9.0) / 24.0)
+    walk = 6.0 + np.cumsum(np.random.default_rng(5).normal(0.0, 0.1, len(time)))
+    for t_out, lo, hi in ((cycle, 0.9, 1.0), (walk, 0.0, 0.25)):
+        cst = ClearSkyTrend(BLEISWIJK, trend_damping=1e-9, shape_memory=86400.0)
+        level = trailing_line(t_out, 6)[0]
+        every = np.arange(len(time))
+        shape = cst._shape(t_out, every, k, DT, None)
+        w = cst.shape_weights(t_out, np.repeat(level[:, None], 12, axis=1), shape, k, DT)
+        late = w[4 * 288:]  # two full days of shape and a day of pairs behind
+        assert lo <= late.mean() <= hi, (lo, late.mean(), hi)
+        assert np.all((w >= 0.0) & (w <= 1.0))
+        np.testing.assert_array_equal(w[: 288 + 12], 0.5)  # no shape yet: the fixed weight

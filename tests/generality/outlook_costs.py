@@ -51,11 +51,13 @@ cloud fraction of the coming rows)."""
 CANDIDATES: dict[str, Callable[[Site], ClearSkyTrend]] = {
     "index-blend": lambda site: IndexBlend(site, 86400.0, 3600.0),
     "shape-by-index": lambda site: ClearSkyTrend(site, shape_by_index=True),
+    "shape-weight-online": lambda site: ClearSkyTrend(site, shape_memory=86400.0),
 }
 """Candidate → its outlook for a site: the clear-sky index relaxed toward its last day's value
 with a 60-min e-folding lead time (radiation, outlook_variants.IndexBlend: Yang 2019); each
 earlier day's outside-temperature change scaled by the ratio of the clear-sky indices
-(clear_sky_trend.sky_scale: Dai et al. 1999)."""
+(clear_sky_trend.sky_scale: Dai et al. 1999); the daily shape's weight per lead time learnt
+over the last day of matured pairs (clear_sky_trend.shape_weights: Yang 2019)."""
 
 
 def _blocks(res, outlook, cloud_ahead: bool = False) -> HorizonDrivers:

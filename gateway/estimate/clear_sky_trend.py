@@ -90,24 +90,6 @@ def forward_fill(v: np.ndarray) -> np.ndarray:
     return np.where(idx >= 0, v[np.maximum(idx, 0)], np.nan)
 
 
-SKY_SCALE_BOUNDS = (1.0 / 3.0, 3.0)
-"""Bounds of ``sky_scale`` [-]: a near-zero index (deep overcast, first light) must not wipe or
-blow up the daily shape."""
-
-
-def sky_scale(index_now: np.ndarray, index_then: np.ndarray) -> np.ndarray:
-    """How much larger the coming change of the outside temperature is than an earlier day's over
-    the same clock interval: the ratio of the clear-sky indices now and then, bounded by
-    ``SKY_SCALE_BOUNDS`` (1 where it is undefined: an index missing, or zero then). The
-    diurnal range of the air temperature grows with the clearness of the sky (sun by day,
-    long-wave loss by night; clouds are the strongest damper of it: Dai, Trenberth & Karl 1999,
-    "Effects of clouds, soil moisture, precipitation, and water vapor on diurnal temperature
-    range", J. Climate 12, 2451-2473), so the change is taken proportional to the index."""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        r = np.asarray(index_now, float) / np.asarray(index_then, float)
-    return np.where(np.isfinite(r), np.clip(r, *SKY_SCALE_BOUNDS), 1.0)
-
-
 class ClearSkyTrend:
     """The ``clear-sky-trend`` outlook for a greenhouse at ``site`` (see the module doc).
 
@@ -115,10 +97,7 @@ class ClearSkyTrend:
     stretch 2009-11-04..24, outside the generality windows): ``index_window`` [s] of the
     clear-sky index, ``trend_window`` [s] of the level and trend lines, ``wind_window`` [s],
     ``trend_damping`` [s] e-folding time of the extrapolated trends, ``shape_days`` days of
-    daily shape and its weight ``shape_weight`` [-]; ``shape_by_index`` scales each earlier
-    day's change by ``sky_scale``, ``shape_memory`` [s] learns the shape's weight per lead time
-    online (``shape_weights``); both candidates, off by default (docs/effects.md, "The
-    outlook's drivers, one at a time").
+    daily shape and its weight ``shape_weight`` [-].
     """
 
     name = "clear-sky-trend"
@@ -126,15 +105,11 @@ class ClearSkyTrend:
     """Clear-sky radiation [W m-2] below which a sample does not count in the index."""
     DEFAULT_INDEX = 0.5
     """Clear-sky index before any daylight was seen [-]."""
-    MIN_SHAPE_PAIRS = 24
-    """Matured (start, lead) pairs before an online shape weight is used (two hours at 5 min)."""
 
     def __init__(self, site: Site, index_window: float = 900.0, trend_window: float = 1800.0,
                  wind_window: float = 900.0, trend_damping: float = 900.0, shape_days: int = 3,
-                 shape_weight: float = 0.5, shape_by_index: bool = False,
-                 shape_memory: float | None = None) -> None:
+                 shape_weight: float = 0.5) -> None:
         self.site = site
-        self.shape_by_index, self.shape_memory = shape_by_index, shape_memory
         self.index_window, self.trend_window, self.wind_window = index_window, trend_window, wind_window
         self.trend_damping, self.shape_days, self.shape_weight = trend_damping, shape_days, shape_weight
 
@@ -183,10 +158,7 @@ class ClearSkyTrend:
             out["i_glob"] = index[starts][:, None] * self._clear(future.ravel()).reshape(future.shape)
         t_fc = None
         if "t_out" in columns:
-            index = None
-            if self.shape_by_index and "i_glob" in columns:
-                index = self.clear_sky_index(np.asarray(columns["i_glob"], float), unix, dt)
-            t_fc = self._temperature(np.asarray(columns["t_out"], float), starts, k, dt, index)
+            t_fc = self._temperature(np.asarray(columns["t_out"], float), starts, k, dt)
             out["t_out"] = t_fc
         if "rh_out" in columns and t_fc is not None:
             e = saturation_vapour_pressure(np.asarray(columns["t_out"], float)) \
@@ -209,24 +181,8 @@ class ClearSkyTrend:
         return r * (1.0 - r ** k) / (1.0 - r)
 
     def _temperature(self, t_out: np.ndarray, starts: np.ndarray, k: np.ndarray,
-                     dt: float, index: np.ndarray | None = None) -> np.ndarray:
-        """Level + weight × the mean change of the earlier days over the same clock interval
-        (each scaled by ``sky_scale`` when ``index``, the clear-sky index, is given) + the damped
-        trend; the weight is ``shape_weight``, or learnt online (``shape_weights``)."""
+                     dt: float) -> np.ndarray:
         level, slope = trailing_line(t_out, max(int(round(self.trend_window / dt)), 2))
-        trend = slope[:, None] * self._damped(k, dt)[None, :]
-        if self.shape_memory is None:
-            shape = self._shape(t_out, starts, k, dt, index)
-            return level[starts][:, None] + self.shape_weight * shape + trend[starts]
-        every = np.arange(len(t_out))
-        shape = self._shape(t_out, every, k, dt, index)
-        weight = self.shape_weights(t_out, level[:, None] + trend, shape, k, dt)
-        return (level[:, None] + weight * shape + trend)[starts]
-
-    def _shape(self, t_out: np.ndarray, starts: np.ndarray, k: np.ndarray, dt: float,
-               index: np.ndarray | None) -> np.ndarray:
-        """(N, len(k)) mean change of the last ``shape_days`` days from the start's clock time
-        to k steps later (0 where no earlier day is complete)."""
         per_day = int(round(DAY_S / dt))
         n = len(t_out)
         shape = np.zeros((len(starts), len(k)))
@@ -237,38 +193,13 @@ class ClearSkyTrend:
             a_c = np.clip(a, 0, n - 1)
             b_c = np.clip(a[:, None] + k[None, :], 0, n - 1)
             change = t_out[b_c] - t_out[a_c][:, None]
-            if index is not None:
-                change = change * sky_scale(index[starts], index[a_c])[:, None]
             good = ok & np.isfinite(change)
             full = np.all(good, axis=1, keepdims=True)
             shape += np.where(full, np.where(good, change, 0.0), 0.0)
             count += full
-        return np.where(count > 0, shape / np.maximum(count, 1), 0.0)
-
-    def shape_weights(self, t_out: np.ndarray, base: np.ndarray, shape: np.ndarray,
-                      k: np.ndarray, dt: float) -> np.ndarray:
-        """(T, len(k)) weight of the daily shape at each index and lead time: the least-squares
-        slope through the origin of what the shape had to add, T[s + h] − ``base``[s, h] (level
-        and damped trend), on the shape, over the pairs of the last ``shape_memory`` whose later
-        end is at or before the index (known there); bounded to [0, 1]; ``shape_weight`` until
-        ``MIN_SHAPE_PAIRS`` pairs. The mean-square-optimal convex weight of a "climatology"
-        (here the daily cycle) against persistence (Yang 2019, Solar Energy 193, 981-985)."""
-        n = len(t_out)
-        win = max(int(round(self.shape_memory / dt)), 1)
-        out = np.full((n, len(k)), self.shape_weight)
-        for j, h in enumerate(k):
-            if h >= n:
-                continue
-            x, y = np.full(n, np.nan), np.full(n, np.nan)
-            x[h:] = shape[:-h, j]  # stamped at the later end s + h: known from there on
-            y[h:] = t_out[h:] - base[:-h, j]
-            ok = np.isfinite(x) & np.isfinite(y) & (x != 0.0)
-            sxy, c = _trailing_sums(np.where(ok, x * y, np.nan), win)
-            sxx, _ = _trailing_sums(np.where(ok, x * x, np.nan), win)
-            good = (c >= self.MIN_SHAPE_PAIRS) & (sxx > 0)
-            w = np.clip(sxy / np.where(good, sxx, 1.0), 0.0, 1.0)
-            out[:, j] = np.where(good, w, self.shape_weight)
-        return out
+        shape = np.where(count > 0, shape / np.maximum(count, 1), 0.0)
+        trend = slope[starts][:, None] * self._damped(k, dt)[None, :]
+        return level[starts][:, None] + self.shape_weight * shape + trend
 
     def drivers(self, history: Mapping[str, np.ndarray], time: np.ndarray, horizon: int,
                 dt: float) -> dict[str, np.ndarray]:

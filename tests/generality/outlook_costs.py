@@ -41,7 +41,7 @@ from gateway.kitcsv import COLUMNS  # noqa: E402
 from gateway.model.drivers import prepare_drivers  # noqa: E402
 from gateway.series import Series  # noqa: E402
 from tests.generality.forecasts import rescore  # noqa: E402
-from tests.generality.outlook_variants import IndexBlend, Measured  # noqa: E402
+from tests.generality.outlook_variants import IndexBlend, Measured, ShapeVariant  # noqa: E402
 
 SWAPS: dict[str, tuple[str, ...]] = {
     "i_glob": ("i_glob",), "t_out": ("t_out",), "rh_out": ("rh_out",), "wind": ("wind",),
@@ -50,14 +50,14 @@ SWAPS: dict[str, tuple[str, ...]] = {
 cloud fraction of the coming rows)."""
 CANDIDATES: dict[str, Callable[[Site], ClearSkyTrend]] = {
     "index-blend": lambda site: IndexBlend(site, 86400.0, 3600.0),
-    "shape-by-index": lambda site: ClearSkyTrend(site, shape_by_index=True),
-    "shape-weight-online": lambda site: ClearSkyTrend(site, shape_memory=86400.0),
+    "shape-by-index": lambda site: ShapeVariant(site, shape_by_index=True),
+    "shape-weight-online": lambda site: ShapeVariant(site, shape_memory=86400.0),
 }
 """Candidate → its outlook for a site: the clear-sky index relaxed toward its last day's value
 with a 60-min e-folding lead time (radiation, outlook_variants.IndexBlend: Yang 2019); each
 earlier day's outside-temperature change scaled by the ratio of the clear-sky indices
-(clear_sky_trend.sky_scale: Dai et al. 1999); the daily shape's weight per lead time learnt
-over the last day of matured pairs (clear_sky_trend.shape_weights: Yang 2019)."""
+(outlook_variants.sky_scale: Dai et al. 1999); the daily shape's weight per lead time learnt
+over the last day of matured pairs (outlook_variants.ShapeVariant.shape_weights: Yang 2019)."""
 
 
 def _blocks(res, outlook, cloud_ahead: bool = False) -> HorizonDrivers:

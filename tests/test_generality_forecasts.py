@@ -48,3 +48,25 @@ def test_compare_marks_better_worse_and_the_goal(tmp_path):
     assert len(rows) == 3
     assert rows[0] == ("| refsim summer | 15 | 1.000 | 0.800 | 0.500 → 0.600 ⬆ | 0.750 → 0.600 ⬇ "
                        "| ✗ → ✓ |")
+
+
+def test_the_ol_rule_counts_goals_the_mean_and_the_worst_cell():
+    from tests.generality.outlook_rule import verdict
+
+    def win(outlook: float, corrected: float = 0.6) -> dict:
+        return _case("refsim", "winter", {"persistence": 1.0, "arx": 0.8, "corrected": corrected,
+                                          "corrected_outlook": outlook})["horizons"]
+
+    main = {"refsim winter": win(0.82), "twonode winter": win(0.7)}
+    gained = {"refsim winter": win(0.79), "twonode winter": win(0.7)}  # a goal won, -1.8 %
+    ok, lines = verdict(main, gained)
+    assert ok and "outlook goals met: 1 → 2 of 2; a goal met by main lost: False" in lines
+    lost = {"refsim winter": win(0.5), "twonode winter": win(0.81)}  # mean -20 %, a goal lost
+    assert not verdict(main, lost)[0]
+    small = {"refsim winter": win(0.81), "twonode winter": win(0.68)}  # -2.0 %: neither branch
+    assert not verdict(main, small)[0]
+    worse_cell = {"refsim winter": win(0.72), "twonode winter": win(0.72)}  # +2.9 % on one window
+    ok, lines = verdict(main, worse_cell)
+    assert not ok and lines[-2].endswith("NOT met")
+    moved = {"refsim winter": win(0.6, 0.61), "twonode winter": win(0.6)}  # corrected moved 1.7 %
+    assert not verdict(main, moved)[0]

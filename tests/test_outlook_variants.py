@@ -5,11 +5,19 @@ the diagnostics that may read the future do."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from gateway.estimate.clear_sky_trend import ClearSkyTrend, _unix
+from gateway.estimate.clear_sky_trend import ClearSkyTrend, _unix, trailing_line
 from gateway.greenhouse import Site
 from gateway.model.solar import clear_sky_global, solar_position
-from tests.generality.outlook_variants import HourlyCloudiness, IndexBlend, Measured, OnlineBlend
+from tests.generality.outlook_variants import (
+    HourlyCloudiness,
+    IndexBlend,
+    Measured,
+    OnlineBlend,
+    ShapeVariant,
+    sky_scale,
+)
 
 SITE = Site(52.03, 4.53)
 DT = 300.0
@@ -25,6 +33,14 @@ def _weather(days: int = 5, seed: int = 3) -> tuple[np.ndarray, dict[str, np.nda
     t_out = 6.0 + 3.0 * np.sin(2 * np.pi * (hours - 9.0) / 24.0)
     return time, {"i_glob": index * clear, "t_out": t_out, "rh_out": np.full(len(time), 80.0),
                   "wind": np.full(len(time), 3.0), "t_in": t_out + 2.0}
+
+
+def _days(n_days: int) -> np.ndarray:
+    return np.datetime64("2009-11-01T00:00", "s") + np.arange(n_days * 288) * np.timedelta64(300, "s")
+
+
+def _clear(time: np.ndarray) -> np.ndarray:
+    return clear_sky_global(solar_position(time, SITE.latitude, SITE.longitude).cos_zenith)
 
 
 def test_the_causal_variants_read_nothing_after_the_start():
@@ -68,3 +84,79 @@ def test_the_blend_goes_from_the_current_index_to_the_reference():
     # online weights: in [0, 1] and falling with lead time on a mean-reverting index
     wts = OnlineBlend(SITE).weights(w["i_glob"], unix, 12, DT)[s[0]]
     assert np.all((wts >= 0.0) & (wts <= 1.0)) and wts[0] > wts[-1]
+
+
+def test_the_blends_live_call_is_its_replay_block():
+    """The ol candidate ``index-blend`` (tests/generality/outlook_costs.py): the live gateway's
+    single-start call on the history up to now equals replay's batch call for that start."""
+    time, w = _weather()
+    blend = IndexBlend(SITE, 86400.0, 3600.0)
+    for s in (3 * 288 + 40, 3 * 288 + 130, 4 * 288 + 150):
+        live = blend.drivers({k: v[: s + 1] for k, v in w.items()}, time[: s + 1], 12, DT)
+        batch = blend.drivers_at(w, time, np.array([s]), 12, DT)
+        for k in w:
+            np.testing.assert_array_equal(live[k], batch[k][0], err_msg=f"{k} at {s}")
+
+
+def test_the_daily_shape_scaled_by_the_sky_follows_a_duller_day():
+    """``shape_by_index`` (a candidate, off by default): an outside temperature whose daily swing
+    is proportional to each day's clear-sky index (Dai et al. 1999: clouds damp the diurnal
+    range) is forecast exactly from earlier, clearer days; the unscaled shape overshoots."""
+    time = _days(4)
+    clear = _clear(time)
+    day = np.arange(len(time)) // 288
+    k_day = np.array([0.8, 0.9, 0.7, 0.4])[day]  # the last day is the dullest
+    hours = (time - time.astype("datetime64[D]")).astype(float) / 3600.0
+    t_out = 5.0 + 8.0 * k_day * np.sin(2 * np.pi * (hours - 9.0) / 24.0)
+    w = {"i_glob": k_day * clear, "t_out": t_out}
+    s = 3 * 288 + int(np.argmax(clear[:288])) - 18  # 90 min before noon on the last day
+    kw = {"shape_weight": 1.0, "trend_damping": 1e-9}  # the shape alone beside the level
+    scaled = ShapeVariant(SITE, shape_by_index=True, **kw).drivers_at(w, time, np.array([s]), 12, DT)
+    plain = ClearSkyTrend(SITE, **kw).drivers_at(w, time, np.array([s]), 12, DT)
+    level = trailing_line(t_out, 6)[0][s]
+    truth = level + t_out[s + 1: s + 13] - t_out[s]
+    np.testing.assert_allclose(scaled["t_out"][0], truth, atol=1e-9)
+    assert np.all(plain["t_out"][0][1:] - truth[1:] > 0.1)  # 0.8 / 0.4 too steep a rise
+    assert not hasattr(ClearSkyTrend(SITE), "shape_by_index")  # not in the gateway's outlook
+
+
+def test_sky_scale_is_the_bounded_ratio_of_the_indices():
+    np.testing.assert_allclose(sky_scale(np.array([0.4, 0.9, 0.01, 0.5, 0.5]),
+                                         np.array([0.8, 0.3, 0.9, 0.0, np.nan])),
+                               [0.5, 3.0, 1.0 / 3.0, 1.0, 1.0])  # no ratio of a zero index
+
+
+@pytest.mark.parametrize("settings", [{"shape_by_index": True}, {"shape_memory": 2 * 86400.0},
+                                      {"shape_by_index": True, "shape_memory": 2 * 86400.0}])
+def test_a_candidates_live_call_is_its_replay_block(settings):
+    """One code path: the live gateway's single-start call on the history up to now equals
+    replay's batch call for that start on the whole series (which also reads nothing later)."""
+    time, w = _weather()
+    outlook = ShapeVariant(SITE, **settings)
+    for s in (3 * 288 + 40, 3 * 288 + 130, 3 * 288 + 200):
+        live = outlook.drivers({k: v[: s + 1] for k, v in w.items()}, time[: s + 1], 12, DT)
+        batch = outlook.drivers_at(w, time, np.array([s]), 12, DT)
+        for k in w:
+            np.testing.assert_array_equal(live[k], batch[k][0], err_msg=f"{k} at {s}")
+
+
+def test_the_online_shape_weight_is_one_on_a_daily_cycle_and_none_on_a_random_walk():
+    """``shape_memory`` (a candidate, off by default): the weight of the daily shape learnt from
+    matured pairs is the mean-square-optimal one (Yang 2019): ~1 where the outside temperature
+    repeats its day exactly, ~0 where it has no daily cycle (a random walk), ``shape_weight``
+    before enough pairs."""
+    time = _days(5)
+    k = np.arange(1, 13)
+    hours = (time - time.astype("datetime64[D]")).astype(float) / 3600.0
+    cycle = 6.0 + 4.0 * np.sin(2 * np.pi * (hours - 9.0) / 24.0)
+    walk = 6.0 + np.cumsum(np.random.default_rng(5).normal(0.0, 0.1, len(time)))
+    for t_out, lo, hi in ((cycle, 0.9, 1.0), (walk, 0.0, 0.25)):
+        cst = ShapeVariant(SITE, trend_damping=1e-9, shape_memory=86400.0)
+        level = trailing_line(t_out, 6)[0]
+        every = np.arange(len(time))
+        shape = cst._shape(t_out, every, k, DT, None)
+        w = cst.shape_weights(t_out, np.repeat(level[:, None], 12, axis=1), shape, k, DT)
+        late = w[4 * 288:]  # two full days of shape and a day of pairs behind
+        assert lo <= late.mean() <= hi, (lo, late.mean(), hi)
+        assert np.all((w >= 0.0) & (w <= 1.0))
+        np.testing.assert_array_equal(w[: 288 + 12], 0.5)  # no shape yet: the fixed weight

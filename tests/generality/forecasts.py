@@ -21,6 +21,7 @@ import json
 import multiprocessing as mp
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import asdict
 from functools import partial
 from pathlib import Path
@@ -105,11 +106,12 @@ def summary(results: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def rescore(folder: Path) -> list[dict]:
+def rescore(folder: Path, blocks: Callable | None = None) -> list[dict]:
     """The cases again from the replays pickled by ``--keep``: the estimator's loop is not run,
     everything after it (ARX, filter, forecasts, report) is, with the code as it is now. The
-    outlook's driver blocks are the kept ones (``res.ahead``): tests/generality/outlooks.py and
-    outlook_study.py recompute them, for an outlook changed since."""
+    outlook's driver blocks are the kept ones (``res.ahead``) unless ``blocks(res)`` makes new
+    ones (an outlook changed since: the loop never reads the outlook, so this is what a whole
+    replay with it gives; tests/generality/outlook_costs.py)."""
     import pickle
 
     from gateway.estimate.replay import HORIZONS, score_forecasts, steps_of
@@ -120,6 +122,8 @@ def rescore(folder: Path) -> list[dict]:
         generator, window = f.stem.split("-", 1)
         res = pickle.loads(f.read_bytes())
         t0 = time.perf_counter()
+        if blocks is not None:
+            res.ahead = blocks(res)
         score_forecasts(res, steps_of(HORIZONS, res.dt))
         vented = any(t.name == "q_vent_control" for t in res.model.terms)
         case = Case("forecast", generator, window, model="prototype+vent_control" if vented else "prototype")

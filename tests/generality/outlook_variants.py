@@ -15,6 +15,12 @@ tests/test_outlook_variants.py):
   ``memory`` whose later end is already measured (the mean-square-optimal convex weight when
   the index is stationary); the reference is the mean index of the same span.
 
+Causal variants of its outside temperature (the ol candidates, docs/effects.md "The outlook's
+drivers, one at a time"; neither passed its rule): :class:`ShapeVariant` with ``shape_by_index``
+(each earlier day's change scaled by the ratio of the clear-sky indices now and then, Dai,
+Trenberth & Karl 1999) or ``shape_memory`` (the daily shape's weight per lead time learnt online
+from matured pairs, Yang 2019's optimal convex weight).
+
 Not causal, diagnostics only (what a perfect weather forecast would be worth):
 
 - :class:`Measured`: the named columns replaced by what was measured later;
@@ -34,7 +40,14 @@ from collections.abc import Mapping
 import numpy as np
 
 from gateway.estimate import correction
-from gateway.estimate.clear_sky_trend import ClearSkyTrend, _trailing_sums, _unix, forward_fill
+from gateway.estimate.clear_sky_trend import (
+    DAY_S,
+    ClearSkyTrend,
+    _trailing_sums,
+    _unix,
+    forward_fill,
+    trailing_line,
+)
 from gateway.greenhouse import Site
 
 
@@ -124,6 +137,114 @@ class OnlineBlend(IndexBlend):
         now = self.clear_sky_index(i_glob, unix, dt)[starts][:, None]
         ref = self.reference_index(i_glob, unix, dt)[starts][:, None]
         return ref + (now - ref) * self.weights(i_glob, unix, horizon, dt)[starts]
+
+
+SKY_SCALE_BOUNDS = (1.0 / 3.0, 3.0)
+"""Bounds of ``sky_scale`` [-]: a near-zero index (deep overcast, first light) must not wipe or
+blow up the daily shape."""
+
+
+def sky_scale(index_now: np.ndarray, index_then: np.ndarray) -> np.ndarray:
+    """How much larger the coming change of the outside temperature is than an earlier day's over
+    the same clock interval: the ratio of the clear-sky indices now and then, bounded by
+    ``SKY_SCALE_BOUNDS`` (1 where it is undefined: an index missing, or zero then). The
+    diurnal range of the air temperature grows with the clearness of the sky (sun by day,
+    long-wave loss by night; clouds are the strongest damper of it: Dai, Trenberth & Karl 1999,
+    "Effects of clouds, soil moisture, precipitation, and water vapor on diurnal temperature
+    range", J. Climate 12, 2451-2473), so the change is taken proportional to the index."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = np.asarray(index_now, float) / np.asarray(index_then, float)
+    return np.where(np.isfinite(r), np.clip(r, *SKY_SCALE_BOUNDS), 1.0)
+
+
+class ShapeVariant(ClearSkyTrend):
+    """``clear-sky-trend`` with the outside temperature's daily shape scaled by the sky
+    (``shape_by_index``) and/or its weight learnt online over ``shape_memory`` [s] (module doc).
+    One code path: ``drivers`` (live) is ``drivers_at`` for the last start."""
+
+    name = "shape-variant"
+    MIN_SHAPE_PAIRS = 24
+    """Matured (start, lead) pairs before an online shape weight is used (two hours at 5 min)."""
+
+    def __init__(self, site: Site, shape_by_index: bool = False,
+                 shape_memory: float | None = None, **settings: float) -> None:
+        super().__init__(site, **settings)  # ClearSkyTrend's settings (its defaults by default)
+        self.shape_by_index, self.shape_memory = shape_by_index, shape_memory
+        self._index: np.ndarray | None = None
+
+    def drivers_at(self, columns: Mapping[str, np.ndarray], time: np.ndarray,
+                   starts: np.ndarray, horizon: int, dt: float) -> dict[str, np.ndarray]:
+        # the clear-sky index of this call's series, for _temperature (which the base calls)
+        self._index = None
+        if self.shape_by_index and "i_glob" in columns:
+            self._index = self.clear_sky_index(np.asarray(columns["i_glob"], float), _unix(time), dt)
+        try:
+            return super().drivers_at(columns, time, starts, horizon, dt)
+        finally:
+            self._index = None
+
+    def _temperature(self, t_out: np.ndarray, starts: np.ndarray, k: np.ndarray,
+                     dt: float) -> np.ndarray:
+        """Level + weight × the mean change of the earlier days over the same clock interval
+        (each scaled by ``sky_scale`` when ``index``, the clear-sky index, is given) + the damped
+        trend; the weight is ``shape_weight``, or learnt online (``shape_weights``)."""
+        index = self._index
+        level, slope = trailing_line(t_out, max(int(round(self.trend_window / dt)), 2))
+        trend = slope[:, None] * self._damped(k, dt)[None, :]
+        if self.shape_memory is None:
+            shape = self._shape(t_out, starts, k, dt, index)
+            return level[starts][:, None] + self.shape_weight * shape + trend[starts]
+        every = np.arange(len(t_out))
+        shape = self._shape(t_out, every, k, dt, index)
+        weight = self.shape_weights(t_out, level[:, None] + trend, shape, k, dt)
+        return (level[:, None] + weight * shape + trend)[starts]
+
+    def _shape(self, t_out: np.ndarray, starts: np.ndarray, k: np.ndarray, dt: float,
+               index: np.ndarray | None) -> np.ndarray:
+        """(N, len(k)) mean change of the last ``shape_days`` days from the start's clock time
+        to k steps later (0 where no earlier day is complete)."""
+        per_day = int(round(DAY_S / dt))
+        n = len(t_out)
+        shape = np.zeros((len(starts), len(k)))
+        count = np.zeros((len(starts), 1))
+        for d in range(1, self.shape_days + 1):  # the same clock interval on earlier days
+            a = starts - d * per_day
+            ok = (a >= 0)[:, None] & ((a[:, None] + k[None, :]) < n)
+            a_c = np.clip(a, 0, n - 1)
+            b_c = np.clip(a[:, None] + k[None, :], 0, n - 1)
+            change = t_out[b_c] - t_out[a_c][:, None]
+            if index is not None:
+                change = change * sky_scale(index[starts], index[a_c])[:, None]
+            good = ok & np.isfinite(change)
+            full = np.all(good, axis=1, keepdims=True)
+            shape += np.where(full, np.where(good, change, 0.0), 0.0)
+            count += full
+        return np.where(count > 0, shape / np.maximum(count, 1), 0.0)
+
+    def shape_weights(self, t_out: np.ndarray, base: np.ndarray, shape: np.ndarray,
+                      k: np.ndarray, dt: float) -> np.ndarray:
+        """(T, len(k)) weight of the daily shape at each index and lead time: the least-squares
+        slope through the origin of what the shape had to add, T[s + h] − ``base``[s, h] (level
+        and damped trend), on the shape, over the pairs of the last ``shape_memory`` whose later
+        end is at or before the index (known there); bounded to [0, 1]; ``shape_weight`` until
+        ``MIN_SHAPE_PAIRS`` pairs. The mean-square-optimal convex weight of a "climatology"
+        (here the daily cycle) against persistence (Yang 2019, Solar Energy 193, 981-985)."""
+        n = len(t_out)
+        win = max(int(round(self.shape_memory / dt)), 1)
+        out = np.full((n, len(k)), self.shape_weight)
+        for j, h in enumerate(k):
+            if h >= n:
+                continue
+            x, y = np.full(n, np.nan), np.full(n, np.nan)
+            x[h:] = shape[:-h, j]  # stamped at the later end s + h: known from there on
+            y[h:] = t_out[h:] - base[:-h, j]
+            ok = np.isfinite(x) & np.isfinite(y) & (x != 0.0)
+            sxy, c = _trailing_sums(np.where(ok, x * y, np.nan), win)
+            sxx, _ = _trailing_sums(np.where(ok, x * x, np.nan), win)
+            good = (c >= self.MIN_SHAPE_PAIRS) & (sxx > 0)
+            w = np.clip(sxy / np.where(good, sxx, 1.0), 0.0, 1.0)
+            out[:, j] = np.where(good, w, self.shape_weight)
+        return out
 
 
 class Measured:

@@ -96,7 +96,8 @@ def run(args: argparse.Namespace) -> int:
         "model": str(path), "data": args.data, "greenhouse": gh.name, "model_kind": args.model_kind,
         **sensors[main],
         "baselines": {k: v for k, v in sensors.items() if k != main},
-        "reference": "explicit vent-based flow of the adaptive model (III.31)" if vents else None,
+        "reference": (f"explicit vent-based flow of the adaptive {result.reference_kind} model "
+                      "(III.31)" if result.reference_kind else None),
         "notes": result.notes,
     }
     if args.json:  # the report first: a failed write below still leaves the result on screen

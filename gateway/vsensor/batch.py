@@ -4,6 +4,11 @@ What ``python -m gateway vsensor`` does: replay the adaptive model without the v
 (its fluxes are the sensor's inputs), run the sensor step by step exactly as live, and, when
 the CSV carries vent openings, replay the model with them too and score the closed-loop flow
 and heat loss against that explicit estimate, beside the baselines shipped with the model.
+
+The explicit estimate is the one the sensor learned: that of its metadata's
+``target_model_kind`` when it has one (e.g. a prototype-fed sensor trained on the almeria
+model's flow), else of the kind that feeds it. A CSV without a column that kind needs (t_soil
+for almeria) still gets its flows; the score is left out with a note naming the column.
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ import numpy as np
 from gateway.greenhouse import Greenhouse
 from gateway.metrics import metrics
 from gateway.series import Series
-from gateway.vsensor.adaptive import AdaptiveRun, has_vents, run_adaptive
+from gateway.vsensor.adaptive import AdaptiveRun, explicit_model, has_vents, run_adaptive
 from gateway.vsensor.features import heat_loss
 from gateway.vsensor.runtime import SensorCounts, VentSensor
 
@@ -47,6 +52,7 @@ class BatchResult:
     reference_q: np.ndarray | None = None
     dt_in_out: np.ndarray | None = None
     notes: list[str] = field(default_factory=list)
+    reference_kind: str | None = None  # the model kind of the reference flow, when there is one
 
 
 def run_sensor(sensor: VentSensor, novent: AdaptiveRun, name: str = "pca_narx") -> SensorRun:
@@ -85,12 +91,20 @@ def run_series(model_path: str | Path, series: Series, gh: Greenhouse, kind: str
                                     novent, name)
     dt = novent.x["t_in"] - novent.x["t_out"]
     result = BatchResult(series.time, runs, dt_in_out=dt)
-    if has_vents(series):
-        vent = run_adaptive(kind, series, gh, vents=True, overrides=overrides, seed=seed, progress=progress)
+    target = sensor.info.meta.get("target_model_kind") or kind
+    missing = [c for c in explicit_model(target, gh).requires if c not in series]
+    if has_vents(series) and missing:
+        result.notes.append(f"not scored: the reference (the explicit flow the sensor learned) is "
+                            f"the '{target}' model's, which needs column(s) {', '.join(missing)}, "
+                            f"absent from the CSV; the flows are the sensor's all the same")
+    elif has_vents(series):
+        vent = run_adaptive(target, series, gh, vents=True, overrides=overrides, seed=seed,
+                            progress=progress)
         if vent.flow is None:  # run_adaptive computes it with the vents
             raise ValueError("the replay with the vents gave no explicit flow")
         result.reference_flow = vent.flow
         result.reference_q = heat_loss(vent.flow, dt, gh)
+        result.reference_kind = target
     if sensor.mismatch:
         result.notes.append("model trained on another greenhouse: " + "; ".join(sensor.mismatch))
     return result

@@ -42,6 +42,12 @@ def _data_args(p: argparse.ArgumentParser, cache: bool = True) -> None:
                    help="online estimator setting, e.g. --set t_in.bats=6 (default: the "
                    "greenhouse's and the model's; recorded in the model)")
     p.add_argument("--seed", type=int, default=0, help="seed of the estimator and the network (0)")
+    if not cache:  # the target option reads the cached replays
+        return
+    p.add_argument("--target-kind", choices=MODEL_KINDS, default=None, metavar="KIND",
+                   help="the adaptive model whose replay with the vents gives the target flow "
+                   "(default: --model's; e.g. --model prototype --target-kind almeria: kit-only "
+                   "inputs, the almeria model's flow, which needs t_soil in the training CSVs)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -112,7 +118,8 @@ def _score(args: argparse.Namespace) -> int:
     gh = load_greenhouse(args.greenhouse)
     models = {str(p): Path(p) for p in args.onnx}
     scores = {Path(p).stem: score_segment(build_segment(p, gh, args.model, args.cache,
-                                                        overrides(args.set) or None, args.seed),
+                                                        overrides(args.set) or None, args.seed,
+                                                        target_kind=args.target_kind),
                                           models, gh, args.model, args.clamp_inputs)
               for p in args.data}
     if args.json:
@@ -157,7 +164,8 @@ def _dataset(args: argparse.Namespace) -> int:
     gh = load_greenhouse(args.greenhouse)
     for path in args.data:
         t0 = time.perf_counter()
-        seg = build_segment(path, gh, args.model, args.cache, overrides(args.set), args.seed)
+        seg = build_segment(path, gh, args.model, args.cache, overrides(args.set), args.seed,
+                            target_kind=args.target_kind)
         print(f"{path}: {len(seg.time)} rows in {time.perf_counter() - t0:.0f} s", flush=True)
     return 0
 
@@ -182,7 +190,7 @@ def _errors(args: argparse.Namespace) -> int:
 
     gh = load_greenhouse(args.greenhouse)
     print(describe(study(args.onnx, args.data, gh, args.model, args.cache,
-                         overrides(args.set) or None, args.seed, args.only)))
+                         overrides(args.set) or None, args.seed, args.only, args.target_kind)))
     return 0
 
 

@@ -8,6 +8,11 @@ inputs). Both replays take minutes per week of data, so their products are cache
 online settings, this module's version and the model layer's code probe (gateway/vsensor/
 probe.py: a changed flux term, sky temperature or step replays again): a second ``train`` on
 the same files only reads.
+
+``target_kind`` (``train --target-kind``): the inputs come from the ``kind`` model's no-vent
+replay (cached alone, under its own key) and the target from the ``target_kind`` model's
+replay with the vents (its usual cache entry): e.g. a sensor fed by the kit-only prototype
+model that learns the almeria model's flow, which needs t_soil only at training time.
 """
 
 from __future__ import annotations
@@ -54,20 +59,25 @@ def file_sha256(path: str | Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
-def cache_key(csv_sha: str, gh: Greenhouse, kind: str, overrides: Overrides | None, seed: int) -> str:
+def cache_key(csv_sha: str, gh: Greenhouse, kind: str, overrides: Overrides | None, seed: int,
+              part: str = "") -> str:
+    """``part``: "" for both replays (the keys written before it existed), "novent" for the
+    no-vent replay alone."""
     gh_text = Path(gh.source).read_bytes().hex() if Path(gh.source).exists() else repr(gh)
     settings = {g: {k: float(v) for k, v in t.items()} for g, t in (overrides or {}).items()}
     probe = code_probe(kind, gh)  # a change of the model layer's fluxes or step: replay again
-    blob = json.dumps([CACHE_VERSION, csv_sha, gh_text, kind, settings, seed, probe], sort_keys=True)
+    items = [CACHE_VERSION, csv_sha, gh_text, kind, settings, seed, probe] + ([part] if part else [])
+    blob = json.dumps(items, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:24]
 
 
-def load_checked(path: str | Path, gh: Greenhouse, kind: str) -> Series:
-    """The resampled CSV, refused with a clear error when it cannot give a target."""
-    model = explicit_model(kind, gh)
+def load_checked(path: str | Path, gh: Greenhouse, kind: str, vents: bool = True) -> Series:
+    """The resampled CSV, refused with a clear error when it cannot give a target (``vents``
+    False: only the no-vent replay's inputs are wanted)."""
+    model = explicit_model(kind, gh) if vents else build_model(kind, gh)
     series = load_series(str(path), step=60.0, required=build_model(kind, gh).requires)
     check_columns(model, [c for c in series.columns if c in series], str(path))
-    if not has_vents(series):
+    if vents and not has_vents(series):
         raise ValueError(f"{path}: no vent_roof or vent_side values: the training target (the "
                          "explicit, vent-based flow) needs the vent openings")
     if len(series) <= WARMUP_STEPS + 10:
@@ -84,33 +94,51 @@ def build_segment(
     seed: int = 0,
     progress: Callable[[int], None] | None = None,
     extra: tuple[str, ...] = (),
+    target_kind: str | None = None,
 ) -> Segment:
     """Inputs and target of one kit CSV (cached). ``progress(rows)`` during the replays;
     ``extra``: the optional derived inputs (features.EXTRAS) after the base ones (computed
-    from the cached replays: not part of the cache key)."""
+    from the cached replays: not part of the cache key); ``target_kind``: the model whose
+    vent replay gives the target (default ``kind``; see the module docstring)."""
     settings_for(build_model(kind, gh), gh, overrides)  # bad overrides fail before minutes of work
     sha = file_sha256(path)
+    if target_kind is None or target_kind == kind:
+        arrays = _replays(path, sha, gh, kind, cache_dir, overrides, seed, progress, vents=True)
+        return _segment(str(path), sha, arrays, gh, kind, extra)
+    settings_for(build_model(target_kind, gh), gh, overrides)
+    target = _replays(path, sha, gh, target_kind, cache_dir, overrides, seed, progress, vents=True)
+    arrays = _replays(path, sha, gh, kind, cache_dir, overrides, seed, progress, vents=False)
+    if not np.array_equal(arrays["time"], target["time"]):  # same CSV, same grid: a guard
+        raise ValueError(f"{path}: the {kind} and {target_kind} replays have different time grids")
+    return _segment(str(path), sha, {**arrays, "flow": target["flow"]}, gh, kind, extra)
+
+
+def _replays(path: str | Path, sha: str, gh: Greenhouse, kind: str, cache_dir, overrides,
+             seed: int, progress, vents: bool) -> dict[str, np.ndarray]:
+    """The cached products of one file's replays: with ``vents`` both (the flow, and the
+    no-vent fluxes and drivers), without them the no-vent replay alone (no ``flow``)."""
     cache = None
     if cache_dir is not None:
-        cache = Path(cache_dir) / f"{Path(path).stem}-{cache_key(sha, gh, kind, overrides, seed)}.npz"
+        key = cache_key(sha, gh, kind, overrides, seed, "" if vents else "novent")
+        cache = Path(cache_dir) / f"{Path(path).stem}-{key}.npz"
     if cache is not None and cache.exists():
         with np.load(cache) as data:
-            arrays = {k: data[k] for k in data.files}
-    else:
-        series = load_checked(path, gh, kind)
-        novent = run_adaptive(kind, series, gh, vents=False, overrides=overrides, seed=seed,
-                              progress=progress)
-        vent = run_adaptive(kind, series, gh, vents=True, overrides=overrides, seed=seed,
-                            progress=progress)
-        arrays = {"time": series.time.astype(np.int64), "flow": vent.flow}
-        arrays.update({f"flux_{k}": v for k, v in novent.fluxes.items()})
-        arrays.update({f"x_{k}": novent.x.get(k, np.full(len(series), np.nan)) for k in KEEP})
-        if cache is not None:
-            cache.parent.mkdir(parents=True, exist_ok=True)
-            tmp = cache.with_suffix(".tmp.npz")
-            np.savez_compressed(tmp, **arrays)
-            tmp.replace(cache)
-    return _segment(str(path), sha, arrays, gh, kind, extra)
+            return {k: data[k] for k in data.files}
+    series = load_checked(path, gh, kind, vents)
+    novent = run_adaptive(kind, series, gh, vents=False, overrides=overrides, seed=seed,
+                          progress=progress)
+    arrays = {"time": series.time.astype(np.int64)}
+    if vents:
+        arrays["flow"] = run_adaptive(kind, series, gh, vents=True, overrides=overrides,
+                                      seed=seed, progress=progress).flow
+    arrays.update({f"flux_{k}": v for k, v in novent.fluxes.items()})
+    arrays.update({f"x_{k}": novent.x.get(k, np.full(len(series), np.nan)) for k in KEEP})
+    if cache is not None:
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        tmp = cache.with_suffix(".tmp.npz")
+        np.savez_compressed(tmp, **arrays)
+        tmp.replace(cache)
+    return arrays
 
 
 def _segment(source: str, sha: str, a: dict[str, np.ndarray], gh: Greenhouse, kind: str,

@@ -154,9 +154,10 @@ def breakdowns(segments: list[Segment], sims: list[np.ndarray], vents: list[dict
 
 
 def study(model: str | Path, paths: list[str], gh: Greenhouse, kind: str, cache, overrides,
-          seed: int, only: str | None = None) -> list[Breakdown]:
+          seed: int, only: str | None = None, target_kind: str | None = None) -> list[Breakdown]:
     extra = extras_of(kind, model_feature_names(model))
-    segments = [build_segment(p, gh, kind, cache, overrides, seed, extra=extra) for p in paths]
+    segments = [build_segment(p, gh, kind, cache, overrides, seed, extra=extra,
+                              target_kind=target_kind) for p in paths]
     vents = []
     for p in paths:
         series = load_series(str(p), step=60.0)

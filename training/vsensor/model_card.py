@@ -18,6 +18,8 @@ def train_command(out: Path, meta: dict, held_files: tuple[str, ...] = ()) -> st
     st = meta["training_settings"]
     parts = ["python -m training.vsensor train --data", *(s["file"] for s in meta["sources"]),
              "--greenhouse", meta["greenhouse"]["name"], "--model", meta["model_kind"]]
+    if meta.get("target_model_kind"):
+        parts += ["--target-kind", meta["target_model_kind"]]
     for group, items in sorted((meta["online_overrides"] or {}).items()):
         parts += [f"--set {group}.{k}={v:g}" for k, v in sorted(items.items())]
     if meta["seed"]:
@@ -58,6 +60,17 @@ def model_card(out: Path, meta: dict, metrics: dict, t18: dict, circle: dict, na
     return "\n".join(lines)
 
 
+def _target_kind_note(meta: dict) -> list[str]:
+    """A paragraph when the target came from another model kind than the inputs."""
+    kind, target = meta["model_kind"], meta.get("target_model_kind")
+    if not target:
+        return []
+    return ["", f"**Target model kind: {target}** (inputs: {kind}). The sensor is fed by the "
+            f"{kind} model only (what a live gateway of that kind runs); it learned, and is scored "
+            f"against, the explicit flow of the **{target}** model with the vent signal, so scoring "
+            f"a CSV needs the columns the {target} model reads, running it does not."]
+
+
 def _inputs_and_structure(out: Path, meta: dict, names: list[str], nets: dict) -> list[str]:
     """Title, the inputs in their order, delays and the graph's structure."""
     pca = meta["pca"]
@@ -70,6 +83,7 @@ def _inputs_and_structure(out: Path, meta: dict, names: list[str], nets: dict) -
         f"**{meta['model_kind']}** model run without the vents, the wind and the inside–outside "
         "temperature and humidity differences. Runs with onnxruntime in `gateway/vsensor` "
         "(`VentSensor`, `python -m gateway vsensor`); see docs/vsensor.md.",
+        *_target_kind_note(meta),
         "",
         "## Inputs (in this order; the runtime refuses a model whose list differs)",
         "",

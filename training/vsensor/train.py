@@ -114,16 +114,17 @@ class Prepared:
 
 def prepare(paths: list[str], gh: Greenhouse, kind: str, cache, overrides, seed: int,
             pca_variance: float, progress: Callable[..., None],
-            extra: tuple[str, ...] = ()) -> Prepared:
+            extra: tuple[str, ...] = (), target_kind: str | None = None) -> Prepared:
     """Build (or read from the cache) every file's replays, split, standardise, PCA
-    (``extra``: optional derived inputs, features.EXTRAS)."""
+    (``extra``: optional derived inputs, features.EXTRAS; ``target_kind``: the model whose
+    vent replay gives the target, default ``kind``: dataset.build_segment)."""
     t0 = time.perf_counter()
     segments: list[Segment] = []
     for p in paths:
         progress(description=f"replays {Path(p).name}")
         segments.append(build_segment(p, gh, kind, cache, overrides, seed,
                                       progress=lambda done: progress(advance=0, info=f"row {done}"),
-                                      extra=extra))
+                                      extra=extra, target_kind=target_kind))
         progress(advance=1)
     return prepare_segments(segments, gh, kind, seed, pca_variance, extra,
                             time.perf_counter() - t0)
@@ -149,19 +150,28 @@ def prepare_segments(segments: list[Segment], gh: Greenhouse, kind: str, seed: i
 
 
 def _metadata(kind: str, extra: tuple[str, ...], prep, nets: dict, gh: Greenhouse, overrides,
-              seed: int, settings: dict, pca_info: dict, metrics: dict) -> dict:
-    """The ONNX metadata the three written models share (docs/vsensor.md, "Training")."""
+              seed: int, settings: dict, pca_info: dict, metrics: dict,
+              target_kind: str | None = None) -> dict:
+    """The ONNX metadata the three written models share (docs/vsensor.md, "Training").
+    ``model_kind`` is what feeds the sensor at run time; ``target_model_kind`` (written only
+    when it differs) the model whose explicit flow it learned and is scored against."""
     segments = prep.segments
     ranges, input_mean = training_ranges(prep.split, prep.names)
     flows = np.concatenate([s.flow for s in segments])
+    other = target_kind not in (None, kind)
+    target = ("explicit ventilation flow G [m3 s-1] of the adaptive model with the vent signal "
+              "(III.31; III.32 inverted)")
+    if other:
+        target = target.replace("adaptive model", f"adaptive {target_kind} model")
     return {
         "model_kind": kind,
         "features": [{"name": f.name, "unit": f.unit, "meaning": f.meaning, "tau_s": f.tau}
                      for f in features(kind, extra)],
         "input_delays": list(INPUT_DELAYS), "output_delays": list(OUTPUT_DELAYS), "step_s": STEP_S,
         "training_ranges": ranges, "input_mean": input_mean,
-        "target": "explicit ventilation flow G [m3 s-1] of the adaptive model with the vent signal "
-                  "(III.31; III.32 inverted)",
+        "target": target,
+        **({"target_model_kind": target_kind,
+            "target_code_probe": code_probe(str(target_kind), gh)} if other else {}),
         "flow_range": [float(np.nanmin(flows)), float(np.nanmax(flows))],
         "y0": nets["pca_narx"].y0,
         "greenhouse": {"name": gh.name, "signature": greenhouse_signature(gh)},
@@ -198,13 +208,15 @@ def _target_meta(net) -> dict:
 
 
 def _score_heldout(paths: list[str], written: dict[str, Path], gh: Greenhouse, kind: str, cache,
-                   overrides, seed: int, extra: tuple[str, ...], progress) -> dict[str, dict]:
+                   overrides, seed: int, extra: tuple[str, ...], progress,
+                   target_kind: str | None = None) -> dict[str, dict]:
     """``train --test``: each file scored closed loop with the written models (file stem →
     network → score)."""
     held = {}
     for p in paths:
         progress(description=f"held out {Path(p).name}")
-        seg = build_segment(p, gh, kind, cache, overrides, seed, extra=extra)
+        seg = build_segment(p, gh, kind, cache, overrides, seed, extra=extra,
+                            target_kind=target_kind)
         held[Path(p).stem] = heldout.score_segment(seg, written, gh, kind)
         progress(advance=1)
     return held
@@ -231,7 +243,7 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
           net_seed: int | None = None, feedback: str = "member",
           feedback_noise: float = 0.0, high_flow_weight: float = 1.0,
           target: str = "identity", extra_features: tuple[str, ...] = (),
-          own_feedback: bool = False) -> TrainResult:
+          own_feedback: bool = False, target_kind: str | None = None) -> TrainResult:
     """Build the datasets, fit the three networks, write the models, card and report (PNGs in
     ``report_dir``, default ``<out stem>.report/`` beside the model). ``pca_variance``: the
     share of the variance the kept components must reach (the issue asks for at least 0.90).
@@ -247,7 +259,8 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
     inputs after the base ones (features.EXTRAS; the runtime computes what the model's metadata
     names); ``own_feedback``:
     deployed, every member of an ensemble hears its own past outputs (K output histories in the
-    graph and the runtime) instead of the ensemble's; the fit is the same."""
+    graph and the runtime) instead of the ensemble's; the fit is the same. ``target_kind``: the
+    model whose vent replay gives the target (default ``kind``; dataset.build_segment)."""
     if not fit.MIN_VARIANCE <= pca_variance <= 1.0:
         raise ValueError(f"pca_variance {pca_variance}: must be in [{fit.MIN_VARIANCE}, 1]")
     if ensemble < 1:
@@ -260,7 +273,8 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
     out = Path(out)
     t0 = time.perf_counter()
     extra = tuple(extra_features)
-    prep = prepare(paths, gh, kind, cache, overrides, seed, pca_variance, progress, extra)
+    prep = prepare(paths, gh, kind, cache, overrides, seed, pca_variance, progress, extra,
+                   target_kind)
     segments, split, names, mean, std = prep.segments, prep.split, prep.names, prep.mean, prep.std
     loadings, share, kept = prep.loadings, prep.share, prep.loadings.shape[1]
     seconds = {"datasets": prep.seconds}
@@ -288,7 +302,7 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
                                      own_feedback)}
     base_meta = _metadata(kind, extra, prep, nets, gh, overrides, seed, settings, pca_info,
                           {"validation_closed_loop": metrics,
-                           "training_log": {k: v for k, v in logs.items()}})
+                           "training_log": {k: v for k, v in logs.items()}}, target_kind)
     written = _write_models(nets, len(names), base_meta, out)
     rep_dir = Path(report_dir) if report_dir else out.with_name(f"{out.stem}.report")
     rep_dir.mkdir(parents=True, exist_ok=True)
@@ -297,7 +311,7 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
     report.validation_plot(segments, sims, split.cut, rep_dir / "validation.png")
     t18 = report.table18(segments, names)
     held = _score_heldout(test_paths or [], written, gh, kind, cache, overrides, seed, extra,
-                          progress)
+                          progress, target_kind)
     seconds["total"] = time.perf_counter() - t0
     card = out.with_suffix(".md")
     card.write_text(model_card(out, base_meta, metrics, t18, circle, names, nets, rep_dir, gateway.__name__,

@@ -97,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
                        ensemble=args.ensemble, net_seed=args.net_seed, feedback=args.feedback,
                        feedback_noise=args.feedback_noise, high_flow_weight=args.high_flow_weight,
                        target=args.target, extra_features=tuple(args.extra_features),
-                       own_feedback=args.own_feedback)
+                       own_feedback=args.own_feedback, target_kind=args.target_kind)
     summary = {"models": {k: str(v) for k, v in result.paths.items()}, "card": str(result.card),
                "pca": {k: v for k, v in result.pca.items() if k != "all_shares"},
                "validation_closed_loop": result.metrics,

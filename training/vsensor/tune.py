@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     with threadpool_limits(1):
         prep = prepare(args.data, gh, args.model, args.cache, overrides(args.set) or None,
                        args.seed, args.pca_variance, lambda **k: None,
-                       tuple(args.extra_features))
+                       tuple(args.extra_features), args.target_kind)
         net, log = fit.fit_ensemble("pca_narx", prep.split, prep.mean, prep.std, prep.loadings,
                                     seeds, hidden, args.epochs, args.rounds, min(30, args.epochs),
                                     round_lr=args.round_lr,
@@ -153,7 +153,8 @@ def run_groups(args: argparse.Namespace, gh, hidden: tuple[int, ...], seeds: lis
     folds = []
     with threadpool_limits(1):
         segments = prepare(args.data, gh, args.model, args.cache, overrides(args.set) or None,
-                           args.seed, args.pca_variance, lambda **k: None, extra).segments
+                           args.seed, args.pca_variance, lambda **k: None, extra,
+                           args.target_kind).segments
         groups = hg.file_groups([Path(s.source).stem for s in segments])
         for g in args.holdout_groups or list(groups):
             if g not in groups:

@@ -235,6 +235,23 @@ def _optional_settings(ensemble: int, net_seed: int, seed: int, feedback: str,
             **({"own_feedback": True} if own_feedback and ensemble > 1 else {})}
 
 
+def _fit_networks(prep, seeds: list[int], hidden, epochs: int, rounds: int,
+                  round_lr: float | None, opts: fit.RowOptions, feedback: str, own_feedback: bool,
+                  progress) -> tuple[dict, dict]:
+    """The three networks (PCA-NARX, NARX without PCA, linear ARX) and the NARXs' fit logs."""
+    split, mean, std, loadings = prep.split, prep.mean, prep.std, prep.loadings
+    nets, logs = {}, {}
+    for name, proj in (("pca_narx", loadings), ("narx_no_pca", None)):
+        nets[name], logs[name] = fit.fit_ensemble(name, split, mean, std, proj, seeds, hidden,
+                                                  epochs, rounds, min(30, epochs),
+                                                  progress=progress, round_lr=round_lr,
+                                                  opts=opts, feedback=feedback)
+        nets[name].own_feedback = own_feedback
+    nets["linear_arx"] = fit.fit_arx(split, mean, std)
+    nets["pca_narx"].explained = prep.share[: loadings.shape[1]]
+    return nets, logs
+
+
 def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: str | Path | None,
           overrides=None, seed: int = 0, hidden=fit.HIDDEN, epochs: int = 100, rounds: int = 6,
           progress: Callable[..., None] | None = None, report_dir: str | Path | None = None,
@@ -275,21 +292,13 @@ def train(paths: list[str], gh: Greenhouse, kind: str, out: str | Path, cache: s
     extra = tuple(extra_features)
     prep = prepare(paths, gh, kind, cache, overrides, seed, pca_variance, progress, extra,
                    target_kind)
-    segments, split, names, mean, std = prep.segments, prep.split, prep.names, prep.mean, prep.std
-    loadings, share, kept = prep.loadings, prep.share, prep.loadings.shape[1]
+    segments, split, names = prep.segments, prep.split, prep.names
+    share, kept = prep.share, prep.loadings.shape[1]
     seconds = {"datasets": prep.seconds}
     t1 = time.perf_counter()
-    nets, logs = {}, {}
     progress(description="fitting")
-    for name, proj in (("pca_narx", loadings), ("narx_no_pca", None)):
-        nets[name], logs[name] = fit.fit_ensemble(name, split, mean, std, proj, seeds, hidden,
-                                                  epochs, rounds, min(30, epochs),
-                                                  progress=progress, round_lr=round_lr,
-                                                  opts=opts, feedback=feedback)
-    for name in ("pca_narx", "narx_no_pca"):
-        nets[name].own_feedback = own_feedback and ensemble > 1
-    nets["linear_arx"] = fit.fit_arx(split, mean, std)
-    nets["pca_narx"].explained = share[:kept]
+    nets, logs = _fit_networks(prep, seeds, hidden, epochs, rounds, round_lr, opts, feedback,
+                               own_feedback and ensemble > 1, progress)
     seconds["fit"] = time.perf_counter() - t1
     metrics, sims = {}, {}
     for name, net in nets.items():

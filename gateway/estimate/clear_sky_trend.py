@@ -36,7 +36,7 @@ clear-sky-index persistence as the reference short-term irradiance forecast: Yan
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 
 import numpy as np
 
@@ -88,6 +88,30 @@ def forward_fill(v: np.ndarray) -> np.ndarray:
     idx = np.where(ok, np.arange(len(v)), -1)
     np.maximum.accumulate(idx, out=idx)
     return np.where(idx >= 0, v[np.maximum(idx, 0)], np.nan)
+
+
+def daily_shape(t_out: np.ndarray, starts: np.ndarray, k: np.ndarray, dt: float, days: int,
+                scale: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray:
+    """(N, len(k)) mean change of ``t_out`` over the last ``days`` days from each start's clock
+    time to k steps later (0 where no earlier day is complete); ``scale(a)``: a factor per start
+    on the change of the earlier day starting at index ``a`` (None: 1; a study's hook)."""
+    per_day = int(round(DAY_S / dt))
+    n = len(t_out)
+    shape = np.zeros((len(starts), len(k)))
+    count = np.zeros((len(starts), 1))
+    for d in range(1, days + 1):  # the same clock interval on earlier days
+        a = starts - d * per_day
+        ok = (a >= 0)[:, None] & ((a[:, None] + k[None, :]) < n)
+        a_c = np.clip(a, 0, n - 1)
+        b_c = np.clip(a[:, None] + k[None, :], 0, n - 1)
+        change = t_out[b_c] - t_out[a_c][:, None]
+        if scale is not None:
+            change = change * scale(a_c)[:, None]
+        good = ok & np.isfinite(change)
+        full = np.all(good, axis=1, keepdims=True)
+        shape += np.where(full, np.where(good, change, 0.0), 0.0)
+        count += full
+    return np.where(count > 0, shape / np.maximum(count, 1), 0.0)
 
 
 class ClearSkyTrend:
@@ -183,21 +207,7 @@ class ClearSkyTrend:
     def _temperature(self, t_out: np.ndarray, starts: np.ndarray, k: np.ndarray,
                      dt: float) -> np.ndarray:
         level, slope = trailing_line(t_out, max(int(round(self.trend_window / dt)), 2))
-        per_day = int(round(DAY_S / dt))
-        n = len(t_out)
-        shape = np.zeros((len(starts), len(k)))
-        count = np.zeros((len(starts), 1))
-        for d in range(1, self.shape_days + 1):  # the same clock interval on earlier days
-            a = starts - d * per_day
-            ok = (a >= 0)[:, None] & ((a[:, None] + k[None, :]) < n)
-            a_c = np.clip(a, 0, n - 1)
-            b_c = np.clip(a[:, None] + k[None, :], 0, n - 1)
-            change = t_out[b_c] - t_out[a_c][:, None]
-            good = ok & np.isfinite(change)
-            full = np.all(good, axis=1, keepdims=True)
-            shape += np.where(full, np.where(good, change, 0.0), 0.0)
-            count += full
-        shape = np.where(count > 0, shape / np.maximum(count, 1), 0.0)
+        shape = daily_shape(t_out, starts, k, dt, self.shape_days)
         trend = slope[starts][:, None] * self._damped(k, dt)[None, :]
         return level[starts][:, None] + self.shape_weight * shape + trend
 

@@ -41,10 +41,10 @@ import numpy as np
 
 from gateway.estimate import correction
 from gateway.estimate.clear_sky_trend import (
-    DAY_S,
     ClearSkyTrend,
     _trailing_sums,
     _unix,
+    daily_shape,
     forward_fill,
     trailing_line,
 )
@@ -203,23 +203,8 @@ class ShapeVariant(ClearSkyTrend):
                index: np.ndarray | None) -> np.ndarray:
         """(N, len(k)) mean change of the last ``shape_days`` days from the start's clock time
         to k steps later (0 where no earlier day is complete)."""
-        per_day = int(round(DAY_S / dt))
-        n = len(t_out)
-        shape = np.zeros((len(starts), len(k)))
-        count = np.zeros((len(starts), 1))
-        for d in range(1, self.shape_days + 1):  # the same clock interval on earlier days
-            a = starts - d * per_day
-            ok = (a >= 0)[:, None] & ((a[:, None] + k[None, :]) < n)
-            a_c = np.clip(a, 0, n - 1)
-            b_c = np.clip(a[:, None] + k[None, :], 0, n - 1)
-            change = t_out[b_c] - t_out[a_c][:, None]
-            if index is not None:
-                change = change * sky_scale(index[starts], index[a_c])[:, None]
-            good = ok & np.isfinite(change)
-            full = np.all(good, axis=1, keepdims=True)
-            shape += np.where(full, np.where(good, change, 0.0), 0.0)
-            count += full
-        return np.where(count > 0, shape / np.maximum(count, 1), 0.0)
+        scale = None if index is None else (lambda a: sky_scale(index[starts], index[a]))
+        return daily_shape(t_out, starts, k, dt, self.shape_days, scale)
 
     def shape_weights(self, t_out: np.ndarray, base: np.ndarray, shape: np.ndarray,
                       k: np.ndarray, dt: float) -> np.ndarray:

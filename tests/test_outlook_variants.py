@@ -86,16 +86,20 @@ def test_the_blend_goes_from_the_current_index_to_the_reference():
     assert np.all((wts >= 0.0) & (wts <= 1.0)) and wts[0] > wts[-1]
 
 
+def assert_live_is_batch(outlook, starts: tuple[int, ...]) -> None:
+    """The single-start call on the history up to each start equals the batch call."""
+    time, w = _weather()
+    for s in starts:
+        live = outlook.drivers({k: v[: s + 1] for k, v in w.items()}, time[: s + 1], 12, DT)
+        batch = outlook.drivers_at(w, time, np.array([s]), 12, DT)
+        for k in w:
+            np.testing.assert_array_equal(live[k], batch[k][0], err_msg=f"{k} at {s}")
+
+
 def test_the_blends_live_call_is_its_replay_block():
     """The ol candidate ``index-blend`` (tests/generality/outlook_costs.py): the live gateway's
     single-start call on the history up to now equals replay's batch call for that start."""
-    time, w = _weather()
-    blend = IndexBlend(SITE, 86400.0, 3600.0)
-    for s in (3 * 288 + 40, 3 * 288 + 130, 4 * 288 + 150):
-        live = blend.drivers({k: v[: s + 1] for k, v in w.items()}, time[: s + 1], 12, DT)
-        batch = blend.drivers_at(w, time, np.array([s]), 12, DT)
-        for k in w:
-            np.testing.assert_array_equal(live[k], batch[k][0], err_msg=f"{k} at {s}")
+    assert_live_is_batch(IndexBlend(SITE, 86400.0, 3600.0), (3 * 288 + 40, 3 * 288 + 130, 4 * 288 + 150))
 
 
 def test_the_daily_shape_scaled_by_the_sky_follows_a_duller_day():
@@ -131,13 +135,7 @@ def test_sky_scale_is_the_bounded_ratio_of_the_indices():
 def test_a_candidates_live_call_is_its_replay_block(settings):
     """One code path: the live gateway's single-start call on the history up to now equals
     replay's batch call for that start on the whole series (which also reads nothing later)."""
-    time, w = _weather()
-    outlook = ShapeVariant(SITE, **settings)
-    for s in (3 * 288 + 40, 3 * 288 + 130, 3 * 288 + 200):
-        live = outlook.drivers({k: v[: s + 1] for k, v in w.items()}, time[: s + 1], 12, DT)
-        batch = outlook.drivers_at(w, time, np.array([s]), 12, DT)
-        for k in w:
-            np.testing.assert_array_equal(live[k], batch[k][0], err_msg=f"{k} at {s}")
+    assert_live_is_batch(ShapeVariant(SITE, **settings), (3 * 288 + 40, 3 * 288 + 130, 3 * 288 + 200))
 
 
 def test_the_online_shape_weight_is_one_on_a_daily_cycle_and_none_on_a_random_walk():

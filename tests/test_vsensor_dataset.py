@@ -13,6 +13,7 @@ from gateway.vsensor.features import (
     flow_from_heat_loss,
     heat_loss,
     low_pass,
+    raw_features,
 )
 from tests import vsensor_data as vd
 from training.simulate import PRESETS, simulate
@@ -51,6 +52,19 @@ def test_low_pass_holds_on_nan():
     raw = np.array([[1.0, np.nan], [np.nan, 2.0], [3.0, 4.0]])
     out = low_pass(raw, np.array([0.5, 1.0]))
     assert out[1, 0] == 1.0 and np.isnan(out[0, 1]) and out[2, 0] == 2.0 and out[2, 1] == 4.0
+
+
+def test_the_inside_vapour_pressure_deficit_input_against_published_values():
+    """``vpd_in`` (an extra input, kit columns only): FAO-56 Annex 2, Table 2.3, gives
+    e°(25 °C) = 3.168 kPa and e°(10 °C) = 1.228 kPa, so at RH 50 % and 80 % the deficit is
+    1.584 and 0.246 kPa; a missing RH gives NaN (flagged by the runtime, never a number)."""
+    x = {"t_in": np.array([25.0, 10.0, 20.0]), "rh_in": np.array([50.0, 80.0, np.nan]),
+         "t_out": np.zeros(3), "rh_out": np.full(3, 50.0), "wind": np.ones(3)}
+    fluxes = {n: np.zeros(3) for n in feature_names("prototype")[3:]}
+    raw = raw_features("prototype", x, fluxes, ("vpd_in",))
+    assert feature_names("prototype", ("vpd_in",))[-1] == "vpd_in"
+    np.testing.assert_allclose(raw[:2, -1], [1.584, 0.246], atol=2e-3)
+    assert np.isnan(raw[2, -1])
 
 
 def test_dataset_inputs_and_target():

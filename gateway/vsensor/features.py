@@ -73,6 +73,10 @@ def _dvp(col: Callable[[str], np.ndarray]) -> np.ndarray:
     return psy.vapour_pressure(col("t_in"), col("rh_in")) - psy.vapour_pressure(col("t_out"), col("rh_out"))
 
 
+def _vpd_in(col: Callable[[str], np.ndarray]) -> np.ndarray:
+    return psy.vapour_pressure_deficit(col("t_in"), col("rh_in"))
+
+
 def _wind_dt(col: Callable[[str], np.ndarray]) -> np.ndarray:
     return col("wind") * (col("t_in") - col("t_out"))
 
@@ -80,6 +84,9 @@ def _wind_dt(col: Callable[[str], np.ndarray]) -> np.ndarray:
 EXTRAS: dict[str, tuple[Feature, Callable[[Callable[[str], np.ndarray]], np.ndarray]]] = {
     "dvp_in_out": (Feature("dvp_in_out", "kPa", "inside minus outside vapour pressure (the "
                            "humidity balance's driving difference, III.3-5)"), _dvp),
+    "vpd_in": (Feature("vpd_in", "kPa", "inside vapour pressure deficit p_ws(T_in) - p_w,in "
+                       "(III.4-5): it drives the transpiration the almeria model's q_trp "
+                       "carries and the prototype's fluxes lack"), _vpd_in),
     "wind_dt": (Feature("wind_dt", "m s-1 K", "wind times (T_in - T_out) (open vents: G grows "
                         "with the wind, so the product follows the heat to be removed)", 600.0),
                 _wind_dt),

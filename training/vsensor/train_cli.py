@@ -66,7 +66,7 @@ def add_fit_args(p: argparse.ArgumentParser) -> None:
                    "learn the flow and odd seeds the opening, each fitted as in a one-target "
                    "ensemble, averaged as flows in the graph")
     p.add_argument("--extra-features", nargs="+", default=[], metavar="NAME",
-                   choices=("dvp_in_out", "wind_dt"),
+                   choices=("dvp_in_out", "vpd_in", "wind_dt"),  # features.EXTRAS
                    help="derived inputs after the base ones (gateway.vsensor.features.EXTRAS; "
                    "default none); the runtime computes what the model's metadata names")
     p.add_argument("--own-feedback", action="store_true",

@@ -97,6 +97,7 @@ def load_ventilation(path: Path, gh: Greenhouse) -> VentilationSensor:
         settings = settings_for(model, gh, sensor.info.meta.get("online_overrides"))
     except (ValueError, TypeError, AttributeError) as e:
         raise ValueError(f"{path}: its metadata's online_overrides: {e}") from None
+
     def history() -> dict:
         return {"t": last[0] if last else None, **sensor.snapshot()}
 

@@ -65,8 +65,10 @@ def add_fit_args(p: argparse.ArgumentParser) -> None:
                    "flow out). mixed: an ensemble (--ensemble 2 or more) whose even network seeds "
                    "learn the flow and odd seeds the opening, each fitted as in a one-target "
                    "ensemble, averaged as flows in the graph")
+    from gateway.vsensor.features import EXTRAS  # the one list of the derived inputs
+
     p.add_argument("--extra-features", nargs="+", default=[], metavar="NAME",
-                   choices=("dvp_in_out", "vpd_in", "wind_dt"),  # features.EXTRAS
+                   choices=tuple(EXTRAS),
                    help="derived inputs after the base ones (gateway.vsensor.features.EXTRAS; "
                    "default none); the runtime computes what the model's metadata names")
     p.add_argument("--own-feedback", action="store_true",

@@ -102,3 +102,18 @@ def test_a_csv_without_t_soil_gets_flows_and_a_note_instead_of_a_score(tmp_path,
     assert lines[0] == "time,flow_m3_s,q_vent_w_m2,out_of_range,valid"
     flows = [float(r.split(",")[1]) for r in lines[1:]]
     assert len(flows) == 1440 and all(math.isfinite(v) and v >= 0 for v in flows)
+
+
+def test_the_progress_bar_counts_only_the_replays_that_run(tmp_path, gh, model):
+    """Two replays (no vents, then the target kind's with them) when the CSV can be scored, one
+    when it cannot (no t_soil for the almeria flow) or carries no vents: the bar's size."""
+    from gateway.vsensor.adaptive import without_vents
+    from gateway.vsensor.batch import replays_needed
+    from gateway.vsensor.runtime import VentSensor
+
+    sensor = VentSensor(model, gh, "prototype")
+    full = load_series(str(vd.test_file()), step=60.0)
+    kit = load_series(str(without_column(vd.test_file(), tmp_path / "kit.csv", "t_soil")), step=60.0)
+    assert replays_needed(sensor, full, gh, "prototype") == 2
+    assert replays_needed(sensor, kit, gh, "prototype") == 1
+    assert replays_needed(sensor, without_vents(full), gh, "prototype") == 1

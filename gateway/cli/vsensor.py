@@ -59,9 +59,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gateway.vsensor.batch import run_series, score, write_flows
+    from gateway.vsensor.batch import replays_needed, run_series, score, write_flows
     from gateway.vsensor.models import shipped_model
-    from gateway.vsensor.runtime import ModelMismatch
+    from gateway.vsensor.runtime import ModelMismatch, VentSensor
 
     sensor_file(args.sensor)
     check_output(args.out, "--out", inputs={"--data": args.data, "--greenhouse": args.greenhouse,
@@ -81,13 +81,13 @@ def run(args: argparse.Namespace) -> int:
         path = args.sensor or shipped_model(args.model_kind)
     except FileNotFoundError as exc:
         raise CliError(str(exc)) from None
-    vents = [c for c in ("vent_roof", "vent_side") if c in series]
-    replays = 2 if vents else 1
     try:
+        sensor = VentSensor(path, gh, args.model_kind, clamp_inputs=args.clamp_inputs)
+        replays = replays_needed(sensor, series, gh, args.model_kind)
         with progress_bar("vsensor", replays * len(series), True) as bar:
             result = run_series(path, series, gh, args.model_kind, seed=args.seed,
                                 baselines=not args.no_baselines, clamp_inputs=args.clamp_inputs,
-                                progress=lambda done: bar(advance=100))
+                                progress=lambda done: bar(advance=100), sensor=sensor)
     except (ModelMismatch, FileNotFoundError) as exc:
         raise CliError(str(exc)) from None
     sensors = score(result)

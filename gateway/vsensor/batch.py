@@ -74,13 +74,35 @@ def baseline_paths(model_path: str | Path) -> dict[str, Path]:
     return {k: v for k, v in found.items() if v.exists()}
 
 
+def unscored_reason(sensor: VentSensor, series: Series, gh: Greenhouse, kind: str) -> str | None:
+    """Why ``series`` cannot be scored against the explicit flow the sensor learned (None: it
+    can, or it has no vents to score against). The flow's kind is the metadata's
+    ``target_model_kind``, else ``kind``."""
+    if not has_vents(series):
+        return None
+    target = sensor.info.meta.get("target_model_kind") or kind
+    missing = [c for c in explicit_model(target, gh).requires if c not in series]
+    if not missing:
+        return None
+    return (f"not scored: the reference (the explicit flow the sensor learned) is the '{target}' "
+            f"model's, which needs column(s) {', '.join(missing)}, absent from the CSV; the flows "
+            "are the sensor's all the same")
+
+
+def replays_needed(sensor: VentSensor, series: Series, gh: Greenhouse, kind: str) -> int:
+    """How many adaptive replays ``run_series`` makes (a progress bar's size, in series)."""
+    return 2 if has_vents(series) and unscored_reason(sensor, series, gh, kind) is None else 1
+
+
 def run_series(model_path: str | Path, series: Series, gh: Greenhouse, kind: str,
                overrides=None, seed: int = 0, baselines: bool = True,
                progress: Callable[[int], None] | None = None,
-               clamp_inputs: bool = False) -> BatchResult:
+               clamp_inputs: bool = False, sensor: VentSensor | None = None) -> BatchResult:
     """Everything ``python -m gateway vsensor`` computes (see the module docstring);
-    ``clamp_inputs``: every sensor built with it (``VentSensor``)."""
-    sensor = VentSensor(model_path, gh, kind, clamp_inputs=clamp_inputs)
+    ``clamp_inputs``: every sensor built with it (``VentSensor``); ``sensor``: the model
+    already opened from ``model_path`` (else it is opened here)."""
+    if sensor is None:
+        sensor = VentSensor(model_path, gh, kind, clamp_inputs=clamp_inputs)
     if overrides is None:
         overrides = sensor.info.meta.get("online_overrides") or None
     novent = run_adaptive(kind, series, gh, vents=False, overrides=overrides, seed=seed, progress=progress)
@@ -92,11 +114,9 @@ def run_series(model_path: str | Path, series: Series, gh: Greenhouse, kind: str
     dt = novent.x["t_in"] - novent.x["t_out"]
     result = BatchResult(series.time, runs, dt_in_out=dt)
     target = sensor.info.meta.get("target_model_kind") or kind
-    missing = [c for c in explicit_model(target, gh).requires if c not in series]
-    if has_vents(series) and missing:
-        result.notes.append(f"not scored: the reference (the explicit flow the sensor learned) is "
-                            f"the '{target}' model's, which needs column(s) {', '.join(missing)}, "
-                            f"absent from the CSV; the flows are the sensor's all the same")
+    unscored = unscored_reason(sensor, series, gh, kind)
+    if unscored:
+        result.notes.append(unscored)
     elif has_vents(series):
         vent = run_adaptive(target, series, gh, vents=True, overrides=overrides, seed=seed,
                             progress=progress)

@@ -163,6 +163,24 @@ def test_fluxes_balance_the_temperature_change(almeria):
     np.testing.assert_allclose(model.capacity(gh) * dTdt[night], total[night], rtol=0.05, atol=0.5)
 
 
+@pytest.mark.parametrize("which", ["almeria", "prototype"])
+def test_fluxes_at_one_minute_are_the_series_fluxes_at_that_minute(which, request):
+    """``fluxes_at`` (what the live gateway publishes and a sensor reads) is ``fluxes`` on one
+    row; a missing driver or a non-finite flux gives {} rather than a partial or NaN set."""
+    model, x, gh = request.getfixturevalue(which)
+    theta = model.defaults(gh)
+    t = 700
+    t_in = x["t_in"]
+    series = model.fluxes(theta, x, t_in)
+    row = {k: float(v[t]) for k, v in x.items() if np.ndim(v) == 1 and len(v) == len(t_in)}
+    one = model.fluxes_at(theta, row, float(t_in[t]))
+    assert set(one) == set(series) and one
+    for name, v in one.items():
+        assert v == pytest.approx(float(series[name][t]), rel=1e-12, abs=1e-12)
+    assert model.fluxes_at(theta, row, float("nan")) == {}
+    assert model.fluxes_at(theta, {k: v for k, v in row.items() if k != "t_out"}, 20.0) == {}
+
+
 def test_vent_areas_follow_iii33_and_iii34(almeria_gh):
     v = almeria_gh.vents
     assert side_vent_area(v, np.array(50.0)) == pytest.approx(2 * 32.75 * 1.90 * 0.5)

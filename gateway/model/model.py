@@ -332,6 +332,19 @@ class Model:
         t = slice(0, len(t_in))
         return {term.name: term.flux(p, x, t_in, t) for term in self.terms}
 
+    def fluxes_at(self, theta: np.ndarray, row: Mapping[str, float], t_in: float) -> dict[str, float]:
+        """Each term's flux [W m-2] on one minute's drivers ``row`` (prepared, as an online
+        estimator's ``last_row``) at the inside temperature ``t_in`` [°C]: what the live gateway
+        publishes and a virtual sensor reads. {} when a driver is missing or a flux is not finite
+        (nothing to say for that minute)."""
+        x = {k: np.array([v], dtype=float) for k, v in row.items()}
+        try:
+            q = self.fluxes(theta, x, np.array([t_in], dtype=float))
+        except KeyError:
+            return {}
+        out = {k: float(np.asarray(v).reshape(-1)[0]) for k, v in q.items()}
+        return out if all(np.isfinite(v) for v in out.values()) else {}
+
 
 def _total(
     fns: Sequence[Callable[[np.ndarray, IndexT], tuple]],

@@ -40,7 +40,7 @@ from gateway.model.model import Model
 from gateway.service.forecaster import LiveForecaster
 from gateway.service.minutes import KIT_COLUMNS, Minute, final_before, first_minute, read_minutes
 from gateway.service.settings import EstimatorSettings, GreenhouseSettings
-from gateway.service.ventilation import HISTORY_KEY, STATE_KEY, SensorFeed, VentilationSensor, model_fluxes
+from gateway.service.ventilation import HISTORY_KEY, STATE_KEY, SensorFeed, VentilationSensor
 from gateway.store.db import transaction
 from gateway.store.live import EstimateRow, add_estimates, load_state, save_state
 
@@ -228,7 +228,7 @@ class GreenhousePipeline:
             rows.append(EstimateRow(g, t, "online", "t_in_next", pred.t_in, "degC", info))
         if not math.isfinite(t_in):
             return rows
-        flux = model_fluxes(self.model, pred.theta, self.est.last_row, t_in)
+        flux = self.model.fluxes_at(pred.theta, self.est.last_row, t_in)
         rows += [EstimateRow(g, t, "flux", n, v, "W m-2") for n, v in flux.items()]
         rows += [EstimateRow(g, t, "forecast", f"t_in+{h}min", v, "degC", self.outlook.name)
                  for h, v in self._forecasts(pred.theta, t)]

@@ -16,7 +16,6 @@ goes on where it stopped instead of settling again.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -109,15 +108,6 @@ def load_ventilation(path: Path, gh: Greenhouse) -> VentilationSensor:
     return VentilationSensor(step, model, settings, history, resume)
 
 
-def model_fluxes(model: Model, theta: np.ndarray, row: Mapping[str, float],
-                 t_in: float) -> dict[str, float]:
-    """Every term's flux [W m-2] on one minute's drivers with ``theta``; {} when one is not finite."""
-    x = {k: np.array([v]) for k, v in row.items()}
-    q = model.fluxes(theta, x, np.array([t_in]))
-    out = {k: float(np.asarray(v).reshape(-1)[0]) for k, v in q.items()}
-    return out if all(math.isfinite(v) for v in out.values()) else {}
-
-
 class SensorFeed:
     """The sensor and what feeds it: the forecasting estimator, or its own estimator."""
 
@@ -162,7 +152,7 @@ class SensorFeed:
         estimator's, used when the sensor reads that model; else its own estimator's."""
         if self.own is not None:
             drivers = self.own.last_row
-            fluxes = model_fluxes(self.own.model, self.own.theta, drivers, t_in)
+            fluxes = self.own.model.fluxes_at(self.own.theta, drivers, t_in)
         return self.sensor.step(t, drivers, fluxes) if fluxes else None
 
     def snapshot(self) -> dict | None:

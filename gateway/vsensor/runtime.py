@@ -391,14 +391,8 @@ def _num(v) -> float:
 
 
 def fluxes_now(estimator) -> dict[str, float]:
-    """The fluxes [W m-2] of an ``OnlineEstimator`` after its ``update`` for this minute: each
-    term evaluated on the sample just checked (``last_row``) with the parameters just estimated
-    (``theta``), along the measured inside temperature (NaN where it was missing)."""
+    """The fluxes [W m-2] of an ``OnlineEstimator`` after its ``update`` for this minute
+    (``Model.fluxes_at`` on the sample just checked, with the parameters just estimated, along
+    the measured inside temperature); {} when one is missing or not finite."""
     row = estimator.last_row
-    x = {k: np.array([v], dtype=float) for k, v in row.items()}
-    t_in = x.get("t_in", np.array([np.nan]))
-    try:
-        out = estimator.model.fluxes(estimator.theta, x, t_in)
-    except KeyError:  # a driver the model needs never arrived: nothing to say
-        return {}
-    return {k: float(np.asarray(v).reshape(-1)[0]) for k, v in out.items()}
+    return estimator.model.fluxes_at(estimator.theta, row, _num(row.get("t_in")))

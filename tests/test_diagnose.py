@@ -13,6 +13,7 @@ shipped day test cannot judge anything (``judge.MIN_DAYS``). The day test itself
 
 from __future__ import annotations
 
+import copy
 import functools
 
 import numpy as np
@@ -79,18 +80,26 @@ def piece_judge(monkeypatch):
 
 
 @functools.cache
+def _clean(plant: str, days: int):
+    """The clean record: one simulation per plant and length per worker, whose first time every
+    case reads and which the effect-free cases take (a copy each: ``post`` may change it)."""
+    return simulate(plant=plant, weather="almeria", days=days, seed=2, step=60)
+
+
 def _first_time(plant: str, days: int) -> np.datetime64:
-    """The clean record's first time: one clean simulation per plant and length per worker (it
-    was run again for every effect case only to read this)."""
-    return simulate(plant=plant, weather="almeria", days=days, seed=2, step=60).time[0]
+    """The clean record's first time (it was simulated again for every case only to read this)."""
+    return _clean(plant, days).time[0]
 
 
 def _data(tmp_path, plant: str, effect: str | None, post=None, at: float = 3.6,
           days: int | None = None):
     days = DAYS if days is None else days  # read at call time (day_test_study.py sets DAYS)
     t0 = str(_first_time(plant, days) + np.timedelta64(int(at * 86400), "s"))
-    effects = [] if effect is None else [f"{effect}@{t0}:{SPECS[effect][plant]}"]
-    r = simulate(plant=plant, weather="almeria", days=days, seed=2, step=60, effects=effects)
+    if effect is None:  # the clean record, simulated once (the same call without effects)
+        r = copy.deepcopy(_clean(plant, days))
+    else:
+        r = simulate(plant=plant, weather="almeria", days=days, seed=2, step=60,
+                     effects=[f"{effect}@{t0}:{SPECS[effect][plant]}"])
     if post is not None:
         post(r)
     path = tmp_path / f"{plant}.csv"

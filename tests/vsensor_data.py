@@ -1,15 +1,24 @@
-"""Small data and a tiny trained sensor shared by the virtual-sensor tests (built once per session).
+"""Small data and a tiny trained sensor shared by the virtual-sensor tests (built once per run).
 
 The online estimator runs with a small budget (TINY) so that both replays of 1.5 simulated days
 take seconds; the network is small (8-8) and trained for a few epochs. Real training runs from
 ``python -m training.vsensor train`` (docs/vsensor.md), never in CI.
+
+Under xdist (``make test``: two workers, one test file each) the vsensor files land on both
+workers, and each used to simulate, replay and train the same things again (~25 s). The workers
+of one run share a folder (``PYTEST_XDIST_TESTRUNUID``), build each file and model once under a
+lock, and reuse what another worker has finished (a marker written after it, with its settings).
 """
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import functools
 import json
+import os
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 from training.simulate import PRESETS, simulate
@@ -21,17 +30,39 @@ GREENHOUSE = "almeria-palmerillas"
 
 @functools.lru_cache(maxsize=1)
 def workdir() -> Path:
+    """One folder for every xdist worker of this run, else a fresh temporary folder."""
+    run = os.environ.get("PYTEST_XDIST_TESTRUNUID")
+    if run:
+        path = Path(tempfile.gettempdir()) / f"serra-vsensor-{run}"
+        path.mkdir(exist_ok=True)
+        return path
     return Path(tempfile.mkdtemp(prefix="serra-vsensor-"))
+
+
+@contextlib.contextmanager
+def _build_once(name: str, settings: str) -> Iterator[bool]:
+    """True when the caller must build ``name`` (no worker of this run has finished it with these
+    ``settings``); one builder at a time, the others wait and then reuse it."""
+    folder = workdir()
+    done = folder / f"{name}.done"
+    with open(folder / f"{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        build = not (done.exists() and done.read_text() == settings)
+        yield build
+        if build:  # not reached when the build raised: the next caller builds again
+            done.write_text(settings)
 
 
 @functools.cache
 def kit_csv(name: str, start: str, days: float, grower: bool, seed: int) -> Path:
     """A simulated Almería-type house with vent openings, as a kit CSV."""
-    plant = PRESETS["almeria"]
-    if grower:
-        plant = plant.with_(controller=GrowerVents(seed=seed))
     path = workdir() / f"{name}.csv"
-    simulate(plant, "almeria", start, days, seed=seed).write(path)
+    with _build_once(f"csv-{name}", repr((start, days, grower, seed))) as build:
+        if build:
+            plant = PRESETS["almeria"]
+            if grower:
+                plant = plant.with_(controller=GrowerVents(seed=seed))
+            simulate(plant, "almeria", start, days, seed=seed).write(path)
     return path
 
 
@@ -54,10 +85,12 @@ def tiny_model(tag: str = "a", ensemble: int = 1, kind: str = "almeria", **optio
     from training.vsensor.train import train
 
     out = workdir() / tag / "tiny.onnx"
-    with threadpool_limits(1):
-        train([str(p) for p in train_files()], load_greenhouse(GREENHOUSE), kind, out,
-              workdir() / "cache", TINY, seed=0, hidden=(8, 8), epochs=8, rounds=1,
-              ensemble=ensemble, **options)
+    settings = repr((ensemble, kind, sorted(options.items())))
+    with _build_once(f"model-{tag}", settings) as build, threadpool_limits(1):
+        if build:
+            train([str(p) for p in train_files()], load_greenhouse(GREENHOUSE), kind, out,
+                  workdir() / "cache", TINY, seed=0, hidden=(8, 8), epochs=8, rounds=1,
+                  ensemble=ensemble, **options)
     return out
 
 

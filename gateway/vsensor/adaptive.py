@@ -111,7 +111,7 @@ def run_adaptive(
     data = series if vents else without_vents(series)
     settings = settings_for(model, gh, overrides)
     result = replay(model, data, gh, model.defaults(gh), settings, seed=seed, horizons=(),
-                    progress=progress)
+                    progress=progress, score=False)
     theta = result.theta
     x = result.x
     t_in = x["t_in"]

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -135,8 +136,12 @@ def _replays(path: str | Path, sha: str, gh: Greenhouse, kind: str, cache_dir, o
     arrays.update({f"x_{k}": novent.x.get(k, np.full(len(series), np.nan)) for k in KEEP})
     if cache is not None:
         cache.parent.mkdir(parents=True, exist_ok=True)
-        tmp = cache.with_suffix(".tmp.npz")
-        np.savez_compressed(tmp, **arrays)
+        # a name of this process's own (two runs sharing the cache folder, two trainings or the
+        # test workers, may write the same entry at once; the rename is atomic either way) that
+        # does not end in .npz, so a look for entries (*.npz) never sees one half written
+        tmp = cache.with_name(f"{cache.name}.{os.getpid()}.tmp")
+        with open(tmp, "wb") as f:  # a file object: savez adds no .npz to the name
+            np.savez_compressed(f, **arrays)
         tmp.replace(cache)
     return arrays
 

@@ -31,11 +31,12 @@ def test_groups_are_site_and_season_of_the_corpus_names():
         "grower", "controller"]
 
 
-def test_a_fold_fits_on_the_other_groups_and_scores_the_whole_held_out_files(tmp_path):
+def test_a_fold_fits_on_the_other_groups_and_scores_the_whole_held_out_files(tmp_path, capsys):
     """Two one-file groups: each fold's figure is the closed loop, over the whole held-out file,
     of the PCA-NARX fitted (standardisation and PCA included) on the other file alone; with
     ``--clamp-inputs`` the same networks also scored with the inputs clamped to the padded
-    ranges of that fit's training rows (the ranges its written model would carry)."""
+    ranges of that fit's training rows (the ranges its written model would carry); every held-out
+    file's mean signed error (sensor − reference) in the log and the printed table."""
     from training.vsensor import fit
     from training.vsensor.cli import main
     from training.vsensor.dataset import build_segment
@@ -59,6 +60,7 @@ def test_a_fold_fits_on_the_other_groups_and_scores_the_whole_held_out_files(tmp
                  "almeria", "--cache", str(cache), *sets, "--hidden", "8,8", "--epochs", "6",
                  "--rounds", "1", "--ensemble", "2", "--own-feedback", "--holdout-groups",
                  "--clamp-inputs", "--log", str(log)]) == 0
+    printed = capsys.readouterr().out
     got = json.loads(log.read_text())
     folds = {f["group"]: f for f in got["folds"]}
     assert list(folds) == ["almeria-summer", "bleiswijk-autumn"]
@@ -85,6 +87,11 @@ def test_a_fold_fits_on_the_other_groups_and_scores_the_whole_held_out_files(tmp
         assert s["mae"] == pytest.approx(mae, rel=1e-12)
         assert s["pct_range"] == pytest.approx(100 * mae / np.ptp(ref[ok]), rel=1e-12)
         assert folds["almeria-summer"][key]["all"]["mae"] == s["mae"]
+        signed = float(np.mean(sims[0][ok] - ref[ok]))
+        assert folds["almeria-summer"]["signed_by_file"][key] == {
+            "almeria-summer-grower": pytest.approx(signed, rel=1e-12, abs=1e-12)}
+        if key == "own":  # the printed table's figure (--own-feedback: members on their own past)
+            assert f"almeria-summer-grower {signed:+.3f} |" in printed
     assert folds["almeria-summer"]["clamped"]["all"]["mae"] != folds["almeria-summer"]["scores"][
         "all"]["mae"]
     clamped = {g: f["clamped"]["all"]["mae"] for g, f in folds.items()}

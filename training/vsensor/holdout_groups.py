@@ -19,13 +19,18 @@ is large for a tiny error.)
 ``clamp``: the same fitted networks also run with every input clamped to the fold's padded
 training ranges (``loop.padded_ranges`` of the ranges its model's metadata would carry), paired
 with the unclamped run: ``Fold.clamped`` and ``own_clamped`` (docs/vsensor.md, tenth pass).
+
+``Fold.signed_by_file``: per held-out file, the closed-loop mean signed error (sensor −
+reference) [m3 s-1] of each run above (keys as ``Fold``'s score fields: ``scores``, ``own``,
+``clamped``, ``own_clamped``): a sensor that sits under the reference shows it here, which its
+MAE alone does not (kt's candidate: MAE 5.09 on Biskra's grower file, almost all bias).
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -85,6 +90,17 @@ def score(refs: list[np.ndarray], ests: list[np.ndarray]) -> Score | None:
     return Score(mae, 100.0 * mae / (hi - lo) if hi > lo else float("nan"), int(ok.sum()), (lo, hi))
 
 
+def signed_error(ref: np.ndarray, est: np.ndarray) -> float:
+    """Mean of ``est − ref`` [m3 s-1] over the finite references (the minutes ``score`` scores)."""
+    ok = np.isfinite(ref)
+    return float(np.mean(est[ok] - ref[ok])) if ok.any() else float("nan")
+
+
+def signed_by_file(segments: list[Segment], sims: list[np.ndarray]) -> dict[str, float]:
+    """Held-out stem → closed-loop mean signed error (sensor − reference) [m3 s-1]."""
+    return {Path(s.source).stem: signed_error(s.flow, y) for s, y in zip(segments, sims, strict=True)}
+
+
 def score_files(segments: list[Segment], sims: list[np.ndarray]) -> dict[str, Score | None]:
     """``all``, ``grower`` and ``controller`` (by the file names) scores of whole files."""
     stems = [Path(s.source).stem for s in segments]
@@ -108,6 +124,8 @@ class Fold:
     seconds: float
     clamped: dict[str, Score | None] | None = None  # ``scores`` with the inputs clamped
     own_clamped: dict[str, Score | None] | None = None  # ``own`` with the inputs clamped
+    # run (``scores``/``own``/``clamped``/``own_clamped``) → held-out stem → mean(sensor − ref)
+    signed_by_file: dict[str, dict[str, float]] = field(default_factory=dict)
 
 
 def run_fold(group: str, segments: list[Segment], gh: Greenhouse, kind: str, seed: int,
@@ -132,11 +150,18 @@ def run_fold(group: str, segments: list[Segment], gh: Greenhouse, kind: str, see
     fold = Fold(group, stems, [Path(s.source).stem for s in outside], int(prep.loadings.shape[1]),
                 score_files(inside, shared), None if own is None else score_files(inside, own),
                 by_file, 0.0)
+    fold.signed_by_file["scores"] = signed_by_file(inside, shared)
+    if own is not None:
+        fold.signed_by_file["own"] = signed_by_file(inside, own)
     if clamp:  # the bounds the fold's written model would carry
         bounds = prep.input_bounds()
-        fold.clamped = score_files(inside, fit.simulate(_shared(net), held, bounds))
+        sims = fit.simulate(_shared(net), held, bounds)
+        fold.clamped = score_files(inside, sims)
+        fold.signed_by_file["clamped"] = signed_by_file(inside, sims)
         if own is not None:
-            fold.own_clamped = score_files(inside, fit.simulate_own_feedback(net, held, bounds))
+            sims = fit.simulate_own_feedback(net, held, bounds)
+            fold.own_clamped = score_files(inside, sims)
+            fold.signed_by_file["own_clamped"] = signed_by_file(inside, sims)
     fold.seconds = time.perf_counter() - t0
     return fold
 
@@ -159,6 +184,12 @@ def pick(f: Fold, own: bool = False, clamped: bool = False) -> dict[str, Score |
     return f.own if own and f.own is not None else f.scores
 
 
+def pick_signed(f: Fold, own: bool = False, clamped: bool = False) -> dict[str, float]:
+    """The signed errors per file of the run ``pick`` picks (empty if not scored)."""
+    run, own_run = ("clamped", "own_clamped") if clamped else ("scores", "own")
+    return f.signed_by_file.get(own_run if own and own_run in f.signed_by_file else run, {})
+
+
 def summarise(folds: list[Fold], own: bool = False, clamped: bool = False) -> dict:
     """Means over the folds (grower and controller apart) and the selection ``criterion``;
     ``own``: the figures of the members each on its own past; ``clamped``: with the inputs
@@ -179,16 +210,19 @@ def as_dict(fold: Fold) -> dict:
 
 
 def describe(folds: list[Fold], own: bool, clamped: bool = False) -> str:
-    """A Markdown table: one row per fold (MAE and % of range; grower and controller apart)."""
+    """A Markdown table: one row per fold (MAE and % of range; grower and controller apart; the
+    mean signed error of every held-out file)."""
     def cell(s: Score | None) -> str:
         return "—" if s is None else f"{s.mae:.3f} ({s.pct_range:.2f} %)"
 
-    lines = ["| held-out group (files) | all | grower's files | controller's files |",
-             "| --- | --- | --- | --- |"]
+    lines = ["| held-out group (files) | all | grower's files | controller's files "
+             "| mean signed error per file (sensor − reference) [m3 s-1] |",
+             "| --- | --- | --- | --- | --- |"]
     for f in folds:
         sc = pick(f, own, clamped)
+        signed = ", ".join(f"{st} {e:+.3f}" for st, e in pick_signed(f, own, clamped).items())
         lines.append(f"| {f.group} ({len(f.held_out)}) | {cell(sc['all'])} | "
-                     f"{cell(sc['grower'])} | {cell(sc['controller'])} |")
+                     f"{cell(sc['grower'])} | {cell(sc['controller'])} | {signed or '—'} |")
     m = summarise(folds, own, clamped)
 
     def mean_cell(key: str) -> str:
@@ -196,7 +230,7 @@ def describe(folds: list[Fold], own: bool, clamped: bool = False) -> str:
         return "—" if mae is None else f"{mae:.3f} ({pct:.2f} %)"
 
     lines.append(f"| mean over folds | {mean_cell('all')} | {mean_cell('grower')} | "
-                 f"{mean_cell('controller')} |")
+                 f"{mean_cell('controller')} | |")
     crit, pct = m["criterion"], m["criterion_pct"]
     lines.append("\ncriterion (mean of the grower's and the controller's mean MAE): "
                  + ("—" if crit is None else f"{crit:.3f} m3 s-1 (on % of range: {pct:.2f} %)"))

@@ -224,6 +224,28 @@ def correlations(records: list[dict], part: str = "heldout") -> dict[str, float]
     return out
 
 
+def same_weather(records: list[dict]) -> str:
+    """Do two generators err on the same days? Pearson r of their held-out daily means over the
+    windows both ran, and the SD of the calibration and held-out daily means."""
+    by = {(r["generator"], r["window"]): np.asarray(r["heldout"], float) for r in records}
+    gens = sorted({g for g, _ in by})
+    cal = np.concatenate([np.asarray(r["calibration"], float) for r in records])
+    held = np.concatenate([np.asarray(r["heldout"], float) for r in records])
+    text = (f"SD of the daily means: calibration days {np.nanstd(cal):.3f} K, held-out days "
+            f"{np.nanstd(held):.3f} K.")
+    if len(gens) == 2:
+        a, b = [], []
+        for (g, w), v in by.items():
+            if g == gens[0] and (gens[1], w) in by:
+                a.append(v)
+                b.append(by[(gens[1], w)])
+        x, y = np.concatenate(a), np.concatenate(b)
+        ok = np.isfinite(x) & np.isfinite(y)
+        text += (f" {gens[0]} vs {gens[1]} on the same window and day: r "
+                 f"{np.corrcoef(x[ok], y[ok])[0, 1]:+.2f} over {int(ok.sum())} days.")
+    return text
+
+
 def markdown(records: list[dict], rows: list[dict], command: str) -> str:
     gens = sorted({r["generator"] for r in records})
     y, _, _ = stack(records, "heldout", ("rad",))
@@ -238,6 +260,7 @@ def markdown(records: list[dict], rows: list[dict], command: str) -> str:
         lines.append(f"| {r['set']} | {r['r2_heldout']:+.3f} | "
                      + " | ".join(f"{r[f'r2_heldout_{g}']:+.3f}" for g in gens)
                      + f" | {r['r2_calibration']:+.3f} |")
+    lines += ["", same_weather(records)]
     lines += ["", "Pooled Pearson r of each feature with the held-out daily mean: "
               + ", ".join(f"{k} {v:+.2f}" for k, v in correlations(records).items()) + "."]
     return "\n".join(lines) + "\n"

@@ -29,7 +29,7 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from tests.generality.base_carry import NIGHT_W_M2  # noqa: E402
+from tests.generality.base_carry import NIGHT_W_M2, per_day  # noqa: E402
 from tests.generality.cases import EXTRA_WINDOWS, Case, case_series  # noqa: E402
 from tests.generality.generators import HELD_OUT  # noqa: E402
 from tests.generality.report import MAIN_WINDOWS  # noqa: E402
@@ -120,10 +120,8 @@ def daily_features(x: dict[str, np.ndarray], clear: np.ndarray, dt: float) -> di
 def daily_means(r: np.ndarray, first_row: int, dt: float, n_days: int) -> np.ndarray:
     """Mean of ``r`` (rows ``first_row`` onwards on a grid of ``dt`` [s]) per day 0..n_days-1;
     NaN for a day without finite rows."""
-    day = ((np.arange(len(r)) + first_row) * dt // DAY_S).astype(int)
-    ok = np.isfinite(r)
-    return np.array([float(np.mean(r[ok & (day == d)])) if (ok & (day == d)).any() else np.nan
-                     for d in range(n_days)])
+    means = per_day(r, first_row, dt)
+    return np.array([means.get(d, np.nan) for d in range(n_days)])
 
 
 def lowo_r2(y: np.ndarray, feats: np.ndarray, groups: np.ndarray) -> float:

@@ -1,4 +1,5 @@
-"""Which daily weather explains the base's day-by-day error? (issue 10, rule /work/notes/dr-rule.txt)
+"""Which daily weather explains the base's day-by-day error? (issue 10; docs/effects.md, "The
+base's day-scale error against daily weather")
 
 For every effect-free window of the dev generators (refsim, twonode; the suite's 10 windows
 each, seed 1 as the suite), the base is calibrated as the diagnosis calibrates it
@@ -29,6 +30,7 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from gateway.model.psychrometrics import vapour_pressure_deficit  # noqa: E402
 from tests.generality.base_carry import NIGHT_W_M2, per_day  # noqa: E402
 from tests.generality.cases import EXTRA_WINDOWS, Case, case_series  # noqa: E402
 from tests.generality.generators import HELD_OUT  # noqa: E402
@@ -71,13 +73,6 @@ weather the base was calibrated on: a base whose parameters absorb a missing ter
 the weather moves away from its calibration)."""
 
 
-def _vpd(t: np.ndarray, rh: np.ndarray) -> np.ndarray:
-    """Vapour pressure deficit [kPa] from air temperature [°C] and relative humidity [%]."""
-    from gateway.model.psychrometrics import saturation_vapour_pressure
-
-    return saturation_vapour_pressure(t) * (1.0 - rh / 100.0)
-
-
 def daily_features(x: dict[str, np.ndarray], clear: np.ndarray, dt: float) -> dict[str, np.ndarray]:
     """Per day since the first row (rows on a grid of ``dt`` [s]): kit-column weather features.
 
@@ -92,7 +87,7 @@ def daily_features(x: dict[str, np.ndarray], clear: np.ndarray, dt: float) -> di
     day = (np.arange(n) * dt // DAY_S).astype(int)
     days = np.unique(day)
     night = x["i_glob"] < NIGHT_W_M2
-    vpd_in = _vpd(x["t_in"], x["rh_in"])
+    vpd_in = vapour_pressure_deficit(x["t_in"], x["rh_in"])
     rows: dict[str, list[float]] = {k: [] for k in (
         "rad", "kt", "wind", "wind_night", "t_out", "vpd_out", "vpd_in", "rad_vpd_in",
         "night_clear")}
@@ -104,7 +99,7 @@ def daily_features(x: dict[str, np.ndarray], clear: np.ndarray, dt: float) -> di
         rows["wind"].append(float(np.nanmean(x["wind"][m])))
         rows["wind_night"].append(float(np.nanmean(x["wind"][mn])) if mn.any() else np.nan)
         rows["t_out"].append(float(np.nanmean(x["t_out"][m])))
-        rows["vpd_out"].append(float(np.nanmean(_vpd(x["t_out"][m], x["rh_out"][m]))))
+        rows["vpd_out"].append(float(np.nanmean(vapour_pressure_deficit(x["t_out"][m], x["rh_out"][m]))))
         rows["vpd_in"].append(float(np.nanmean(vpd_in[m])))
         rows["rad_vpd_in"].append(float(np.nanmean(x["i_glob"][m] * vpd_in[m])))
         rows["night_clear"].append(float(1.0 - np.nanmean(x["cloud"][mn])) if mn.any() else np.nan)

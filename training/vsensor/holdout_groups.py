@@ -176,18 +176,22 @@ def _mean(values: list[float]) -> float | None:
     return float(np.mean(values)) if values else None
 
 
+def _run(f: Fold, own: bool, clamped: bool) -> str:
+    """The ``Fold`` field of the run asked for: the ensemble's past or (``own``, when scored)
+    each member's, inputs clamped or not."""
+    run, own_run = ("clamped", "own_clamped") if clamped else ("scores", "own")
+    return own_run if own and getattr(f, own_run) is not None else run
+
+
 def pick(f: Fold, own: bool = False, clamped: bool = False) -> dict[str, Score | None]:
     """A fold's scores: the ensemble's past or (``own``) each member's, inputs clamped or not
     (``clamped``: None when the fold was not scored clamped)."""
-    if clamped:
-        return f.own_clamped if own and f.own_clamped is not None else f.clamped
-    return f.own if own and f.own is not None else f.scores
+    return getattr(f, _run(f, own, clamped))
 
 
 def pick_signed(f: Fold, own: bool = False, clamped: bool = False) -> dict[str, float]:
     """The signed errors per file of the run ``pick`` picks (empty if not scored)."""
-    run, own_run = ("clamped", "own_clamped") if clamped else ("scores", "own")
-    return f.signed_by_file.get(own_run if own and own_run in f.signed_by_file else run, {})
+    return f.signed_by_file.get(_run(f, own, clamped), {})
 
 
 def summarise(folds: list[Fold], own: bool = False, clamped: bool = False) -> dict:

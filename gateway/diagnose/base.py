@@ -21,7 +21,6 @@ import numpy as np
 from gateway.diagnose import night_sky
 from gateway.diagnose.bic import delta_bic, effective_samples
 from gateway.diagnose.fit import Shooting, fit_lm, fit_swarm, radiation_fit, window_starts
-from gateway.diagnose.shift_weights import fit_ratio, shift_weights
 from gateway.diagnose.structure import STORE, SensorBias, SkyLoss, Structured, model_unit, structure
 from gateway.greenhouse import Greenhouse
 from gateway.model.model import Model
@@ -67,19 +66,10 @@ VENT_BOX_UPPER = 1e-2
 """[m s-1 K-1] C_vc's physical upper bound: a wide-open Mediterranean house exchanges ~40 h-1
 (Kittas et al. 1997; Boulard & Baille 1995), reached over a proportional band of ~4 K
 (Vanthoor 2011 §2.4) in a house ~3.6 m high: 40 h-1 × 3.6 m / 3600 s / 4 K = 1e-2."""
-SHIFT_WEIGHTS = False
-"""Whether every shooting SSE of the base's calibration (base fit, optional parts, their ΔBIC,
-the inner validation MSE, the final refit) weights each window by the covariate-shift weight
-toward the held-out part's weather (gateway/diagnose/shift_weights.py; issue 10, cw). The
-effect search and the judge stay unweighted. Off: on the tuning generators' effect-free
-windows the mean held-out base error barely moved (refsim 0.856 → 0.847, twonode 0.668 →
-0.657 K, pooled −1.3 % against the rule's −5 %), single windows by −40 … +59 %
-(docs/effects.md, "Weighting the base toward the held-out weather")."""
 STORE_START = {"c_store": 5e4, "h_store": 3.0, "k_store": 3.0, "a_store": 0.1}
 """Where the heat store's fit starts (a floor-like store: 5 cm of wet sand, h ≈ 3 W m-2 K-1)."""
 
 Progress = Callable[[str], None]
-Weigh = Callable[[np.ndarray], "np.ndarray | None"]
 
 
 def carry(theta: np.ndarray, old: Model, new: Model, gh: Greenhouse | None = None,
@@ -179,24 +169,23 @@ def calibrate_base(base: Model, gh: Greenhouse, x: dict, dt: float, s: int, hori
     if model.night_sky is not None:
         theta[model.index(night_sky.LEVEL.name)] = start[night_sky.LEVEL.name]
     theta = radiation_fit(model, x, theta, (0, s))
-    weigh = weigher(x, s, horizon)
     say("calibrating the base model (thesis terms + effective heat capacity)")
-    shoot = Shooting(model, x, gh, dt, starts, horizon, weigh(starts))
+    shoot = Shooting(model, x, gh, dt, starts, horizon)
     theta = fit(model, theta, shoot, gh, BASE_ITERATIONS, seed)
     sse, npair = shoot.sse(theta[None])
-    val = _validation(model, theta, x, gh, dt, val_starts, horizon, weigh)
+    val = _validation(model, theta, x, gh, dt, val_starts, horizon)
     log = [{"structure": "base", "detail": structure_detail(model), "kept": True,
             "mse": float(sse[0] / npair), "delta_bic": 0.0, "validation_mse": val}]
     for label, build in options(model, gh):
         new = build(model)
         say(f"calibrating the base model: trying a {label}")
         th = carry(theta, model, new, gh, start)
-        sh = Shooting(new, x, gh, dt, starts, horizon, shoot.weight)
+        sh = Shooting(new, x, gh, dt, starts, horizon)
         th = fit(new, th, sh, gh, OPTION_ITERATIONS, seed + 1)
         sse_new, _ = sh.sse(th[None])
         k_new = len(new.names) - len(model.names)
         dbic = delta_bic(float(sse_new[0]), float(sse[0]), effective_samples(npair, dt), k_new)
-        val_new = _validation(new, th, x, gh, dt, val_starts, horizon, weigh)
+        val_new = _validation(new, th, x, gh, dt, val_starts, horizon)
         kept = dbic < 0 and (not inner or _validated(val_new, val))
         log.append({"structure": label, "detail": structure_detail(new), "kept": bool(kept),
                     "mse": float(sse_new[0] / npair), "delta_bic": dbic, "validation_mse": val_new})
@@ -205,19 +194,9 @@ def calibrate_base(base: Model, gh: Greenhouse, x: dict, dt: float, s: int, hori
     if inner:  # the chosen structure, refitted on all of C
         say("calibrating the base model: the chosen structure on the whole calibration part")
         whole = window_starts([(0, s)], horizon, skip=horizon)
-        shoot = Shooting(model, x, gh, dt, whole, horizon, weigh(whole))
+        shoot = Shooting(model, x, gh, dt, whole, horizon)
         theta = fit(model, theta, shoot, gh, 0, seed)
     return model, theta, log
-
-
-def weigher(x: dict, s: int, horizon: int) -> Weigh:
-    """Per-window weights for a set of window starts: None (unweighted) unless
-    ``SHIFT_WEIGHTS``. The density ratio is fitted once per calibration (kit weather only, the
-    held-out T_in never read); each set of windows is normalised to mean 1 on its own."""
-    if not SHIFT_WEIGHTS:
-        return lambda starts: None
-    ratio = fit_ratio(x, s, horizon)
-    return lambda starts: shift_weights(ratio, x, starts, horizon)
 
 
 def _validated(new: float | None, old: float | None) -> bool:
@@ -228,12 +207,11 @@ def _validated(new: float | None, old: float | None) -> bool:
 
 
 def _validation(model: Structured, theta: np.ndarray, x: dict, gh: Greenhouse, dt: float,
-                starts: np.ndarray, horizon: int, weigh: Weigh | None = None) -> float | None:
+                starts: np.ndarray, horizon: int) -> float | None:
     """Shooting MSE on the inner validation windows (None without them)."""
     if len(starts) == 0:
         return None
-    w = weigh(starts) if weigh is not None else None
-    return float(Shooting(model, x, gh, dt, starts, horizon, w).mse(theta[None])[0])
+    return float(Shooting(model, x, gh, dt, starts, horizon).mse(theta[None])[0])
 
 
 def structure_detail(model: Structured) -> str:

@@ -82,8 +82,6 @@ class Shooting:
     dt: float
     starts: np.ndarray
     horizon: int
-    weight: np.ndarray | None = None
-    """(N,) per-window weights (base.SHIFT_WEIGHTS, shift_weights.py); None: all 1."""
     target: np.ndarray = field(init=False)  # (N, H) measured T_in at steps 1..H
 
     def __post_init__(self) -> None:
@@ -95,10 +93,8 @@ class Shooting:
         return self.model.shoot(theta, self.x, self.gh, self.dt, self.starts, self.horizon)
 
     def residual(self, theta: np.ndarray) -> np.ndarray:
-        """Prediction minus measurement (P, N, H), NaN where not comparable; times √weight
-        when weighted, so SSE, MSE, the swarm and Levenberg–Marquardt all see the weights."""
-        r = self.predict(theta) - self.target[None]
-        return r if self.weight is None else r * np.sqrt(self.weight)[None, :, None]
+        """Prediction minus measurement (P, N, H), NaN where not comparable."""
+        return self.predict(theta) - self.target[None]
 
     def sse(self, theta: np.ndarray) -> tuple[np.ndarray, int]:
         """Sum of squared residuals per candidate (P,) and the number of compared pairs."""

@@ -78,7 +78,10 @@ def test_the_clear_sky_outlook_without_a_site_says_how_to_give_one(capsys, tmp_p
     assert str(gh) in line and "[site]" in line and "--site LAT,LON" in line
 
 
-def test_vsensor_without_a_shipped_sensor_for_the_kind_is_one_line(capsys, tmp_path):
+def test_vsensor_without_a_shipped_sensor_for_the_kind_is_one_line(capsys, tmp_path, monkeypatch):
+    from gateway.vsensor import models
+
+    monkeypatch.setattr(models, "MODEL_DIR", tmp_path)  # a wheel without the prototype's sensor
     data = kit_csv(tmp_path)
     assert main(["vsensor", "--data", str(data), "--greenhouse", "biskra-prototype",
                  "--model-kind", "prototype"]) == 2

@@ -199,6 +199,24 @@ def test_a_restart_resumes_the_sensors_closed_loop(tmp_path, sensor, caplog):
     assert len(ran) >= 80 and restarted == ran
 
 
+def test_the_shipped_prototype_sensor_runs_live_on_kit_columns_every_minute(tmp_path, caplog):
+    """The shipped prototype-kind sensor (kit inputs, trained with vpd_in, the almeria model's
+    flow as target) on the kit's records alone (no t_soil): its own prototype estimator with its
+    training settings feeds it, one finite, non-negative flow per minute with data."""
+    assert "t_soil" not in TRACE
+    store = Store(tmp_path / "gw.db")
+    fill(store, range(61))
+    worker = start(write(tmp_path, {"north": VENTED}, shipped_model("prototype")), store, caplog)
+    assert "ventilation sensor fed by its own 'prototype' estimator" in caplog.text
+    step(worker, store, 60)
+    measured = [t for (t,) in store.conn.execute(
+        "SELECT t FROM estimates WHERE source='measured' AND name='t_in' ORDER BY t")]
+    got = flows(store, "north")
+    assert len(measured) >= 55 and list(got) == measured
+    assert all(math.isfinite(v) and v >= 0.0 for v in got.values())
+    assert len(set(got.values())) > 1  # it moves with the data
+
+
 def test_a_sensor_the_kit_cannot_feed_is_refused_naming_the_key_and_column(tmp_path, caplog):
     """The shipped almeria-kind sensor reads the almeria model's fluxes, which need t_soil."""
     cfg = write(tmp_path, {"north": VENTED}, shipped_model("almeria"))

@@ -310,10 +310,15 @@ def test_gateway_never_imports_sklearn_or_training():
         assert "from training" not in text and "import training" not in text, path
 
 
-@pytest.mark.parametrize("kind", ["almeria"])
+# the shipped sensors: kind → the extra inputs it was trained with (docs/vsensor.md)
+SHIPPED = {"almeria": (), "prototype": ("vpd_in",)}
+
+
+@pytest.mark.parametrize("kind", list(SHIPPED))
 def test_shipped_model_matches_the_code_that_feeds_it(kind):
-    """The model in the wheel: its metadata names exactly what gateway/vsensor/features.py
-    computes, it is small, it loads and runs, and the baselines sit beside it."""
+    """The models in the wheel: the metadata names exactly what gateway/vsensor/features.py
+    computes, each is small, loads and runs, and the baselines sit beside it. ``prototype`` reads
+    the kit's columns only and learnt the almeria model's flow (``target_kind``)."""
     from gateway.vsensor.batch import BASELINES
     from gateway.vsensor.features import INPUT_DELAYS, OUTPUT_DELAYS, features
     from gateway.vsensor.models import shipped_model
@@ -324,8 +329,10 @@ def test_shipped_model_matches_the_code_that_feeds_it(kind):
     gh = load_greenhouse("almeria-palmerillas")
     sensor = VentSensor(path, gh, kind)  # raises ModelMismatch if anything differs
     meta = sensor.info.meta
-    assert [f["name"] for f in meta["features"]] == [f.name for f in features(kind)]
-    assert [f["unit"] for f in meta["features"]] == [f.unit for f in features(kind)]
+    want = features(kind, SHIPPED[kind])
+    assert [f["name"] for f in meta["features"]] == [f.name for f in want]
+    assert [f["unit"] for f in meta["features"]] == [f.unit for f in want]
+    assert meta.get("target_model_kind", kind) == "almeria"  # both learnt the almeria model's flow
     assert meta["input_delays"] == list(INPUT_DELAYS) and meta["output_delays"] == list(OUTPUT_DELAYS)
     assert meta["model_kind"] == kind and meta["network"] == "pca_narx"
     assert meta["pca"]["variance_total"] >= 0.90
@@ -334,6 +341,9 @@ def test_shipped_model_matches_the_code_that_feeds_it(kind):
     # trained on the fluxes this code computes (flux terms, sky temperature, step): else retrain
     diffs = probe_differences(meta.get("code_probe", {}), kind, gh)
     assert not diffs, f"{path.name} was trained on other fluxes; retrain (docs/vsensor.md): {diffs}"
+    if "target_code_probe" in meta:  # and its target on the almeria model's fluxes of this code
+        diffs = probe_differences(meta["target_code_probe"], "almeria", gh)
+        assert not diffs, f"{path.name}'s target came from other fluxes; retrain: {diffs}"
     for name in BASELINES:
         VentSensor(path.with_name(f"{kind}.{name}.onnx"), gh, kind)
     assert path.with_suffix(".md").exists()

@@ -1,9 +1,11 @@
 """Virtual ventilation sensor bench: time per step, memory with the model loaded, training time.
 
-(a) onnxruntime, one thread: ``session.run`` of the shipped PCA-NARX on one step (u 1×6×F,
+(a) onnxruntime, one thread: ``session.run`` of each shipped PCA-NARX on one step (u 1×6×F,
     y_past 1×5), and the whole ``VentSensor.step`` (filters, delays, flags, clamp) around it;
-    goal ≤ 50 µs median. Peer, same weights: scikit-learn's own ``MLPRegressor.predict`` on the
-    one row (after the same standardisation and PCA in numpy), timed interleaved with (a).
+    goal ≤ 50 µs median. Both shipped sensors: ``almeria`` (the summary's top-level figures) and
+    the kit's ``prototype`` (``kit_sensor``). Peer, same weights: scikit-learn's own
+    ``MLPRegressor.predict`` on the one row (after the same standardisation and PCA in numpy),
+    timed interleaved with (a).
 (b) Resident memory of a gateway process that imports numpy and the gateway, before and after
     loading the sensor (onnxruntime's import dominates).
 (c) Training time of ``training.vsensor.train`` on two 2-day simulator files with the small
@@ -59,7 +61,7 @@ def _per_call_us(fn, calls: int = CALLS) -> tuple[float, float]:
     return (time.perf_counter_ns() - t0) / calls / 1e3, (time.process_time_ns() - c0) / calls / 1e3
 
 
-def _sklearn_peer(meta: dict, sess) -> tuple:
+def _sklearn_peer(kind: str) -> tuple:
     """MLPRegressors holding the shipped network's weights, read back from the graph (one per
     ensemble member: ``m<j>_w<i>``; a single network: ``w<i>``)."""
     import re
@@ -68,7 +70,7 @@ def _sklearn_peer(meta: dict, sess) -> tuple:
     from onnx import load, numpy_helper
     from sklearn.neural_network import MLPRegressor
 
-    model = load(str(shipped_model("almeria")))
+    model = load(str(shipped_model(kind)))
     w = {t.name: numpy_helper.to_array(t).astype(np.float64) for t in model.graph.initializer}
     prefixes = sorted({m.group(1) for k in w if (m := re.fullmatch(r"(m\d+_)?w\d+", k))},
                       key=lambda p: p or "")
@@ -88,20 +90,20 @@ def _sklearn_peer(meta: dict, sess) -> tuple:
     return mlps, w
 
 
-def timing() -> dict:
+def timing(kind: str = "almeria") -> dict:
     import onnxruntime as ort
 
-    gh = load_greenhouse("almeria-palmerillas")
+    gh = load_greenhouse("almeria-palmerillas")  # the house both shipped sensors learnt
     from gateway.vsensor import VentSensor
 
-    sensor = VentSensor(shipped_model("almeria"), gh, "almeria")
+    sensor = VentSensor(shipped_model(kind), gh, kind)
     sess = sensor.session
     n_f = len(sensor.info.names)
     rng = np.random.default_rng(0)
     u = rng.normal(size=(1, 6, n_f)).astype(np.float32) * 0.1 + sensor.info.mean.astype(np.float32)
     k_h = sensor.histories  # K > 1: every member on its own past outputs
     yp = np.full((1, 5) if k_h == 1 else (1, k_h, 5), sensor.info.y0, dtype=np.float32)
-    mlps, w = _sklearn_peer(sensor.info.meta, sess)
+    mlps, w = _sklearn_peer(kind)
     mean, std, pca = w["mean"], w["std"], w.get("pca")
     y_mean, y_std = float(w["y_mean"][0]), float(w["y_std"][0])
     target = sensor.info.meta.get("training_settings", {}).get("target_transform", "identity")
@@ -124,7 +126,7 @@ def timing() -> dict:
     onnx_out = float(np.mean(sess.run(None, {"u": u, "y_past": yp})[0][0]))
     assert abs(onnx_out - sk_step()) < 1e-3 * max(1.0, abs(onnx_out)), "peer differs from the graph"
     meas = {"t_in": 22.0, "t_out": 18.0, "rh_in": 70.0, "rh_out": 60.0, "wind": 3.0}
-    fluxes = {n: 0.0 for n in sensor.info.names[3:]}
+    fluxes = {n: 0.0 for n in sensor.info.names[3:] if n.startswith("q_")}  # vpd_in: from meas
     rows = {"onnx_run": [], "vsensor_step": [], "sklearn_predict": []}
     for _ in range(ROUNDS):  # interleaved: a busy neighbour hits all three alike
         rows["onnx_run"].append(_per_call_us(lambda: sess.run(None, {"u": u, "y_past": yp})))
@@ -136,7 +138,7 @@ def timing() -> dict:
             "sklearn_over_onnx_run_cpu": cpu["sklearn_predict"] / cpu["onnx_run"],
             "sklearn_over_onnx_run": med["sklearn_predict"] / med["onnx_run"],
             "sklearn_over_vsensor_step": med["sklearn_predict"] / med["vsensor_step"],
-            "goal_us": 50.0, "onnxruntime": ort.__version__}
+            "goal_us": 50.0, "onnxruntime": ort.__version__, "model": shipped_model(kind).name}
 
 
 def memory() -> dict:
@@ -172,7 +174,8 @@ def training_time() -> dict:
 
 
 def run() -> dict:
-    t = timing()
+    t = timing("almeria")
+    kit = timing("prototype")
     m = memory()
     tr = training_time()
     summary = {
@@ -184,10 +187,15 @@ def run() -> dict:
         "cpu_us": t["cpu_us_median_of_rounds"],
         "sklearn_over_onnx_run_cpu": t["sklearn_over_onnx_run_cpu"],
         "goal_us": 50.0,
+        "kit_sensor": {"model": kit["model"],
+                       "onnx_run_us": kit["per_call_us_median_of_rounds"]["onnx_run"],
+                       "vsensor_step_us": kit["per_call_us_median_of_rounds"]["vsensor_step"],
+                       "sklearn_over_onnx_run": kit["sklearn_over_onnx_run"],
+                       "cpu_us": kit["cpu_us_median_of_rounds"]},
         **m,
         "training_seconds": tr["seconds"],
     }
-    return {"summary": summary, "timing": t, "memory": m, "training": tr}
+    return {"summary": summary, "timing": t, "timing_kit_sensor": kit, "memory": m, "training": tr}
 
 
 if __name__ == "__main__":

@@ -99,3 +99,24 @@ def test_hot_dry_runs_are_their_own_groups_and_never_the_test_site_or_season():
     assert not set(corpus.HOT_DRY) & set(corpus.TRAIN + corpus.TEST + corpus.FRESH + corpus.OTHER)
     assert all(r.weather == "seville" and "spring" not in r.name for r in corpus.HOT_DRY)
     assert set(corpus.UTC_OFFSET) >= {r.weather for r in corpus.HOT_DRY}
+
+
+def test_more_test_runs_are_new_draws_of_the_test_site_and_season_written_only_when_asked(
+        tmp_path, monkeypatch):
+    """``MORE_TEST`` (docs/vsensor.md, "More Biskra spring files"): the test group only, new seeds
+    and days, in no other part, and written to ``more-test/`` only with ``--more-test``."""
+    test_groups = {hg.group_of(r.name) for r in corpus.TEST}
+    assert {hg.group_of(r.name) for r in corpus.MORE_TEST} == test_groups == {"biskra-spring"}
+    others = corpus.TRAIN + corpus.TEST + corpus.FRESH + corpus.OTHER + corpus.HOT_DRY
+    assert not {r.seed for r in corpus.MORE_TEST} & {r.seed for r in others}
+    assert not {r.start for r in corpus.MORE_TEST} & {r.start for r in corpus.TEST}
+    assert {hg.vents_of(r.name) for r in corpus.MORE_TEST} == {"grower", "controller"}
+    assert all(r.start[5:7] in ("03", "04", "05") for r in corpus.MORE_TEST)  # spring months
+
+    monkeypatch.setattr(corpus, "generate", fake_generate)
+    assert vsensor_main(["corpus", "--out", str(tmp_path / "plain")]) == 0
+    assert "more-test" not in written(tmp_path / "plain")
+    assert vsensor_main(["corpus", "--out", str(tmp_path / "all"), "--more-test"]) == 0
+    every = written(tmp_path / "all")
+    assert every.pop("more-test") == sorted(r.name for r in corpus.MORE_TEST)
+    assert every == written(tmp_path / "plain")

@@ -62,6 +62,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="only these runs (names as in training/vsensor/corpus.py)")
     c.add_argument("--hot-dry", action="store_true",
                    help="also the opt-in HOT_DRY runs (Sevilla, a third climate) in DIR/hot-dry")
+    c.add_argument("--more-test", action="store_true",
+                   help="also the opt-in MORE_TEST runs (more Biskra spring files) in DIR/more-test")
     c.set_defaults(func=_corpus)
     d = sub.add_parser("dataset", help="run the adaptive model with and without vents, cache")
     _data_args(d)
@@ -143,9 +145,10 @@ def overrides(items: list[str]) -> dict[str, dict[str, float]]:
 
 
 def _corpus(args: argparse.Namespace) -> int:
-    from training.vsensor.corpus import FRESH, HOT_DRY, OTHER, TEST, TRAIN, write_corpus
+    from training.vsensor.corpus import FRESH, HOT_DRY, MORE_TEST, OTHER, TEST, TRAIN, write_corpus
 
-    every = TRAIN + TEST + FRESH + OTHER + (HOT_DRY if args.hot_dry else ())
+    every = (TRAIN + TEST + FRESH + OTHER + (HOT_DRY if args.hot_dry else ())
+             + (MORE_TEST if args.more_test else ()))
     unknown = sorted(set(args.only or ()) - {r.name for r in every})
     if unknown:
         raise ValueError(f"--only: no run named {', '.join(unknown)} (runs: "

@@ -11,7 +11,8 @@
 and season (spring) appear nowhere in training; ``OTHER`` is another house. ``python -m
 training.vsensor corpus --out DIR`` writes ``DIR/train``, ``DIR/test``, ``DIR/fresh`` and
 ``DIR/other`` kit CSVs with the simulator's truth files; ``--hot-dry`` also writes the opt-in
-``HOT_DRY`` runs to ``DIR/hot-dry`` (a third climate, not in ``TRAIN``).
+``HOT_DRY`` runs to ``DIR/hot-dry`` (a third climate, not in ``TRAIN``), ``--more-test`` the
+``MORE_TEST`` runs to ``DIR/more-test`` (more draws of the test site and season).
 """
 
 from __future__ import annotations
@@ -76,6 +77,17 @@ the winter run added by the twelfth, candidate I, to give the climate its cold s
 Almería has: docs/vsensor.md): never spring (the test season), never Biskra weather; not in
 ``TRAIN``, so the shipped model and its figures do not depend on them (``corpus --hot-dry``
 writes them)."""
+MORE_TEST = (
+    Run("biskra-spring-grower-2", "sim", "biskra", "2019-03-28", 5, "grower", 41),
+    Run("biskra-spring-grower-3", "sim", "biskra", "2019-04-28", 5, "grower", 42),
+    Run("biskra-spring-grower-4", "sim", "biskra", "2019-05-10", 5, "grower", 43),
+    Run("biskra-spring-controller-2", "sim", "biskra", "2019-04-01", 5, "controller", 44),
+    Run("biskra-spring-controller-3", "sim", "biskra", "2019-05-05", 5, "controller", 45),
+)
+"""More draws of the test site and season (Biskra, spring), fixed before any was scored
+(2026-11-28, /work/notes/bs-rule.txt; docs/vsensor.md "More Biskra spring files"): ``TEST`` is one
+5-day file per vent kind, one draw of the weather and of the grower's visits. Opt-in
+(``corpus --more-test``); no sensor is trained or chosen on them."""
 OTHER = (
     Run("other-house-spring", "sim", "almeria", "2020-04-15", 3, "controller", 31),
 )
@@ -123,14 +135,16 @@ def generate(run: Run, path: Path) -> Path:
 
 
 def part_of(run: Run) -> str:
-    """The folder of ``run`` under a corpus: ``train``, ``test``, ``fresh``, ``other`` or
-    ``hot-dry`` (the opt-in runs stay out of ``train/``, whose files the docs glob)."""
+    """The folder of ``run`` under a corpus: ``train``, ``test``, ``fresh``, ``other``,
+    ``hot-dry`` or ``more-test`` (the opt-in runs stay out of ``train/``, whose files the docs
+    glob)."""
     return ("test" if run in TEST else "fresh" if run in FRESH else "other" if run in OTHER
-            else "hot-dry" if run in HOT_DRY else "train")
+            else "hot-dry" if run in HOT_DRY else "more-test" if run in MORE_TEST else "train")
 
 
 def write_corpus(out: Path, runs: tuple[Run, ...] = TRAIN + TEST + FRESH + OTHER) -> list[Path]:
-    """Every run of ``runs`` under ``out/<part_of(run)>`` (the default leaves ``HOT_DRY`` out)."""
+    """Every run of ``runs`` under ``out/<part_of(run)>`` (the default leaves the opt-in
+    ``HOT_DRY`` and ``MORE_TEST`` out)."""
     paths = []
     for run in runs:
         part = part_of(run)

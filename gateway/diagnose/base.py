@@ -70,6 +70,8 @@ STORE_START = {"c_store": 5e4, "h_store": 3.0, "k_store": 3.0, "a_store": 0.1}
 """Where the heat store's fit starts (a floor-like store: 5 cm of wet sand, h ≈ 3 W m-2 K-1)."""
 
 Progress = Callable[[str], None]
+Resample = Callable[[np.ndarray], np.ndarray]
+"""Shooting window starts in, the starts to fit on out (``calibrate_base``'s ``resample``)."""
 
 
 def carry(theta: np.ndarray, old: Model, new: Model, gh: Greenhouse | None = None,
@@ -147,7 +149,8 @@ def night_bounds(prior: float) -> tuple[float, float]:
 
 
 def calibrate_base(base: Model, gh: Greenhouse, x: dict, dt: float, s: int, horizon: int,
-                   seed: int, say: Progress) -> tuple[Structured, np.ndarray, list[dict]]:
+                   seed: int, say: Progress, resample: Resample | None = None
+                   ) -> tuple[Structured, np.ndarray, list[dict]]:
     """Structural calibration on rows [0, s) (module docstring).
 
     The structure is chosen on an inner split of C: fitted on its first part C1 (the first
@@ -155,12 +158,18 @@ def calibrate_base(base: Model, gh: Greenhouse, x: dict, dt: float, s: int, hori
     and whose weather is the next regime, as the held-out part's will be. An option is kept
     when it cuts the C2 error by at least ``MIN_VALIDATION_GAIN`` (and, as before, lowers BIC
     on C1). The chosen structure is then refitted on all of C. When C is too short to split,
-    the choice falls back to BIC on C."""
+    the choice falls back to BIC on C.
+
+    ``resample`` (None in the diagnosis): maps every set of shooting window starts the
+    calibration uses (the fits on C1, the inner validation on C2, the refit on C) to the starts
+    to use instead, a start repeated m times weighing m times (a study's bootstrap,
+    tests/generality/bagged_base.py); None leaves them as they are."""
     s1 = int(round(INNER_SPLIT * s))
     inner = s1 >= 3 * horizon and s - s1 >= 2 * horizon
     fit_seg = [(0, s1)] if inner else [(0, s)]
-    starts = window_starts(fit_seg, horizon, skip=horizon)
-    val_starts = window_starts([(s1, s)], horizon) if inner else np.zeros(0, dtype=int)
+    pick = resample or (lambda st: st)
+    starts = pick(window_starts(fit_seg, horizon, skip=horizon))
+    val_starts = pick(window_starts([(s1, s)], horizon)) if inner else np.zeros(0, dtype=int)
     model = structure(base, gh, store=False)
     start = STORE_START | night_start(x, s)
     if NIGHT_SKY_IN_BASE:
@@ -193,7 +202,7 @@ def calibrate_base(base: Model, gh: Greenhouse, x: dict, dt: float, s: int, hori
             model, theta, sse, val = new, th, sse_new, val_new
     if inner:  # the chosen structure, refitted on all of C
         say("calibrating the base model: the chosen structure on the whole calibration part")
-        whole = window_starts([(0, s)], horizon, skip=horizon)
+        whole = pick(window_starts([(0, s)], horizon, skip=horizon))
         shoot = Shooting(model, x, gh, dt, whole, horizon)
         theta = fit(model, theta, shoot, gh, 0, seed)
     return model, theta, log

@@ -1,0 +1,240 @@
+"""Step 1 of the bg rule (issue 10; /work/notes/bg-rule.txt; docs/effects.md, "A bagged base"):
+the base's held-out free-run MAE on the dev generators' effect-free windows (refsim, twonode x
+the suite's 10 windows, seed 1), main's calibration and a bagged one side by side in one
+process on the same code.
+
+Main: search.prepare, as the diagnosis calibrates its base. Candidate: K = 5 bags; bag b draws
+the calibration part's whole days (days since the first row) with replacement (numpy
+default_rng(b), as many draws as days), and base.calibrate_base runs exactly as in prepare
+(same seed, bounds, iterations, structure choice) with every set of shooting windows it uses
+(fits on C1, inner validation on C2, refit on C) cut to the windows that start on drawn days,
+each repeated as often as its day was drawn (``resample``). The candidate's held-out prediction
+is the mean of the 5 bags' free runs. The MAE is the diagnosis's "base" figure (search._report's
+``before``, the suite's "base MAE"): free runs on the data's own grid restarted at each held-out
+block, |measured − model| averaged over the held-out rows; the fit grid's figure
+(day_residual.py's ``heldout_mae``) is reported beside it. The search is not run (the figure
+does not depend on it). Never the held-out generator.
+
+    PYTHONPATH=. nice -n 5 python tests/generality/bagged_base.py [--out out/bg]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from tests.generality.cases import EXTRA_WINDOWS, Case, case_series  # noqa: E402
+from tests.generality.generators import HELD_OUT  # noqa: E402
+from tests.generality.report import MAIN_WINDOWS  # noqa: E402
+
+DEV = ("refsim", "twonode")
+K_BAGS = 5
+DAY_S = 86400.0
+SHORT = {"vent controller": "V", "long-wave sky loss": "L", "heat store": "S",
+         "sensor offset": "O", "night sky level": "N"}
+"""Abbreviations of the optional parts in the table."""
+
+
+def day_counts(n_days: int, seed: int) -> np.ndarray:
+    """How often each of ``n_days`` days was drawn: ``n_days`` draws with replacement."""
+    draws = np.random.default_rng(seed).integers(0, n_days, n_days)
+    return np.bincount(draws, minlength=n_days)
+
+
+def day_resample(counts: np.ndarray, dt: float) -> Callable[[np.ndarray], np.ndarray]:
+    """Window starts (rows on a grid of ``dt`` [s]) → those on drawn days, each repeated as often
+    as its day was drawn (calibrate_base's ``resample``)."""
+    def pick(starts: np.ndarray) -> np.ndarray:
+        day = (np.asarray(starts) * dt // DAY_S).astype(int)
+        return np.repeat(starts, counts[day]).astype(int)
+    return pick
+
+
+def heldout_mae(model, theta, st, series, xf, gh) -> tuple[np.ndarray, np.ndarray]:
+    """The base's held-out free run on the data's grid (as search._report's ``before``) and on
+    the fit grid (as the search's state holds it)."""
+    from gateway.diagnose import judge as jd
+
+    k, held = series_k(series, st), st.held
+    nf, sf = len(series), st.ctx.split * k
+    ffolds = [[(a * k, b * k if b < held.n else nf) for a, b in f] for f in held.folds]
+    fine = jd.heldout(model, [theta, theta], xf, gh, series.step, ffolds, sf, nf)["free_run"]
+    coarse = st.heldout(model, [theta, theta])["free_run"]
+    return fine, coarse
+
+
+def series_k(series, st) -> int:
+    return int(round(st.ctx.dt / series.step))
+
+
+def mae(meas: np.ndarray, pred: np.ndarray) -> float:
+    return float(np.nanmean(np.abs(meas - pred)))
+
+
+def timed_prepare(series, gh, model):
+    """search.prepare, as the diagnosis runs it, and the CPU seconds of its calibrate_base."""
+    from gateway.diagnose import search
+
+    spent: list[float] = []
+    inner = search.calibrate_base
+
+    def timed(*args, **kwargs):
+        t0 = time.process_time()
+        out = inner(*args, **kwargs)
+        spent.append(time.process_time() - t0)
+        return out
+
+    search.calibrate_base = timed
+    try:
+        start = search.prepare(series, gh, model)
+    finally:
+        search.calibrate_base = inner
+    return start, spent[0]
+
+
+def kept_parts(log: list[dict]) -> list[str]:
+    return [r["structure"] for r in log if r["kept"] and r["structure"] != "base"]
+
+
+def run_window(generator: str, window: str, seed: int, bags: int = K_BAGS) -> dict:
+    """Main and the bagged base on one effect-free window."""
+    from gateway.diagnose.base import calibrate_base
+    from gateway.diagnose.fit import drivers
+
+    if generator in HELD_OUT:
+        raise SystemExit(f"{generator} is held out: not a dev generator")
+    with tempfile.TemporaryDirectory() as tmp:
+        _, gh, model, series = case_series(Case("diagnose", generator, window, "none", seed),
+                                           Path(tmp))
+    start, cpu_main = timed_prepare(series, gh, model)
+    st = start.state
+    ctx = st.ctx
+    xf = drivers(series, gh)
+    k = series_k(series, st)
+    meas_f, meas_c = xf["t_in"][ctx.split * k:], ctx.x["t_in"][ctx.split:]
+    fine0, coarse0 = heldout_mae(st.model0, start.theta, st, series, xf, gh)
+    days = ctx.split * ctx.dt / DAY_S
+    n_days = int(np.ceil(days - 1e-9))
+    rec: dict = {"generator": generator, "window": window, "calibration_days": days,
+                 "main": {"mae": mae(meas_f, fine0), "mae_fit_grid": mae(meas_c, coarse0),
+                          "kept": kept_parts(start.structure), "cpu_s": cpu_main}}
+    fines, coarses, per_bag, cpu = [], [], [], 0.0
+    for b in range(bags):
+        counts = day_counts(n_days, b)
+        t0 = time.process_time()
+        m_b, th_b, log_b = calibrate_base(model, gh, ctx.x, ctx.dt, ctx.split, ctx.horizon, 0,
+                                          lambda msg: None, day_resample(counts, ctx.dt))
+        cpu += time.process_time() - t0
+        f_b, c_b = heldout_mae(m_b, th_b, st, series, xf, gh)
+        fines.append(f_b)
+        coarses.append(c_b)
+        per_bag.append({"seed": b, "day_counts": counts.tolist(), "kept": kept_parts(log_b),
+                        "mae": mae(meas_f, f_b)})
+    rec["cand"] = {"mae": mae(meas_f, np.mean(fines, axis=0)),
+                   "mae_fit_grid": mae(meas_c, np.mean(coarses, axis=0)), "cpu_s": cpu,
+                   "bags": per_bag}
+    rec["change_pct"] = 100.0 * (rec["cand"]["mae"] / rec["main"]["mae"] - 1.0)
+    return rec
+
+
+def verdict(records: list[dict]) -> dict:
+    """The rule's (a) pooled mean falls >= 5 %, (b) neither generator's mean is worse, (c) at
+    most 3 of the windows worse by > 10 %."""
+    main = np.array([r["main"]["mae"] for r in records])
+    cand = np.array([r["cand"]["mae"] for r in records])
+    pooled = 100.0 * (cand.mean() / main.mean() - 1.0)
+    gens = {}
+    for g in sorted({r["generator"] for r in records}):
+        m = np.array([r["generator"] == g for r in records])
+        gens[g] = {"main": float(main[m].mean()), "cand": float(cand[m].mean()),
+                   "change_pct": 100.0 * (cand[m].mean() / main[m].mean() - 1.0)}
+    worse = int(sum(r["change_pct"] > 10.0 for r in records))
+    out = {"pooled_main": float(main.mean()), "pooled_cand": float(cand.mean()),
+           "pooled_change_pct": float(pooled), "generators": gens, "worse_10pct": worse,
+           "a": bool(pooled <= -5.0), "b": bool(all(v["cand"] <= v["main"] for v in gens.values())),
+           "c": bool(worse <= 3)}
+    out["step1_passes"] = out["a"] and out["b"] and out["c"]
+    return out
+
+
+def _parts(kept: list[str]) -> str:
+    return "+".join(SHORT.get(p, p) for p in kept) or "–"
+
+
+def markdown(records: list[dict], v: dict, command: str) -> str:
+    lines = [f"`{command}`", "",
+             "| generator | window | main MAE [K] | bagged MAE [K] | change | single bags' mean MAE "
+             "[K] | parts main / bags 0–4 |", "|---|---|---|---|---|---|---|"]
+    for r in records:
+        bags = r["cand"]["bags"]
+        single = np.mean([b["mae"] for b in bags])
+        lines.append(f"| {r['generator']} | {r['window']} | {r['main']['mae']:.3f} | "
+                     f"{r['cand']['mae']:.3f} | {r['change_pct']:+.1f} % | {single:.3f} | "
+                     f"{_parts(r['main']['kept'])} / "
+                     + " ".join(_parts(b["kept"]) for b in bags) + " |")
+    lines.append("")
+    lines.append("Parts: V vent controller, L long-wave sky loss, S heat store, O sensor offset.")
+    for g, s in v["generators"].items():
+        lines.append(f"{g}: mean {s['main']:.3f} → {s['cand']:.3f} K ({s['change_pct']:+.1f} %).")
+    lines.append(f"Pooled: {v['pooled_main']:.3f} → {v['pooled_cand']:.3f} K "
+                 f"({v['pooled_change_pct']:+.1f} %); windows worse by > 10 %: {v['worse_10pct']}.")
+    fit_m = np.mean([r["main"]["mae_fit_grid"] for r in records])
+    fit_c = np.mean([r["cand"]["mae_fit_grid"] for r in records])
+    lines.append(f"On the fit grid (day_residual.py's figure): pooled {fit_m:.3f} → {fit_c:.3f} K "
+                 f"({100.0 * (fit_c / fit_m - 1.0):+.1f} %).")
+    lines.append(f"(a) pooled falls >= 5 %: {'pass' if v['a'] else 'FAIL'}; (b) neither generator "
+                 f"worse: {'pass' if v['b'] else 'FAIL'}; (c) <= 3 windows worse by > 10 %: "
+                 f"{'pass' if v['c'] else 'FAIL'}. Step 1 "
+                 f"{'passes' if v['step1_passes'] else 'fails'}.")
+    cpu_m = sum(r["main"]["cpu_s"] for r in records)
+    cpu_c = sum(r["cand"]["cpu_s"] for r in records)
+    lines.append(f"Base calibration CPU over the windows: main {cpu_m:.0f} s, bagged {cpu_c:.0f} s "
+                 f"(× {cpu_c / cpu_m:.2f}).")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--generators", default=",".join(DEV))
+    ap.add_argument("--windows", default=None, help="default: the suite's 10 effect-free windows")
+    ap.add_argument("--seed", type=int, default=1, help="the generators' sensor seed (the suite's)")
+    ap.add_argument("--out", default="out/bg")
+    a = ap.parse_args(argv)
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    windows = a.windows.split(",") if a.windows else [*MAIN_WINDOWS, *EXTRA_WINDOWS]
+    command = "python tests/generality/bagged_base.py " + " ".join(argv or sys.argv[1:])
+    records: list[dict] = []
+    t_all = time.perf_counter()
+    for g in a.generators.split(","):
+        for w in windows:
+            t0 = time.perf_counter()
+            records.append(run_window(g, w, a.seed))
+            r = records[-1]
+            print(f"{g}/{w}: main {r['main']['mae']:.3f} bagged {r['cand']['mae']:.3f} K "
+                  f"({r['change_pct']:+.1f} %; {time.perf_counter() - t0:.0f} s)",
+                  file=sys.stderr, flush=True)
+            (out / "bagged_base.json").write_text(json.dumps({"windows": records}, indent=1))
+    v = verdict(records)
+    meta = {"command": command.strip(), "wall_s": time.perf_counter() - t_all, "bags": K_BAGS}
+    (out / "bagged_base.json").write_text(json.dumps({"windows": records, "verdict": v,
+                                                      "meta": meta}, indent=1))
+    text = markdown(records, v, command.strip())
+    (out / "bagged_base.md").write_text(text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

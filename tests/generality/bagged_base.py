@@ -107,9 +107,22 @@ def kept_parts(log: list[dict]) -> list[str]:
     return [r["structure"] for r in log if r["kept"] and r["structure"] != "base"]
 
 
+def refit_only(model, theta, gh, ctx, resample: Callable[[np.ndarray], np.ndarray]):
+    """Main's chosen structure refitted on the bag's windows of the whole calibration part, as
+    calibrate_base's last step (Levenberg–Marquardt from main's parameters): a bag without its
+    own structure choice (``--fixed-structure``)."""
+    from gateway.diagnose.base import fit
+    from gateway.diagnose.fit import Shooting, window_starts
+
+    whole = resample(window_starts([(0, ctx.split)], ctx.horizon, skip=ctx.horizon))
+    shoot = Shooting(model, ctx.x, gh, ctx.dt, whole, ctx.horizon)
+    return model, fit(model, theta, shoot, gh, 0, 0), [{"structure": "fixed", "kept": False}]
+
+
 def run_window(generator: str, window: str, seed: int, bags: int = K_BAGS,
-               first_bag: int = 0) -> dict:
-    """Main and the bagged base on one effect-free window (bag seeds ``first_bag`` onwards)."""
+               first_bag: int = 0, fixed_structure: bool = False) -> dict:
+    """Main and the bagged base on one effect-free window (bag seeds ``first_bag`` onwards;
+    ``fixed_structure``: each bag refits main's structure only, :func:`refit_only`)."""
     from gateway.diagnose.base import calibrate_base
     from gateway.diagnose.fit import drivers
 
@@ -134,8 +147,12 @@ def run_window(generator: str, window: str, seed: int, bags: int = K_BAGS,
     for b in range(first_bag, first_bag + bags):
         counts = day_counts(n_days, b)
         t0 = time.process_time()
-        m_b, th_b, log_b = calibrate_base(model, gh, ctx.x, ctx.dt, ctx.split, ctx.horizon, 0,
-                                          lambda msg: None, day_resample(counts, ctx.dt))
+        if fixed_structure:
+            m_b, th_b, log_b = refit_only(st.model0, start.theta, gh, ctx,
+                                          day_resample(counts, ctx.dt))
+        else:
+            m_b, th_b, log_b = calibrate_base(model, gh, ctx.x, ctx.dt, ctx.split, ctx.horizon,
+                                              0, lambda msg: None, day_resample(counts, ctx.dt))
         cpu += time.process_time() - t0
         f_b, c_b = heldout_mae(m_b, th_b, st, series, xf, gh)
         fines.append(f_b)
@@ -212,6 +229,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=1, help="the generators' sensor seed (the suite's)")
     ap.add_argument("--first-bag", type=int, default=0,
                     help="seed of the first bag's day draw (the rule's: 0, bags 0-4)")
+    ap.add_argument("--fixed-structure", action="store_true",
+                    help="each bag refits main's chosen structure only (no structure choice)")
     ap.add_argument("--out", default="out/bg")
     a = ap.parse_args(argv)
     out = Path(a.out)
@@ -223,7 +242,8 @@ def main(argv: list[str] | None = None) -> int:
     for g in a.generators.split(","):
         for w in windows:
             t0 = time.perf_counter()
-            records.append(run_window(g, w, a.seed, first_bag=a.first_bag))
+            records.append(run_window(g, w, a.seed, first_bag=a.first_bag,
+                                      fixed_structure=a.fixed_structure))
             r = records[-1]
             print(f"{g}/{w}: main {r['main']['mae']:.3f} bagged {r['cand']['mae']:.3f} K "
                   f"({r['change_pct']:+.1f} %; {time.perf_counter() - t0:.0f} s)",
@@ -231,7 +251,7 @@ def main(argv: list[str] | None = None) -> int:
             (out / "bagged_base.json").write_text(json.dumps({"windows": records}, indent=1))
     v = verdict(records)
     meta = {"command": command.strip(), "wall_s": time.perf_counter() - t_all, "bags": K_BAGS,
-            "first_bag": a.first_bag}
+            "first_bag": a.first_bag, "fixed_structure": a.fixed_structure}
     (out / "bagged_base.json").write_text(json.dumps({"windows": records, "verdict": v,
                                                       "meta": meta}, indent=1))
     text = markdown(records, v, command.strip())

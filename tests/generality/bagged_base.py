@@ -119,6 +119,71 @@ def refit_only(model, theta, gh, ctx, resample: Callable[[np.ndarray], np.ndarra
     return model, fit(model, theta, shoot, gh, 0, 0), [{"structure": "fixed", "kept": False}]
 
 
+def forced_structure(model, gh, ctx, keep: set[str]):
+    """calibrate_base as the diagnosis runs it, every step the same, except that an optional
+    part is kept iff its label is in ``keep`` (``--vote-from``: the structure the bags voted
+    for, fitted on C1 and refitted on all of C as the chosen structure is)."""
+    from gateway.diagnose import base
+
+    current: list[str] = []
+    inner_options, inner_dbic = base.options, base.delta_bic
+
+    def labelled(m, g):
+        out = []
+        for label, build in inner_options(m, g):
+            def tracked(mm, _build=build, _label=label):
+                current.append(_label)
+                return _build(mm)
+            out.append((label, tracked))
+        return out
+
+    base.options = labelled
+    base.delta_bic = lambda *a: -1.0 if current and current[-1] in keep else 1.0
+    inner_validated = base._validated
+    base._validated = lambda new, old: bool(current and current[-1] in keep)
+    try:
+        return base.calibrate_base(model, gh, ctx.x, ctx.dt, ctx.split, ctx.horizon, 0,
+                                   lambda msg: None)
+    finally:
+        base.options, base.delta_bic, base._validated = inner_options, inner_dbic, inner_validated
+
+
+def voted(record: dict, bags: int = K_BAGS) -> set[str]:
+    """The parts kept by a majority of a run's bags (a record of the rule-bg JSON)."""
+    counts: dict[str, int] = {}
+    for bag in record["cand"]["bags"]:
+        for part in bag["kept"]:
+            counts[part] = counts.get(part, 0) + 1
+    return {p for p, n in counts.items() if 2 * n > bags}
+
+
+def vote_window(generator: str, window: str, seed: int, keep: set[str]) -> dict:
+    """Main and the one structure the bags voted for on one effect-free window."""
+    from gateway.diagnose.fit import drivers
+
+    with tempfile.TemporaryDirectory() as tmp:
+        _, gh, model, series = case_series(Case("diagnose", generator, window, "none", seed),
+                                           Path(tmp))
+    start, cpu_main = timed_prepare(series, gh, model)
+    st = start.state
+    xf = drivers(series, gh)
+    meas_f = xf["t_in"][st.ctx.split * series_k(series, st):]
+    meas_c = st.ctx.x["t_in"][st.ctx.split:]
+    fine0, coarse0 = heldout_mae(st.model0, start.theta, st, series, xf, gh)
+    t0 = time.process_time()
+    m_v, th_v, log_v = forced_structure(model, gh, st.ctx, keep)
+    cpu = time.process_time() - t0
+    fine_v, coarse_v = heldout_mae(m_v, th_v, st, series, xf, gh)
+    one = {"seed": None, "kept": kept_parts(log_v), "mae": mae(meas_f, fine_v)}
+    rec = {"generator": generator, "window": window,
+           "main": {"mae": mae(meas_f, fine0), "mae_fit_grid": mae(meas_c, coarse0),
+                    "kept": kept_parts(start.structure), "cpu_s": cpu_main},
+           "cand": {"mae": one["mae"], "mae_fit_grid": mae(meas_c, coarse_v), "cpu_s": cpu,
+                    "bags": [one]}}
+    rec["change_pct"] = 100.0 * (rec["cand"]["mae"] / rec["main"]["mae"] - 1.0)
+    return rec
+
+
 def run_window(generator: str, window: str, seed: int, bags: int = K_BAGS,
                first_bag: int = 0, fixed_structure: bool = False) -> dict:
     """Main and the bagged base on one effect-free window (bag seeds ``first_bag`` onwards;
@@ -231,6 +296,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="seed of the first bag's day draw (the rule's: 0, bags 0-4)")
     ap.add_argument("--fixed-structure", action="store_true",
                     help="each bag refits main's chosen structure only (no structure choice)")
+    ap.add_argument("--vote-from", default=None, metavar="JSON",
+                    help="a bagged run's JSON: fit the one structure its bags' majority kept")
     ap.add_argument("--out", default="out/bg")
     a = ap.parse_args(argv)
     out = Path(a.out)
@@ -242,8 +309,13 @@ def main(argv: list[str] | None = None) -> int:
     for g in a.generators.split(","):
         for w in windows:
             t0 = time.perf_counter()
-            records.append(run_window(g, w, a.seed, first_bag=a.first_bag,
-                                      fixed_structure=a.fixed_structure))
+            if a.vote_from:
+                prior = {(r["generator"], r["window"]): r
+                         for r in json.loads(Path(a.vote_from).read_text())["windows"]}
+                records.append(vote_window(g, w, a.seed, voted(prior[(g, w)])))
+            else:
+                records.append(run_window(g, w, a.seed, first_bag=a.first_bag,
+                                          fixed_structure=a.fixed_structure))
             r = records[-1]
             print(f"{g}/{w}: main {r['main']['mae']:.3f} bagged {r['cand']['mae']:.3f} K "
                   f"({r['change_pct']:+.1f} %; {time.perf_counter() - t0:.0f} s)",

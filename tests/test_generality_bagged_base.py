@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tests.generality.bagged_base import day_counts, day_resample, verdict
+from tests.generality.bagged_base import day_counts, day_resample, verdict, voted
 
 
 def test_day_counts_draw_as_many_days_as_there_are_reproducibly():
@@ -42,3 +42,11 @@ def test_verdict_applies_the_three_criteria():
     assert v["worse_10pct"] == 4 and v["a"] and v["b"] and not v["c"]
     # pooled -4 %: (a) fails
     assert not verdict([record("a", 1.0, 0.96), record("b", 1.0, 0.96)])["a"]
+
+
+def test_voted_keeps_the_parts_a_majority_of_the_bags_kept():
+    bags = [["heat store"], ["heat store", "sensor offset"], ["sensor offset"], ["heat store"], []]
+    rec = {"cand": {"bags": [{"kept": k} for k in bags]}}
+    assert voted(rec) == {"heat store"}  # 3 of 5; the offset's 2 of 5 is no majority
+    assert voted(rec, bags=4) == {"heat store"}
+    assert voted({"cand": {"bags": [{"kept": []}] * 5}}) == set()

@@ -148,6 +148,68 @@ def forced_structure(model, gh, ctx, keep: set[str]):
         base.options, base.delta_bic, base._validated = inner_options, inner_dbic, inner_validated
 
 
+def tried_models(model, gh, ctx) -> list[tuple]:
+    """Every (model, parameters) main's calibrate_base fits on C1 (the base, then each option
+    tried on top of the parts kept so far), each refitted on all of C (``--tried-average``)."""
+    from gateway.diagnose import base
+    from gateway.diagnose.fit import Shooting, window_starts
+
+    seen: list[tuple] = []
+    inner_fit = base.fit
+
+    def recording(m, theta, shoot, g, iterations, seed):
+        out = inner_fit(m, theta, shoot, g, iterations, seed)
+        seen.append((m, out))
+        return out
+
+    base.fit = recording
+    try:
+        base.calibrate_base(model, gh, ctx.x, ctx.dt, ctx.split, ctx.horizon, 0, lambda msg: None)
+    finally:
+        base.fit = inner_fit
+    whole = window_starts([(0, ctx.split)], ctx.horizon, skip=ctx.horizon)
+    return [(m, inner_fit(m, th, Shooting(m, ctx.x, gh, ctx.dt, whole, ctx.horizon), gh, 0, 0))
+            for m, th in seen[:-1]]  # the last fit is the chosen structure's refit on C
+
+
+def tried_window(generator: str, window: str, seed: int) -> dict:
+    """Main and the equal-weight mean of every structure main's calibration tried."""
+    from gateway.diagnose.fit import drivers
+
+    with tempfile.TemporaryDirectory() as tmp:
+        _, gh, model, series = case_series(Case("diagnose", generator, window, "none", seed),
+                                           Path(tmp))
+    start, cpu_main = timed_prepare(series, gh, model)
+    st = start.state
+    xf = drivers(series, gh)
+    meas_f = xf["t_in"][st.ctx.split * series_k(series, st):]
+    meas_c = st.ctx.x["t_in"][st.ctx.split:]
+    fine0, coarse0 = heldout_mae(st.model0, start.theta, st, series, xf, gh)
+    t0 = time.process_time()
+    fits = tried_models(model, gh, st.ctx)
+    cpu = time.process_time() - t0
+    runs = [heldout_mae(m, th, st, series, xf, gh) for m, th in fits]
+    fines, coarses = [r[0] for r in runs], [r[1] for r in runs]
+    each = [{"seed": None, "kept": structure_parts(m), "mae": mae(meas_f, f)}
+            for (m, _), f in zip(fits, fines, strict=True)]
+    rec = {"generator": generator, "window": window,
+           "main": {"mae": mae(meas_f, fine0), "mae_fit_grid": mae(meas_c, coarse0),
+                    "kept": kept_parts(start.structure), "cpu_s": cpu_main},
+           "cand": {"mae": mae(meas_f, np.mean(fines, axis=0)),
+                    "mae_fit_grid": mae(meas_c, np.mean(coarses, axis=0)), "cpu_s": cpu,
+                    "bags": each}}
+    rec["change_pct"] = 100.0 * (rec["cand"]["mae"] / rec["main"]["mae"] - 1.0)
+    return rec
+
+
+def structure_parts(model) -> list[str]:
+    """The optional parts of a fitted base (labels as the structure log's)."""
+    from gateway.diagnose.base import structure_detail
+
+    detail = structure_detail(model)
+    return [label for label in SHORT if label in detail]
+
+
 def voted(record: dict, bags: int = K_BAGS) -> set[str]:
     """The parts kept by a majority of a run's bags (a record of the rule-bg JSON)."""
     counts: dict[str, int] = {}
@@ -298,6 +360,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="each bag refits main's chosen structure only (no structure choice)")
     ap.add_argument("--vote-from", default=None, metavar="JSON",
                     help="a bagged run's JSON: fit the one structure its bags' majority kept")
+    ap.add_argument("--tried-average", action="store_true",
+                    help="the mean of every structure main's calibration tried, each refitted on C")
     ap.add_argument("--out", default="out/bg")
     a = ap.parse_args(argv)
     out = Path(a.out)
@@ -309,7 +373,9 @@ def main(argv: list[str] | None = None) -> int:
     for g in a.generators.split(","):
         for w in windows:
             t0 = time.perf_counter()
-            if a.vote_from:
+            if a.tried_average:
+                records.append(tried_window(g, w, a.seed))
+            elif a.vote_from:
                 prior = {(r["generator"], r["window"]): r
                          for r in json.loads(Path(a.vote_from).read_text())["windows"]}
                 records.append(vote_window(g, w, a.seed, voted(prior[(g, w)])))

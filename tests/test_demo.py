@@ -4,9 +4,25 @@ import pytest
 
 from training.__main__ import main
 
+QUICK = ["--set", "t_in.iterations=10", "--set", "i_in.iterations=10"]
+"""A quicker replay (step 3 at the default 50 iterations was over 2/3 of this test's 141 s); what
+the test checks is that the four steps run and leave their outputs, not the replay's error."""
 
-def test_demo_runs_the_whole_loop(tmp_path, capsys):
-    assert main(["demo", "--out", str(tmp_path), "--days", "3"]) == 0
+
+def test_demo_runs_the_whole_loop(tmp_path, capsys, monkeypatch):
+    import gateway.cli
+
+    calls, real = [], gateway.cli.main
+
+    def spy(argv):  # the real command, its arguments noted
+        calls.append(argv)
+        return real(argv)
+
+    monkeypatch.setattr(gateway.cli, "main", spy)
+    assert main(["demo", "--out", str(tmp_path), "--days", "3", *QUICK]) == 0
+    assert [c[0] for c in calls] == ["calibrate", "replay", "diagnose"]
+    assert " ".join(QUICK) in " ".join(calls[1])  # the settings reach the replay alone
+    assert "--set" not in calls[0] + calls[2]
     out = capsys.readouterr().out
     for step in ("1/4 simulate", "2/4 calibrate", "3/4 replay", "4/4 diagnose"):
         assert step in out
@@ -41,6 +57,15 @@ def test_demo_refuses_a_bad_length(argv, says, capsys):
     with pytest.raises(SystemExit) as exc:
         main(["demo", *argv])
     assert exc.value.code == 2 and says in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("item, says", [("t_in.windw=3", "unknown key 'windw'"),
+                                         ("t_in.iterations", "OUTPUT.KEY=NUMBER")])
+def test_demo_refuses_a_bad_setting_before_it_simulates(item, says, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["demo", "--out", str(tmp_path / "demo"), "--set", item])
+    assert exc.value.code == 2 and says in capsys.readouterr().err
+    assert not (tmp_path / "demo").exists()
 
 
 def test_demo_refuses_an_out_that_is_a_file(tmp_path, capsys):

@@ -75,6 +75,18 @@ def _folder(text: str) -> str:
     return text
 
 
+def _setting(text: str) -> str:
+    """argparse type of ``--set``: what ``replay --set`` takes, checked before step 1 runs."""
+    from gateway.cli import CliError
+    from gateway.cli.replay import _overrides
+
+    try:
+        _overrides([text])
+    except CliError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "demo",
@@ -91,6 +103,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    f"({POWER:g} W m-2) starts {CHANGE_AT:.3f} × D after the start "
                    f"({_when(DAYS)}Z for {DAYS:g})")
     p.add_argument("--seed", type=int, default=1, help="simulator and swarm seed (1)")
+    p.add_argument("--set", action="append", default=[], type=_setting, metavar="OUTPUT.KEY=VALUE",
+                   help="an online setting of step 3, passed to replay's --set (e.g. "
+                   "t_in.iterations=10 for a quicker, rougher replay); repeatable")
     p.set_defaults(func=run)
 
 
@@ -132,6 +147,7 @@ def run(args: argparse.Namespace) -> int:
     t0 = _step("3/4 replay: the online estimator sample by sample, vs constant parameters and "
                "persistence")
     code = gateway_main(["replay", *common, "--params", str(params), "--seed", str(args.seed),
+                         *(a for item in args.set for a in ("--set", item)),
                          "--out", str(out / "predictions.csv"), "--plot", str(out / "replay.png")])
     if code:
         return code

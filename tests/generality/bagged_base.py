@@ -26,6 +26,8 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -172,36 +174,6 @@ def tried_models(model, gh, ctx) -> list[tuple]:
             for m, th in seen[:-1]]  # the last fit is the chosen structure's refit on C
 
 
-def tried_window(generator: str, window: str, seed: int) -> dict:
-    """Main and the equal-weight mean of every structure main's calibration tried."""
-    from gateway.diagnose.fit import drivers
-
-    with tempfile.TemporaryDirectory() as tmp:
-        _, gh, model, series = case_series(Case("diagnose", generator, window, "none", seed),
-                                           Path(tmp))
-    start, cpu_main = timed_prepare(series, gh, model)
-    st = start.state
-    xf = drivers(series, gh)
-    meas_f = xf["t_in"][st.ctx.split * series_k(series, st):]
-    meas_c = st.ctx.x["t_in"][st.ctx.split:]
-    fine0, coarse0 = heldout_mae(st.model0, start.theta, st, series, xf, gh)
-    t0 = time.process_time()
-    fits = tried_models(model, gh, st.ctx)
-    cpu = time.process_time() - t0
-    runs = [heldout_mae(m, th, st, series, xf, gh) for m, th in fits]
-    fines, coarses = [r[0] for r in runs], [r[1] for r in runs]
-    each = [{"seed": None, "kept": structure_parts(m), "mae": mae(meas_f, f)}
-            for (m, _), f in zip(fits, fines, strict=True)]
-    rec = {"generator": generator, "window": window,
-           "main": {"mae": mae(meas_f, fine0), "mae_fit_grid": mae(meas_c, coarse0),
-                    "kept": kept_parts(start.structure), "cpu_s": cpu_main},
-           "cand": {"mae": mae(meas_f, np.mean(fines, axis=0)),
-                    "mae_fit_grid": mae(meas_c, np.mean(coarses, axis=0)), "cpu_s": cpu,
-                    "bags": each}}
-    rec["change_pct"] = 100.0 * (rec["cand"]["mae"] / rec["main"]["mae"] - 1.0)
-    return rec
-
-
 def structure_parts(model) -> list[str]:
     """The optional parts of a fitted base (labels as the structure log's)."""
     from gateway.diagnose.base import structure_detail
@@ -219,38 +191,62 @@ def voted(record: dict, bags: int = K_BAGS) -> set[str]:
     return {p for p, n in counts.items() if 2 * n > bags}
 
 
-def vote_window(generator: str, window: str, seed: int, keep: set[str]) -> dict:
-    """Main and the one structure the bags voted for on one effect-free window."""
-    from gateway.diagnose.fit import drivers
+@dataclass
+class Window:
+    """One effect-free window with main's base calibrated as the diagnosis does."""
 
-    with tempfile.TemporaryDirectory() as tmp:
-        _, gh, model, series = case_series(Case("diagnose", generator, window, "none", seed),
-                                           Path(tmp))
-    start, cpu_main = timed_prepare(series, gh, model)
-    st = start.state
-    xf = drivers(series, gh)
-    meas_f = xf["t_in"][st.ctx.split * series_k(series, st):]
-    meas_c = st.ctx.x["t_in"][st.ctx.split:]
-    fine0, coarse0 = heldout_mae(st.model0, start.theta, st, series, xf, gh)
-    t0 = time.process_time()
-    m_v, th_v, log_v = forced_structure(model, gh, st.ctx, keep)
-    cpu = time.process_time() - t0
-    fine_v, coarse_v = heldout_mae(m_v, th_v, st, series, xf, gh)
-    one = {"seed": None, "kept": kept_parts(log_v), "mae": mae(meas_f, fine_v)}
-    rec = {"generator": generator, "window": window,
-           "main": {"mae": mae(meas_f, fine0), "mae_fit_grid": mae(meas_c, coarse0),
-                    "kept": kept_parts(start.structure), "cpu_s": cpu_main},
-           "cand": {"mae": one["mae"], "mae_fit_grid": mae(meas_c, coarse_v), "cpu_s": cpu,
-                    "bags": [one]}}
-    rec["change_pct"] = 100.0 * (rec["cand"]["mae"] / rec["main"]["mae"] - 1.0)
-    return rec
+    gh: object
+    model: object
+    start: object  # search.prepare's result
+    cpu_main: float
+
+    @property
+    def ctx(self):
+        return self.start.state.ctx
 
 
-def run_window(generator: str, window: str, seed: int, bags: int = K_BAGS,
-               first_bag: int = 0, fixed_structure: bool = False) -> dict:
-    """Main and the bagged base on one effect-free window (bag seeds ``first_bag`` onwards;
-    ``fixed_structure``: each bag refits main's structure only, :func:`refit_only`)."""
+Fit = tuple[object, np.ndarray, dict]
+"""A candidate base: (model, parameters, what the table says of it: ``kept``, ``seed``, ...)."""
+
+
+def bag_fits(w: Window, bags: int = K_BAGS, first_bag: int = 0,
+             fixed_structure: bool = False) -> list[Fit]:
+    """The rule's bags (seeds ``first_bag`` onwards); ``fixed_structure``: each bag refits main's
+    structure only (:func:`refit_only`)."""
     from gateway.diagnose.base import calibrate_base
+
+    ctx, st = w.ctx, w.start.state
+    n_days = int(np.ceil(ctx.split * ctx.dt / DAY_S - 1e-9))
+    out = []
+    for b in range(first_bag, first_bag + bags):
+        counts = day_counts(n_days, b)
+        pick = day_resample(counts, ctx.dt)
+        if fixed_structure:
+            m_b, th_b, log_b = refit_only(st.model0, w.start.theta, w.gh, ctx, pick)
+        else:
+            m_b, th_b, log_b = calibrate_base(w.model, w.gh, ctx.x, ctx.dt, ctx.split,
+                                              ctx.horizon, 0, lambda msg: None, pick)
+        out.append((m_b, th_b, {"seed": b, "day_counts": counts.tolist(),
+                                "kept": kept_parts(log_b)}))
+    return out
+
+
+def vote_fits(w: Window, keep: set[str]) -> list[Fit]:
+    """The one structure the bags voted for (:func:`forced_structure`)."""
+    m_v, th_v, log_v = forced_structure(w.model, w.gh, w.ctx, keep)
+    return [(m_v, th_v, {"seed": None, "kept": kept_parts(log_v)})]
+
+
+def tried_fits(w: Window) -> list[Fit]:
+    """Every structure main's calibration tried, refitted on C (:func:`tried_models`)."""
+    return [(m, th, {"seed": None, "kept": structure_parts(m)})
+            for m, th in tried_models(w.model, w.gh, w.ctx)]
+
+
+def compare_window(generator: str, window: str, seed: int,
+                   candidates: Callable[[Window], list[Fit]]) -> dict:
+    """Main's base and the mean of the ``candidates``' free runs on one effect-free window:
+    held-out MAE of each, the candidates' CPU time, what each kept."""
     from gateway.diagnose.fit import drivers
 
     if generator in HELD_OUT:
@@ -259,36 +255,24 @@ def run_window(generator: str, window: str, seed: int, bags: int = K_BAGS,
         _, gh, model, series = case_series(Case("diagnose", generator, window, "none", seed),
                                            Path(tmp))
     start, cpu_main = timed_prepare(series, gh, model)
-    st = start.state
-    ctx = st.ctx
+    w, st = Window(gh, model, start, cpu_main), start.state
     xf = drivers(series, gh)
-    k = series_k(series, st)
-    meas_f, meas_c = xf["t_in"][ctx.split * k:], ctx.x["t_in"][ctx.split:]
+    meas_f = xf["t_in"][w.ctx.split * series_k(series, st):]
+    meas_c = w.ctx.x["t_in"][w.ctx.split:]
     fine0, coarse0 = heldout_mae(st.model0, start.theta, st, series, xf, gh)
-    days = ctx.split * ctx.dt / DAY_S
-    n_days = int(np.ceil(days - 1e-9))
-    rec: dict = {"generator": generator, "window": window, "calibration_days": days,
-                 "main": {"mae": mae(meas_f, fine0), "mae_fit_grid": mae(meas_c, coarse0),
-                          "kept": kept_parts(start.structure), "cpu_s": cpu_main}}
-    fines, coarses, per_bag, cpu = [], [], [], 0.0
-    for b in range(first_bag, first_bag + bags):
-        counts = day_counts(n_days, b)
-        t0 = time.process_time()
-        if fixed_structure:
-            m_b, th_b, log_b = refit_only(st.model0, start.theta, gh, ctx,
-                                          day_resample(counts, ctx.dt))
-        else:
-            m_b, th_b, log_b = calibrate_base(model, gh, ctx.x, ctx.dt, ctx.split, ctx.horizon,
-                                              0, lambda msg: None, day_resample(counts, ctx.dt))
-        cpu += time.process_time() - t0
-        f_b, c_b = heldout_mae(m_b, th_b, st, series, xf, gh)
-        fines.append(f_b)
-        coarses.append(c_b)
-        per_bag.append({"seed": b, "day_counts": counts.tolist(), "kept": kept_parts(log_b),
-                        "mae": mae(meas_f, f_b)})
-    rec["cand"] = {"mae": mae(meas_f, np.mean(fines, axis=0)),
-                   "mae_fit_grid": mae(meas_c, np.mean(coarses, axis=0)), "cpu_s": cpu,
-                   "bags": per_bag}
+    t0 = time.process_time()
+    fits = candidates(w)
+    cpu = time.process_time() - t0
+    runs = [heldout_mae(m, th, st, series, xf, gh) for m, th, _ in fits]
+    each = [info | {"mae": mae(meas_f, fine)} for (_, _, info), (fine, _) in
+            zip(fits, runs, strict=True)]
+    rec = {"generator": generator, "window": window,
+           "calibration_days": w.ctx.split * w.ctx.dt / DAY_S,
+           "main": {"mae": mae(meas_f, fine0), "mae_fit_grid": mae(meas_c, coarse0),
+                    "kept": kept_parts(start.structure), "cpu_s": cpu_main},
+           "cand": {"mae": mae(meas_f, np.mean([r[0] for r in runs], axis=0)),
+                    "mae_fit_grid": mae(meas_c, np.mean([r[1] for r in runs], axis=0)),
+                    "cpu_s": cpu, "bags": each}}
     rec["change_pct"] = 100.0 * (rec["cand"]["mae"] / rec["main"]["mae"] - 1.0)
     return rec
 
@@ -374,14 +358,15 @@ def main(argv: list[str] | None = None) -> int:
         for w in windows:
             t0 = time.perf_counter()
             if a.tried_average:
-                records.append(tried_window(g, w, a.seed))
+                build = tried_fits
             elif a.vote_from:
                 prior = {(r["generator"], r["window"]): r
                          for r in json.loads(Path(a.vote_from).read_text())["windows"]}
-                records.append(vote_window(g, w, a.seed, voted(prior[(g, w)])))
+                build = partial(vote_fits, keep=voted(prior[(g, w)]))
             else:
-                records.append(run_window(g, w, a.seed, first_bag=a.first_bag,
-                                          fixed_structure=a.fixed_structure))
+                build = partial(bag_fits, first_bag=a.first_bag,
+                                fixed_structure=a.fixed_structure)
+            records.append(compare_window(g, w, a.seed, build))
             r = records[-1]
             print(f"{g}/{w}: main {r['main']['mae']:.3f} bagged {r['cand']['mae']:.3f} K "
                   f"({r['change_pct']:+.1f} %; {time.perf_counter() - t0:.0f} s)",

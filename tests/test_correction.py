@@ -221,3 +221,78 @@ def test_the_weather_change_is_read_from_the_rows_the_forecast_reads():
         np.testing.assert_array_equal(from_series[f"d_{c}"], from_blocks[f"d_{c}"])
         np.testing.assert_array_equal(from_series[f"d_{c}"], x[c][starts + H - 1] - x[c][starts])
     assert np.all(correction.ahead_change(x, starts, 1)["d_i_glob"] == 0.0)  # one step: no change
+
+
+def _momentum_series(seed: int, n: int = 2000):
+    """A reading whose rate is an AR(1) of short memory, and a forecast H steps ahead that is
+    right but for the reading's last quarter-hour move, which it misses (its error that move,
+    as a model that does not see what moves the reading would)."""
+    rng = np.random.default_rng(seed)
+    rate = np.zeros(n)
+    for t in range(1, n):
+        rate[t] = 0.5 * rate[t - 1] + rng.normal(0, 0.2)
+    measured = 20.0 + np.cumsum(rate)
+    lag = int(round(correction.TREND_S / DT))
+    x = {"i_glob": np.zeros(n), "t_out": np.full(n, 10.0)}
+    time = np.datetime64("2020-01-01T00:00", "s") + np.arange(n) * np.timedelta64(int(DT), "s")
+    forecast = np.full(n, np.nan)
+    moved = measured[lag:n - H] - measured[:n - H - lag]
+    forecast[lag:n - H] = measured[lag + H:] - moved + rng.normal(0, 0.02, n - H - lag)
+    return measured, x, time, forecast
+
+
+def test_a_reading_that_keeps_moving_is_learnt_from_its_trend(monkeypatch):
+    """A forecast whose error is the reading's last quarter-hour move: the trend feature learns
+    it; without that column (held at 0) the others (the last matured error among them) cannot."""
+    measured, x, time, forecast = _momentum_series(seed=11)
+    corrected = correct_series({H: forecast}, measured, x, time, DT)[H]
+    mask = np.array([0.0 if n == "t_in trend" else 1.0 for n in FEATURES])
+    full = correction.features
+    monkeypatch.setattr(correction, "features", lambda *a: full(*a) * mask)
+    without = correct_series({H: forecast}, measured, x, time, DT)[H]
+    err = {k: _mae_late(measured, f) for k, f in
+           (("before", forecast), ("without", without), ("after", corrected))}
+    assert err["after"] < 0.5 * err["without"] and err["after"] < 0.5 * err["before"], err
+
+
+def test_the_trend_is_the_reading_less_the_one_a_quarter_hour_before():
+    live = Corrector([H], 60.0)
+    assert live.lag == 15
+    for v in range(16):
+        assert math.isnan(live.trend())
+        live.observe(float(v))
+    assert live.trend() == 15.0
+    live.observe(math.nan)
+    assert math.isnan(live.trend())
+
+
+def test_a_snapshot_saved_before_the_trend_feature_resumes_as_not_yet_learnt(monkeypatch):
+    """A state saved by the correction before "t_in trend" was appended (one column fewer) is
+    migrated with that column's sums at 0: with the column held at 0, the resumed run is the
+    uninterrupted one."""
+    mask = np.array([0.0 if n == "t_in trend" else 1.0 for n in FEATURES])
+    full = correction.features
+    monkeypatch.setattr(correction, "features", lambda *a: full(*a) * mask)
+    measured, x, time, forecast = _series(seed=5, n=800)
+    whole = correct_series({H: forecast}, measured, x, time, DT)[H]
+    hours = hour_of_day(time)
+    live = Corrector([H], DT)
+    got = np.full(len(measured), np.nan)
+    k = len(FEATURES)
+    for t in range(len(measured)):
+        if t == 400:  # a gateway updated over a state saved with 13 features
+            snap = json.loads(json.dumps(live.snapshot()))
+            snap["r_mat"] = {h: [r[:k - 1] for r in m[:k - 1]] for h, m in snap["r_mat"].items()}
+            snap["r_vec"] = {h: v[:k - 1] for h, v in snap["r_vec"].items()}
+            snap["pending"] = {h: [p if p is None else p[:k - 1] + p[-1:] for p in q]
+                               for h, q in snap["pending"].items()}
+            live = Corrector([H], DT)
+            live.restore(snap)
+            assert live.learnt[H] > 0 and len(live.pending[H]) == H
+        live.observe(float(measured[t]))
+        if math.isfinite(forecast[t]):
+            row = {"i_glob": float(x["i_glob"][t]), "t_out": float(x["t_out"][t]),
+                   "hour": float(hours[t])}
+            got[t] = live.correct(H, float(forecast[t]), float(measured[t]), row)
+        live.add()
+    np.testing.assert_allclose(got, whole, rtol=0, atol=1e-12)

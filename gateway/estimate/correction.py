@@ -10,8 +10,7 @@ follows the season. For each horizon h, with the error e(t) = T_in[t + h] − f(
     ê(t) = β(t) · φ(t),     corrected f(t) + ê(t),
     φ(t) = (1, f(t) − T_in[t], e(t − h), I_glob[t] / 1 kW m-2, (T_out − T_in)[t] / 10 K,
             g(t) − f(t), (T_in[t] − 20 °C) / 10 K, (T_in[t] − T̄_in(t)) / 10 K,
-            sin ωτ(t), cos ωτ(t), ΔI_glob(t) / 100 W m-2, Δu(t) / 1 m s-1, ΔT_out(t) / 1 K,
-            (T_in[t] − T_in[t − 15 min]) / 1 K),
+            sin ωτ(t), cos ωτ(t), ΔI_glob(t) / 100 W m-2, Δu(t) / 1 m s-1, ΔT_out(t) / 1 K),
     ω = 2π / 24 h, τ the UTC hour,
 
 ``T̄_in(t)`` the mean reading of the last day up to t (a controlled house goes back to its
@@ -22,10 +21,7 @@ Neural Networks 5, 241-259), ``e(t − h)`` the last error already measured at t
 change of the forecast's own drivers from its start to the last step it reads
 (``ahead_change``: the measured weather for the model-skill forecast, the outlook's for the
 live one; the grey box under-responds to a change of its weather, docs/effects.md, "The
-correction on the forecast's own weather"), and the reading's own change over the last quarter
-hour, its recent trend (a house whose vents a controller the kit does not see opens and closes
-moves in ways the grey box misses over the next minutes; docs/online-estimator.md, "The
-reading's trend in the correction"). β(t) is the exponentially weighted least squares
+correction on the forecast's own weather"). β(t) is the exponentially weighted least squares
 estimate with a constant ridge toward "no correction" (Gunnarsson 1996, "Combining tracking and
 regularization in recursive least squares identification", Proc. 35th IEEE CDC, 2551-2552):
 
@@ -54,13 +50,11 @@ MEMORY_S = 4 * 86400.0
 RIDGE = 50.0
 """ρ [-], in units of one start's weight: the correction's prior toward zero."""
 FEATURES = ("1", "f - t_in", "last error", "i_glob", "t_out - t_in", "arx - f", "t_in level",
-            "t_in - day mean", "sin hour", "cos hour", "i_glob ahead", "wind ahead", "t_out ahead",
-            "t_in trend")
+            "t_in - day mean", "sin hour", "cos hour", "i_glob ahead", "wind ahead", "t_out ahead")
 """Names of φ, in order: "sin/cos hour" are the hour of the day (UTC) as a daily harmonic, so a
 repeated daily error (the sun stored and given back later in the day) is learnt by phase; the
-three after them are the change of the forecast's own drivers over its horizon (``ahead``);
-the last is the reading's change over ``TREND_S`` up to the start."""
-SCALE = np.array([1.0, 1.0, 1.0, 1e-3, 0.1, 1.0, 0.1, 0.1, 1.0, 1.0, 1e-2, 1.0, 1.0, 1.0])
+last three are the change of the forecast's own drivers over its horizon (``ahead``)."""
+SCALE = np.array([1.0, 1.0, 1.0, 1e-3, 0.1, 1.0, 0.1, 0.1, 1.0, 1.0, 1e-2, 1.0, 1.0])
 """φ in these units (I_glob per kW m-2, temperature differences per 10 K; the changes over the
 horizon per 100 W m-2, 1 m s-1 and 1 K, a typical hour's change) so one ridge suits all."""
 T_LEVEL_C = 20.0
@@ -68,8 +62,6 @@ T_LEVEL_C = 20.0
 constant column takes the rest)."""
 DAY_MEAN_S = 86400.0
 """[s] the span of the mean reading the departure is counted from."""
-TREND_S = 900.0
-"""[s] the span of the reading's recent trend (the shortest horizon, 15 min; at least one step)."""
 WARMUP_S = 86400.0
 """[s] the correction is applied once a horizon has learnt from this long of matured starts (a
 day: the daily harmonic is not identified before); until then ``combined`` goes out as it is."""
@@ -99,20 +91,18 @@ def forgetting(dt: float, memory_s: float = MEMORY_S) -> float:
 
 
 def features(f: float, t_in: float, last_error: float, row: Mapping[str, float],
-             arx: float, day_mean: float = math.nan, trend: float = math.nan) -> np.ndarray:
+             arx: float, day_mean: float = math.nan) -> np.ndarray:
     """φ (scaled, ``FEATURES``) at one start: ``row`` holds ``i_glob``, ``t_out`` and ``hour``
     (UTC, 0-24) at the start and the changes ``d_<driver>`` over the horizon (``ahead_change``),
-    ``day_mean`` the mean reading of the last day, ``trend`` the reading's change over the last
-    ``TREND_S`` [K]. A missing last error, ARX forecast, day mean, change or trend counts as 0;
-    a missing driver makes φ NaN (no correction)."""
+    ``day_mean`` the mean reading of the last day. A missing last error, ARX forecast, day mean
+    or change counts as 0; a missing driver makes φ NaN (no correction)."""
     w = 2.0 * math.pi * row.get("hour", math.nan) / 24.0
     ahead = [row.get(f"d_{c}", math.nan) for c in AHEAD]
     raw = np.array([1.0, f - t_in, last_error if math.isfinite(last_error) else 0.0,
                     row.get("i_glob", math.nan), row.get("t_out", math.nan) - t_in,
                     arx - f if math.isfinite(arx) else 0.0, t_in - T_LEVEL_C,
                     t_in - day_mean if math.isfinite(day_mean) else 0.0, math.sin(w), math.cos(w),
-                    *(d if math.isfinite(d) else 0.0 for d in ahead),
-                    trend if math.isfinite(trend) else 0.0])
+                    *(d if math.isfinite(d) else 0.0 for d in ahead)])
     return raw * SCALE
 
 
@@ -131,7 +121,6 @@ class Corrector:
         self.horizons, self.lam, self.ridge = tuple(horizons), forgetting(dt, memory_s), ridge
         self.warmup = int(math.ceil(warmup_s / dt))  # learnt starts before the first correction
         self.day = max(int(round(DAY_MEAN_S / dt)), 1)  # readings in the day mean
-        self.lag = max(int(round(TREND_S / dt)), 1)  # steps back to the trend's first reading
         self.reset()
 
     def reset(self) -> None:
@@ -142,8 +131,7 @@ class Corrector:
         self.learnt = dict.fromkeys(self.horizons, 0)
         self.pending: dict[int, deque] = {h: deque() for h in self.horizons}
         self._made: dict[int, list[float]] = {}
-        # the last day's readings (NaN kept), at least the trend's span
-        self.readings: deque = deque(maxlen=max(self.day, self.lag + 1))
+        self.readings: deque = deque(maxlen=self.day)  # the last day's readings (NaN kept)
         self.day_mean = math.nan
 
     def drop_pending(self) -> None:
@@ -179,12 +167,6 @@ class Corrector:
             self.r_vec[h] = self.lam * self.r_vec[h] + phi * e
             self.learnt[h] += 1
 
-    def trend(self) -> float:
-        """The last reading less the one ``lag`` steps before it [K] (NaN until there is one)."""
-        if len(self.readings) <= self.lag:
-            return math.nan
-        return self.readings[-1] - self.readings[-1 - self.lag]
-
     def beta(self, h: int) -> np.ndarray:
         k = len(FEATURES)
         return np.linalg.solve(self.r_mat[h] + self.ridge * np.eye(k), self.r_vec[h])
@@ -194,7 +176,7 @@ class Corrector:
         """The corrected forecast of horizon ``h`` made now from the reading ``t_in``, the
         drivers ``row`` (``features``) and the ARX's forecast of the same target; ``f``
         unchanged where φ cannot be formed. Remembered for ``add``."""
-        phi = features(f, t_in, self.last[h], row, arx, self.day_mean, self.trend())
+        phi = features(f, t_in, self.last[h], row, arx, self.day_mean)
         if not (math.isfinite(f) and np.all(np.isfinite(phi))):
             return f
         self._made[h] = [*phi.tolist(), f]
@@ -218,37 +200,25 @@ class Corrector:
                 "readings": list(self.readings)}
 
     def restore(self, snap: Mapping | None) -> None:
-        """Continue from a ``snapshot`` (None, or one made with other features: start afresh;
-        one made before the last feature was appended, ``FEATURES`` less its last: migrated,
-        that feature not yet learnt)."""
+        """Continue from a ``snapshot`` (None, or one made with other features: start
+        afresh)."""
         self.reset()
         if not snap:
             return
         k = len(FEATURES)
-        sums = {key: np.asarray(m, dtype=float) for key, m in snap.get("r_mat", {}).items()}
-        short = k - 1 if sums and all(m.shape == (k - 1, k - 1) for m in sums.values()) else k
-        if any(m.shape != (short, short) for m in sums.values()):
+        if any(np.shape(m) != (k, k) for m in snap.get("r_mat", {}).values()):
             return  # an older φ: its sums and pending starts do not fit this one
         for v in snap.get("readings", []):
             self.observe_reading(v)
         for h in self.horizons:
             key = str(h)
-            if key in sums:
-                self.r_mat[h][:short, :short] = sums[key]
-                self.r_vec[h][:short] = np.asarray(snap["r_vec"][key], dtype=float)
+            if key in snap.get("r_mat", {}):
+                self.r_mat[h] = np.asarray(snap["r_mat"][key], dtype=float)
+                self.r_vec[h] = np.asarray(snap["r_vec"][key], dtype=float)
             last = snap.get("last", {}).get(key)
             self.last[h] = math.nan if last is None else float(last)
             self.learnt[h] = int(snap.get("learnt", {}).get(key, 0))
-            self.pending[h].extend(_widened(p, k) for p in snap.get("pending", {}).get(key, []))
-
-
-def _widened(pending: list[float] | None, k: int) -> list[float] | None:
-    """A pending start's [*φ, f] with φ padded by zeros to ``k`` features (a start made
-    before the last feature was appended did not see it)."""
-    if pending is None:
-        return None
-    phi, f = list(pending[:-1]), pending[-1]
-    return [*phi, *[0.0] * (k - len(phi)), f]
+            self.pending[h].extend(snap.get("pending", {}).get(key, []))
 
 
 def correct_series(forecasts: Mapping[int, np.ndarray], measured: np.ndarray,

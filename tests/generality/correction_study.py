@@ -76,9 +76,11 @@ def variants() -> list[tuple[str, np.ndarray, float, float]]:
     def drop(gone: tuple[str, ...]) -> np.ndarray:
         return np.array([0.0 if n in gone else 1.0 for n in names])
 
-    for n in names[1:-2]:
-        out.append((f"without {n}", drop((n,)), mem, ridge))
-    out.append(("without the daily harmonic", drop(names[-2:]), mem, ridge))
+    harmonic = ("sin hour", "cos hour")
+    for n in names[1:]:
+        if n not in harmonic:
+            out.append((f"without {n}", drop((n,)), mem, ridge))
+    out.append(("without the daily harmonic", drop(harmonic), mem, ridge))
     out.append(("bias alone", drop(names[1:]), mem, ridge))
     out += [(f"memory {d} d", full, d * 86400.0, ridge) for d in (1, 2, 7, 14)]
     out += [(f"ridge {r}", full, mem, float(r)) for r in (5, 20, 200)]

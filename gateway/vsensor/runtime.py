@@ -13,6 +13,7 @@ the training ranges and counts them. No NaN and no negative flow ever leaves it.
 ``VentSensor(..., clamp_inputs=True)`` (off by default) also feeds every filtered input outside
 its padded training range at that range's bound (``loop.padded_ranges``; still flagged, and
 counted in ``counts.inputs_clamped``), as ``loop.closed_loop(..., bounds=...)`` does in batch.
+``io_binding=False``: plain ``session.run`` instead of the same bits through ``binding.BoundRun``.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from gateway.greenhouse import Greenhouse
+from gateway.vsensor.binding import BoundRun
 from gateway.vsensor.features import (
     EXTRAS,
     INPUT_DELAYS,
@@ -219,7 +221,7 @@ class VentSensor:
     """The deployed sensor for one greenhouse (see the module docstring)."""
 
     def __init__(self, model_path: str | Path, gh: Greenhouse, model_kind: str | None,
-                 threads: int = 1, clamp_inputs: bool = False) -> None:
+                 threads: int = 1, clamp_inputs: bool = False, io_binding: bool = True) -> None:
         """``model_kind``: the model whose fluxes will be fed (a model trained on another kind
         is refused); None: the kind the model was trained on (its metadata's ``model_kind``),
         for a caller that feeds whatever the model reads (gateway/service/ventilation.py)."""
@@ -256,6 +258,7 @@ class VentSensor:
         self.histories = _histories(model_path, self.session, self.info)
         self.model_id = hashlib.sha256(Path(model_path).read_bytes()).hexdigest()[:16]
         self._feeds: dict[str, np.ndarray] = {}
+        self._run = BoundRun(self.session, self.histories) if io_binding else self._plain_run
         self.counts = SensorCounts()
         self.reset()
 
@@ -283,8 +286,8 @@ class VentSensor:
             raise ValueError(f"the saved history is of another model ({snap.get('model')!r}, "
                              f"this one is {self.model_id!r})")
         state = [float(v) for v in snap["state"]]
-        u = np.asarray(snap["u"], dtype=np.float32)
-        y = np.asarray(snap["y"], dtype=np.float32)
+        u = np.array(snap["u"], dtype=np.float32, order="C")  # own C copies: bound in place
+        y = np.array(snap["y"], dtype=np.float32, order="C")
         if len(state) != len(self._state) or u.shape != self._u.shape or y.shape != self._y.shape:
             raise ValueError("the saved history has the wrong shape")
         started, last_dt = bool(snap["started"]), float(snap["last_dt"])
@@ -311,8 +314,7 @@ class VentSensor:
         else:
             self._u[0, 1:] = self._u[0, :-1].copy()
             self._u[0, 0] = row
-        self._feeds["u"], self._feeds["y_past"] = self._u, self._y_feed
-        out = self.session.run(self._out, self._feeds)[0][0]
+        out = self._run(self._u, self._y_feed)[0]  # BoundRun: re-binds a replaced _u / _y_feed
         upper = self.limits.upper_now(dt, _num(m.get("t_out")), raw[0])
         ys, clamped = [], False  # every history's output held, clipped, then averaged
         for j in range(self.histories):
@@ -329,6 +331,10 @@ class VentSensor:
                            clamped, bool(self.mismatch))
         self._count(est)
         return est
+
+    def _plain_run(self, u: np.ndarray, y_past: np.ndarray) -> np.ndarray:
+        self._feeds["u"], self._feeds["y_past"] = u, y_past
+        return self.session.run(self._out, self._feeds)[0]
 
     def _limit(self, y: float, last: float, upper: float) -> tuple[float, bool]:
         """A network output held when non-finite and clipped to [0, upper]; clipped or not."""

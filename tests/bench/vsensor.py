@@ -5,7 +5,12 @@
     goal ≤ 50 µs median. Both shipped sensors: ``almeria`` (the summary's top-level figures) and
     the kit's ``prototype`` (``kit_sensor``). Peer, same weights: scikit-learn's own
     ``MLPRegressor.predict`` on the one row (after the same standardisation and PCA in numpy),
-    timed interleaved with (a).
+    timed interleaved with (a). Side by side in the same rounds: the step's own graph call
+    plain (``session.run`` with the sensor's feeds, ``step_call_plain``) against the IOBinding
+    bound once to the same arrays (``binding.BoundRun``, ``step_call_bound``), and the whole
+    step with ``io_binding=False`` (``vsensor_step_plain``) against the default bound sensor
+    (``vsensor_step``); reported as ratios bound / plain (``bound_over_plain``), outputs checked
+    bit-identical first.
 (b) Resident memory of a gateway process that imports numpy and the gateway, before and after
     loading the sensor (onnxruntime's import dominates).
 (c) Training time of ``training.vsensor.train`` on two 2-day simulator files with the small
@@ -31,6 +36,7 @@ one_core()
 import numpy as np  # noqa: E402
 
 from gateway.greenhouse import load_greenhouse  # noqa: E402
+from gateway.vsensor.binding import BoundRun  # noqa: E402
 from gateway.vsensor.models import shipped_model  # noqa: E402
 
 ROUNDS = 5
@@ -97,6 +103,7 @@ def timing(kind: str = "almeria") -> dict:
     from gateway.vsensor import VentSensor
 
     sensor = VentSensor(shipped_model(kind), gh, kind)
+    plain_sensor = VentSensor(shipped_model(kind), gh, kind, io_binding=False)
     sess = sensor.session
     n_f = len(sensor.info.names)
     rng = np.random.default_rng(0)
@@ -125,16 +132,31 @@ def timing(kind: str = "almeria") -> dict:
 
     onnx_out = float(np.mean(sess.run(None, {"u": u, "y_past": yp})[0][0]))
     assert abs(onnx_out - sk_step()) < 1e-3 * max(1.0, abs(onnx_out)), "peer differs from the graph"
+    bound = BoundRun(sess, k_h)
+    call_plain, call_bound = lambda: plain_sensor._plain_run(u, yp), lambda: bound(u, yp)
+    assert call_plain().tobytes() == call_bound().tobytes(), "bound run differs from session.run"
     meas = {"t_in": 22.0, "t_out": 18.0, "rh_in": 70.0, "rh_out": 60.0, "wind": 3.0}
     fluxes = {n: 0.0 for n in sensor.info.names[3:] if n.startswith("q_")}  # vpd_in: from meas
-    rows = {"onnx_run": [], "vsensor_step": [], "sklearn_predict": []}
-    for _ in range(ROUNDS):  # interleaved: a busy neighbour hits all three alike
+    rows = {"onnx_run": [], "step_call_plain": [], "step_call_bound": [], "vsensor_step_plain": [],
+            "vsensor_step": [], "sklearn_predict": []}
+    for _ in range(ROUNDS):  # interleaved: a busy neighbour hits them all alike
         rows["onnx_run"].append(_per_call_us(lambda: sess.run(None, {"u": u, "y_past": yp})))
+        rows["step_call_plain"].append(_per_call_us(call_plain))
+        rows["step_call_bound"].append(_per_call_us(call_bound))
+        rows["vsensor_step_plain"].append(_per_call_us(lambda: plain_sensor.step(meas, fluxes)))
         rows["vsensor_step"].append(_per_call_us(lambda: sensor.step(meas, fluxes)))
         rows["sklearn_predict"].append(_per_call_us(sk_step, CALLS // 4))
+    assert json.dumps(sensor.snapshot()) == json.dumps(plain_sensor.snapshot()), "steps differ"
     med = {k: float(np.median([w for w, _ in v])) for k, v in rows.items()}
     cpu = {k: float(np.median([c for _, c in v])) for k, v in rows.items()}
+    ratios = {}  # bound / plain: median over rounds of the ratio within a round (wall, CPU)
+    for name, bound_row, plain_row in (("step_call", "step_call_bound", "step_call_plain"),
+                                       ("vsensor_step", "vsensor_step", "vsensor_step_plain")):
+        for i, tag in ((0, ""), (1, "_cpu")):
+            ratios[name + tag] = float(np.median([b[i] / p[i] for b, p in
+                                                  zip(rows[bound_row], rows[plain_row], strict=True)]))
     return {"per_call_us_median_of_rounds": med, "cpu_us_median_of_rounds": cpu, "rounds": rows,
+            "bound_over_plain": ratios,
             "sklearn_over_onnx_run_cpu": cpu["sklearn_predict"] / cpu["onnx_run"],
             "sklearn_over_onnx_run": med["sklearn_predict"] / med["onnx_run"],
             "sklearn_over_vsensor_step": med["sklearn_predict"] / med["vsensor_step"],
@@ -187,7 +209,9 @@ def run() -> dict:
         "cpu_us": t["cpu_us_median_of_rounds"],
         "sklearn_over_onnx_run_cpu": t["sklearn_over_onnx_run_cpu"],
         "goal_us": 50.0,
+        "bound_over_plain": t["bound_over_plain"],
         "kit_sensor": {"model": kit["model"],
+                       "bound_over_plain": kit["bound_over_plain"],
                        "onnx_run_us": kit["per_call_us_median_of_rounds"]["onnx_run"],
                        "vsensor_step_us": kit["per_call_us_median_of_rounds"]["vsensor_step"],
                        "sklearn_over_onnx_run": kit["sklearn_over_onnx_run"],

@@ -92,11 +92,12 @@ def case_series(case: Case, tmp: Path) -> tuple:
     return data, gh, model, load_series(str(path), step=ROW_S, required=model.requires)
 
 
-def run(case: Case, keep: str | None = None) -> dict:
+def run(case: Case, keep: str | None = None, bags: int = 0) -> dict:
     """Run one case; the result is plain JSON data (errors are reported, not raised).
 
     ``keep``: a directory where a forecast case also pickles its ``ReplayResult`` (to study the
-    forecasts without replaying again; tests/generality/forecasts.py ``--keep``)."""
+    forecasts without replaying again; tests/generality/forecasts.py ``--keep``). ``bags``: a
+    diagnosis case's ``diagnose(..., bags=)`` (0: main's; gateway/diagnose/bagging.py)."""
     t0 = time.perf_counter()
     out: dict = {"case": asdict(case)}
     try:
@@ -105,7 +106,7 @@ def run(case: Case, keep: str | None = None) -> dict:
             out["size"] = data.size
             out["start"] = None if data.start is None else str(data.start) + "Z"
             if case.task == "diagnose":
-                out.update(_diagnose(case, data, gh, model, series))
+                out.update(_diagnose(case, data, gh, model, series, bags))
             else:
                 pickled = Path(keep) / f"{case.generator}-{case.window}.pkl" if keep else None
                 out.update(_forecast(gh, model, series, pickled))
@@ -134,10 +135,10 @@ def case_visible_change(case: Case, data) -> float | None:
     return visible_change(data, _reading_without_change(case.generator, case.window, case.seed))
 
 
-def _diagnose(case: Case, data, gh, model, series) -> dict:
+def _diagnose(case: Case, data, gh, model, series, bags: int = 0) -> dict:
     from gateway.diagnose import diagnose, to_json
 
-    d = diagnose(series, gh, model)
+    d = diagnose(series, gh, model, bags=bags)
     j = to_json(d)
     first = j["findings"][0] if j["findings"] else None
     res = {

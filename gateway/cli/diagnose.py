@@ -24,10 +24,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "rest is held out (0.5)")
     p.add_argument("--report", metavar="DIR", help="write report.md and PNG plots into DIR")
     p.add_argument("--seed", type=int, default=0, help="random seed of the swarm (0)")
-    p.add_argument("--bags", type=int, default=0, metavar="K",
-                   help="judge on the mean held-out prediction of K bases, each calibrated on "
-                   "the calibration part's days drawn with replacement (a bagged judge, issue 10; "
-                   "about K+1 times the run time); 0: off (0)")
     p.set_defaults(func=run)
 
 
@@ -36,8 +32,6 @@ def run(args: argparse.Namespace) -> int:
 
     if not 0.1 <= args.split <= 0.9:
         raise CliError(f"--split {args.split}: must be between 0.1 and 0.9")
-    if args.bags < 0:
-        raise CliError(f"--bags {args.bags}: must be 0 or more")
     check_output(args.report, "--report", folder=True)
     series, gh, model = load_inputs(args)
     tty = sys.stderr.isatty()
@@ -47,8 +41,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"  {msg}", file=sys.stderr, flush=True)
 
     try:
-        d = diagnose(series, gh, model, split=args.split, seed=args.seed, progress=say,
-                     bags=args.bags)
+        d = diagnose(series, gh, model, split=args.split, seed=args.seed, progress=say)
     except ValueError as exc:
         raise CliError(str(exc)) from None
     hint = live_model_hint(args.model, d.structure)

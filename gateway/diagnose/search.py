@@ -19,9 +19,6 @@ code ``diagnose`` runs: ``prepare`` (steps 1–3: the search's state on the cali
 ``search_round`` (one round of step 4, every candidate tried returned with its fold fits,
 held-out prediction and verdict), ``try_effect`` (one candidate, optionally at a given start),
 ``fit_all`` (a candidate's reported fit on all data) and ``keep``.
-
-With ``bags`` (off: 0) the judge and the report see the mean of K bags' held-out predictions,
-each bag a state of its own on a day-bootstrapped base (bagging.py); this state stays the spine.
 """
 
 from __future__ import annotations
@@ -31,7 +28,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gateway.diagnose import bagging
 from gateway.diagnose import judge as jd
 from gateway.diagnose import residuals as res
 from gateway.diagnose.base import Progress, calibrate_base
@@ -61,13 +57,11 @@ def diagnose(
     seed: int = 0,
     library: tuple[Effect, ...] = LIBRARY,
     progress: Progress | None = None,
-    bags: int = 0,
 ) -> Diagnosis:
-    """Run the whole diagnosis on ``series`` (see the module docstring); ``bags`` > 0: the
-    judge and the report on the mean of that many bags' predictions (bagging.py)."""
+    """Run the whole diagnosis on ``series`` (see the module docstring)."""
     t_start = _time.perf_counter()
     say = progress or (lambda msg: None)
-    start = prepare(series, gh, base, split, seed, say, bags)
+    start = prepare(series, gh, base, split, seed, say)
     st = start.state
     for rnd in range(1, MAX_EFFECTS + 1):
         r = search_round(st, library, rnd, say)
@@ -112,9 +106,8 @@ class Heldout:
 
 class State:
     """The loop's state: the shared context, the base, the model so far (the base + the effects
-    kept), its parameters per fold and on all data, its held-out prediction (the judge's: the
-    bags' mean when there are ``bags``, bagging.py), and what was tried (``trials``) and
-    rejected (``rejected``, with why)."""
+    kept), its parameters per fold and on all data, its held-out prediction, and what was
+    tried (``trials``) and rejected (``rejected``, with why)."""
 
     def __init__(self, ctx: Context, model0: Structured, theta: np.ndarray, held: Heldout) -> None:
         self.ctx = ctx
@@ -126,7 +119,6 @@ class State:
         self.findings: list[Finding] = []
         self.rejected: list[dict] = []
         self.trials: list[dict] = []
-        self.bags: list[State] = []
 
     def final(self) -> _Fit:
         """The model so far with its parameters per fold and on all data."""
@@ -153,11 +145,10 @@ class Start:
 
 
 def prepare(series: Series, gh: Greenhouse, base: Model, split: float = 0.5, seed: int = 0,
-            progress: Progress | None = None, bags: int = 0) -> Start:
+            progress: Progress | None = None) -> Start:
     """Steps 1–3 of the module docstring, as ``diagnose`` runs them: ``series`` on the fit
     grid, the base calibrated on its first ``split`` (base.calibrate_base), the held-out
-    folds, and the search's state with the base's cross-fitted held-out prediction; with
-    ``bags``, each bag's state on its own base (bagging.bases) and their mean prediction."""
+    folds, and the search's state with the base's cross-fitted held-out prediction."""
     say = progress or (lambda msg: None)
     if not 0.1 <= split <= 0.9:
         raise ValueError(f"split must be within [0.1, 0.9], got {split}")
@@ -171,12 +162,7 @@ def prepare(series: Series, gh: Greenhouse, base: Model, split: float = 0.5, see
     held = Heldout.of(s, n, dt)
     model0, theta, structure_log = calibrate_base(base, gh, x, dt, s, horizon, seed, say)
     ctx = Context(x, gh, dt, float(x["_index"][-1]), horizon, s)
-    st = State(ctx, model0, theta, held)
-    if bags:
-        st.bags = [State(ctx, m, th, held)
-                   for m, th in bagging.bases(base, gh, x, dt, s, horizon, seed, bags, say)]
-        st.current_pred = bagging.mean_pred([b.current_pred for b in st.bags])
-    return Start(coarse, k, theta, structure_log, st)
+    return Start(coarse, k, theta, structure_log, State(ctx, model0, theta, held))
 
 
 @dataclass(frozen=True)
@@ -184,8 +170,7 @@ class Tried:
     """A candidate effect tried against the model so far (``try_effect``): the model with it
     added, its fit on each fold's fit set (parameters, ΔBIC with the second output), its
     cross-fitted held-out prediction, the judge's verdict (``delta_bic`` filled in per fold)
-    and the ΔBIC of its τ scan on all data that ranked it (None when not ranked); with bags,
-    its fit on each bag's state (``bagged``), whose mean prediction is ``pred``."""
+    and the ΔBIC of its τ scan on all data that ranked it (None when not ranked)."""
 
     effect: Effect
     model: Structured
@@ -193,7 +178,6 @@ class Tried:
     pred: dict
     verdict: jd.Verdict
     rank_dbic: float | None = None
-    bagged: tuple[bagging.BagTry, ...] = ()
 
     @property
     def thetas(self) -> list[np.ndarray]:
@@ -229,9 +213,7 @@ class Round:
 
 def reference(st: State) -> dict:
     """The judge's reference: the model so far refitted on each fold's fit set as a candidate
-    is (effect_fit.refit), its cross-fitted held-out prediction (with bags: their mean)."""
-    if st.bags:
-        return bagging.mean_pred([reference(b) for b in st.bags])
+    is (effect_fit.refit), its cross-fitted held-out prediction."""
     ref = [refit(st.ctx, st.model, st.thetas[j], st.held.fit_sets[j]) for j in (0, 1)]
     return st.heldout(st.model, ref)
 
@@ -271,28 +253,17 @@ def try_effect(st: State, e: Effect, ref_pred: dict, at: float | None = None,
     """Candidate ``e`` added to the model so far, fitted on each fold's fit set
     (effect_fit.fit_effect; with ``at``, its start held there [s since the first row]: the
     oracle of a known start) and judged on the held-out folds against ``ref_pred``
-    (``reference``); with bags, fitted the same way on each bag's state and judged on their
-    mean prediction (the starts and ΔBIC stay this state's)."""
+    (``reference``)."""
     ctx = st.ctx
-    new_model, fits = _fitted(st, e, at)
-    bagged = tuple(bagging.BagTry(m, [f.theta for f in fs], b.heldout(m, [f.theta for f in fs]))
-                   for b in st.bags for m, fs in [_fitted(b, e, at)])
-    pred = (bagging.mean_pred([t.pred for t in bagged]) if bagged
-            else st.heldout(new_model, [f.theta for f in fits]))
+    new_model = compose(st.model0, st.effects + [e], ctx.gh, ctx.duration)
+    fits = [fit_effect(ctx, new_model, st.model, st.thetas[j], e, st.held.fit_sets[j],
+                       latest=at is None, at=at) for j in (0, 1)]
+    pred = st.heldout(new_model, [f.theta for f in fits])
     starts = [float(f.theta[new_model.index(e.tau_name)]) for f in fits]
     verdict = jd.judge(st.current_pred, ref_pred, pred, ctx.x["t_in"], st.held.blocks,
                        ctx.split, ctx.dt, starts, ctx.last)
     verdict.delta_bic = [float(f.delta_bic) for f in fits]  # second output included
-    return Tried(e, new_model, fits, pred, verdict, rank_dbic, bagged)
-
-
-def _fitted(st: State, e: Effect, at: float | None) -> tuple[Structured, list[EffectFit]]:
-    """``e`` composed onto ``st``'s model so far and fitted on each fold's fit set from its
-    fold parameters (``try_effect``)."""
-    ctx = st.ctx
-    new_model = compose(st.model0, st.effects + [e], ctx.gh, ctx.duration)
-    return new_model, [fit_effect(ctx, new_model, st.model, st.thetas[j], e, st.held.fit_sets[j],
-                                  latest=at is None, at=at) for j in (0, 1)]
+    return Tried(e, new_model, fits, pred, verdict, rank_dbic)
 
 
 def fit_all(st: State, t: Tried) -> EffectFit:
@@ -305,7 +276,7 @@ def fit_all(st: State, t: Tried) -> EffectFit:
 def keep(st: State, t: Tried, series: Series, say: Progress | None = None
          ) -> Finding:
     """Add ``t`` to the model so far: its finding (reported from ``fit_all``), its model, fold
-    parameters and held-out prediction become the state's (each bag's fit its bag's)."""
+    parameters and held-out prediction become the state's."""
     full = fit_all(st, t)
     ctx, e = st.ctx, t.effect
     st.findings.append(make_finding(e, t.model, full.theta, series, st.current_pred,
@@ -313,8 +284,6 @@ def keep(st: State, t: Tried, series: Series, say: Progress | None = None
     st.effects.append(e)
     st.model, st.thetas, st.theta_all = t.model, t.thetas, full.theta
     st.current_pred = t.pred
-    for b, bt in zip(st.bags, t.bagged, strict=True):
-        bagging.adopt(b, e, bt)
     if say is not None:
         say(f"kept {e.name}: {st.findings[-1].summary}")
     return st.findings[-1]
@@ -362,8 +331,7 @@ def _pick(passed: list[Tried], t_in: np.ndarray, s: int, dt: float
 def _report(series: Series, k: int, base: _Fit, st: State) -> Diagnosis:
     """Figures on the data's own grid (``k`` data samples to one fit step): held-out error of
     ``base`` and of the search's final model beside persistence, residuals; what the search
-    found, rejected and tried. With bags, "before" and "after" are the means over the bags'
-    bases and final models."""
+    found, rejected and tried."""
     ctx = st.ctx
     gh, final, held = ctx.gh, st.final(), st.held
     xf = drivers(series, gh)
@@ -371,14 +339,8 @@ def _report(series: Series, k: int, base: _Fit, st: State) -> Diagnosis:
     sf = ctx.split * k
     fblocks = [(a * k, b * k if b < held.n else nf) for a, b in held.blocks]
     ffolds = [[(a * k, b * k if b < held.n else nf) for a, b in f] for f in held.folds]
-    bases = [_Fit(b.model0, [b.theta_all, b.theta_all], b.theta_all) for b in st.bags]
-
-    def on_grid(fits: list[_Fit]) -> dict:
-        return bagging.mean_pred([jd.heldout(f.model, f.thetas, xf, gh, dtf, ffolds, sf, nf)
-                                  for f in fits])
-
-    before_f = on_grid(bases or [base])
-    after_f = on_grid([b.final() for b in st.bags] or [final])
+    before_f = jd.heldout(base.model, base.thetas, xf, gh, dtf, ffolds, sf, nf)
+    after_f = jd.heldout(final.model, final.thetas, xf, gh, dtf, ffolds, sf, nf)
     meas = xf["t_in"]
     traces(st.findings, final.model, final.theta_all, xf, gh, ctx.duration)
     an_before = res.analyse(series.time[sf:], meas[sf:] - before_f["free_run"], xf, sf, dtf)

@@ -13,8 +13,7 @@ is the mean of the 5 bags' free runs. The MAE is the diagnosis's "base" figure (
 ``before``, the suite's "base MAE"): free runs on the data's own grid restarted at each held-out
 block, |measured − model| averaged over the held-out rows; the fit grid's figure
 (day_residual.py's ``heldout_mae``) is reported beside it. The search is not run (the figure
-does not depend on it). Never the held-out generator. The bootstrap (day_counts, day_resample)
-lives in gateway/diagnose/bagging.py since rule bq (the diagnosis's opt-in bagged judge).
+does not depend on it). Never the held-out generator.
 
     PYTHONPATH=. nice -n 5 python tests/generality/bagged_base.py [--out out/bg]
 """
@@ -37,21 +36,31 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from gateway.diagnose.bagging import (  # noqa: E402
-    DAY_S,
-    calibration_days,
-    day_counts,
-    day_resample,
-)
 from tests.generality.cases import EXTRA_WINDOWS, Case, case_series  # noqa: E402
 from tests.generality.generators import HELD_OUT  # noqa: E402
 from tests.generality.report import MAIN_WINDOWS  # noqa: E402
 
 DEV = ("refsim", "twonode")
 K_BAGS = 5
+DAY_S = 86400.0
 SHORT = {"vent controller": "V", "long-wave sky loss": "L", "heat store": "S",
          "sensor offset": "O", "night sky level": "N"}
 """Abbreviations of the optional parts in the table."""
+
+
+def day_counts(n_days: int, seed: int) -> np.ndarray:
+    """How often each of ``n_days`` days was drawn: ``n_days`` draws with replacement."""
+    draws = np.random.default_rng(seed).integers(0, n_days, n_days)
+    return np.bincount(draws, minlength=n_days)
+
+
+def day_resample(counts: np.ndarray, dt: float) -> Callable[[np.ndarray], np.ndarray]:
+    """Window starts (rows on a grid of ``dt`` [s]) → those on drawn days, each repeated as often
+    as its day was drawn (calibrate_base's ``resample``)."""
+    def pick(starts: np.ndarray) -> np.ndarray:
+        day = (np.asarray(starts) * dt // DAY_S).astype(int)
+        return np.repeat(starts, counts[day]).astype(int)
+    return pick
 
 
 def heldout_mae(model, theta, st, series, xf, gh) -> tuple[np.ndarray, np.ndarray]:
@@ -207,7 +216,7 @@ def bag_fits(w: Window, bags: int = K_BAGS, first_bag: int = 0,
     from gateway.diagnose.base import calibrate_base
 
     ctx, st = w.ctx, w.start.state
-    n_days = calibration_days(ctx.split, ctx.dt)
+    n_days = int(np.ceil(ctx.split * ctx.dt / DAY_S - 1e-9))
     out = []
     for b in range(first_bag, first_bag + bags):
         counts = day_counts(n_days, b)

@@ -92,12 +92,11 @@ def case_series(case: Case, tmp: Path) -> tuple:
     return data, gh, model, load_series(str(path), step=ROW_S, required=model.requires)
 
 
-def run(case: Case, keep: str | None = None, bags: int = 0) -> dict:
+def run(case: Case, keep: str | None = None) -> dict:
     """Run one case; the result is plain JSON data (errors are reported, not raised).
 
     ``keep``: a directory where a forecast case also pickles its ``ReplayResult`` (to study the
-    forecasts without replaying again; tests/generality/forecasts.py ``--keep``). ``bags``: a
-    diagnosis case's ``diagnose(..., bags=)`` (0: main's; gateway/diagnose/bagging.py)."""
+    forecasts without replaying again; tests/generality/forecasts.py ``--keep``)."""
     t0 = time.perf_counter()
     out: dict = {"case": asdict(case)}
     try:
@@ -106,7 +105,7 @@ def run(case: Case, keep: str | None = None, bags: int = 0) -> dict:
             out["size"] = data.size
             out["start"] = None if data.start is None else str(data.start) + "Z"
             if case.task == "diagnose":
-                out.update(_diagnose(case, data, gh, model, series, bags))
+                out.update(_diagnose(case, data, gh, model, series))
             else:
                 pickled = Path(keep) / f"{case.generator}-{case.window}.pkl" if keep else None
                 out.update(_forecast(gh, model, series, pickled))
@@ -135,10 +134,10 @@ def case_visible_change(case: Case, data) -> float | None:
     return visible_change(data, _reading_without_change(case.generator, case.window, case.seed))
 
 
-def _diagnose(case: Case, data, gh, model, series, bags: int = 0) -> dict:
+def _diagnose(case: Case, data, gh, model, series) -> dict:
     from gateway.diagnose import diagnose, to_json
 
-    d = diagnose(series, gh, model, bags=bags)
+    d = diagnose(series, gh, model)
     j = to_json(d)
     first = j["findings"][0] if j["findings"] else None
     res = {

@@ -8,7 +8,7 @@ on each generator's three main windows. Writes ``bench/results/generality.json``
 Markdown section of docs/effects.md (between its markers).
 
     python tests/generality/suite.py [--jobs 2] [--generators refsim,twonode,vanthoor]
-        [--only diagnose|forecast] [--windows autumn,winter] [--no-docs] [--seed 1] [--bags 0]
+        [--only diagnose|forecast] [--windows autumn,winter] [--no-docs] [--seed 1]
 """
 
 from __future__ import annotations
@@ -20,7 +20,6 @@ import os
 import subprocess
 import sys
 import time
-from functools import partial
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -91,10 +90,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--kinds", default=",".join(ALL_KINDS), help="changes to diagnose (all)")
     ap.add_argument("--seed", type=int, default=1,
                     help="the generators' noise seed, every case (1: the suite's usual results)")
-    ap.add_argument("--bags", type=int, default=0, metavar="K",
-                    help="diagnose with a bagged judge of K day-bootstrap bags "
-                    "(diagnose(..., bags=K), gateway/diagnose/bagging.py; about K+1 times the "
-                    "diagnosis's time); 0: main's diagnosis (0)")
     ap.add_argument("--json", default=str(RESULTS), help=f"results file ({RESULTS.relative_to(ROOT)})")
     ap.add_argument("--no-docs", action="store_true", help="do not rewrite docs/effects.md")
     ap.add_argument("--merge", action="store_true",
@@ -108,8 +103,6 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"unknown generator(s) {bad}; known: {', '.join(GENERATORS)}")
     if a.combine:
         return _combine([Path(f) for f in a.combine], Path(a.json), not a.no_docs)
-    if a.bags < 0:
-        ap.error(f"--bags {a.bags}: must be 0 or more")
     kinds = tuple(k for k in a.kinds.split(",") if k)
     unknown = [k for k in kinds if k not in ALL_KINDS]
     if unknown:
@@ -120,7 +113,7 @@ def main(argv: list[str] | None = None) -> int:
     results = []
     ctx = mp.get_context("spawn")  # a clean interpreter per worker: no state shared with the parent
     with ctx.Pool(a.jobs, initializer=init_worker, maxtasksperchild=4) as pool:
-        for i, r in enumerate(pool.imap_unordered(partial(run, bags=a.bags), cases), 1):
+        for i, r in enumerate(pool.imap_unordered(run, cases), 1):
             results.append(r)
             spent = time.perf_counter() - t0
             eta = spent / i * (len(cases) - i)
@@ -138,8 +131,7 @@ def main(argv: list[str] | None = None) -> int:
     meta = {"command": "make bench-generality", "cases": len(results), "jobs": a.jobs,
             "minutes": minutes, "runs": [{"minutes": minutes, "jobs": a.jobs}],
             "when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": commit_id(),
-            "model": MODEL, "forecast_model": FORECAST_MODEL, "generators": list(gens), "seed": a.seed,
-            "bags": a.bags}
+            "model": MODEL, "forecast_model": FORECAST_MODEL, "generators": list(gens), "seed": a.seed}
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"meta": meta, "results": results}, indent=1) + "\n", encoding="utf-8")
     print(f"wrote {out} in {minutes:.1f} min", flush=True)

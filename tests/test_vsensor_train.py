@@ -208,7 +208,7 @@ def test_extra_features_and_sqrt_target_run_the_same_live_as_in_training(tmp_pat
     assert np.allclose(live, batch, rtol=1e-4, atol=1e-4)
     assert np.all(live >= 0)
     # the model without its extras' code is refused, naming the input
-    from gateway.vsensor.runtime import ModelInfo, ModelMismatch, check_model
+    from gateway.vsensor.model_info import ModelInfo, ModelMismatch, check_model
 
     info = VentSensor(model, gh, "almeria").info
     renamed = ModelInfo(**{**info.__dict__, "names": (*info.names[:-1], "no_such_input")})

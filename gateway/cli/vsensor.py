@@ -60,8 +60,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from gateway.vsensor.batch import replays_needed, run_series, score, write_flows
+    from gateway.vsensor.model_info import ModelMismatch
     from gateway.vsensor.models import shipped_model
-    from gateway.vsensor.runtime import ModelMismatch, VentSensor
+    from gateway.vsensor.runtime import VentSensor
 
     sensor_file(args.sensor)
     check_output(args.out, "--out", inputs={"--data": args.data, "--greenhouse": args.greenhouse,

@@ -8,6 +8,7 @@
 Nothing here imports scikit-learn or anything under ``training/``.
 """
 
-from gateway.vsensor.runtime import ModelMismatch, SensorCounts, VentEstimate, VentSensor, fluxes_now
+from gateway.vsensor.model_info import ModelMismatch
+from gateway.vsensor.runtime import SensorCounts, VentEstimate, VentSensor, fluxes_now
 
 __all__ = ["ModelMismatch", "SensorCounts", "VentEstimate", "VentSensor", "fluxes_now"]

@@ -158,7 +158,9 @@ def prepare(series: Series, gh: Greenhouse, base: Model, split: float = 0.5, see
     s = int(round(split * n))
     horizon = max(int(round(HORIZON_S / dt)), 2)
     _check_length(series, s, n, horizon)  # before drivers(): it needs a first row
-    x = drivers(coarse, gh)
+    # the base's driver-only columns (``Model.prepare``: FluxTerm.derive) once, not at every
+    # step of every run: elementwise, so the same numbers as computed at each step
+    x = dict(base.prepare(drivers(coarse, gh)))
     held = Heldout.of(s, n, dt)
     model0, theta, structure_log = calibrate_base(base, gh, x, dt, s, horizon, seed, say)
     ctx = Context(x, gh, dt, float(x["_index"][-1]), horizon, s)

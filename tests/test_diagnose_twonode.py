@@ -1,6 +1,6 @@
 """Diagnosis on data from a generator it was not built on (tests/twonode.py, real weather).
 
-The generality study (docs/effects.md, "Generality: an independent generator") ran 14 cases on
+The generality study (docs/effects.md, "Generality: two generators") ran 14 cases on
 this generator; only the cases that pass on three noise seeds are kept here as regressions.
 """
 

@@ -13,7 +13,7 @@ day effect, AR(1) across days, plus piece noise; seeded). ``null``: the dev suit
 effect-free windows (refsim, twonode), every judged candidate with both p-values and its day
 means, and the base's held-out day means (one JSON line per window, then a summary). ``cases``:
 the same for named suite cases. ``rho``: ``day_p`` of the logged day means at several
-``DAY_RHO``. ``short``: the 12 model-made cases of tests/test_diagnose.py (reference
+``DAY_RHO``. ``short``: the 12 model-made cases of tests/diagnose_cases.py (reference
 simulator, 6 effects x 2 models) at ``--days`` with the change at ``--at``, each diagnosed with
 the piece test and with the day test: what the day test costs on short records. Otherwise the
 judge's switch is as imported (``judge.DAY_TEST``: on since 2026-11-27).

@@ -71,10 +71,11 @@ def prototype_gh():
     return load_greenhouse("biskra-prototype")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def filled(tmp_path_factory: pytest.TempPathFactory):
-    """A store filled the way the service fills it (tests/status_store.py), once per test file
-    of the status screen."""
+    """A store filled the way the service fills it (tests/status_store.py; its clock is the
+    trace's, not the wall's), once per worker for the status screen's files (test_status.py,
+    test_status_app.py). Read only: a test changes its own copy (``store``)."""
     from tests.status_store import fill_store
 
     return fill_store(tmp_path_factory.mktemp("status") / "serra.db", minutes=130)
@@ -90,10 +91,10 @@ def store(filled, tmp_path: Path):
     return Filled(path, filled.now, filled.minutes)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def bundles(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The firmware and gateway bundles built by images/build.py (``make images``) into a
-    temporary folder, once per test file of the images."""
+    temporary folder, once per worker for test_images.py and test_images_units.py (read only)."""
     from tests.images_common import build
 
     out = tmp_path_factory.mktemp("images")

@@ -2,7 +2,7 @@
 venv and run through the shipped units; the units themselves and the firmware bundle are in
 test_images_units.py.
 
-The bundles are built once per module by images/build.py into a temporary folder (the
+The bundles are built once per test worker by images/build.py into a temporary folder (the
 ``bundles`` fixture, tests/conftest.py). The fresh venv gets the wheel with ``--no-deps
 --no-index`` (offline) and sees the test venv's site-packages as a plain path for the
 dependencies (numpy, rich, …): ``.pth`` files there are not processed, so neither the editable

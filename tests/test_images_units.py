@@ -1,6 +1,6 @@
 """``make images``: the systemd units and install steps of the gateway bundle, the README's deploy
 commands, and the firmware bundle (compiled for the ESP32, run on MicroPython). The bundles are
-built once per module by images/build.py into a temporary folder (the ``bundles`` fixture)."""
+built once per test worker by images/build.py into a temporary folder (the ``bundles`` fixture)."""
 
 from __future__ import annotations
 

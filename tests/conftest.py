@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import logging
+import shutil
 import signal
 import threading
 from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -67,3 +69,34 @@ def almeria_gh():
 @pytest.fixture(scope="session")
 def prototype_gh():
     return load_greenhouse("biskra-prototype")
+
+
+@pytest.fixture(scope="session")
+def filled(tmp_path_factory: pytest.TempPathFactory):
+    """A store filled the way the service fills it (tests/status_store.py; its clock is the
+    trace's, not the wall's), once per worker for the status screen's files (test_status.py,
+    test_status_app.py). Read only: a test changes its own copy (``store``)."""
+    from tests.status_store import fill_store
+
+    return fill_store(tmp_path_factory.mktemp("status") / "serra.db", minutes=130)
+
+
+@pytest.fixture
+def store(filled, tmp_path: Path):
+    """A copy of the ``filled`` store this test may change."""
+    from tests.status_store import Filled
+
+    path = tmp_path / "serra.db"
+    shutil.copy(filled.path, path)
+    return Filled(path, filled.now, filled.minutes)
+
+
+@pytest.fixture(scope="session")
+def bundles(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The firmware and gateway bundles built by images/build.py (``make images``) into a
+    temporary folder, once per worker for test_images.py and test_images_units.py (read only)."""
+    from tests.images_common import build
+
+    out = tmp_path_factory.mktemp("images")
+    assert build.main(["--out", str(out)]) == 0
+    return out

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +24,10 @@ from gateway.store.live import findings
 from gateway.store.outbox import Outbox
 from tests.gateway_harness import EPOCH, sim_trace, store_trace
 
-GH = load_greenhouse("biskra-prototype")
+GH = replace(load_greenhouse("biskra-prototype"), online={"t_in": {"iterations": 10, "bats": 10}})
+"""The kit's house with a small estimator budget in its own ``[online.t_in]`` table (the live
+default is 50 × 20): what these tests check is exact, budget-free (resume, causality, gaps,
+messages, migration), and the pipelines here step at half the time."""
 MODEL = build_model("prototype", GH)
 TRACE = sim_trace(days=1.0)
 

@@ -59,8 +59,11 @@ def test_riwpso_recovers_every_parameter_within_half_a_percent(data, prototype_g
 def test_rsba_recovers_every_parameter_within_one_percent(data, prototype_gh):
     series, model = data
     # Thesis settings (100 bats, f in [0, 1.5], sigma in [1e-7, 1e-2] of the box). RSBA's
-    # uniform sigma refines slowly: c_loss (the least sensitive parameter, as in table 4)
-    # needs ~2000 iterations to fall under 1 % (tests/bench/calibration.py reports 10 seeds).
-    result = calibrate(model, series, prototype_gh, make_algorithm("rsba", iterations=2500), seed=0)
+    # uniform sigma refines slowly: c_loss (the least sensitive parameter, as in table 4) can
+    # need ~2000 iterations to fall under 1 % (tests/bench/calibration.py: 10 seeds at 2500,
+    # worst error median 0.47 %, max 0.78 %). Seed 0 is under 1 % from iteration ~385 on
+    # (0.65 % at 500, 0.53 % at 750, 0.22 % at 2500): 700 iterations keep the claim at a
+    # quarter of the time. A broken search (no local walk, III.44) stays above 1 % here.
+    result = calibrate(model, series, prototype_gh, make_algorithm("rsba", iterations=700), seed=0)
     errors = relative_errors(result.params)
     assert max(errors.values()) < 0.01, errors

@@ -225,7 +225,9 @@ def test_tracks_a_change_of_the_cover_exchange_coefficient():
     changed[j] *= 2.0
     series = model_data(ALMERIA, GH, hours=10, start_hour=6, theta_at=lambda k: base if k < 240 else changed,
                         noise=0.01)
-    settings = online_settings(ALMERIA, GH, {"t_in": {"iterations": 20, "bats": 20}})
+    # 8 iterations (20 until 2026-11-28): error 0.067 of the constant's either way, median
+    # estimate 1.69 × the old value (1.77 at 20); without the t_in estimation it fails
+    settings = online_settings(ALMERIA, GH, {"t_in": {"iterations": 8, "bats": 20}})
     preds, theta = run(OnlineEstimator(ALMERIA, GH, base, settings), series)
     x = prepare_drivers(series, GH)
     const = ALMERIA.one_step(base[None, :], x, GH, 60.0)[0]

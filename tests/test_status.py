@@ -1,21 +1,16 @@
-"""The status screen: its data layer (snapshots from the store and from the gateway's messages),
-the panels, the Textual app driven headless at 80×24 by its Pilot, and ``--once`` into a pipe.
+"""The status screen's data layer (snapshots from the store and from the gateway's messages), its
+panels, and ``gateway status --once`` into a pipe; the Textual app is in test_status_app.py.
 
 The store is filled in process the way the service fills it (tests/status_store.py): the
 simulator's kit records, the real estimator, the real message producers and status rows."""
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
-import hashlib
 import json
 import math
-import shutil
 import sqlite3
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -23,74 +18,13 @@ import numpy as np
 import pytest
 
 from gateway.status import render
-from gateway.status.app import StatusApp
 from gateway.status.messages import Messages
-from gateway.status.snapshot import Link, Snapshot, attention
-from gateway.status.store_source import StoreSource
+from gateway.status.snapshot import Link, attention
 from gateway.store import Store
-from gateway.store.live import set_status
-from tests.status_store import MODEL, Filled, fill_store, records, status_rows
+from tests.status_helpers import beating, fresh_status, snap_of
+from tests.status_store import MODEL, Filled, records
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-@pytest.fixture(scope="module")
-def filled(tmp_path_factory: pytest.TempPathFactory) -> Filled:
-    return fill_store(tmp_path_factory.mktemp("status") / "serra.db", minutes=130)
-
-
-@pytest.fixture
-def store(filled: Filled, tmp_path: Path) -> Filled:
-    """A copy of the filled store this test may change."""
-    path = tmp_path / "serra.db"
-    shutil.copy(filled.path, path)
-    return Filled(path, filled.now, filled.minutes)
-
-
-def snap_of(f: Filled, wall: float | None = None) -> Snapshot:
-    src = StoreSource(f.path)
-    try:
-        return src.snapshot(wall=wall)
-    finally:
-        src.close()
-
-
-def fresh_status(f: Filled, **kw) -> float:
-    """Status rows as a running service writes them; returns their heartbeat."""
-    beat = kw.pop("heartbeat", time.time())
-    s = Store(f.path)
-    try:
-        set_status(s.conn, status_rows(f.now, heartbeat=beat, **kw), f.now)
-    finally:
-        s.close()
-    return beat
-
-
-@contextlib.contextmanager
-def beating(f: Filled, every_s: float = 1.0, **kw):
-    """Status rows (``status_rows`` options ``kw``) rewritten every ``every_s`` while the block
-    runs, as the running service rewrites its own (every 5 s): a command that takes long to start
-    on a loaded machine still finds a fresh heartbeat (the staleness limit is 20 s)."""
-    stop = threading.Event()
-
-    def beat() -> None:
-        while True:
-            fresh_status(f, **kw)
-            if stop.wait(every_s):
-                return
-
-    writer = threading.Thread(target=beat, daemon=True)
-    writer.start()
-    try:
-        yield
-    finally:
-        stop.set()
-        writer.join(30)
-
-
-def digest(path: Path) -> str:
-    return "".join(hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(
-        path.parent.glob(path.name + "*")) if not p.name.endswith("-shm"))
 
 
 # -- the data layer ------------------------------------------------------------------------------
@@ -240,126 +174,6 @@ def test_messages_give_the_same_numbers_as_the_store(store: Filled) -> None:
     kit = next(k for k in snap.kits if k.device_id == 7)
     assert kit.greenhouses == ("north in+out",) and kit.records == 130 and kit.boot == 0
     assert [f.effect for f in a.findings] == ["heat_source"]
-
-
-# -- the app, headless at 80×24 ---------------------------------------------------------------------
-def screen_text(app: StatusApp) -> str:
-    return "\n".join(s.text for s in app.screen._compositor.render_strips())
-
-
-async def _shown(app, pilot, *markers: str, what: str) -> str:
-    """The screen once every one of ``markers`` is on it: panels are filled from snapshots taken
-    in a thread and painted part by part, so a key's effect can show a few frames later on a
-    busy machine (generous deadline)."""
-    deadline = time.monotonic() + 60
-    while not all(m in (text := screen_text(app)) for m in markers):
-        assert time.monotonic() < deadline, f"{what}: {markers!r} not all shown in 60 s:\n{text}"
-        await pilot.pause(0.05)
-    return text
-
-
-def _all(m: str | tuple[str, ...]) -> tuple[str, ...]:
-    return (m,) if isinstance(m, str) else tuple(m)
-
-
-async def _drive(source, keys_and_markers, first: str | tuple[str, ...], size=(80, 24)
-                 ) -> list[str]:
-    """Screens: the first one once ``first`` is on it (the first snapshot is counted before its
-    panel is painted), then one after each (key, the text that shows it took effect)."""
-    app = StatusApp(source, interval=0.5)
-    shots: list[str] = []
-    async with app.run_test(size=size) as pilot:
-        deadline = time.monotonic() + 60
-        while app.refreshes == 0:  # the first snapshot (taken in a thread)
-            assert time.monotonic() < deadline, "no snapshot in 60 s"
-            await pilot.pause(0.05)
-        shots.append(await _shown(app, pilot, *_all(first), "q quit", what="the first snapshot"))
-        for key, marker in keys_and_markers:
-            await pilot.press(key)
-            await pilot.pause()
-            shots.append(await _shown(app, pilot, *_all(marker), "q quit", what=f"after {key!r}"))
-        await pilot.press("q")
-    assert app.return_code == 0
-    return shots
-
-
-class PinnedClock(StoreSource):
-    """A store source whose wall clock stands at ``wall``: what the screen says of the
-    heartbeat's age does not depend on how long a loaded machine takes to draw it."""
-
-    def __init__(self, path: Path, wall: float) -> None:
-        super().__init__(path)
-        self.wall = wall
-
-    def snapshot(self, wall: float | None = None) -> Snapshot:
-        return super().snapshot(self.wall if wall is None else wall)
-
-
-def test_app_at_80x24_switches_panels_and_quits(store: Filled) -> None:
-    beat = fresh_status(store)
-    src = PinnedClock(store.path, beat + 1.0)
-    before = digest(store.path)
-    try:
-        # each screen is read once everything asserted below is painted
-        steps = [("2", ("SILENT", "rain timeout", "bad_tag 3")),
-                 ("3", ("Service    running · pid 4242", "Zenoh      up: 1 peer")),
-                 ("g", ("Inside T  measured", "greenhouse north (1/1)"))]
-        home, kits, gateway, back = asyncio.run(_drive(
-            src, steps, ("greenhouse north (1/1)", "Inside T  measured", "Parameters (prototype",
-                         "heat_source since")))
-    finally:
-        src.close()
-    assert digest(store.path) == before  # the screen never writes
-    for shot in (home, kits, gateway):
-        lines = shot.splitlines()
-        assert len(lines) == 24 and all(len(x) <= 80 for x in lines)
-    assert "greenhouse north (1/1)" in home and "Inside T  measured" in home
-    assert "Parameters (prototype" in home and "heat_source since" in home
-    assert "q quit" in home.splitlines()[-1], home
-    assert "SILENT" in kits and "rain timeout" in kits and "bad_tag 3" in kits
-    assert "Service    running · pid 4242" in gateway and "Zenoh      up: 1 peer" in gateway
-    assert "Inside T  measured" in back and "greenhouse north (1/1)" in back  # back again
-    print("\n--- 80x24: greenhouse ---\n" + home + "\n--- kits ---\n" + kits +
-          "\n--- gateway ---\n" + gateway)
-
-
-def test_app_on_an_empty_store_and_with_the_link_down(store: Filled, tmp_path: Path) -> None:
-    Store(tmp_path / "empty.db").close()
-    src = StoreSource(tmp_path / "empty.db")
-    try:
-        (home, gw) = asyncio.run(_drive(src, [("w", "unknown: no status from a gateway")],
-                                        "No greenhouse in this store yet."))
-    finally:
-        src.close()
-    assert "No greenhouse in this store yet." in home
-    assert "unknown: no status from a gateway" in gw
-    beat = fresh_status(store, peers=0, waiting=("serra/f1/north/forecast",))
-    src = PinnedClock(store.path, beat + 1.0)
-    try:
-        (_, gw) = asyncio.run(_drive(src, [("3", "DOWN: no peer or router connected")],
-                                     "Inside T  measured"))
-    finally:
-        src.close()
-    assert "DOWN: no peer or router connected" in gw
-
-
-def test_app_keeps_the_last_snapshot_when_a_refresh_fails(store: Filled) -> None:
-    class Flaky(StoreSource):
-        calls = 0
-
-        def snapshot(self, wall=None):
-            self.calls += 1
-            if self.calls > 1:
-                raise sqlite3.OperationalError("disk I/O error")
-            return super().snapshot(wall)
-
-    src = Flaky(store.path)
-    try:
-        (_, again) = asyncio.run(_drive(src, [("r", "refresh failed")], "Inside T  measured"))
-    finally:
-        src.close()
-    assert "refresh failed (showing the last snapshot): OperationalError: disk I/O" in again
-    assert "Inside T  measured" in again
 
 
 # -- the command ----------------------------------------------------------------------------------

@@ -10,9 +10,7 @@ import onnxruntime as ort
 import pytest
 
 from gateway.greenhouse import load_greenhouse
-from gateway.series import load_series
 from gateway.vsensor import VentSensor
-from gateway.vsensor.adaptive import run_adaptive
 from gateway.vsensor.binding import BoundRun
 from gateway.vsensor.features import feature_names
 from gateway.vsensor.models import shipped_model
@@ -28,8 +26,7 @@ def gh():
 
 @pytest.fixture(scope="module")
 def novent(gh):
-    series = load_series(str(vd.test_file()))
-    return run_adaptive("almeria", series, gh, vents=False, overrides=vd.TINY)
+    return vd.test_novent(gh)
 
 
 def _model(which: str):

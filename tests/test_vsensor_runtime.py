@@ -19,7 +19,6 @@ from gateway.greenhouse import load_greenhouse
 from gateway.model import build_model
 from gateway.series import load_series
 from gateway.vsensor import ModelMismatch, VentSensor, fluxes_now
-from gateway.vsensor.adaptive import run_adaptive
 from gateway.vsensor.batch import run_sensor
 from gateway.vsensor.features import feature_names, filter_gains, flow_limits, low_pass, raw_features
 from gateway.vsensor.loop import closed_loop, fill_missing
@@ -40,8 +39,7 @@ def model_path():
 
 @pytest.fixture(scope="module")
 def novent(gh):
-    series = load_series(str(vd.test_file()))
-    return run_adaptive("almeria", series, gh, vents=False, overrides=vd.TINY)
+    return vd.test_novent(gh)
 
 
 def test_prototype_leakage_flow_carries_the_leakage_heat_loss(gh):

@@ -112,6 +112,19 @@ def rewrite_metadata(src: Path, dst: Path, **changes) -> Path:
     return dst
 
 
+def test_novent(gh):
+    """The test file's no-vent replay (what the sensor is fed), from its cached segment: the
+    replay training's tests make of it anyway (seed 0, TINY), made once per run for every file
+    and worker instead of once more per file. A fresh object on each call."""
+    import numpy as np
+
+    from gateway.vsensor.adaptive import AdaptiveRun
+    from training.vsensor.dataset import build_segment
+
+    seg = build_segment(test_file(), gh, "almeria", workdir() / "cache", TINY)
+    return AdaptiveRun(seg.time, seg.x, seg.fluxes, np.empty((len(seg.time), 0)), [])
+
+
 def live_and_batch(model: Path, gh, extra: tuple[str, ...] = (), clamp_inputs: bool = False):
     """(sensor, live flows, batch flows) of ``model`` on the test file: the gateway's sensor
     run step by step (``run_sensor``) beside training's batch closed loop (``simulate_model``)

@@ -1,0 +1,128 @@
+"""A new user's mistakes on where the commands write: an output in a missing folder, a folder, a file
+where a folder goes, the input itself or the store being read; each is one line, exit status 2,
+said before the work (not after an hour of calibration) and leaving nothing behind."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from gateway.cli import main
+from tests.cli_mistakes_common import PROTO, kit_csv, one_error_line
+
+
+@pytest.mark.parametrize("command,option", [
+    (["calibrate", "--iterations", "1", "--population", "2"], "--out"),
+    (["replay"], "--out"),
+    (["replay"], "--plot"),
+])
+def test_an_output_in_a_missing_folder_is_refused_before_the_work(capsys, tmp_path, command,
+                                                                   option):
+    data = kit_csv(tmp_path)
+    target = tmp_path / "no-such-folder" / "out.file"
+    assert main([*command, "--data", str(data), *PROTO, option, str(target)]) == 2
+    line = one_error_line(capsys)
+    assert f"{option} {target}" in line and "does not exist" in line
+    assert not target.parent.exists()
+
+
+def test_an_output_that_is_a_folder_is_named(capsys, tmp_path):
+    data = kit_csv(tmp_path)
+    assert main(["replay", "--data", str(data), *PROTO, "--plot", str(tmp_path)]) == 2
+    assert f"--plot {tmp_path}: is a folder" in one_error_line(capsys)
+
+
+def test_a_report_folder_that_is_a_file_is_refused_before_the_diagnosis(capsys, tmp_path):
+    data = kit_csv(tmp_path)  # far too short to diagnose: the report is checked first
+    assert main(["diagnose", "--data", str(data), *PROTO, "--report", str(data)]) == 2
+    assert f"--report {data}: exists and is not a folder" in one_error_line(capsys)
+
+
+def test_calibrate_writes_its_params_file_where_asked(capsys, tmp_path):
+    data, out = kit_csv(tmp_path), tmp_path / "p.toml"
+    assert main(["calibrate", "--data", str(data), *PROTO, "--iterations", "1", "--population",
+                 "2", "--out", str(out)]) == 0
+    assert "calibrated with rsba" in capsys.readouterr().out
+    assert "[params]" in out.read_text()
+
+
+def test_simulate_into_a_folder_is_named_before_simulating(capsys, tmp_path):
+    from training.__main__ import main as training_main
+
+    assert training_main(["simulate", "--out", str(tmp_path), "--days", "0.01"]) == 2
+    assert f"--out {tmp_path}: is a folder" in one_error_line(capsys)
+
+
+def test_subscribe_export_from_a_mistyped_store_creates_nothing(capsys, tmp_path):
+    db = tmp_path / "clod.db"
+    assert main(["subscribe", "--db", str(db), "--export", str(tmp_path / "csv")]) == 2
+    assert f"{db}: no such cloud store" in one_error_line(capsys)
+    assert not db.exists() and not (tmp_path / "csv").exists()
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--gateway", "bad farm!"], "gateway name 'bad farm!': use 1-63 letters"),
+    (["--router", "r 1=10.0.0.5"], "router name 'r 1': use 1-63 letters"),
+    (["--sign", "farm-d.csr"], "--sign 'farm-d.csr': expected ROLE:FILE.csr"),
+])
+def test_certs_mistakes_leave_no_ca_behind(capsys, tmp_path, args, message):
+    out = tmp_path / "certs"
+    assert main(["certs", "--out", str(out), *args]) == 2
+    assert message in one_error_line(capsys)
+    assert not out.exists()  # no CA made for a command that was refused
+
+
+def test_certs_out_that_is_a_file_is_named(capsys, tmp_path):
+    out = tmp_path / "certs"
+    out.write_text("")
+    assert main(["certs", "--out", str(out), "--gateway", "f1"]) == 2
+    assert f"--out {out}: exists and is not a folder" in one_error_line(capsys)
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--from", "2026-03-02T00:00Z", "--to", "2026-03-01T00:00Z"],
+     "--to 2026-03-01T00:00Z: not after --from 2026-03-02T00:00Z"),
+    (["--out", "."], "--out .: is a folder"),
+])
+def test_export_span_and_out_mistakes_come_before_the_store(capsys, tmp_path, args, message):
+    out = ["--out", str(tmp_path / "k.csv")] if "--out" not in args else []
+    assert main(["export", "--db", str(tmp_path / "none.db"), *out, *args]) == 2
+    assert message in one_error_line(capsys)
+
+
+def test_images_build_out_that_is_a_file_is_a_usage_error(tmp_path):
+    import subprocess
+    import sys
+
+    build = Path(__file__).parents[1] / "images" / "build.py"
+    out = tmp_path / "build"
+    out.write_text("keep me")
+    r = subprocess.run([sys.executable, str(build), "--out", str(out)], capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 2 and f"--out {out}: exists and is not a folder" in r.stderr
+    assert "Traceback" not in r.stderr and out.read_text() == "keep me"
+
+
+@pytest.mark.parametrize("command,option", [
+    (["replay"], "--out"),
+    (["replay"], "--plot"),
+    (["calibrate", "--iterations", "1", "--population", "2"], "--out"),
+])
+def test_an_output_that_is_the_input_data_is_refused(capsys, tmp_path, command, option):
+    data = kit_csv(tmp_path)
+    before = data.read_bytes()
+    assert main([*command, "--data", str(data), *PROTO, option, str(data)]) == 2
+    assert f"{option} {data}: is the --data input" in one_error_line(capsys)
+    assert data.read_bytes() == before
+
+
+def test_export_over_its_own_store_is_refused(capsys, tmp_path):
+    from gateway.store import Store
+
+    db = tmp_path / "serra.db"
+    Store(db).close()
+    before = db.read_bytes()
+    assert main(["export", "--db", str(db), "--out", str(db)]) == 2
+    assert f"--out {db}: is the store --db" in one_error_line(capsys)
+    assert db.read_bytes() == before

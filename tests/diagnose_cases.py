@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 from gateway.diagnose import base as base_module
-from gateway.diagnose import search, to_json
+from gateway.diagnose import judge, search, to_json
 from gateway.greenhouse import load_greenhouse
 from gateway.model import build_model
 from gateway.series import load_series
@@ -180,3 +180,20 @@ def shared_calibration() -> Iterator[None]:
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(search, "calibrate_base", calibrate)
         yield
+
+
+# -- fixtures the three test files import (``from tests.diagnose_cases import ...``) ----------
+@pytest.fixture(scope="module", autouse=True)
+def shared_calibration_in_module() -> Iterator[None]:
+    """One base calibration per distinct calibration part for the importing module's cases."""
+    with shared_calibration():
+        yield
+
+
+@pytest.fixture
+def piece_judge(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The judge on 6-hour pieces (``judge.DAY_TEST`` off) for the 6-day records: they test the
+    library's naming and starts, and the shipped day test needs ``judge.MIN_DAYS`` held-out
+    days after a change where these leave 2 (docs/effects.md, "What switching it on costs on
+    short records")."""
+    monkeypatch.setattr(judge, "DAY_TEST", False)

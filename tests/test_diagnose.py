@@ -21,31 +21,14 @@ import numpy as np
 import pytest
 
 from gateway.diagnose import EFFECTS, diagnose
-from gateway.diagnose import judge as jd
 from gateway.diagnose.effects import LIBRARY
 from tests import diagnose_cases as cases
-from tests.diagnose_cases import EQUIVALENT, KNOWN_MISSES, SPECS
+from tests.diagnose_cases import EQUIVALENT, KNOWN_MISSES, SPECS, piece_judge, shared_calibration_in_module  # noqa: F401 (fixtures)
 
 __all__ = ["DAYS", "EQUIVALENT", "SPECS", "_data"]  # tests/generality/day_test_study.py reads them
 
 DAYS = cases.DAYS
 """Days of the records ``_data`` makes (tests/generality/day_test_study.py sets it)."""
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _shared_calibration():
-    """One base calibration per distinct calibration part for the module's cases."""
-    with cases.shared_calibration():
-        yield
-
-
-@pytest.fixture
-def piece_judge(monkeypatch):
-    """The judge on 6-hour pieces (``judge.DAY_TEST`` off) for the 6-day records: they test the
-    library's naming and starts, and the shipped day test needs ``judge.MIN_DAYS`` held-out
-    days after a change where these leave 2 (docs/effects.md, "What switching it on costs on
-    short records")."""
-    monkeypatch.setattr(jd, "DAY_TEST", False)
 
 
 def _data(tmp_path, plant: str, effect: str | None, post=None, at: float = 3.6,

@@ -19,21 +19,7 @@ from gateway.diagnose import diagnose
 from gateway.diagnose import judge as jd
 from gateway.diagnose.effects import LIBRARY
 from tests import diagnose_cases as cases
-from tests.diagnose_cases import SPECS
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _shared_calibration():
-    """One base calibration per distinct calibration part for the module's cases."""
-    with cases.shared_calibration():
-        yield
-
-
-@pytest.fixture
-def piece_judge(monkeypatch):
-    """The judge on 6-hour pieces (``judge.DAY_TEST`` off) for the 6-day records (as in
-    tests/test_diagnose.py)."""
-    monkeypatch.setattr(jd, "DAY_TEST", False)
+from tests.diagnose_cases import SPECS, piece_judge, shared_calibration_in_module  # noqa: F401 (fixtures)
 
 
 @pytest.fixture(scope="module")

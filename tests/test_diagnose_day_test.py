@@ -12,14 +12,12 @@ import pytest
 from gateway.diagnose import diagnose, to_json
 from gateway.diagnose import judge as jd
 from tests import diagnose_cases as cases
-from tests.diagnose_cases import EQUIVALENT, LONG_AT, LONG_DAYS
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _shared_calibration():
-    """One base calibration per distinct calibration part for the module's cases."""
-    with cases.shared_calibration():
-        yield
+from tests.diagnose_cases import (
+    EQUIVALENT,
+    LONG_AT,
+    LONG_DAYS,
+    shared_calibration_in_module,  # noqa: F401 (fixture)
+)
 
 
 @pytest.mark.slow

@@ -26,7 +26,7 @@ def gh():
 
 @pytest.fixture(scope="module")
 def novent(gh):
-    return vd.test_novent(gh)
+    return vd.novent_run(gh)
 
 
 def _model(which: str):

@@ -39,7 +39,7 @@ def model_path():
 
 @pytest.fixture(scope="module")
 def novent(gh):
-    return vd.test_novent(gh)
+    return vd.novent_run(gh)
 
 
 def test_prototype_leakage_flow_carries_the_leakage_heat_loss(gh):

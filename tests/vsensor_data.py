@@ -112,16 +112,21 @@ def rewrite_metadata(src: Path, dst: Path, **changes) -> Path:
     return dst
 
 
-def test_novent(gh):
+def novent_run(gh):
     """The test file's no-vent replay (what the sensor is fed), from its cached segment: the
     replay training's tests make of it anyway (seed 0, TINY), made once per run for every file
     and worker instead of once more per file. A fresh object on each call."""
+    from training.vsensor.dataset import build_segment
+
+    return _as_run(build_segment(test_file(), gh, "almeria", workdir() / "cache", TINY))
+
+
+def _as_run(seg):
+    """A training segment as the ``AdaptiveRun`` the gateway's sensor is fed (no parameters)."""
     import numpy as np
 
     from gateway.vsensor.adaptive import AdaptiveRun
-    from training.vsensor.dataset import build_segment
 
-    seg = build_segment(test_file(), gh, "almeria", workdir() / "cache", TINY)
     return AdaptiveRun(seg.time, seg.x, seg.fluxes, np.empty((len(seg.time), 0)), [])
 
 
@@ -129,16 +134,13 @@ def live_and_batch(model: Path, gh, extra: tuple[str, ...] = (), clamp_inputs: b
     """(sensor, live flows, batch flows) of ``model`` on the test file: the gateway's sensor
     run step by step (``run_sensor``) beside training's batch closed loop (``simulate_model``)
     on the same replayed segment, which the tests hold equal (``clamp_inputs``: both clamp)."""
-    import numpy as np
-
     from gateway.vsensor import VentSensor
-    from gateway.vsensor.adaptive import AdaptiveRun
     from gateway.vsensor.batch import run_sensor
     from training.vsensor.dataset import build_segment
     from training.vsensor.errors import simulate_model
 
     seg = build_segment(test_file(), gh, "almeria", workdir() / "cache", TINY, extra=extra)
     batch = simulate_model(model, [seg], gh, "almeria", clamp_inputs)[0]
-    nov = AdaptiveRun(seg.time, seg.x, seg.fluxes, np.empty((len(seg.time), 0)), [])
+    nov = _as_run(seg)
     sensor = VentSensor(model, gh, "almeria", clamp_inputs=clamp_inputs)
     return sensor, run_sensor(sensor, nov).flow, batch

@@ -57,7 +57,9 @@ DAY_WEIGHTS = False
 filter for effects that act on some days only (added exchange on days with a large inside–
 outside difference, a cover on sunny days). The weights come from the fitted models and the
 drivers, not from the held-out errors, so the size stays that of the declared AR(1) (rule wd,
-docs/effects.md "A day test weighted by the candidate's own change"). Off: a measurement."""
+docs/effects.md "A day test weighted by the candidate's own change"). Off: on the dev suite it
+gains the two autumn ventilation kinds but brings back twonode bleiswijk-10-29's false alarm
+and names the night heater 28 h early in twonode summer (rule wd not met)."""
 REFERENCE_TEST = False
 """Whether a candidate must also be significant against the *reference* (the model so far
 refitted on the same fit sets without it): ``day_p`` of the per-piece cut against the

@@ -9,13 +9,13 @@ wherever an effect starts.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from gateway.diagnose.bic import EFFECTIVE_S
+from gateway.diagnose.student_t import student_t_sf
 from gateway.metrics import metrics
 from gateway.model.model import Model
 
@@ -51,6 +51,15 @@ are logged in the trials either way (``p_pieces``, ``p_days``)."""
 DAY_RHO = 0.5
 """Day-to-day correlation of the held-out error that ``day_p`` is built for (AR(1) across days;
 not estimated per candidate: from 3 to 7 day means an estimate is noise, biased low)."""
+DAY_WEIGHTS = False
+"""Weight ``day_p``'s days by the change the candidate itself predicts on each (the mean
+|after − reference| of its held-out free runs over the day's judged samples [K]): a matched
+filter for effects that act on some days only (added exchange on days with a large inside–
+outside difference, a cover on sunny days). The weights come from the fitted models and the
+drivers, not from the held-out errors, so the size stays that of the declared AR(1) (rule wd,
+docs/effects.md "A day test weighted by the candidate's own change"). Off: on the dev suite it
+gains the two autumn ventilation kinds but brings back twonode bleiswijk-10-29's false alarm
+and names the night heater 28 h early in twonode summer (rule wd not met)."""
 REFERENCE_TEST = False
 """Whether a candidate must also be significant against the *reference* (the model so far
 refitted on the same fit sets without it): ``day_p`` of the per-piece cut against the
@@ -198,7 +207,8 @@ def paired_p(d: np.ndarray) -> float:
     return student_t_sf(t, max(n_eff - 1.0, 1.0))
 
 
-def day_p(d: np.ndarray, day: np.ndarray, rho: float | None = None) -> float:
+def day_p(d: np.ndarray, day: np.ndarray, rho: float | None = None,
+          weights: np.ndarray | None = None) -> float:
     """One-sided p-value of mean(d) > 0 with whole days as the units: the pieces' differences
     ``d`` averaged per ``day`` label (any correlation within a day is then inside one unit),
     and the day means taken as AR(1) across days with correlation ``rho`` (``DAY_RHO``).
@@ -207,7 +217,12 @@ def day_p(d: np.ndarray, day: np.ndarray, rho: float | None = None) -> float:
     rho^|i-j|, M the centring matrix, K days): Var(mean) = sigma² 1'R1/K², and the sample sum
     of squares has E[z'z] = sigma² tr(MR), so sigma² is read as z'z / tr(MR); degrees of
     freedom tr(MR)²/tr(MRMR) (Satterthwaite). Exact in the first two moments on Gaussian day
-    means of that correlation, conservative for less. 1 with fewer than ``MIN_DAYS`` days."""
+    means of that correlation, conservative for less. 1 with fewer than ``MIN_DAYS`` days.
+
+    ``weights`` (one per day label, sorted, ≥ 0; ``DAY_WEIGHTS``): the matched-filter form, the
+    test of β > 0 in m = β w + e with e ~ AR(1) as above: t = w'm / √(σ² w'Rw), σ² = z'z/tr(PR)
+    with z = Pm, P = I − ww'/w'w, df tr(PR)²/tr(PRPR). w = 1 is the form above (P = M); fewer
+    than ``MIN_DAYS`` days with w > 0 give 1."""
     rho = DAY_RHO if rho is None else rho
     labels = np.unique(day)
     if len(labels) < MIN_DAYS:
@@ -216,6 +231,8 @@ def day_p(d: np.ndarray, day: np.ndarray, rho: float | None = None) -> float:
     k = len(m)
     lag = np.abs(np.subtract.outer(labels, labels)).astype(float)  # gaps count as days
     R = rho**lag
+    if weights is not None:
+        return _weighted_day_p(m, np.asarray(weights, dtype=float), R)
     MR = R - R.mean(axis=0, keepdims=True)
     a = float(np.trace(MR))
     z = m - m.mean()
@@ -227,42 +244,21 @@ def day_p(d: np.ndarray, day: np.ndarray, rho: float | None = None) -> float:
     return student_t_sf(float(m.mean() / np.sqrt(var_mean)), max(df, 1.0))
 
 
-def student_t_sf(t: float, df: float) -> float:
-    """P(T > t) for Student's t with ``df`` degrees of freedom: ½ I_x(df/2, ½) with
-    x = df/(df + t²) (regularised incomplete beta by its continued fraction, Numerical Recipes
-    §6.4)."""
-    x = df / (df + t * t)
-    tail = 0.5 * _betainc(0.5 * df, 0.5, x)
-    return tail if t > 0 else 1.0 - tail
-
-
-def _betainc(a: float, b: float, x: float) -> float:
-    if x <= 0.0 or x >= 1.0:
-        return 0.0 if x <= 0.0 else 1.0
-    ln_front = (math.lgamma(a + b) - math.lgamma(a) - math.lgamma(b)
-                + a * math.log(x) + b * math.log1p(-x))
-    if x < (a + 1.0) / (a + b + 2.0):
-        return math.exp(ln_front) * _betacf(a, b, x) / a
-    return 1.0 - math.exp(ln_front) * _betacf(b, a, 1.0 - x) / b
-
-
-def _betacf(a: float, b: float, x: float) -> float:
-    """Continued fraction of the incomplete beta (modified Lentz)."""
-    tiny = 1e-300
-    c, d = 1.0, 1.0 - (a + b) * x / (a + 1.0)
-    d = 1.0 / (d if abs(d) > tiny else tiny)
-    h = d
-    for m in range(1, 300):
-        for num in (m * (b - m) * x / ((a + 2 * m - 1) * (a + 2 * m)),
-                    -(a + m) * (a + b + m) * x / ((a + 2 * m) * (a + 2 * m + 1))):
-            d = 1.0 + num * d
-            d = 1.0 / (d if abs(d) > tiny else tiny)
-            c = 1.0 + num / c
-            c = c if abs(c) > tiny else tiny
-            h *= d * c
-        if abs(d * c - 1.0) < 1e-14:
-            break
-    return h
+def _weighted_day_p(m: np.ndarray, w: np.ndarray, R: np.ndarray) -> float:
+    """``day_p``'s matched-filter form on the day means ``m`` with weights ``w`` and the
+    declared day correlation matrix ``R``."""
+    if np.count_nonzero(w > 0) < MIN_DAYS:
+        return 1.0
+    P = np.eye(len(w)) - np.outer(w, w) / float(w @ w)
+    PR = P @ R
+    a = float(np.trace(PR))
+    z = P @ m
+    ss, num = float(z @ z), float(w @ m)
+    if ss == 0.0:
+        return 0.0 if num > 0 else 1.0
+    var = ss / a * float(w @ R @ w)
+    df = a * a / float(np.sum(PR * PR.T))
+    return student_t_sf(num / np.sqrt(var), max(df, 1.0))
 
 
 def _piece_diffs(x: np.ndarray, y: np.ndarray, ok: np.ndarray, cut: list[tuple[int, int]],
@@ -274,6 +270,19 @@ def _piece_diffs(x: np.ndarray, y: np.ndarray, ok: np.ndarray, cut: list[tuple[i
         if k.any():
             out.append(np.mean(x[a - s : b - s][k]) - np.mean(y[a - s : b - s][k]))
     return np.array(out)
+
+
+def _day_weights(reference: dict, after: dict, ok: np.ndarray, cut: list[tuple[int, int]],
+                 after_tau: np.ndarray, day: np.ndarray, s: int) -> np.ndarray:
+    """``DAY_WEIGHTS``: per day label (sorted), the mean |after − reference| [K] of the free
+    runs over the comparable samples of the judged pieces after the start."""
+    gap = np.abs(after["free_run"] - reference["free_run"])
+    tot, cnt = np.zeros(len(cut)), np.zeros(len(cut))
+    for i, (a, b) in enumerate(cut):
+        k = ok[a - s : b - s]
+        tot[i], cnt[i] = gap[a - s : b - s][k].sum(), k.sum()
+    tot, cnt = tot[after_tau], cnt[after_tau]
+    return np.array([tot[day == k].sum() / cnt[day == k].sum() for k in np.unique(day)])
 
 
 def judge(before: dict, reference: dict, after: dict, meas: np.ndarray, blocks: Blocks, s: int,
@@ -298,7 +307,8 @@ def judge(before: dict, reference: dict, after: dict, meas: np.ndarray, blocks: 
     d_before = _piece_diffs(err["b"], err["a"], ok, cut, s)
     mae = {k: float(np.mean(v[ok])) for k, v in err.items()}
     tau = max(starts) if starts else 0.0
-    kept = [a for a, b in cut if ok[a - s : b - s].any()]
+    kept_cut = [(a, b) for a, b in cut if ok[a - s : b - s].any()]
+    kept = [a for a, _ in kept_cut]
     after_tau = np.array([a * dt >= tau for a in kept], dtype=bool)
     if not after_tau.any():
         after_tau[:] = True
@@ -307,17 +317,21 @@ def judge(before: dict, reference: dict, after: dict, meas: np.ndarray, blocks: 
     day = np.array([int(a * dt // 86400.0) for a in kept])[after_tau]
     half = len(post_ref) // 2
     p_pieces, p_days = paired_p(post), day_p(post, day)
+    w = _day_weights(reference, after, ok, kept_cut, after_tau, day, s) if DAY_WEIGHTS else None
+    p_weighted = day_p(post, day, weights=w) if w is not None else p_days
     stats: dict[str, Any] = {  # figures of several types, reported as JSON (Verdict.stats)
-        "p": p_days if DAY_TEST else p_pieces, "p_pieces": p_pieces, "p_days": p_days,
+        "p": p_weighted if DAY_TEST else p_pieces, "p_pieces": p_pieces, "p_days": p_days,
         "day_means": [float(post[day == k].mean()) for k in np.unique(day)],
         "p_reference": paired_p(post_ref),
-        "p_days_reference": day_p(post_ref, day),
+        "p_days_reference": day_p(post_ref, day, weights=w),
         "halves": ([float(post_ref[:half].mean()), float(post_ref[half:].mean())]
                    if half else [0.0, 0.0]),
         "cut": 1.0 - mae["a"] / mae["b"] if mae["b"] > 0 else 0.0,
         "cut_reference": 1.0 - mae["a"] / mae["r"] if mae["r"] > 0 else 0.0,
         "late": bool(tau > last + 1.0), "starts": starts, "pieces": int(len(post)),
     }
+    if w is not None:
+        stats |= {"p_days_weighted": p_weighted, "day_weights": [float(v) for v in w]}
     good = decide(stats)
     why = _why(stats, mae, len(post))
     if min(stats["halves"]) <= 0:

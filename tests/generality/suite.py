@@ -54,9 +54,14 @@ def all_cases(generators=GENERATORS, windows=MAIN_WINDOWS, only: str | None = No
     return cases
 
 
-def init_worker() -> None:
+def init_worker(day_weights: bool = False) -> None:
+    """One thread per worker; the judge's ``DAY_WEIGHTS`` as asked (``--day-weights``)."""
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[var] = "1"
+    if day_weights:
+        from gateway.diagnose import judge
+
+        judge.DAY_WEIGHTS = True
 
 
 def _line(r: dict) -> str:
@@ -94,6 +99,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-docs", action="store_true", help="do not rewrite docs/effects.md")
     ap.add_argument("--merge", action="store_true",
                     help="keep the other cases of an existing results file (rerun a part only)")
+    ap.add_argument("--day-weights", action="store_true",
+                    help="judge with the day test weighted by each candidate's own predicted "
+                    "change (judge.DAY_WEIGHTS; off as shipped)")
     ap.add_argument("--combine", nargs="+", metavar="RESULTS.json",
                     help="run nothing: join these results files (later ones win) into --json and docs")
     a = ap.parse_args(argv)
@@ -112,7 +120,8 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     results = []
     ctx = mp.get_context("spawn")  # a clean interpreter per worker: no state shared with the parent
-    with ctx.Pool(a.jobs, initializer=init_worker, maxtasksperchild=4) as pool:
+    with ctx.Pool(a.jobs, initializer=init_worker, initargs=(a.day_weights,),
+                  maxtasksperchild=4) as pool:
         for i, r in enumerate(pool.imap_unordered(run, cases), 1):
             results.append(r)
             spent = time.perf_counter() - t0
@@ -131,7 +140,8 @@ def main(argv: list[str] | None = None) -> int:
     meta = {"command": "make bench-generality", "cases": len(results), "jobs": a.jobs,
             "minutes": minutes, "runs": [{"minutes": minutes, "jobs": a.jobs}],
             "when": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "commit": commit_id(),
-            "model": MODEL, "forecast_model": FORECAST_MODEL, "generators": list(gens), "seed": a.seed}
+            "model": MODEL, "forecast_model": FORECAST_MODEL, "generators": list(gens), "seed": a.seed,
+            "day_weights": a.day_weights}
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"meta": meta, "results": results}, indent=1) + "\n", encoding="utf-8")
     print(f"wrote {out} in {minutes:.1f} min", flush=True)

@@ -70,33 +70,3 @@ def test_non_finite_costs_are_treated_as_worst():
 def test_unknown_algorithm_is_a_clear_error():
     with pytest.raises(ValueError, match="choose from riwpso, ba, rsba"):
         make_algorithm("ga")
-
-
-def _walk_scales(iterations: int = 60) -> np.ndarray:
-    """Every bat on the local walk around a best held at the centre (bat 0 starts there at
-    cost 0, which nothing beats; r0 = 0 keeps every pulse rate at 0, no frequency term): each
-    iteration's candidates are best + sigma ε with ε uniform in [-1, 1]^k, so their largest
-    distance from the centre reads that iteration's step scale sigma (600 draws of ε: its largest
-    |ε| is above 0.99 but for a chance of 0.25 %)."""
-    seen: list[np.ndarray] = []
-
-    def cost(x: np.ndarray) -> np.ndarray:
-        seen.append(x.copy())
-        return np.sum((x - 0.5) ** 2, axis=1)
-
-    s = BatSettings(bats=200, iterations=iterations, f_min=0.0, f_max=0.0, r0=0.0,
-                    random_initial_rate=False, sigma_min=0.01, sigma_max=0.4, tol=-1.0)
-    bat(cost, np.zeros(3), np.ones(3), s, "rsba", np.random.default_rng(8), x0=np.full(3, 0.5))
-    return np.array([np.abs(x - 0.5).max() for x in seen[1:]])  # seen[0]: the initial swarm
-
-
-def test_rsba_redraws_its_step_scale_every_iteration():
-    """RSBA's local walk (III.44) with sigma redrawn uniformly in [sigma_min, sigma_max] every
-    iteration (III.45): the first iteration walks at sigma_max (the start value), the next ones
-    at scales spread over the whole range."""
-    scales = _walk_scales()
-    assert scales[0] == pytest.approx(0.4, rel=0.02)
-    later = scales[1:]
-    assert np.all((later >= 0.01 * 0.98) & (later <= 0.4 * 1.0001)), later
-    assert later.min() < 0.1 and later.max() > 0.33, (later.min(), later.max())
-    assert np.std(later) > 0.06, np.std(later)  # uniform on [0.01, 0.4]: sd 0.113

@@ -230,7 +230,7 @@ def test_firmware_delivers_every_record_exactly_once_over_lossy_udp(tmp_path: Pa
     (dev / "config.json").write_text(json.dumps({
         "device_id": 7, "key": KEY.hex(), "wifi": {"ssid": "serra", "password": "pw"},
         "gateway": {"host": "127.0.0.1", "port": proxy.port},
-        "sample_ms": 50, "period_s": 0.2, "ack_timeout_ms": 250, "wdt_ms": 5000,
+        "sample_ms": 25, "period_s": 0.1, "ack_timeout_ms": 100, "wdt_ms": 5000,
         "pins": {"dht_in": 4, "dht_out": 16, "pyranometer": 34, "anemometer": 35, "rain": 27}}))
     n = 120
     try:
@@ -245,8 +245,8 @@ def test_firmware_delivers_every_record_exactly_once_over_lossy_udp(tmp_path: Pa
         rows = stored(db, 0)
         check_exactly_once(recs, rows, n)
         # Second boot: the flash counter moves on, sequence numbers restart at 0, still unique.
-        # The access point vanishes for 4 s mid-stream: records wait in the ring, no reset.
-        fw2 = Firmware(dev, trace, outage="2000:4000")
+        # The access point vanishes for 2 s mid-stream: records wait in the ring, no reset.
+        fw2 = Firmware(dev, trace, outage="1000:2000")
         try:
             recs2 = run_until_delivered(fw2, db, 1, 40, timeout=90)
         finally:

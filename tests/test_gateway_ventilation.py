@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+from gateway.greenhouse import PRESET_DIR
 from gateway.service.clock import WallClock
 from gateway.service.config import ConfigError, load_config
 from gateway.service.resources import prepare
@@ -29,6 +30,12 @@ from tests.vsensor_data import TINY, rewrite_metadata, tiny_model
 
 TRACE = sim_trace(days=0.5)  # 6 h from 06:00
 VENTED = "prototype+vent_control"
+HOUSE = (PRESET_DIR / "almeria-palmerillas.toml").read_text() + (
+    "\n[online.t_in]\niterations = 10\nbats = 10\n")
+"""The Almería house with a small forecasting estimator budget in its own ``[online.t_in]``
+table (the live default is 50 × 20), as the pipeline tests' house: what these tests check (which
+estimator feeds the sensor, equal flows, exact resumes) does not depend on the budget; the
+sensor's own estimator keeps its TINY training settings, which still differ from it."""
 
 
 @pytest.fixture(scope="module")
@@ -48,7 +55,8 @@ def live_settings_sensor(sensor, tmp_path_factory) -> Path:
 def write(folder: Path, models: dict[str, str], vsensor: Path) -> Path:
     """A gateway.toml with one greenhouse per (name, model), all on device 7, with ``vsensor``."""
     write_keys(folder / "keys.txt", {7: KEY})
-    houses = "".join(f'[[greenhouse]]\nname = "{n}"\ngreenhouse = "almeria-palmerillas"\n'
+    (folder / "house.toml").write_text(HOUSE)
+    houses = "".join(f'[[greenhouse]]\nname = "{n}"\ngreenhouse = "{folder / "house.toml"}"\n'
                      f'model = "{m}"\ninside = 7\nvsensor = "{vsensor}"\n'
                      for n, m in models.items())
     path = folder / "gw.toml"

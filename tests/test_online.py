@@ -182,8 +182,11 @@ def test_missing_inside_temperature_is_bridged_by_the_previous_prediction():
 
 # -- hard box, adaptive box and activity gating ------------------------------------------------
 def test_adaptive_box_limits_each_move_and_gating_holds_inactive_parameters():
+    # A 2 x 4 budget: the limits and the gating hold whatever the search does; 960 minutes of
+    # it still move every checked parameter (FAST's 8 x 10 search was most of this test).
     series = model_data(ALMERIA, GH, hours=16, start_hour=4)
-    settings = online_settings(ALMERIA, GH, FAST)
+    settings = online_settings(ALMERIA, GH, {"t_in": {"iterations": 2, "bats": 4},
+                                             "i_in": {"iterations": 2, "bats": 4}})
     est = OnlineEstimator(ALMERIA, GH, ALMERIA.defaults(GH), settings)
     _, theta = run(est, series)
     x = prepare_drivers(series, GH)

@@ -70,3 +70,44 @@ def test_non_finite_costs_are_treated_as_worst():
 def test_unknown_algorithm_is_a_clear_error():
     with pytest.raises(ValueError, match="choose from riwpso, ba, rsba"):
         make_algorithm("ga")
+
+
+class FirstCallBest:
+    """Cost 1 for the initial population and 2 for every later one, so the global best stays
+    the seeded bat 0 and no bat ever moves; records every later population (raw units)."""
+
+    def __init__(self):
+        self.populations = []
+
+    def __call__(self, x):
+        if not hasattr(self, "_started"):
+            self._started = True
+            return np.ones(len(x))
+        self.populations.append(x.copy())
+        return np.full(len(x), 2.0)
+
+
+def test_rsba_redraws_its_step_scale_uniformly_in_the_sigma_range_each_iteration():
+    # III.44: every walker lands at best + sigma * eps, eps ~ U[-1, 1]^k (box-normalised);
+    # III.45: sigma = sigma_min + (sigma_max - sigma_min) * rand, redrawn every iteration, the
+    # first iteration using sigma_max. With the best pinned at the box centre, no acceptance
+    # (r_i = 0 keeps every bat walking) and the range inside the box (no redraws), an
+    # iteration's largest |u - 0.5| over 40 bats x 3 coordinates is its sigma to within ~3 %.
+    lo, hi = 0.1, 0.4
+    settings = BatSettings(bats=40, iterations=300, random_initial_rate=False,
+                           sigma_min=lo, sigma_max=hi)
+    cost = FirstCallBest()
+    bat(cost, LOWER, UPPER, settings, "rsba", np.random.default_rng(5), x0=(LOWER + UPPER) / 2)
+    spread = np.array([np.max(np.abs((x - LOWER) / (UPPER - LOWER) - 0.5))
+                       for x in cost.populations])  # one per iteration, shape (300,)
+    assert len(spread) == 300
+    assert 0.95 * hi <= spread[0] <= hi  # the first step uses sigma_max
+    later = spread[1:]
+    assert later.max() <= hi and later.min() >= 0.95 * lo  # never outside [sigma_min, sigma_max]
+    # Uniform over the range: each quarter holds about a quarter of the iterations (binomial
+    # sd 0.025 for 299 draws; the 3 % shrink of the max only shifts edges slightly).
+    edges = lo + (hi - lo) * np.array([0.25, 0.5, 0.75])
+    quarters = np.diff(np.concatenate([[0], np.searchsorted(np.sort(later / 0.985), edges),
+                                       [len(later)]])) / len(later)
+    assert np.all(np.abs(quarters - 0.25) < 0.1), quarters
+    assert np.mean(np.abs(np.diff(later)) > 0.01 * (hi - lo)) > 0.9  # redrawn every iteration

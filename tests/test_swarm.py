@@ -76,12 +76,13 @@ class FirstCallBest:
     """Cost 1 for the initial population and 2 for every later one, so the global best stays
     the seeded bat 0 and no bat ever moves; records every later population (raw units)."""
 
-    def __init__(self):
-        self.populations = []
+    def __init__(self) -> None:
+        self.calls = 0
+        self.populations: list[np.ndarray] = []
 
-    def __call__(self, x):
-        if not hasattr(self, "_started"):
-            self._started = True
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        self.calls += 1
+        if self.calls == 1:
             return np.ones(len(x))
         self.populations.append(x.copy())
         return np.full(len(x), 2.0)

@@ -21,7 +21,6 @@ import numpy as np
 from gateway.diagnose import night_sky
 from gateway.diagnose.bic import delta_bic, effective_samples
 from gateway.diagnose.fit import Shooting, fit_lm, fit_swarm, radiation_fit, window_starts
-from gateway.diagnose.latent import CropLatent
 from gateway.diagnose.structure import STORE, SensorBias, SkyLoss, Structured, model_unit, structure
 from gateway.greenhouse import Greenhouse
 from gateway.model.model import Model
@@ -67,11 +66,6 @@ VENT_BOX_UPPER = 1e-2
 """[m s-1 K-1] C_vc's physical upper bound: a wide-open Mediterranean house exchanges ~40 h-1
 (Kittas et al. 1997; Boulard & Baille 1995), reached over a proportional band of ~4 K
 (Vanthoor 2011 §2.4) in a house ~3.6 m high: 40 h-1 × 3.6 m / 3600 s / 4 K = 1e-2."""
-OFFER_LATENT = False
-"""Whether ``options`` offers the crop's transpiration (latent.py, its vapour-deficit loss) as an
-optional part, after the vent controller and the sky loss (rule lt, docs/effects.md)."""
-LATENT_REFERENCE = "inside"
-"""The vapour pressure the crop's deficit is taken against (latent.CropLatent)."""
 STORE_START = {"c_store": 5e4, "h_store": 3.0, "k_store": 3.0, "a_store": 0.1}
 """Where the heat store's fit starts (a floor-like store: 5 cm of wet sand, h ≈ 3 W m-2 K-1)."""
 
@@ -130,13 +124,6 @@ def options(model: Structured, gh: Greenhouse) -> list[tuple[str, Callable[[Stru
         out.insert(0, ("vent controller",
                        lambda m: m.with_terms(ControlledVentilation(
                            gh.air_density, VENT_BOX_UPPER if WIDE_VENT_BOX else None))))
-    if OFFER_LATENT and not any(t.name == CropLatent.name for t in model.terms):
-        # the crop's vapour-deficit loss: a warm, dry house loses more (latent.py); after
-        # the sky loss, before the store and the offset, which would otherwise take up the
-        # steadied afternoons
-        at = [lb for lb, _ in out].index("heat store")
-        out.insert(at, ("crop transpiration",
-                        lambda m: m.with_terms(CropLatent(model_unit(m, gh), LATENT_REFERENCE))))
     if OFFER_NIGHT_SKY and model.night_sky is None:
         # the sky's night level with the loss to it: before the store and the offset, which
         # would otherwise take up the misread nights (docs/effects.md, "Base structure")
@@ -243,8 +230,6 @@ def structure_detail(model: Structured) -> str:
         parts.append("vent controller (c_vc, t_vc)")
     if any(t.name == "q_lw_sky" for t in model.terms):
         parts.append("long-wave sky loss c_lw_sky")
-    if any(t.name == CropLatent.name for t in model.terms):
-        parts.append("crop transpiration c_vpd")
     if model.night_sky is not None:
         parts.append(f"night sky level {night_sky.LEVEL.name}")
     if model.store:

@@ -66,9 +66,6 @@ VENT_BOX_UPPER = 1e-2
 """[m s-1 K-1] C_vc's physical upper bound: a wide-open Mediterranean house exchanges ~40 h-1
 (Kittas et al. 1997; Boulard & Baille 1995), reached over a proportional band of ~4 K
 (Vanthoor 2011 §2.4) in a house ~3.6 m high: 40 h-1 × 3.6 m / 3600 s / 4 K = 1e-2."""
-BASE_HORIZON_S: float | None = None
-"""[s] Length of the shooting windows the base is calibrated on; None: the search's
-(fit.HORIZON_S, 6 h). Rule ho (docs/effects.md) measures 12 h, the held-out blocks' length."""
 STORE_START = {"c_store": 5e4, "h_store": 3.0, "k_store": 3.0, "a_store": 0.1}
 """Where the heat store's fit starts (a floor-like store: 5 cm of wet sand, h ≈ 3 W m-2 K-1)."""
 
@@ -167,14 +164,11 @@ def calibrate_base(base: Model, gh: Greenhouse, x: dict, dt: float, s: int, hori
     calibration uses (the fits on C1, the inner validation on C2, the refit on C) to the starts
     to use instead, a start repeated m times weighing m times (a study's bootstrap,
     tests/generality/bagged_base.py); None leaves them as they are."""
-    skip = horizon  # the store observer's warm-up before the first window, as the search's
-    if BASE_HORIZON_S is not None:
-        horizon = max(int(round(BASE_HORIZON_S / dt)), 2)
     s1 = int(round(INNER_SPLIT * s))
     inner = s1 >= 3 * horizon and s - s1 >= 2 * horizon
     fit_seg = [(0, s1)] if inner else [(0, s)]
     pick = resample or (lambda st: st)
-    starts = pick(window_starts(fit_seg, horizon, skip=skip))
+    starts = pick(window_starts(fit_seg, horizon, skip=horizon))
     val_starts = pick(window_starts([(s1, s)], horizon)) if inner else np.zeros(0, dtype=int)
     model = structure(base, gh, store=False)
     start = STORE_START | night_start(x, s)
@@ -208,7 +202,7 @@ def calibrate_base(base: Model, gh: Greenhouse, x: dict, dt: float, s: int, hori
             model, theta, sse, val = new, th, sse_new, val_new
     if inner:  # the chosen structure, refitted on all of C
         say("calibrating the base model: the chosen structure on the whole calibration part")
-        whole = pick(window_starts([(0, s)], horizon, skip=skip))
+        whole = pick(window_starts([(0, s)], horizon, skip=horizon))
         shoot = Shooting(model, x, gh, dt, whole, horizon)
         theta = fit(model, theta, shoot, gh, 0, seed)
     return model, theta, log

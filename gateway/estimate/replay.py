@@ -14,7 +14,9 @@ gateway does, records what it predicted, then computes, after the loop and vecto
 - forecasts h = 15, 30, 60 min ahead from every start t with the parameters in force at t
   (``Model.forecast``), against persistence T_in[t + h] = T_in[t] and the ARX baseline, twice:
   with the weather that was later measured (model skill: ``adaptive``, ``adaptive_kf``,
-  ``constant``, ``arx``) and with a causal weather outlook (what the live gateway can do:
+  ``constant``, ``arx``; the inside readings a model reads besides its state, such as the
+  transpiration's vapour pressure, held at the start: horizon.measured_weather_blocks) and
+  with a causal weather outlook (what the live gateway can do:
   ``adaptive_outlook``, ``adaptive_kf_outlook``, ``arx_outlook``; gateway/estimate/outlook.py,
   default ``clear-sky-trend`` when the greenhouse has a ``[site]``).
 

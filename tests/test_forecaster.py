@@ -10,6 +10,7 @@ import pytest
 from test_online import ALMERIA, FAST, GH, model_data
 
 from gateway.estimate import correction
+from gateway.estimate.horizon import INSIDE_READINGS
 from gateway.estimate.online import online_settings
 from gateway.estimate.replay import replay, score_forecasts, steps_of
 from gateway.service.forecaster import KINDS, LiveForecaster
@@ -38,7 +39,10 @@ def live_forecasts(res, kind: str, restart: bool = False) -> tuple[dict[int, np.
             live.restore(snap)
         live.update({k: float(v[t]) for k, v in x.items()}, theta[t], res.time[t])
         if np.isfinite(res.measured[t]):
-            block = {k: v[t: t + max(HORIZONS) + 1] for k, v in x.items()}
+            # the weather as later measured, the inside readings as at t (a model-skill
+            # forecast's drivers, gateway/estimate/horizon.py INSIDE_READINGS)
+            block = {k: np.full(max(HORIZONS) + 1, v[t]) if k in INSIDE_READINGS
+                     else v[t: t + max(HORIZONS) + 1] for k, v in x.items()}
             for h, v in live.forecasts(theta[t], block, HORIZONS).items():
                 got[h][t] = v
     return got, stop

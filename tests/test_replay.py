@@ -60,14 +60,33 @@ def test_report_has_the_promised_shape_and_adaptation_pays(result):
     assert rep["estimations"]["done"]["t_in"] > 1300 and rep["estimations"]["done"]["i_in"] > 10
 
 
+def held_inside(x: dict, start: int) -> dict:
+    """``x`` with the inside readings (and p_w,in) held at ``start`` from there on: the drivers
+    of a forecast made at ``start`` with the weather later measured."""
+    from gateway.estimate.horizon import INSIDE_READINGS
+
+    out = {k: np.array(v, dtype=float) for k, v in x.items()}
+    for k in INSIDE_READINGS:
+        if k in out:
+            out[k][start:] = out[k][start]
+    return out
+
+
 def test_forecasts_match_a_free_run_with_the_parameters_of_the_start(result):
+    """A forecast is the free run from its start with the parameters in force then, the
+    weather as later measured and the inside readings as at the start."""
     h = 15
     f = forecasts(result, h)
     for i in (100, 700, 1000):
         start = f["target"][i] - h
-        run = ALMERIA.free_run(result.theta[start][None, :], result.x, GH, 60.0, start, start + h + 1)
+        x = held_inside(result.x, start)
+        run = ALMERIA.free_run(result.theta[start][None, :], x, GH, 60.0, start, start + h + 1)
         assert f["adaptive"][i] == pytest.approx(run[0, -1], abs=1e-9)
         assert f["persistence"][i] == result.measured[start]
+        # the inside humidity's later readings do not reach it (they would: q_trp, III.29)
+        leaky = ALMERIA.free_run(result.theta[start][None, :], result.x, GH, 60.0, start,
+                                 start + h + 1)
+        assert abs(leaky[0, -1] - run[0, -1]) > 1e-6
 
 
 def test_replay_matches_the_sample_by_sample_estimator(drifting, result):
@@ -213,13 +232,18 @@ KIT = ["t_in", "rh_in", "t_out", "rh_out", "i_glob", "wind", "i_in", "t_soil", "
 
 
 class MeasuredFuture:
-    """An outlook that returns what was later measured (to check the blocks' layout)."""
+    """An outlook that returns the weather later measured, the inside readings held at the
+    start, as a model-skill forecast reads them (to check the blocks' layout)."""
 
     name = "measured"
 
     def drivers_at(self, columns, time, starts, horizon, dt):
+        from gateway.estimate.horizon import INSIDE_READINGS
+
         idx = np.minimum(starts[:, None] + np.arange(1, horizon + 1)[None, :], len(time) - 1)
-        return {k: np.asarray(v, float)[idx] for k, v in columns.items()}
+        held = np.repeat(starts[:, None], horizon, axis=1)
+        return {k: np.asarray(v, float)[held if k in INSIDE_READINGS else idx]
+                for k, v in columns.items()}
 
 
 def steady_sky(result):

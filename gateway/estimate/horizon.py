@@ -67,6 +67,28 @@ def outlook_drivers(outlook: Outlook, x: Mapping[str, np.ndarray], kit_columns: 
     return HorizonDrivers(flat, rows, starts, horizon, getattr(outlook, "name", type(outlook).__name__))
 
 
+INSIDE_READINGS = ("t_in", "rh_in", "i_in", "t_soil", "p_w_in")
+"""What the kit measures inside the house, and what is derived from it (``p_w_in``, III.4): the
+house's response, not its weather. A forecast "with the weather later measured" reads these
+at its start only: read at later rows they would hand it the future it forecasts (the Almería
+transpiration's p_w,in carries T_in: at saturation p_w,in = p_ws(T_in))."""
+
+
+def measured_weather_blocks(x: Mapping[str, np.ndarray], starts: np.ndarray,
+                            horizon: int) -> HorizonDrivers:
+    """Blocks for ``starts`` over ``horizon`` steps with the weather (and the grower's vents and
+    crop) as later measured and derived, row by row, and the inside readings
+    (``INSIDE_READINGS``) held at each start: the drivers of a model-skill forecast."""
+    n = len(next(iter(x.values())))
+    starts = np.asarray(starts, dtype=int)
+    idx = np.minimum(starts[:, None] + np.arange(horizon + 1)[None, :], n - 1)
+    held = np.repeat(starts[:, None], horizon + 1, axis=1)
+    flat = {name: np.asarray(v, dtype=float)[held if name in INSIDE_READINGS else idx].ravel()
+            for name, v in x.items()}
+    rows = np.arange(len(starts)) * (horizon + 1)
+    return HorizonDrivers(flat, rows, starts, horizon, "measured")
+
+
 def live_block(outlook: Outlook, history: Mapping[str, np.ndarray], time: np.ndarray,
                horizon: int, dt: float, gh: Greenhouse, cloud: float) -> dict[str, np.ndarray]:
     """The drivers of the one forecast the live gateway makes now (the last row of ``history``):

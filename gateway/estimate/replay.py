@@ -14,7 +14,9 @@ gateway does, records what it predicted, then computes, after the loop and vecto
 - forecasts h = 15, 30, 60 min ahead from every start t with the parameters in force at t
   (``Model.forecast``), against persistence T_in[t + h] = T_in[t] and the ARX baseline, twice:
   with the weather that was later measured (model skill: ``adaptive``, ``adaptive_kf``,
-  ``constant``, ``arx``) and with a causal weather outlook (what the live gateway can do:
+  ``constant``, ``arx``; the inside readings a model reads besides its state, such as the
+  transpiration's vapour pressure, held at the start: horizon.measured_weather_blocks) and
+  with a causal weather outlook (what the live gateway can do:
   ``adaptive_outlook``, ``adaptive_kf_outlook``, ``arx_outlook``; gateway/estimate/outlook.py,
   default ``clear-sky-trend`` when the greenhouse has a ``[site]``).
 
@@ -32,7 +34,7 @@ import numpy as np
 
 from gateway.estimate import arx as arx_baseline
 from gateway.estimate import combination, correction, disturbance
-from gateway.estimate.horizon import HorizonDrivers, outlook_drivers
+from gateway.estimate.horizon import INSIDE_READINGS, HorizonDrivers, measured_weather_blocks, outlook_drivers
 from gateway.estimate.online import Counters, GroupSettings, OnlineEstimator
 from gateway.estimate.outlook import Outlook, default_outlook, make_outlook
 from gateway.greenhouse import Greenhouse
@@ -191,20 +193,27 @@ def forecasts(result: ReplayResult, horizon: int) -> dict[str, np.ndarray]:
     starts = starts[ok]
     model, x, gh, dt = result.model, result.x, result.gh, result.dt
     theta = result.theta[starts]
+    # the model's drivers over the horizon: the weather later measured; the inside readings it
+    # reads besides its state (the Almería transpiration's p_w,in, the soil) held at the start
+    wx, rows = x, starts
+    if any(c in INSIDE_READINGS for c in model.requires if c != "t_in"):
+        blocks = measured_weather_blocks(x, starts, horizon)
+        wx, rows = blocks.x, blocks.rows
     out = {
         "target": starts + horizon,
         "measured": result.measured[starts + horizon],
-        "adaptive": model.forecast(theta, x, gh, dt, starts, horizon),
+        "adaptive": model.forecast(theta, wx, gh, dt, rows, horizon),
         "constant": model.forecast(np.repeat(result.theta0[None, :], len(starts), axis=0),
-                                   x, gh, dt, starts, horizon),
+                                   wx, gh, dt, rows, horizon),
         "persistence": result.measured[starts],
     }
     if result.arx is not None:
-        out["arx"] = result.arx.forecast(x, starts, horizon)
+        out["arx"] = result.arx.forecast(x, starts, horizon)  # reads T_in at the start only
     kf = result.filtered
     if kf is not None:
         kf_start = (kf.t_hat[starts], kf.b_hat[starts], kf.settings)
-        out["adaptive_kf"] = disturbance.forecast(model, theta, x, gh, dt, starts, horizon, *kf_start)
+        out["adaptive_kf"] = disturbance.forecast(model, theta, wx, gh, dt, rows, horizon,
+                                                  *kf_start)
     ahead = result.ahead
     if ahead is not None and horizon <= ahead.horizon:
         rows = ahead.rows[np.searchsorted(ahead.starts, starts)]

@@ -17,7 +17,7 @@ import hashlib
 import logging
 import sqlite3
 import threading
-from collections.abc import Hashable
+from collections.abc import Callable, Hashable
 from pathlib import Path
 
 from gateway import protocol as p
@@ -101,7 +101,8 @@ class Rig:
         self._handler = _Collect(self.errors, lambda: loop.call_soon_threadsafe(
             self._error_seen.set))
         logging.getLogger("serra.ingest").addHandler(self._handler)
-        self.reader = sqlite3.connect(f"file:{self.db}?mode=ro", uri=True, isolation_level=None)
+        self.reader = sqlite3.connect(f"{self.db.as_uri()}?mode=ro", uri=True,
+                                     isolation_level=None)
         self.board, self.resender = Acks(self.reader), Acks(self.reader)
         self.writer = asyncio.create_task(self.core.run_writer())
         return self
@@ -142,7 +143,9 @@ class Rig:
 
 
 class _Collect(logging.Handler):
-    def __init__(self, into: list[logging.LogRecord], on_record) -> None:
+    """Keeps the ERROR records of a logger and calls ``on_record`` after each."""
+
+    def __init__(self, into: list[logging.LogRecord], on_record: Callable[[], None]) -> None:
         super().__init__(logging.ERROR)
         self.into, self.on_record = into, on_record
 
@@ -160,7 +163,7 @@ def test_no_ack_while_the_commit_is_held_not_even_to_a_resend(tmp_path: Path) ->
                 r.send(s)
             await asyncio.wait_for(r.gate.entered.wait(), DEADLINE)
             # The batch is written inside its transaction, its COMMIT held: not durable yet.
-            assert r.rows() == []
+            assert r.gate.in_transaction and r.rows() == []
             assert r.board.got == [], "acked before its batch committed"
             r.send(2, resend=True)  # a resend of a record of the held batch: waits for it
             assert r.resender.got == [], "a resend during the commit was acked before it"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sqlite3
 from pathlib import Path
 
 import pytest
@@ -175,3 +176,41 @@ def test_aggregation_works_through_a_backlog_in_bounded_steps(tmp_path: Path) ->
         steps.append(n)
     assert steps == [7] * 7 + [1]
     assert s.conn.execute("SELECT count(*), sum(n) FROM minute").fetchone() == (50, 50)
+
+
+class _CommitFails:
+    """The store's connection, whose next COMMIT fails as SQLite's SQLITE_BUSY does: the error
+    is raised and the transaction is left open (the COMMIT never ran)."""
+
+    def __init__(self, conn) -> None:
+        self._conn, self.armed = conn, True
+
+    def execute(self, sql: str, *args):
+        if self.armed and sql.strip().upper() == "COMMIT":
+            self.armed = False
+            raise sqlite3.OperationalError("database is locked")
+        return self._conn.execute(sql, *args)
+
+    def __getattr__(self, name: str):
+        return getattr(self._conn, name)
+
+
+def test_a_failed_commit_is_rolled_back_and_the_store_keeps_working(tmp_path: Path) -> None:
+    """A COMMIT that fails and leaves the transaction open must not wedge the store: the batch
+    is rolled back (nothing of it stored, the write lock released) and the next batch, the
+    same records resent, is stored once."""
+    s = Store(tmp_path / "g.db")
+    assert s.write_batch([(rec(i), T0 + i) for i in range(3)]) == 3
+    real = s.conn
+    s.conn = _CommitFails(real)
+    with pytest.raises(sqlite3.OperationalError, match="locked"):
+        s.write_batch([(rec(i), T0 + i) for i in range(3, 6)])
+    assert not real.in_transaction
+    with sqlite3.connect(tmp_path / "g.db") as other:  # the write lock is free
+        other.execute("BEGIN IMMEDIATE")
+        assert other.execute("SELECT count(*) FROM samples").fetchone()[0] == 3
+        other.execute("ROLLBACK")
+    assert s.write_batch([(rec(i), T0 + i) for i in range(3, 6)]) == 3
+    assert sorted(r[0] for r in real.execute("SELECT seq FROM samples")) == list(range(6))
+    s.conn = real
+    s.close()

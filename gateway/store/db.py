@@ -7,7 +7,7 @@ import re
 import sqlite3
 import urllib.parse
 from collections.abc import Iterable, Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import NamedTuple
 
@@ -130,7 +130,16 @@ def transaction(conn: sqlite3.Connection, mode: str = "IMMEDIATE") -> Iterator[N
     except BaseException:
         conn.execute("ROLLBACK")
         raise
-    conn.execute("COMMIT")
+    try:
+        conn.execute("COMMIT")
+    except BaseException:
+        # SQLite may leave the transaction open when COMMIT fails (SQLITE_BUSY always, an I/O
+        # error sometimes): roll it back, or every later BEGIN fails ("cannot start a
+        # transaction within a transaction") and the write lock stays held until a restart.
+        if conn.in_transaction:
+            with suppress(sqlite3.Error):
+                conn.execute("ROLLBACK")
+        raise
 
 
 class DeviceState(NamedTuple):

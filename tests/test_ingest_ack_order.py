@@ -203,7 +203,9 @@ def test_a_failed_commit_acks_nothing_loses_nothing_and_the_resends_are_stored_o
             assert r.resender.got == []
             [err] = r.errors
             assert err.name == "serra.ingest" and err.levelno == logging.ERROR
-            assert err.getMessage() == "store write of 3 records failed: disk I/O error"
+            assert err.getMessage() == ("store write of 3 records failed (device 7 seq 3-5): "
+                                        "disk I/O error; none acknowledged, the boards keep "
+                                        "them and resend")
             assert r.core.counters["store_error"] == 3 and r.core.counters["stored"] == 3
             # What was committed before is all there; nothing of the failed batch is.
             assert r.rows() == [(1, s, 1) for s in range(3)]

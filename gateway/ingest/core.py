@@ -42,6 +42,16 @@ WINDOW = 1024
 _HEADER = p.MAGIC + bytes([p.VERSION, p.TYPE_RECORD])
 
 
+def _spans(keys: list[tuple[int, int, int]]) -> str:
+    """The records of a batch as a log line names them: ``device 7 seq 3-5, device 9 seq 12``
+    (keys are (device, boot, seq); the seqs' range per device)."""
+    seqs: dict[int, list[int]] = {}
+    for dev, _, seq in keys:
+        seqs.setdefault(dev, []).append(seq)
+    return ", ".join(f"device {d} seq {min(v)}" + (f"-{max(v)}" if max(v) > min(v) else "")
+                     for d, v in sorted(seqs.items()))
+
+
 def peer_text(peer: Hashable) -> str:
     """Where a packet came from, as a log line says it: ``192.168.4.7:5683`` for a UDP
     (host, port), ``[fe80::1]:5683`` for IPv6, the port's name for serial."""
@@ -281,7 +291,8 @@ class IngestCore:
         except Exception as e:
             # Nothing acknowledged, nothing lost: the senders still hold these records.
             self.counters["store_error"] += len(keys)
-            log.error("store write of %d records failed: %s", len(keys), e)
+            log.error("store write of %d records failed (%s): %s; none acknowledged, the boards "
+                      "keep them and resend", len(keys), _spans(keys), e)
             for k in keys:
                 self._pending.pop(k, None)
             return

@@ -20,6 +20,8 @@ import threading
 from collections.abc import Callable, Hashable
 from pathlib import Path
 
+import pytest
+
 from gateway import protocol as p
 from gateway.ingest.core import IngestCore
 from gateway.store import Store
@@ -45,7 +47,7 @@ class CommitGate:
         self._conn = conn
         self._loop = loop
         self.armed = False
-        self.fail = False
+        self.fail: str | None = None  # "io" or "busy": how the released COMMIT fails
         self.entered = asyncio.Event()  # set (on the loop) when an armed COMMIT is waiting
         self.release = threading.Event()
 
@@ -59,9 +61,11 @@ class CommitGate:
             if not self.release.wait(DEADLINE):
                 self._conn.execute("ROLLBACK")
                 raise sqlite3.OperationalError("test gate: never released")
-            if self.fail:
+            if self.fail == "io":  # SQLite rolls back a transaction whose commit hit an I/O error
                 self._conn.execute("ROLLBACK")
                 raise sqlite3.OperationalError("disk I/O error")
+            if self.fail == "busy":  # SQLITE_BUSY on COMMIT leaves the transaction open
+                raise sqlite3.OperationalError("database is locked")
         return self._conn.execute(sql, *args)
 
 
@@ -182,8 +186,11 @@ def test_no_ack_while_the_commit_is_held_not_even_to_a_resend(tmp_path: Path) ->
     asyncio.run(go())
 
 
+@pytest.mark.parametrize("fail, why", [("io", "disk I/O error"), ("busy", "database is locked")])
 def test_a_failed_commit_acks_nothing_loses_nothing_and_the_resends_are_stored_once(
-        tmp_path: Path) -> None:
+        tmp_path: Path, fail: str, why: str) -> None:
+    """Whether SQLite rolled the failed COMMIT back (an I/O error) or left it open (busy: the
+    store then rolls it back, db.transaction), the store takes the resends afterwards."""
     async def go() -> None:
         async with Rig(tmp_path) as r:
             for s in range(3):
@@ -191,7 +198,7 @@ def test_a_failed_commit_acks_nothing_loses_nothing_and_the_resends_are_stored_o
             await r.until_committed(3)
             assert sorted(r.board.got) == [(s, STORED, True) for s in range(3)]
 
-            r.gate.armed, r.gate.fail = True, True
+            r.gate.armed, r.gate.fail = True, fail
             for s in range(3, 6):
                 r.send(s)
             await asyncio.wait_for(r.gate.entered.wait(), DEADLINE)
@@ -203,9 +210,9 @@ def test_a_failed_commit_acks_nothing_loses_nothing_and_the_resends_are_stored_o
             assert r.resender.got == []
             [err] = r.errors
             assert err.name == "serra.ingest" and err.levelno == logging.ERROR
-            assert err.getMessage() == ("store write of 3 records failed (device 7 seq 3-5): "
-                                        "disk I/O error; none acknowledged, the boards keep "
-                                        "them and resend")
+            assert err.getMessage() == (f"store write of 3 records failed (device 7 seq 3-5): "
+                                        f"{why}; none acknowledged, the boards keep them and "
+                                        f"resend")
             assert r.core.counters["store_error"] == 3 and r.core.counters["stored"] == 3
             # What was committed before is all there; nothing of the failed batch is.
             assert r.rows() == [(1, s, 1) for s in range(3)]

@@ -60,13 +60,19 @@ def test_status_over_zenoh_shows_the_gateway_and_drains_nothing(tmp_path: Path) 
                      "Service    answering", "this screen: connected (1 peer), the gateway answers"):
             assert want in out, want
         assert "\x1b" not in out
-        # the data layer in process: the store and the messages agree on the latest forecast
+        # the data layer in process: the store and the messages agree on the latest forecast.
+        # The kit runs on (300x): read the store first, then the screen must catch up with it
+        # (a snapshot taken first and compared with a later store read raced the gateway).
         source = ZenohSource([gw.zenoh])
-        snap = source.snapshot()
-        (g,) = snap.greenhouses
         with sqlite3.connect(f"file:{db}?mode=ro", uri=True) as c:
             t = c.execute("SELECT max(t) FROM estimates WHERE source='forecast'").fetchone()[0]
-        assert g.temperature.t is not None and g.temperature.t >= t - 60 * 3
+
+        def caught_up():
+            (view,) = source.snapshot().greenhouses
+            ok = view.temperature.t is not None and view.temperature.t >= t - 60 * 3
+            return view if ok else None
+
+        g = wait_for(caught_up, 60, "the screen's latest forecast as recent as the store's")
         assert sorted(g.temperature.forecasts) == [15, 30, 60]
         assert [s.n > 0 for s in g.temperature.skill] == [True, True, True]
         assert len(g.series["t_in"].finite) > 10

@@ -86,6 +86,13 @@ def test_a_router_links_to_its_upstream_when_it_appears(pki: Pki, tmp_path: Path
         inbox = Inbox()
         _subscribe_store(store, inbox)
         wait_until(lambda: pub.matching_status.matching, what="the store, through two routers")
-        pub.put("up")
-        wait_until(lambda: inbox.has("up"), what="the put at the cloud store")
-        assert inbox.items == [("serra/farm-b/gh2/status", "up")]
+
+        # Matching can turn true while the new link's routes still settle, and a plain put sent
+        # then may be dropped (it failed so once under load; the gateway's advanced publisher
+        # recovers such a sample, this plain one does not): put until one arrives.
+        def arrived() -> bool:
+            pub.put("up")
+            return inbox.has("up")
+
+        wait_until(arrived, what="a put at the cloud store", interval=0.2)
+        assert set(inbox.items) == {("serra/farm-b/gh2/status", "up")}

@@ -195,16 +195,16 @@ def forecasts(result: ReplayResult, horizon: int) -> dict[str, np.ndarray]:
     theta = result.theta[starts]
     # the model's drivers over the horizon: the weather later measured; the inside readings it
     # reads besides its state (the Almería transpiration's p_w,in, the soil) held at the start
-    wx, rows = x, starts
+    wx, w_rows = x, starts
     if any(c in INSIDE_READINGS for c in model.requires if c != "t_in"):
         blocks = measured_weather_blocks(x, starts, horizon)
-        wx, rows = blocks.x, blocks.rows
+        wx, w_rows = blocks.x, blocks.rows
     out = {
         "target": starts + horizon,
         "measured": result.measured[starts + horizon],
-        "adaptive": model.forecast(theta, wx, gh, dt, rows, horizon),
+        "adaptive": model.forecast(theta, wx, gh, dt, w_rows, horizon),
         "constant": model.forecast(np.repeat(result.theta0[None, :], len(starts), axis=0),
-                                   wx, gh, dt, rows, horizon),
+                                   wx, gh, dt, w_rows, horizon),
         "persistence": result.measured[starts],
     }
     if result.arx is not None:
@@ -212,7 +212,7 @@ def forecasts(result: ReplayResult, horizon: int) -> dict[str, np.ndarray]:
     kf = result.filtered
     if kf is not None:
         kf_start = (kf.t_hat[starts], kf.b_hat[starts], kf.settings)
-        out["adaptive_kf"] = disturbance.forecast(model, theta, wx, gh, dt, rows, horizon,
+        out["adaptive_kf"] = disturbance.forecast(model, theta, wx, gh, dt, w_rows, horizon,
                                                   *kf_start)
     ahead = result.ahead
     if ahead is not None and horizon <= ahead.horizon:

@@ -14,7 +14,7 @@ converges, both on multiple-shooting free runs (fit.py).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
@@ -66,12 +66,6 @@ VENT_BOX_UPPER = 1e-2
 """[m s-1 K-1] C_vc's physical upper bound: a wide-open Mediterranean house exchanges ~40 h-1
 (Kittas et al. 1997; Boulard & Baille 1995), reached over a proportional band of ~4 K
 (Vanthoor 2011 §2.4) in a house ~3.6 m high: 40 h-1 × 3.6 m / 3600 s / 4 K = 1e-2."""
-HUBER = False
-"""Whether the base's fit ends with a Levenberg–Marquardt polish on the Huber loss (rule hb,
-a measurement: docs/effects.md); off: least squares throughout."""
-HUBER_K = 1.345
-"""Huber's constant in robust standard deviations of the least-squares residuals (Huber 1964:
-95 % efficiency on Gaussian errors)."""
 STORE_START = {"c_store": 5e4, "h_store": 3.0, "k_store": 3.0, "a_store": 0.1}
 """Where the heat store's fit starts (a floor-like store: 5 cm of wet sand, h ≈ 3 W m-2 K-1)."""
 
@@ -106,34 +100,7 @@ def fit(model: Model, theta: np.ndarray, shoot: Shooting, gh: Greenhouse, iterat
     free = free_parameters(model)
     if iterations:
         theta = fit_swarm(shoot, theta, free, lo, hi, iterations, seed)
-    theta = fit_lm(shoot, theta, free, lo, hi, LM_ITERATIONS)
-    if HUBER:
-        theta = fit_lm(HuberShooting.around(shoot, theta), theta, free, lo, hi, LM_ITERATIONS)
-    return theta
-
-
-@dataclass(frozen=True)
-class HuberShooting:
-    """``shoot``'s residuals as Huber pseudo-residuals ψ(r) = r (|r| ≤ c), sign(r) √(2c|r| − c²)
-    (else): Σ ψ² is the Huber loss, so least squares on ψ is a Huber fit."""
-
-    shoot: Shooting
-    c: float
-
-    @classmethod
-    def around(cls, shoot: Shooting, theta: np.ndarray) -> HuberShooting:
-        """c = ``HUBER_K`` × 1.4826 MAD of the residuals at ``theta`` [K]."""
-        r = shoot.residual(theta[None])[0]
-        r = r[np.isfinite(r)]
-        sigma = 1.4826 * float(np.median(np.abs(r - np.median(r)))) if r.size else 1.0
-        return cls(shoot, HUBER_K * max(sigma, 1e-3))
-
-    def residual(self, theta: np.ndarray) -> np.ndarray:
-        r = self.shoot.residual(theta)
-        a = np.abs(r)
-        with np.errstate(invalid="ignore"):
-            big = np.sign(r) * np.sqrt(np.maximum(2.0 * self.c * a - self.c ** 2, 0.0))
-        return np.where(a <= self.c, r, big)
+    return fit_lm(shoot, theta, free, lo, hi, LM_ITERATIONS)
 
 
 def options(model: Structured, gh: Greenhouse) -> list[tuple[str, Callable[[Structured], Structured]]]:

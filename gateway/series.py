@@ -11,6 +11,16 @@ from gateway.kitcsv import KitCsvError, KitData, read_kit_csv
 
 MAX_GAP_S = 300.0
 """No value is interpolated across a hole longer than this [s] (docs/data-format.md)."""
+JITTER = 1.5
+"""Two samples up to this multiple of the data's median spacing apart are neighbours, not a
+hole, when that is longer than ``MAX_GAP_S`` and the step [-]: a logger whose clock jitters
+(5-minute rows ±20 s) would otherwise turn every late sample into a gap, while one missing row
+(twice the spacing) still is one."""
+CLOCK_SLACK = 1.1
+"""Data are refused as too coarse for the step only when their median spacing exceeds the
+interpolation limit by more than this factor [-]: a kit that sleeps 300 s and takes a few
+seconds to measure and send (rows every 305 s), or jittered rows whose median lands at 320 s,
+are 5-minute data, not data to read at ``--step 305``."""
 SAMPLINGS = ("instant", "mean")
 """What a row holds: the value at its time, or the mean over its step (the kit's minute
 aggregates); the model reads the two differently (gateway/model/drivers.py, docs/model.md)."""
@@ -65,9 +75,11 @@ def resample(data: KitData, step: float = 60.0, max_gap: float = MAX_GAP_S) -> S
     Each grid value is interpolated linearly between the two neighbouring finite samples of its
     column, only when those are at most ``max_gap`` seconds apart (or the grid time falls on a
     sample); otherwise it stays NaN. A hole of one grid step is no hole at that grid, so the
-    limit is at least ``step``. Samples finer than the grid are block-averaged first, so 30 s
-    sensor noise is not aliased. Data sampled more coarsely than both limits is an error
-    (every grid value between two samples would be a gap).
+    limit is at least ``step``; nor is a late or early sample of jittered rows, so it is also at
+    least ``JITTER`` × the median spacing of the data. Samples finer than the grid are
+    block-averaged first, so 30 s sensor noise is not aliased. Data sampled more coarsely than
+    ``max_gap`` and ``step`` (by more than ``CLOCK_SLACK``) is an error: the tools do not
+    bridge 10-minute rows on a 1-minute grid.
     """
     if step <= 0:
         raise ValueError(f"step must be positive, got {step}")
@@ -76,12 +88,13 @@ def resample(data: KitData, step: float = 60.0, max_gap: float = MAX_GAP_S) -> S
     grid = start + step * np.arange(int(np.floor((t[-1] - start) / step + 1e-9)) + 1)
     native = float(np.median(np.diff(t))) if len(t) > 1 else step
     max_gap = max(max_gap, step)
-    if native > max_gap:
+    if native > CLOCK_SLACK * max_gap:
         raise KitCsvError(
             f"{data.source}: samples are {native:g} s apart (median), more than the {max_gap:g} s "
             f"the tools interpolate across: on a {step:g} s grid almost every value would be a "
             f"gap; use a model step of at least {native:g} s (--step {native:g})"
         )
+    max_gap = max(max_gap, JITTER * native)
     columns = {}
     for name, values in data.columns.items():
         ok = np.isfinite(values)

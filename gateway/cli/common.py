@@ -140,7 +140,43 @@ def load_inputs(args: argparse.Namespace) -> tuple[Series, Greenhouse, Model]:
     if note:
         print(f"note: {args.data}: {note}", file=sys.stderr)
     site_note(gh, args.greenhouse)
+    night = night_radiation_note(series, gh)
+    if night:
+        print(f"warning: {args.data}: {night}", file=sys.stderr)
     return series, gh, model
+
+
+NIGHT_RADIATION = 50.0
+"""Measured global radiation [W m-2] that is daylight, not a pyranometer's night offset."""
+NIGHT_SHARE = 0.25
+"""Share of that radiation measured with the sun below the horizon above which the site or
+the times are wrong by hours [-]. On correctly timed data it is 0-3 % (the Bleiswijk file's
+hourly means lag the sun by ~30 min); with the longitude or UTC offset off by 8-10 h, 96-99 %."""
+
+
+def night_radiation_note(series: Series, gh: Greenhouse) -> str | None:
+    """When most daylight radiation in the data falls while the sun is down at the
+    greenhouse's ``[site]`` (NOAA sun, gateway/model/solar.py), what is wrong; else None.
+    A longitude of the wrong sign or local times written with ``Z`` shift the clear sky by
+    hours against the data: the clear-sky index then sits at 0 by day, the sky reads overcast
+    and the outlook forecasts darkness, with no error anywhere."""
+    from gateway.model.solar import solar_position
+
+    if gh.site is None or "i_glob" not in series:
+        return None
+    i = series["i_glob"]
+    day = np.isfinite(i) & (i > NIGHT_RADIATION)
+    if np.count_nonzero(day) * series.step < 3600.0:
+        return None
+    sun = solar_position(series.time[day], gh.site.latitude, gh.site.longitude).cos_zenith
+    share = float(np.mean(sun <= 0.0))
+    if share <= NIGHT_SHARE:
+        return None
+    return (f"{100 * share:.0f} % of the radiation above {NIGHT_RADIATION:g} W m-2 is measured "
+            f"while the sun is below the horizon at latitude {gh.site.latitude:g}, longitude "
+            f"{gh.site.longitude:g} (east positive): the site or the times' UTC offset is wrong by "
+            "hours (local times written with Z?), and the clear-sky index, the cloudiness and "
+            "the outlook are read against the wrong sun (docs/data-format.md)")
 
 
 def gap_note(series: Series, names: tuple[str, ...] | list[str]) -> str | None:

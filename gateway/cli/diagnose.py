@@ -4,9 +4,13 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
 from gateway.cli import CliError
 from gateway.cli.common import add_data_arguments, check_output, dump_json, load_inputs, writing
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -44,11 +48,16 @@ def run(args: argparse.Namespace) -> int:
         d = diagnose(series, gh, model, split=args.split, seed=args.seed, progress=say)
     except ValueError as exc:
         raise CliError(str(exc)) from None
+    short = short_heldout_note(d.time, d.split_index)
+    if short:
+        print(f"note: {short}", file=sys.stderr)
     hint = live_model_hint(args.model, d.structure)
     if args.json:  # the findings first: a failed write below still leaves them on screen
         dump_json({**to_json(d), "hint": hint})
     else:
         _print_human(d)
+        if short:
+            sys.stdout.write(f"note: {short}\n")
         if hint:
             sys.stdout.write(f"hint: {hint}\n")
     if args.report:
@@ -58,6 +67,27 @@ def run(args: argparse.Namespace) -> int:
             path = write_report(d, args.report, args.data)
         say(f"report written to {path}")
     return 0
+
+
+def short_heldout_note(time: np.ndarray, split_index: int) -> str | None:
+    """What to say when the held-out part (rows ``split_index``.. of ``time``, UTC) is shorter
+    than the ``judge.MIN_DAYS`` days the day test needs after a change: no finding can come
+    out, and "no library effect improved the held-out error" would read as a clean bill of
+    health. None when it is long enough, or without the day test (``judge.DAY_TEST``)."""
+    import numpy as np
+
+    from gateway.diagnose import judge
+
+    if not judge.DAY_TEST or len(time) < 2 or split_index >= len(time):
+        return None
+    step = float((time[1] - time[0]) / np.timedelta64(1, "s"))
+    held = float((time[-1] - time[split_index]) / np.timedelta64(1, "s")) + step
+    if held >= judge.MIN_DAYS * 86400.0:
+        return None
+    return (f"only {held / 86400.0:.1f} days are held out, and a change is judged once "
+            f"{judge.MIN_DAYS} held-out days follow its start: no finding can be reported from this "
+            f"record (give at least {2 * judge.MIN_DAYS} days with the default --split 0.5; "
+            "docs/effects.md, \"Known limits\")")
 
 
 def live_model_hint(model_name: str, structure: list[dict]) -> str | None:

@@ -18,6 +18,14 @@ from gateway.service.forecaster import KINDS, LiveForecaster
 HORIZONS = (15, 60)
 
 
+class QuickCorrector(correction.Corrector):
+    """The correction applied after an hour of matured errors instead of a day, so that a
+    series shorter than a day exercises it."""
+
+    def __init__(self, horizons, dt, *args) -> None:
+        super().__init__(horizons, dt, correction.MEMORY_S, correction.RIDGE, 3600.0)
+
+
 @pytest.fixture(scope="module")
 def result():
     series = model_data(ALMERIA, GH, hours=8, seed=3)
@@ -69,11 +77,7 @@ def test_the_applied_correction_is_the_replays(result, monkeypatch):
     (the block's rows), is replay's row again, and differs from ``combined``."""
     from dataclasses import replace as copy_with
 
-    class Quick(correction.Corrector):
-        def __init__(self, horizons, dt, *args) -> None:
-            super().__init__(horizons, dt, correction.MEMORY_S, correction.RIDGE, 3600.0)
-
-    monkeypatch.setattr(correction, "Corrector", Quick)
+    monkeypatch.setattr(correction, "Corrector", QuickCorrector)
     res = copy_with(result, horizons={})
     score_forecasts(res, steps_of(HORIZONS, res.dt))
     got, stop = live_forecasts(res, "corrected")

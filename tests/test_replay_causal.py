@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_forecaster import QuickCorrector
 from test_online import ALMERIA, GH, model_data
 
 from gateway.estimate import correction
@@ -25,14 +26,6 @@ CUT = 14 * 60
 """The last row both series share [1-minute rows]: 14 h, after the morning's sun."""
 WEATHER = ("t_out", "rh_out", "i_glob", "wind", "vent_roof", "vent_side", "lai")
 """What a measured-weather forecast may read after its start (the rest is held at it)."""
-
-
-class QuickCorrector(correction.Corrector):
-    """The correction applied after an hour of matured errors instead of a day, so that a
-    day-long series exercises it (as tests/test_forecaster.py does)."""
-
-    def __init__(self, horizons, dt, *args) -> None:
-        super().__init__(horizons, dt, correction.MEMORY_S, correction.RIDGE, 3600.0)
 
 
 def changed_after(series, cut: int, columns, seed: int):

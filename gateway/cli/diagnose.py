@@ -4,13 +4,11 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import TYPE_CHECKING
+
+import numpy as np
 
 from gateway.cli import CliError
 from gateway.cli.common import add_data_arguments, check_output, dump_json, load_inputs, writing
-
-if TYPE_CHECKING:
-    import numpy as np
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -74,8 +72,6 @@ def short_heldout_note(time: np.ndarray, split_index: int) -> str | None:
     than the ``judge.MIN_DAYS`` days the day test needs after a change: no finding can come
     out, and "no library effect improved the held-out error" would read as a clean bill of
     health. None when it is long enough, or without the day test (``judge.DAY_TEST``)."""
-    import numpy as np
-
     from gateway.diagnose import judge
 
     if not judge.DAY_TEST or len(time) < 2 or split_index >= len(time):

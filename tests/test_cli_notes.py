@@ -100,6 +100,18 @@ def test_each_diagnose_note_is_in_the_text_the_json_and_the_report(capsys, tmp_p
         assert f"{n['level']}: {n['message']} [{n['code']}]" in out
 
 
+def test_the_csv_readers_notices_are_notes_too(capsys, tmp_path):
+    data = _kit(tmp_path / "extra.csv", 0.5)
+    lines = data.read_text().splitlines()
+    lines = [lines[0] + ",co2_ppm"] + [row + ",400" for row in lines[1:]]
+    data.write_text("\n".join([*lines, lines[-1]]) + "\n")  # and the last row sent twice
+    out, err = _run(capsys, "calibrate", data, str(_greenhouse(tmp_path)), "--json")
+    notes = json.loads(out)["notes"]
+    assert [n["code"] for n in notes] == ["csv_reader", "csv_reader"]
+    assert "ignoring unknown column(s) co2_ppm" in notes[0]["message"]
+    assert all(f"note: {n['message']}" not in err for n in notes)  # the reader logs them itself
+
+
 @pytest.mark.parametrize("command", ["calibrate", "replay"])
 def test_ordinary_data_gives_no_note(capsys, tmp_path, command):
     gh = str(_greenhouse(tmp_path))

@@ -126,8 +126,8 @@ def test_progress_bar_on_a_terminal_and_none_when_piped():
 @pytest.mark.parametrize("command", ["calibrate", "replay", "diagnose"])
 def test_too_short_data_is_one_clear_line_not_a_traceback(capsys, tmp_path, command, rows):
     t = np.datetime64("2020-01-01T00:00:00", "s") + np.arange(rows) * np.timedelta64(60, "s")
-    cols = {c: np.full(rows, 10.0) for c in ("t_in", "rh_in", "t_out", "i_glob", "wind")}
-    path = write_kit_csv(tmp_path / "short.csv", t, cols)
+    cols = {c: np.full(rows, 10.0) for c in ("t_in", "rh_in", "t_out", "rh_out", "i_glob", "wind")}
+    path = write_kit_csv(tmp_path / "short.csv", t, cols)  # all kit columns: no note on stderr
     code = main([command, "--data", str(path), "--greenhouse", "biskra-prototype",
                  "--model", "prototype", "--iterations" if command == "calibrate" else "--seed", "1"])
     err = capsys.readouterr().err

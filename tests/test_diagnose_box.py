@@ -125,7 +125,10 @@ def test_cli_json_and_report(tmp_path, capsys, monkeypatch, whitened_prototype):
     assert out["after"]["free_run"]["mae"] < out["before"]["free_run"]["mae"]
     for name in ("report.md", "residual.png", "hour_of_day.png", "effects.png"):
         assert (tmp_path / "rep" / name).stat().st_size > 0
-    assert "solar gain fell" in (tmp_path / "rep" / "report.md").read_text(encoding="utf-8")
+    report = (tmp_path / "rep" / "report.md").read_text(encoding="utf-8")
+    assert "solar gain fell" in report
+    # ordinary data: nothing to note (tests/test_cli_notes.py has the unusual record)
+    assert out["notes"] == [] and "## Notes" not in report
 
 
 def test_a_kept_vent_controller_points_the_live_estimator_to_the_vented_model():

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from gateway.cli import main
-from gateway.cli.diagnose import short_heldout_note
+from gateway.cli.notes import short_heldout_note
 from gateway.diagnose import judge
 from gateway.kitcsv import write_kit_csv
 

@@ -10,7 +10,7 @@ import pytest
 
 from gateway.greenhouse import Site, load_greenhouse
 from gateway.model import psychrometrics as psy
-from gateway.model import sky
+from gateway.model import sky, solar
 from gateway.model.drivers import prepare_drivers
 from gateway.series import Series
 from training.weather import load_bleiswijk
@@ -142,3 +142,24 @@ def test_cli_site_option(tmp_path, capsys):
     _, gh, _ = load_inputs(args)
     assert gh.site is None
     assert "no [site]" in capsys.readouterr().err
+
+
+def test_a_negative_offset_is_read_the_same_by_the_series_and_the_tracker():
+    """A pyranometer reading below 0 (an offset, a dewy dome at low sun) counts as 0 wherever
+    the radiation is read (gateway/model/solar.py ``measured_global``): the cloudiness of a whole
+    series equals the one carried sample by sample, also where the offset falls in strong
+    clear sky, and the model's drivers see 0."""
+    time, i = _day(0.6)
+    clear = sky.clear_sky(time, *BLEISWIJK)
+    low = (clear >= sky.STRONG_CLEAR) & (clear < 250.0)  # the low morning and evening sun
+    i = np.where(low, -8.0, i)
+    tracker = sky.CloudTracker(BLEISWIJK, 300.0)
+    one_at_a_time = [tracker.update(t, v) for t, v in zip(time, i, strict=True)]
+    np.testing.assert_allclose(sky.cloud_fraction(time, i, BLEISWIJK, 300.0), one_at_a_time,
+                               rtol=0, atol=1e-12)
+    n = len(time)
+    series = Series(time, 300.0, {"t_in": np.full(n, 15.0), "t_out": np.full(n, 10.0),
+                                  "i_glob": i, "wind": np.ones(n)})
+    x = prepare_drivers(series, load_greenhouse("biskra-prototype"))
+    np.testing.assert_array_equal(x["i_glob"], np.where(low, 0.0, i))
+    assert np.isnan(solar.measured_global([-8.0, np.nan])).tolist() == [False, True]

@@ -11,13 +11,14 @@ from gateway.cli.common import (
     add_sampling_argument,
     check_output,
     dump_json,
-    load_inputs,
+    load_run,
     parse_span,
     positive_int,
     progress_bar,
     write_params_file,
     writing,
 )
+from gateway.cli.notes import as_json, text_block
 from gateway.estimate.calibrate import calibrate, evaluate
 from gateway.estimate.objective import MODES
 from gateway.estimate.swarm import ALGORITHMS, make_algorithm
@@ -53,7 +54,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     check_output(args.out, "--out", inputs={"--data": args.data, "--greenhouse": args.greenhouse})
-    series, gh, model = load_inputs(args)
+    inputs = load_run(args)
+    series, gh, model = inputs.series, inputs.gh, inputs.model
     span = parse_span(args.calibrate_on, series) or (0, len(series))
     algorithm = make_algorithm(args.algorithm, model.name, args.iterations, args.population)
     radiation = 1 if model.radiation is not None and "i_in" in series else 0  # one closed-form fit
@@ -84,11 +86,13 @@ def run(args: argparse.Namespace) -> int:
         "evaluations": result.evaluations,
         "cost": {"kind": args.cost, "mse": result.cost},
         "span": {"start": str(series.time[a]) + "Z", "end": str(series.time[b - 1]) + "Z"},
+        "notes": as_json(inputs.notes),
     }
     if args.json:  # the report first: a failed write below still leaves the result on screen
         dump_json(report)
     else:
         _print_human(report)
+        sys.stdout.write(text_block(inputs.notes))
     if args.out:
         with writing("--out", args.out):
             write_params_file(

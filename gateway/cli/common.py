@@ -9,18 +9,18 @@ import os
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from gateway.cli import CliError
+from gateway.cli.notes import Note, echo, input_notes, site_note_text
 from gateway.greenhouse import Greenhouse, GreenhouseError, Site, list_presets, load_greenhouse
 from gateway.kitcsv import KitCsvError, parse_time
 from gateway.model import MODEL_NAMES, build_model, check_parameters
 from gateway.model.model import Model, check_columns
-from gateway.model.sky import DEFAULT_CLOUD
 from gateway.series import SAMPLINGS, Series, load_series
 
 
@@ -68,9 +68,7 @@ def with_site(gh: Greenhouse, site: tuple[float, float] | None) -> Greenhouse:
 def site_note(gh: Greenhouse, greenhouse: str) -> None:
     """Without a site at all, the note of what the sky temperature then rests on (stderr)."""
     if gh.site is None:
-        print(f"note: {greenhouse} gives no [site] and no --site was given: the cloudiness "
-              f"cannot be read from the radiation, so the sky temperature takes a cloud fraction "
-              f"of {DEFAULT_CLOUD:g} and the outside humidity only", file=sys.stderr)
+        print(f"note: {site_note_text(greenhouse)}", file=sys.stderr)
 
 
 def positive_number(text: str) -> float:
@@ -108,8 +106,27 @@ def positive_int(text: str) -> int:
     return value
 
 
+@dataclass(frozen=True)
+class Inputs:
+    """What a data command runs on: the resampled data, the greenhouse, the model, and the
+    notes the data gives rise to (gateway/cli/notes.py), already printed on stderr."""
+
+    series: Series
+    gh: Greenhouse
+    model: Model
+    notes: list[Note]
+
+
 def load_inputs(args: argparse.Namespace) -> tuple[Series, Greenhouse, Model]:
-    """Greenhouse, model and resampled data, with errors turned into one clear line."""
+    """Greenhouse, model and resampled data, with errors turned into one clear line (the
+    notes on stderr only; the commands use :func:`load_run`)."""
+    run = load_run(args)
+    return run.series, run.gh, run.model
+
+
+def load_run(args: argparse.Namespace) -> Inputs:
+    """Greenhouse, model and resampled data, with errors turned into one clear line, and the
+    notes on the data (printed on stderr now, before any long computation)."""
     try:
         gh = with_site(load_greenhouse(args.greenhouse), getattr(args, "site", None))
         model = build_model(args.model, gh)
@@ -136,68 +153,10 @@ def load_inputs(args: argparse.Namespace) -> tuple[Series, Greenhouse, Model]:
         check_columns(model, [c for c in series.columns if c in series], args.data)
     except ValueError as exc:
         raise CliError(str(exc)) from None
-    note = gap_note(series, model.requires)
-    if note:
-        print(f"note: {args.data}: {note}", file=sys.stderr)
-    site_note(gh, args.greenhouse)
-    night = night_radiation_note(series, gh)
-    if night:
-        print(f"warning: {args.data}: {night}", file=sys.stderr)
-    return series, gh, model
-
-
-NIGHT_RADIATION = 50.0
-"""Measured global radiation [W m-2] that is daylight, not a pyranometer's night offset."""
-NIGHT_SHARE = 0.25
-"""Share of that radiation measured with the sun below the horizon above which the site or
-the times are wrong by hours [-]. On correctly timed data it is 0-3 % (the Bleiswijk file's
-hourly means lag the sun by ~30 min); with the longitude or UTC offset off by 8-10 h, 96-99 %."""
-
-
-def night_radiation_note(series: Series, gh: Greenhouse) -> str | None:
-    """When most daylight radiation in the data falls while the sun is down at the
-    greenhouse's ``[site]`` (NOAA sun, gateway/model/solar.py), what is wrong; else None.
-    A longitude of the wrong sign or local times written with ``Z`` shift the clear sky by
-    hours against the data: the clear-sky index then sits at 0 by day, the sky reads overcast
-    and the outlook forecasts darkness, with no error anywhere."""
-    from gateway.model.solar import solar_position
-
-    if gh.site is None or "i_glob" not in series:
-        return None
-    i = series["i_glob"]
-    day = np.isfinite(i) & (i > NIGHT_RADIATION)
-    if np.count_nonzero(day) * series.step < 3600.0:
-        return None
-    sun = solar_position(series.time[day], gh.site.latitude, gh.site.longitude).cos_zenith
-    share = float(np.mean(sun <= 0.0))
-    if share <= NIGHT_SHARE:
-        return None
-    return (f"{100 * share:.0f} % of the radiation above {NIGHT_RADIATION:g} W m-2 is measured "
-            f"while the sun is below the horizon at latitude {gh.site.latitude:g}, longitude "
-            f"{gh.site.longitude:g} (east positive): the site or the times' UTC offset is wrong by "
-            "hours (local times written with Z?), and the clear-sky index, the cloudiness and "
-            "the outlook are read against the wrong sun (docs/data-format.md)")
-
-
-def gap_note(series: Series, names: tuple[str, ...] | list[str]) -> str | None:
-    """What the data lacks on the grid, said once: rows without a value of a column the model
-    needs (gaps longer than the interpolation limit, empty cells), as holes, with the longest
-    one's length and start; None when nothing is missing. Nothing is filled in beyond the
-    interpolation of docs/data-format.md."""
-    cols = [series[c] for c in names if c in series.columns]
-    if not cols or len(series) == 0:
-        return None
-    missing = ~np.all(np.isfinite(np.vstack(cols)), axis=0)
-    if not missing.any():
-        return None
-    edge = np.diff(np.concatenate(([0], missing.astype(np.int8), [0])))
-    starts, ends = np.flatnonzero(edge == 1), np.flatnonzero(edge == -1)
-    k = int(np.argmax(ends - starts))
-    minutes = (ends[k] - starts[k]) * series.step / 60.0
-    length = f"{minutes / 60.0:.1f} h" if minutes >= 120 else f"{minutes:g} min"
-    return (f"{int(missing.sum())} of {len(series)} rows on the {series.step:g} s grid lack a "
-            f"value the model needs, in {len(starts)} hole(s), the longest {length} from "
-            f"{series.time[starts[k]]}Z; no value is made up for them (docs/data-format.md)")
+    notes = input_notes(series, gh, model, args.data, args.greenhouse,
+                        getattr(args, "command", None))
+    echo(notes)
+    return Inputs(series, gh, model, notes)
 
 
 def parse_span(text: str | None, series: Series) -> tuple[int, int] | None:

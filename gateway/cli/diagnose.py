@@ -5,10 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-import numpy as np
-
 from gateway.cli import CliError
-from gateway.cli.common import add_data_arguments, check_output, dump_json, load_inputs, writing
+from gateway.cli.common import add_data_arguments, check_output, dump_json, load_run, writing
+from gateway.cli.notes import Note, as_json, echo, short_heldout_note, text_block
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -35,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
     if not 0.1 <= args.split <= 0.9:
         raise CliError(f"--split {args.split}: must be between 0.1 and 0.9")
     check_output(args.report, "--report", folder=True)
-    series, gh, model = load_inputs(args)
+    inputs = load_run(args)
     tty = sys.stderr.isatty()
 
     def say(msg: str) -> None:
@@ -43,47 +42,29 @@ def run(args: argparse.Namespace) -> int:
             print(f"  {msg}", file=sys.stderr, flush=True)
 
     try:
-        d = diagnose(series, gh, model, split=args.split, seed=args.seed, progress=say)
+        d = diagnose(inputs.series, inputs.gh, inputs.model, split=args.split, seed=args.seed,
+                     progress=say)
     except ValueError as exc:
         raise CliError(str(exc)) from None
     short = short_heldout_note(d.time, d.split_index)
-    if short:
-        print(f"note: {short}", file=sys.stderr)
+    made = [Note("short_heldout", short)] if short else []
+    echo(made)
+    notes = inputs.notes + made
     hint = live_model_hint(args.model, d.structure)
     if args.json:  # the findings first: a failed write below still leaves them on screen
-        dump_json({**to_json(d), "hint": hint})
+        dump_json({**to_json(d), "hint": hint, "notes": as_json(notes)})
     else:
         _print_human(d)
-        if short:
-            sys.stdout.write(f"note: {short}\n")
+        sys.stdout.write(text_block(notes))
         if hint:
             sys.stdout.write(f"hint: {hint}\n")
     if args.report:
         from gateway.diagnose.report import write_report
 
         with writing("--report", args.report):
-            path = write_report(d, args.report, args.data)
+            path = write_report(d, args.report, args.data, as_json(notes))
         say(f"report written to {path}")
     return 0
-
-
-def short_heldout_note(time: np.ndarray, split_index: int) -> str | None:
-    """What to say when the held-out part (rows ``split_index``.. of ``time``, UTC) is shorter
-    than the ``judge.MIN_DAYS`` days the day test needs after a change: no finding can come
-    out, and "no library effect improved the held-out error" would read as a clean bill of
-    health. None when it is long enough, or without the day test (``judge.DAY_TEST``)."""
-    from gateway.diagnose import judge
-
-    if not judge.DAY_TEST or len(time) < 2 or split_index >= len(time):
-        return None
-    step = float((time[1] - time[0]) / np.timedelta64(1, "s"))
-    held = float((time[-1] - time[split_index]) / np.timedelta64(1, "s")) + step
-    if held >= judge.MIN_DAYS * 86400.0:
-        return None
-    return (f"only {held / 86400.0:.1f} days are held out, and a change is judged once "
-            f"{judge.MIN_DAYS} held-out days follow its start: no finding can be reported from this "
-            f"record (give at least {2 * judge.MIN_DAYS} days with the default --split 0.5; "
-            "docs/effects.md, \"Known limits\")")
 
 
 def live_model_hint(model_name: str, structure: list[dict]) -> str | None:

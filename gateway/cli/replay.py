@@ -10,11 +10,12 @@ from gateway.cli.common import (
     add_data_arguments,
     check_output,
     dump_json,
-    load_inputs,
+    load_run,
     progress_bar,
     read_params_file,
     writing,
 )
+from gateway.cli.notes import as_json, echo, params_notes, text_block
 from gateway.estimate.online import online_settings
 from gateway.estimate.outlook import OUTLOOKS, make_outlook
 from gateway.estimate.replay import replay, report, write_predictions
@@ -80,14 +81,18 @@ def _overrides(items: list[str]) -> dict[str, dict[str, float]]:
 
 
 def run(args: argparse.Namespace) -> int:
-    inputs = {"--data": args.data, "--greenhouse": args.greenhouse, "--params": args.params}
-    check_output(args.out, "--out", inputs=inputs)
-    check_output(args.plot, "--plot", inputs=inputs)
-    series, gh, model = load_inputs(args)
+    sources = {"--data": args.data, "--greenhouse": args.greenhouse, "--params": args.params}
+    check_output(args.out, "--out", inputs=sources)
+    check_output(args.plot, "--plot", inputs=sources)
+    run_inputs = load_run(args)
+    series, gh, model = run_inputs.series, run_inputs.gh, run_inputs.model
     theta0 = read_params_file(args.params, model, gh) if args.params else None
-    for o in outside_box(theta0, model, gh) if theta0 is not None else ():
-        uses = "the estimator, and the 'constant' model, use"
-        print(f"note: {o.describe(args.params, uses)}", file=sys.stderr)
+    notes = run_inputs.notes
+    if theta0 is not None:
+        made = params_notes(outside_box(theta0, model, gh), args.params,
+                            "the estimator, and the 'constant' model, use")
+        echo(made)
+        notes = notes + made
     try:
         settings = online_settings(model, gh, _overrides(args.set))
     except ValueError as exc:
@@ -110,10 +115,12 @@ def run(args: argparse.Namespace) -> int:
     rep = report(result, warmup)
     rep["data"] = args.data
     rep["start"] = "calibrated" if args.params else "middle of the hard box"
+    rep["notes"] = as_json(notes)
     if args.json:  # the report first: a failed write below still leaves the result on screen
         dump_json(rep)
     else:
         _print_human(rep)
+        sys.stdout.write(text_block(notes))
     if args.out:
         with writing("--out", args.out):
             write_predictions(result, args.out)

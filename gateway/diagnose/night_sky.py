@@ -48,8 +48,7 @@ LEVEL = Parameter("c_sky_night", "-", 0.0, 1.0, sky.DEFAULT_CLOUD, None, ALWAYS,
 def sky_drivers(series: Series, gh: Greenhouse, x: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     """The drivers the part reads (``RELAX``, ``PRIOR``, ``EPS_CLEAR``), from the same series
     and site as the kit's cloud fraction (gateway/model/drivers.py)."""
-    i_glob = np.maximum(np.asarray(series.columns.get("i_glob", np.full(len(series), np.nan)),
-                                   dtype=float), 0.0)
+    i_glob = series.columns.get("i_glob", np.full(len(series), np.nan))  # read as sky.py reads it
     _, r, prior = sky.carried_cloud(series.time, i_glob, site_of(gh), series.step)
     rh = x.get("rh_out")
     e = None if rh is None else psy.vapour_pressure(x["t_out"], rh)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -11,8 +12,11 @@ from gateway.diagnose.result import Diagnosis
 MODES = (("free_run", "free run"), ("one_step", "one-step"))
 
 
-def write_report(d: Diagnosis, out: str | Path, source: str) -> Path:
-    """Write ``report.md`` and the PNGs into ``out``; return the markdown path."""
+def write_report(d: Diagnosis, out: str | Path, source: str,
+                 notes: Sequence[Mapping[str, str]] = ()) -> Path:
+    """Write ``report.md`` and the PNGs into ``out``; return the markdown path. ``notes``: the
+    run's notes on its data ({code, level, message}, gateway/cli/notes.py), a "Notes" section
+    ahead of the figures when there are any."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     _plot_residuals(d, out / "residual.png")
@@ -21,7 +25,8 @@ def write_report(d: Diagnosis, out: str | Path, source: str) -> Path:
     lines = [f"# Diagnosis of {source}", "",
              f"Model `{d.model.name}`; calibration part up to {str(d.time[d.split_index])[:16]} UTC, "
              f"held-out part after it ({len(d.blocks)} blocks, free runs restarted at each block). "
-             f"{d.seconds:.1f} s.", "", "## Base structure (calibration part only)", "",
+             f"{d.seconds:.1f} s.", "", *notes_section(notes),
+             "## Base structure (calibration part only)", "",
              "Before any effect is searched, the thesis model gets an effective heat capacity and "
              "optional parts, each kept only if BIC on the calibration part falls "
              "(docs/effects.md):", ""]
@@ -57,6 +62,19 @@ def write_report(d: Diagnosis, out: str | Path, source: str) -> Path:
     path = out / "report.md"
     path.write_text("\n".join(lines), encoding="utf-8")
     return path
+
+
+def notes_section(notes: Sequence[Mapping[str, str]]) -> list[str]:
+    """The "Notes" section: each note's code and message, warnings marked; none without
+    notes."""
+    if not notes:
+        return []
+    lines = ["## Notes", "", "Read the figures below with these notes on the data "
+             "(docs/data-format.md, \"Notes\"):", ""]
+    for n in notes:
+        tag = "**warning** " if n.get("level") == "warning" else ""
+        lines.append(f"- {tag}`{n['code']}`: {n['message']}")
+    return [*lines, ""]
 
 
 def _plt():

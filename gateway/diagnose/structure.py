@@ -96,6 +96,7 @@ class SkyLoss(FluxTerm):
     equation = "III.21 form"
     description = "long-wave loss to the sky: -c_lw_sky (T_in - T_sky)"
     requires = ("t_out",)
+    optional = ("rh_out",)  # T_sky's clear-sky emissivity (gateway/model/sky.py)
     parameters = (SKY,)
 
     def __init__(self, unit: float) -> None:

@@ -99,6 +99,7 @@ class Transpiration(FluxTerm):
     equation = "III.28–III.29"
     description = "crop transpiration: -(C_A (1 - e^-k LAI) I_in + C_B LAI VPD)"
     requires = ("i_glob", "rh_in")
+    optional = ("lai",)  # else the greenhouse's [crop] lai
     uses = ("c_tsw",)
     parameters = (
         Parameter("c_a", "-", 0.2, 0.7, 0.26, 0.002, CROP_DAY, "radiative transpiration"),
@@ -172,6 +173,7 @@ class NaturalVentilation(FluxTerm):
     equation = "III.31–III.32"
     description = "natural ventilation and leakage: -rho c_p G (T_in - T_out) / A"
     requires = ("t_out", "wind")
+    optional = ("vent_roof", "vent_side")  # else closed
     parameters: tuple[Parameter, ...] = (
         Parameter("c_ven_d", "-", 0.05, 1.0, 0.65, 0.07, VENTS_OPEN, "vent discharge coefficient"),
         Parameter("c_ven_w", "-", 0.01, 1.0, 0.09, 0.07, VENTS_OPEN, "wind pressure coefficient"),

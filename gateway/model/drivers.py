@@ -10,7 +10,7 @@ import numpy as np
 
 from gateway.greenhouse import Greenhouse, Vents
 from gateway.model import psychrometrics as psy
-from gateway.model import sky
+from gateway.model import sky, solar
 from gateway.series import Series
 
 
@@ -53,7 +53,7 @@ def prepare_drivers(series: Series, gh: Greenhouse, cloud: np.ndarray | None = N
     nan = np.full(n, np.nan)
     for name in ("t_in", "t_out", "rh_in", "i_glob", "wind"):
         x.setdefault(name, nan)
-    x["i_glob"] = np.maximum(x["i_glob"], 0.0)
+    x["i_glob"] = solar.measured_global(x["i_glob"])
     if cloud is None:
         cloud = sky.cloud_fraction(series.time, x["i_glob"], site_of(gh), series.step)
     x["cloud"] = np.asarray(cloud, dtype=float)

@@ -113,6 +113,7 @@ class SkyRadiation(FluxTerm):
     equation = "III.21"
     description = "long-wave loss to the sky: -C_thermal h_o (T_in - T_sky)"
     requires = ("t_out", "wind")
+    optional = ("rh_out",)  # T_sky's clear-sky emissivity (gateway/model/sky.py)
     parameters = (
         Parameter("c_thermal", "kg K J-1 ((1 - tau_c)/C_a)", 0.0, 2e-4, 2.556266e-5, _R_FAST,
                   ALWAYS, "thermal loss coefficient (1 - tau_c)/C_a"),

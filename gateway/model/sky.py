@@ -130,11 +130,12 @@ def carried_cloud(time: np.ndarray, i_glob: ArrayLike, site: tuple[float, float]
     readings c = c_p + (c_last − c_p) e^(−Δt/RELAX_S), so r = 1 − e^(−Δt/RELAX_S) is the share
     of the prior in c (0 where the cloud is read, 1 before the first reading and without a
     site, where c_p = c = ``DEFAULT_CLOUD``). A level fitted in place of the prior enters as
-    c + r (level − c_p) (gateway/diagnose/night_sky.py)."""
+    c + r (level − c_p) (gateway/diagnose/night_sky.py). ``i_glob`` is read through
+    ``solar.measured_global`` (a negative night offset counts as 0), as ``CloudTracker`` reads it."""
     n = len(time)
     if site is None:
         return np.full(n, DEFAULT_CLOUD), np.ones(n), np.full(n, DEFAULT_CLOUD)
-    i = np.asarray(i_glob, dtype=float)
+    i = solar.measured_global(i_glob)
     clear = clear_sky(time, *site)
     strong = (clear >= STRONG_CLEAR) & np.isfinite(i)
     t = np.asarray(time, dtype="datetime64[s]").astype(np.int64).astype(float)
@@ -188,7 +189,7 @@ class CloudTracker:
         while self._day and self._day[0][0] <= t - PRIOR_S:
             self._day_sum -= self._day.popleft()[1]
         if clear >= STRONG_CLEAR and np.isfinite(i_glob):
-            self._sun.append((t, max(float(i_glob), 0.0), clear))
+            self._sun.append((t, float(solar.measured_global(i_glob)), clear))
             if len(self._sun) * self.step >= MIN_STRONG_S:
                 k = sum(b[1] for b in self._sun) / sum(b[2] for b in self._sun)
                 c = float(cloud_fraction_from_index(k))

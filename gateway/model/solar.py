@@ -19,12 +19,22 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 SOLAR_CONSTANT = 1361.0
 """Total solar irradiance at 1 au [W m-2] (Kopp & Lean 2011)."""
 
 MIN_COS_ZENITH = 0.01
 """Below this cos z (sun under ~0.6° of elevation) the clear-sky radiation is taken as 0."""
+
+
+def measured_global(i_glob: ArrayLike) -> np.ndarray:
+    """Measured global radiation [W m-2] as every part of the gateway reads it: a
+    pyranometer's small negative offset at night (the kit CSV accepts down to -10 W m-2,
+    gateway/kitcsv.py) counts as 0, and a missing value (NaN) stays missing. The one place
+    of this rule: the model's drivers (drivers.py), the cloudiness read from the radiation,
+    whole series or one sample at a time (sky.py)."""
+    return np.maximum(np.asarray(i_glob, dtype=float), 0.0)
 
 
 @dataclass(frozen=True)

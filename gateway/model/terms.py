@@ -147,6 +147,9 @@ class FluxTerm:
     description: str = ""
     parameters: tuple[Parameter, ...] = ()
     requires: tuple[str, ...] = ()
+    optional: tuple[str, ...] = ()
+    """Kit columns the term reads when the data has them; without them ``prepare_drivers``
+    gives a stand-in (gateway/model/drivers.py) and the tools say so (gateway/cli/notes.py)."""
     uses: tuple[str, ...] = ()  # parameters owned by another part of the model (e.g. c_tsw)
     linear_in_parameters: bool = False
     """True when (g, s) = sum_j theta_j (g_j, s_j) over the term's own parameters for a given

@@ -38,6 +38,9 @@ class Series:
     sampling: str = "instant"
     """``instant``: each value is the one at its time; ``mean``: each value is the mean over the
     step it starts (per-minute aggregates), see SAMPLINGS."""
+    native_step: float | None = None
+    """[s] Median spacing of the rows the series was resampled from (None: not resampled, the
+    rows are the grid's): 5-minute rows on a 60 s grid repeat one reading over 5 samples."""
 
     def __post_init__(self) -> None:
         if self.sampling not in SAMPLINGS:
@@ -61,6 +64,7 @@ class Series:
             self.source,
             list(self.notices),
             self.sampling,
+            self.native_step,
         )
 
     def index_of(self, stamp: np.datetime64) -> int:
@@ -108,6 +112,7 @@ def resample(data: KitData, step: float = 60.0, max_gap: float = MAX_GAP_S) -> S
         columns=columns,
         source=data.source,
         notices=list(data.notices),
+        native_step=native,
     )
 
 

@@ -85,8 +85,11 @@ class OnlineEstimator:
         dt: float = 60.0,
         seed: int | None = 0,
         search: Callable[..., SearchResult] = bat,
+        stuck_samples: int = STUCK_SAMPLES,
     ) -> None:
         self.model, self.gh, self.dt = model, gh, float(dt)
+        # identical readings in a row that make a stuck sensor (sample_check.stuck_limit)
+        self.stuck_samples = int(stuck_samples)
         self.search = search  # swarm.bat (vectorised RSBA); the bench swaps in a per-bat loop
         self.lower, self.upper = model.bounds(gh)
         self.variation = model.variations(gh)
@@ -114,10 +117,10 @@ class OnlineEstimator:
         self._cap = max(4 * self.history, 512)
         self._buf: dict[str, np.ndarray] = {}
         self._n = 0  # rows stored in the buffer
-        self._stuck = StuckRun()
-        # Parameters at the start of each of the last STUCK_SAMPLES updates, to undo what a
+        self._stuck = StuckRun(limit=self.stuck_samples)
+        # Parameters at the start of each of the last stuck_samples updates, to undo what a
         # stuck run taught the estimator before it was recognised.
-        self._theta_before: deque[np.ndarray] = deque(maxlen=STUCK_SAMPLES)
+        self._theta_before: deque[np.ndarray] = deque(maxlen=self.stuck_samples)
         self._last_prediction: float | None = None
         self._sky = CloudTracker(site_of(gh), self.dt)  # cloudiness carried sample to sample
         self.counters = Counters()
@@ -135,7 +138,7 @@ class OnlineEstimator:
         self._theta_before.append(self.theta.copy())
         values, faults = check_sample(sample, self.model.requires, self._stuck,
                                       self.counters.faults)
-        if self._stuck.length == STUCK_SAMPLES:
+        if self._stuck.length == self.stuck_samples:
             self._strike_stuck_run()
         if faults:
             self.counters.faulty_samples += 1
@@ -169,7 +172,7 @@ class OnlineEstimator:
         """Forget the window (after a gap in the data, e.g. the kit was off for hours): the next
         estimations wait for a full window of new samples. The parameters are kept."""
         self._buf, self._n = {}, 0
-        self._stuck = StuckRun()
+        self._stuck = StuckRun(limit=self.stuck_samples)
         self._theta_before.clear()
         self._last_prediction = None
 
@@ -210,7 +213,7 @@ class OnlineEstimator:
         for k, v in rows.items():
             self._buf[k] = np.full(self._cap, np.nan)
             self._buf[k][: self._n] = v[len(v) - self._n :]
-        self._stuck = StuckRun(float(snap["stuck"][0]), int(snap["stuck"][1]))
+        self._stuck = StuckRun(float(snap["stuck"][0]), int(snap["stuck"][1]), self.stuck_samples)
         self._theta_before.extend(np.asarray(t, dtype=float) for t in snap["theta_before"])
         self._last_prediction = snap["last_prediction"]
         if "sky" in snap:  # states saved before the cloud tracker existed start it afresh
@@ -221,11 +224,11 @@ class OnlineEstimator:
 
     # -- checks and buffer ----------------------------------------------------------------
     def _strike_stuck_run(self) -> None:
-        """A stuck run was just recognised: its repeats 2 … STUCK_SAMPLES − 1 were accepted as
+        """A stuck run was just recognised: its repeats 2 … stuck_samples − 1 were accepted as
         measurements. Strike them from the buffer (no later window uses them) and restore the
         parameters held before the first repeat, so the flat readings do not steer the model
         while it dead-reckons through the fault (the first reading of the run was a real one)."""
-        repeats = STUCK_SAMPLES - 2
+        repeats = self.stuck_samples - 2
         air = self._idx.get("t_in")  # the groups fitted on other outputs learnt nothing from it
         if air is not None and len(self._theta_before) >= repeats + 1:
             self.theta[air] = self._theta_before[-(repeats + 1)][air]

@@ -37,6 +37,7 @@ from gateway.estimate import combination, correction, disturbance
 from gateway.estimate.horizon import INSIDE_READINGS, HorizonDrivers, measured_weather_blocks, outlook_drivers
 from gateway.estimate.online import Counters, GroupSettings, OnlineEstimator
 from gateway.estimate.outlook import Outlook, default_outlook, make_outlook
+from gateway.estimate.sample_check import stuck_limit
 from gateway.greenhouse import Greenhouse
 from gateway.metrics import metrics
 from gateway.model.model import Model
@@ -112,7 +113,8 @@ def replay(
     is made from the loop's record afterwards (``score_forecasts``: the ARX baseline, the
     disturbance filter, the forecasts and their correction), for a caller that reads only the
     estimator's run (``vsensor.adaptive.run_adaptive``: ~8 % of its time went there)."""
-    est = OnlineEstimator(model, gh, theta0, settings, dt=series.step, seed=seed)
+    est = OnlineEstimator(model, gh, theta0, settings, dt=series.step, seed=seed,
+                          stuck_samples=stuck_limit(series.step, series.native_step))
     n, k = len(series), len(model.names)
     adaptive = np.full(n, np.nan)
     theta = np.full((n, k), np.nan)

@@ -2,7 +2,7 @@
 
 A value is dropped (NaN) and counted per column and reason when it is missing, outside the kit
 column's possible range (gateway/kitcsv.py ``COLUMNS``) or, for the inside temperature, stuck:
-repeated bit for bit ``STUCK_SAMPLES`` times in a row.
+the same reading repeated bit for bit ``STUCK_SAMPLES`` times in a row (``stuck_limit``).
 """
 
 from __future__ import annotations
@@ -21,18 +21,32 @@ run is recognised, the repeats already accepted are struck out and the parameter
 are rolled back (``OnlineEstimator._strike_stuck_run``)."""
 
 
+
+
+def stuck_limit(step: float, native_step: float | None = None) -> int:
+    """Samples on a ``step`` [s] grid that ``STUCK_SAMPLES`` identical readings of the data's
+    own rows, ``native_step`` [s] apart, span: 30 at 1 min on 1-minute rows, 146 on a 60 s grid
+    of 5-minute rows (interpolating between equal rows repeats their value 5 times; a coarse
+    reading, 0.1 °C, of still air stays the same for an hour, and counting grid samples called
+    that stuck). Never fewer than ``STUCK_SAMPLES``."""
+    if native_step is None or native_step <= step:
+        return STUCK_SAMPLES
+    return max(STUCK_SAMPLES, int(round((STUCK_SAMPLES - 1) * native_step / step)) + 1)
+
+
 @dataclass
 class StuckRun:
-    """The current run of identical inside temperatures."""
+    """The current run of identical inside temperatures; stuck from ``limit`` in a row on."""
 
     value: float = float("nan")
     length: int = 0
+    limit: int = STUCK_SAMPLES
 
     def see(self, v: float) -> bool:
-        """Count ``v``; True from the ``STUCK_SAMPLES``-th identical value in a row on."""
+        """Count ``v``; True from the ``limit``-th identical value in a row on."""
         self.length = self.length + 1 if v == self.value else 1
         self.value = v
-        return self.length >= STUCK_SAMPLES
+        return self.length >= self.limit
 
 
 def check_sample(sample: Mapping[str, float], requires: Collection[str], stuck: StuckRun,

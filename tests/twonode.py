@@ -26,7 +26,9 @@ Effects (from --at): whitening (transmission x f), door (extra air changes), hea
 night-only, on the air), barrels (a water node coupled to the air), sunsensor (a sensor body
 heated by inside radiation, with a 4-min lag, RH read at the body temperature), drift (K/day);
 outside the diagnosis library: misting (amp W m-2 of evaporative cooling of the air, its vapour
-added, 11-15 h UTC), controller (house vents from 13 °C, full at 16 °C, instead of 17/24 °C).
+added, 11-15 h UTC), controller (house vents from 13 °C, full at 16 °C, instead of 17/24 °C),
+thermostat (a heated house: heating of the air to amp °C, 60 W m-2 K-1 below it, at most
+150 W m-2, evaluated every 10 s; tests/generality/heated_study.py runs it from the start).
 """
 
 from __future__ import annotations
@@ -205,6 +207,7 @@ def simulate(plant, start, days, effect=None, at=None, amp=None, seed=1, weather
             heat = amp
         if effect == "nightheater" and on[i] and ig < 10:
             heat = amp
+        thermostat = effect == "thermostat" and on[i]
         # vent controller (house), evaluated every minute on the air temperature
         mist = amp if effect == "misting" and on[i] and 11.0 <= hour[i] < 15.0 else 0.0
         if plant == "house":
@@ -220,6 +223,8 @@ def simulate(plant, start, days, effect=None, at=None, amp=None, seed=1, weather
             hm = 1.8 * abs(tm - ta) ** (1 / 3) + 1.0
             q_mass = hm * (tm - ta)
             q_w = hw * (tw - ta)
+            if thermostat:  # pipe heating to the setpoint, proportional and capped
+                heat = min(max(60.0 * (amp - ta), 0.0), 150.0)
             dta = (q_cov + q_vent + q_mass + q_w + heat - mist + p["a_air"] * iin) / ca
             dtm, evap = _mass_rate(p, plant, tm, tc, tsk, to, x, iin, q_mass)
             cond = max((x - xsat(tc)) * p["cover_ratio"] * hci_c / (RHO * CP) * 1.0, 0.0)

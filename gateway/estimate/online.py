@@ -297,7 +297,7 @@ class OnlineEstimator:
         (P, free), the others held (``Model.columns`` without checks), the start state (P, 1)
         and the model's stepper over the window ``x`` for those columns. One buffer and one
         stepper per population size, rewritten (reset) at every call (a cost call is done with
-        them; a new stepper per call cost ~5 % of a replay)."""
+        them; a new stepper per call was ~5 % of a replay under cProfile)."""
         base, names, held = self.theta, self._names, {}
 
         def columns(cand: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray, Stepper]:

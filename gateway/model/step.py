@@ -260,7 +260,8 @@ class Stepper:
         """``__call__`` for one row ``t`` with the default integration: the same operations on
         the same operands, the block's sums read once per step rather than through
         ``rates``/``_fixed_at``/``_moving_at`` (a step of a 20-bat population is ~100 small
-        operations, so the Python around them counts; docs/online-estimator.md, "Replay speed")."""
+        numpy operations; the Python around them is a small share: docs/online-estimator.md,
+        "Replay speed")."""
         c = self._c
         j = self._block(state, t)  # before reading self._table: it may replace it
         gi, si, ki, _ = self._table[j]

@@ -119,6 +119,27 @@ def test_step_follows_the_balance_with_drivers_moving_within_the_step(which, req
     assert rms_new < 0.2 * rms_old, (rms_new, rms_old)
 
 
+@pytest.mark.parametrize("which", ["almeria", "prototype_vc"])
+@pytest.mark.parametrize("a", [0, 700])  # midnight and midday rows
+def test_a_reset_stepper_steps_as_a_new_one_bit_for_bit(which, a, request):
+    """The online cost reuses one stepper per search, its parameter columns rewritten in place
+    and ``reset`` between populations (gateway/estimate/online.py): the same bits as a new one."""
+    model, x, gh = request.getfixturevalue(which)
+    x = model.prepare({k: np.asarray(v)[a : a + 4] for k, v in x.items()})
+    rows = np.ascontiguousarray(random_population(model, gh, 5).T)
+    p = {n: rows[j, :, None] for j, n in enumerate(model.names)}
+    reused = model.stepper(p, x, model.capacity(gh), 60.0)
+    for seed in (1, 2):
+        reused(np.full((5, 1), 20.0), 0)  # a block held from the columns before the rewrite
+        rows[:] = random_population(model, gh, 5, seed).T
+        reused.reset()
+        fresh = model.stepper(p, x, model.capacity(gh), 60.0)
+        mine = new = np.full((5, 1), float(x["t_in"][0]))
+        for s in range(3):
+            mine, new = reused(mine, s), fresh(new, s)
+            assert np.array_equal(mine, new), (seed, s)
+
+
 def test_one_step_at_the_measured_state_is_what_free_run_does_for_one_step(almeria):
     model, x, gh = almeria
     theta = model.defaults(gh)[None, :]

@@ -132,6 +132,7 @@ class Corrector:
         self.pending: dict[int, deque] = {h: deque() for h in self.horizons}
         self._made: dict[int, list[float]] = {}
         self.readings: deque = deque(maxlen=self.day)  # the last day's readings (NaN kept)
+        self._finite = 0  # how many of them are finite
         self.day_mean = math.nan
 
     def drop_pending(self) -> None:
@@ -142,9 +143,15 @@ class Corrector:
 
     def observe_reading(self, reading: float | None) -> None:
         """The reading joins the last day's mean (``observe`` does this itself)."""
-        self.readings.append(math.nan if reading is None else float(reading))
-        got = [v for v in self.readings if math.isfinite(v)]
-        self.day_mean = math.fsum(got) / len(got) if got else math.nan
+        value = math.nan if reading is None else float(reading)
+        if len(self.readings) == self.day and math.isfinite(self.readings[0]):
+            self._finite -= 1  # the oldest reading leaves the day
+        self.readings.append(value)
+        self._finite += math.isfinite(value)
+        # the same fsum of the same values as a list of them would give, without the list
+        # (a day of 1-minute readings, every step)
+        got = self._finite
+        self.day_mean = math.fsum(filter(math.isfinite, self.readings)) / got if got else math.nan
 
     def observe(self, reading: float) -> None:
         """The reading now matures the forecasts made h steps ago: forget, then learn each;

@@ -46,18 +46,23 @@ from gateway.model.terms import (
 SMOOTH_K = 0.5
 """[K] width w over which σ rounds the setpoint's corner."""
 _ZERO, _HALF, _ONE = const(0.0), const(0.5), const(1.0)  # 0-d operands (terms.const)
+_W = const(SMOOTH_K)  # w as a 0-d operand, built once (the hot path: a free run's every step)
+
+
+def _width(w: float) -> np.ndarray:
+    return _W if w == SMOOTH_K else const(w)
 
 
 def soft_excess(z: np.ndarray, w: float = SMOOTH_K) -> np.ndarray:
     """σ(z) = w ln(1 + e^{z/w}) [K]: ≈ max(0, z) beyond a few w, w ln 2 at z = 0 (NaN, a
     missing reading, stays NaN)."""
-    z, w_ = np.asarray(z, dtype=float), const(w)
+    z, w_ = np.asarray(z, dtype=float), _width(w)
     return np.maximum(z, _ZERO) + w_ * np.log1p(np.exp(-np.abs(z) / w_))  # = w ln(1 + e^{z/w})
 
 
 def soft_step(z: np.ndarray, w: float = SMOOTH_K) -> np.ndarray:
     """σ'(z) = 1 / (1 + e^{−z/w}) [-]: the logistic, the derivative of ``soft_excess``."""
-    return _HALF * (_ONE + np.tanh(_HALF * np.asarray(z, dtype=float) / const(w)))
+    return _HALF * (_ONE + np.tanh(_HALF * np.asarray(z, dtype=float) / _width(w)))
 
 
 class ControlledVentilation(FluxTerm):

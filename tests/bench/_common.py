@@ -5,7 +5,9 @@ from __future__ import annotations
 import json
 import os
 import platform
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -38,3 +40,21 @@ def write_result(name: str, result: dict[str, Any]) -> Path:
     path = RESULTS / f"{name}.json"
     path.write_text(json.dumps({"bench": name, "machine": machine(), **result}, indent=2) + "\n")
     return path
+
+
+def against(script: str, ref: str, rounds: int) -> tuple[list, list]:
+    """Interleaved rounds of ``script --round`` (its last stdout line is JSON): one process on
+    git ``ref``'s tree (``git archive`` into a temporary folder), one on this tree, ``rounds``
+    times; (ref's results, this tree's)."""
+    with tempfile.TemporaryDirectory(prefix="serra-bench-base-") as base:
+        archive = subprocess.run(["git", "-C", str(ROOT), "archive", ref], check=True,
+                                 capture_output=True).stdout
+        subprocess.run(["tar", "-x", "-C", base], input=archive, check=True)
+        trees: dict[str, list] = {"base": [], "this": []}
+        for _ in range(rounds):
+            for label, path in (("base", base), ("this", str(ROOT))):
+                env = {**os.environ, "PYTHONPATH": path, "SERRA_TREE": path}
+                out = subprocess.run([sys.executable, script, "--round"], env=env, cwd=path,
+                                     check=True, capture_output=True, text=True).stdout
+                trees[label].append(json.loads(out.splitlines()[-1]))
+    return trees["base"], trees["this"]

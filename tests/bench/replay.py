@@ -18,7 +18,6 @@ import argparse
 import hashlib
 import json
 import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -29,6 +28,7 @@ sys.path.insert(0, str(HERE))
 # The tree under test first (this checkout, or the one --against exported): tests/bench/gateway.py
 # must not shadow the gateway package.
 sys.path.insert(0, os.environ.get("SERRA_TREE", str(HERE.parents[1])))
+from _common import against as against_rounds  # noqa: E402
 from _common import one_core, write_result  # noqa: E402
 
 one_core()
@@ -80,28 +80,11 @@ def _round() -> dict:
         return {name: _one(name, series, gh, folder) for name in MODELS}
 
 
-def _against(ref: str, rounds: int) -> tuple[list, list]:
-    """Interleaved rounds: one process on ``ref``'s tree, one on this tree, ``rounds`` times."""
-    root = HERE.parents[1]
-    with tempfile.TemporaryDirectory(prefix="serra-bench-base-") as base:
-        archive = subprocess.run(["git", "-C", str(root), "archive", ref], check=True,
-                                 capture_output=True).stdout
-        subprocess.run(["tar", "-x", "-C", base], input=archive, check=True)
-        trees: dict[str, list] = {"base": [], "this": []}
-        for _ in range(rounds):
-            for label, path in (("base", base), ("this", str(root))):
-                env = {**os.environ, "PYTHONPATH": path, "SERRA_TREE": path}
-                out = subprocess.run([sys.executable, __file__, "--round"], env=env, cwd=path,
-                                     check=True, capture_output=True, text=True).stdout
-                trees[label].append(json.loads(out.splitlines()[-1]))
-    return trees["base"], trees["this"]
-
-
 def run(against: str | None = None, rounds: int = ROUNDS) -> dict:
     if against is None:
         this, base = [_round() for _ in range(rounds)], None
     else:
-        base, this = _against(against, rounds)
+        base, this = against_rounds(__file__, against, rounds)
     summary: dict = {"cpu_s_median_of_rounds": {
         m: float(np.median([r[m]["cpu_s"] for r in this])) for m in MODELS}}
     out: dict = {"rounds": this, "summary": summary}

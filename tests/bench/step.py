@@ -21,9 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
-import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -33,6 +31,7 @@ sys.path.insert(0, str(HERE))
 # The tree under test first (this checkout, or the one --against exported): tests/bench/gateway.py
 # must not shadow the gateway package.
 sys.path.insert(0, os.environ.get("SERRA_TREE", str(HERE.parents[1])))
+from _common import against as against_rounds  # noqa: E402
 from _common import one_core, write_result  # noqa: E402
 
 one_core()
@@ -121,30 +120,13 @@ def _median_ratio(rounds: list, num, den) -> dict[str, float]:
     return {k: float(np.median([num(r)[k] / den(r)[k] for r in rounds])) for k in keys}
 
 
-def _against(ref: str) -> tuple[list, list]:
-    """Interleaved rounds: one process on ``ref``'s tree, one on this tree, ROUNDS times."""
-    root = HERE.parents[1]
-    with tempfile.TemporaryDirectory(prefix="serra-bench-base-") as base:
-        archive = subprocess.run(["git", "-C", str(root), "archive", ref], check=True,
-                                 capture_output=True).stdout
-        subprocess.run(["tar", "-x", "-C", base], input=archive, check=True)
-        trees: dict[str, list] = {"base": [], "this": []}
-        for _ in range(ROUNDS):
-            for label, path in (("base", base), ("this", str(root))):
-                env = {**os.environ, "PYTHONPATH": path, "SERRA_TREE": path}
-                out = subprocess.run([sys.executable, __file__, "--round"], env=env, cwd=path,
-                                     check=True, capture_output=True, text=True).stdout
-                trees[label].append(json.loads(out.splitlines()[-1]))
-    return trees["base"], trees["this"]
-
-
 def run(against: str | None = None) -> dict:
     if against is None:
         calib, online = _objective_and_free_run(), _online()
         rounds = [_round(calib, online) for _ in range(ROUNDS)]
         base = None
     else:
-        base, rounds = _against(against)
+        base, rounds = against_rounds(__file__, against, ROUNDS)
     keys = list(rounds[0]["default"])
     best = {label: {k: min(r[label][k] for r in rounds) for k in keys} for label in SCHEMES}
     summary = {"default_over_frozen_median_of_rounds":

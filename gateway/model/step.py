@@ -250,11 +250,14 @@ class Stepper:
         return _rate(gi + gd, si + sd, ki + kd, state, self._c)
 
     def _moving_rates(self, state: np.ndarray, t: Index) -> tuple[np.ndarray, np.ndarray]:
-        return _rate(*self._moving_at(state, t), state, self._c)
+        g, s, k = self._moving_at(state, t)
+        return _rate(g, s, k, state, self._c)
 
-    def _bound_rates(self, state: np.ndarray, t: int) -> tuple[np.ndarray, np.ndarray]:
-        """``_moving_rates`` at a row ``t`` of the block held (the caller has just placed it)."""
-        return _rate(*self._bound(state, t), state, self._c)
+    def _bound_rates(self, state: np.ndarray, t: Index) -> tuple[np.ndarray, np.ndarray]:
+        """``_moving_rates`` at a row ``t`` (an int) of the block held (the caller has just
+        placed it)."""
+        g, s, k = self._bound(state, t)  # type: ignore[arg-type]  # one row: end_rates passes t1
+        return _rate(g, s, k, state, self._c)
 
     def _step_row(self, state: np.ndarray, t: int) -> np.ndarray:
         """``__call__`` for one row ``t`` with the default integration: the same operations on

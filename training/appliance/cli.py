@@ -284,13 +284,14 @@ class Demo:
     def settle(self, lag: int = 2, timeout: float = 90.0) -> None:
         """Let the gateway's estimator catch up with what was stored before it is stopped (on a
         busy machine it can trail the accelerated kit by minutes); the last minute or two stay
-        open until a later record closes them."""
+        open until a later record closes them. It steps once per stored *minute*: a kit whose
+        records drift 57-63 s apart (a loaded machine at 300×) puts two in some minutes."""
         db = self.out / "serra.db"
         deadline = time.monotonic() + timeout
         while ("gateway" in self.group.procs and self.group.procs["gateway"].poll() is None
                and time.monotonic() < deadline
                and count(db, "SELECT count(*) FROM estimates WHERE name=?", ("t_in_next",))
-               < count(db, "SELECT count(*) FROM samples") - lag):
+               < count(db, "SELECT count(*) FROM minute") - lag):
             time.sleep(0.2)
 
     def report(self) -> None:

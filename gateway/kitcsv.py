@@ -51,7 +51,6 @@ COLUMNS: dict[str, Column] = {
     )
 }
 TEMPERATURE_COLUMNS = ("t_in", "t_out", "t_soil")
-AIR_TEMPERATURE_REQUIRED = ("t_in", "t_out", "rh_in", "i_glob", "wind")
 
 
 class KitCsvError(ValueError):

@@ -190,3 +190,43 @@ def test_a_missing_required_column_names_the_file_and_the_column(capsys, tmp_pat
                  "--step", "300"]) == 2
     line = capsys.readouterr().err.strip().splitlines()[-1]
     assert f"error: {empty}: column(s) {column} hold no value" in line
+
+
+def _vsensor(capsys, tmp_path: Path, toml: str, *more: str) -> tuple[dict, str, str]:
+    """``vsensor --json`` (the shipped almeria sensor, no baselines) on 20 minutes of kit rows
+    with an unknown column, for a greenhouse described by ``toml``."""
+    gh = tmp_path / "gh.toml"
+    gh.write_text(toml, encoding="utf-8")
+    rows = ["time,t_in,rh_in,t_out,rh_out,i_glob,wind,t_soil,vent_roof,bogus"]
+    rows += [f"2020-03-27T10:{k:02d}:00Z,20.0,60.0,15.0,55.0,400.0,1.5,18.0,10.0,1"
+             for k in range(20)]
+    data = tmp_path / "v.csv"
+    data.write_text("\n".join(rows) + "\n", encoding="utf-8")
+    code = main(["vsensor", "--data", str(data), "--greenhouse", str(gh), "--model-kind",
+                 "almeria", "--no-baselines", *more])
+    out, err = capsys.readouterr()
+    assert code == 0 and "Traceback" not in err, err
+    return (json.loads(out) if "--json" in more else {}), out, err
+
+
+def test_vsensor_notes_are_records_in_its_json_and_its_text(capsys, tmp_path):
+    """vsensor's notes are the other commands' (gateway/cli/notes.py): ``{code, level,
+    message}`` in ``--json``, ``level: message [code]`` after the text report, each on stderr;
+    the CSV reader's notice and the missing site among them, not only on stderr."""
+    from gateway.greenhouse import PRESET_DIR
+
+    text = (PRESET_DIR / "almeria-palmerillas.toml").read_text()
+    no_site = text[: text.index("[site]")] + text[text.index("[geometry]"):]
+    rep, _, err = _vsensor(capsys, tmp_path, no_site, "--json")
+    notes = rep["notes"]
+    assert [n["code"] for n in notes] == ["csv_reader", "no_site"], notes
+    assert all(set(n) == {"code", "level", "message"} and n["level"] == "note" for n in notes)
+    assert "bogus" in notes[0]["message"] and notes[1]["message"] in err
+    other = no_site.replace("roof_count = 5", "roof_count = 2")  # another house's vents
+    rep, _, err = _vsensor(capsys, tmp_path, other, "--json", "--site", "36.79,-2.72")
+    assert [n["code"] for n in rep["notes"]] == ["csv_reader", "other_greenhouse"]
+    warn = rep["notes"][1]
+    assert warn["level"] == "warning" and "roof_vent_area_m2" in warn["message"]
+    assert warn["message"] in err and rep["flagged"] == rep["steps"]
+    _, out, _ = _vsensor(capsys, tmp_path, other, "--site", "36.79,-2.72")
+    assert f"warning: {warn['message']} [other_greenhouse]" in out

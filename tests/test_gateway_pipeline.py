@@ -163,6 +163,27 @@ def test_a_gap_restarts_the_window_not_the_parameters(tmp_path: Path) -> None:
     assert params[EPOCH + 60 * 250] != after  # and estimated again once the window refilled
 
 
+def test_a_missing_outside_humidity_is_said_once_per_outage(tmp_path: Path) -> None:
+    """Minutes with an outside temperature but no rh_out: the sky temperature falls back to
+    Swinbank's (gateway/model/sky.py). The gateway says so once when it starts, not per minute,
+    and once when rh_out has been back for ``HUMIDITY_BACK_MIN`` minutes."""
+    from gateway.service.pipeline import HUMIDITY_BACK_MIN
+
+    trace = {c: v.copy() for c, v in TRACE.items()}
+    trace["rh_out"][20:60] = np.nan  # the outside kit's RH channel fails for 40 minutes
+    assert np.isfinite(trace["t_out"][20:60]).all() and np.isfinite(trace["rh_out"][:20]).all()
+    s = Store(tmp_path / "g.db")
+    last = 60 + HUMIDITY_BACK_MIN + 5
+    store_trace(s, trace, range(last + 1))
+    pl = pipeline()
+    pl.resume(s.conn)
+    rep = pl.step_pending(s.conn, end(last), 0.0, 600.0)
+    said = [n for n in rep.notes if "rh_out" in n]
+    assert len(said) == 2, rep.notes
+    assert "2009-11-01T06:20Z" in said[0] and "Swinbank" in said[0]
+    assert "back" in said[1] and "2009-11-01T07:00Z" in said[1]
+
+
 def infos() -> dict[str, GreenhouseInfo]:
     lo, hi = MODEL.bounds(GH)
     return {"north": GreenhouseInfo(Place("f1", "north", 34.85, 5.73), 7, 7, MODEL, lo.tolist(),

@@ -70,3 +70,31 @@ def test_the_held_cloud_is_not_the_prior_at_night(week) -> None:
                       float(x["cloud"][s]))
     np.testing.assert_allclose(live["t_sky"], sky.sky_temperature(live["t_out"], live["rh_out"],
                                                                    x["cloud"][s]))
+
+
+def test_a_negative_offset_reads_the_same_live_and_in_replay() -> None:
+    """A pyranometer's negative offset (the kit CSV accepts down to -10 W m-2) counts as 0 in
+    the live outlook as in replay's (gateway/model/solar.py ``measured_global``): data stamped at
+    the end of its averaging interval lags the computed sun, so the offset is still read in the
+    first quarter-hours of strong clear sky, where the clear-sky index counts it."""
+    assert GH.site is not None
+    n = 2 * 1440
+    time = np.datetime64("2021-04-10T00:00:00") + np.arange(n) * np.timedelta64(60, "s")
+    lagged = sky.clear_sky(time - np.timedelta64(40, "m"), GH.site.latitude, GH.site.longitude)
+    i_glob = np.where(lagged > 1.0, 0.9 * lagged, -6.0)
+    hours = np.arange(n) / 60.0
+    t_out = 16.0 + 7.0 * np.sin(2 * np.pi * (hours - 9.0) / 24.0)
+    cols = {"t_in": t_out + 3.0, "rh_in": np.full(n, 65.0), "t_out": t_out,
+            "rh_out": np.full(n, 50.0), "i_glob": i_glob, "wind": np.full(n, 2.0)}
+    clear = sky.clear_sky(time, GH.site.latitude, GH.site.longitude)
+    s = 1440 + int(np.argmax((clear[1440:] >= 50.0) & (i_glob[1440:] > 0.0)))  # day 2's first light read
+    assert np.any(i_glob[s - 15 : s] < 0.0) and np.all(clear[s - 15 : s + 1] >= 30.0)
+    x = prepare_drivers(Series(time, DT, cols), GH)
+    outlook = make_outlook("clear-sky-trend", GH)
+    kit = list(cols)
+    blocks = outlook_drivers(outlook, x, kit, time, DT, GH, np.array([s]), H)
+    live = live_block(outlook, {c: cols[c][: s + 1] for c in kit}, time[: s + 1], H, DT, GH,
+                      float(x["cloud"][s]))
+    assert np.all(live["i_glob"] >= 0.0)
+    for name, v in live.items():
+        np.testing.assert_allclose(v, blocks.x[name][:H], rtol=1e-12, atol=1e-12, err_msg=name)

@@ -96,8 +96,8 @@ def test_a_csv_without_t_soil_gets_flows_and_a_note_instead_of_a_score(tmp_path,
     assert code == 0
     rep = json.loads(capsys.readouterr().out)
     assert rep["reference"] is None and rep["flow"] is None and rep["steps"] == 1440
-    assert any("'almeria' model" in n and "t_soil" in n and "not scored" in n
-               for n in rep["notes"])
+    assert any(n["code"] == "not_scored" and "'almeria' model" in n["message"]
+               and "t_soil" in n["message"] for n in rep["notes"])
     lines = out.read_text().splitlines()
     assert lines[0] == "time,flow_m3_s,q_vent_w_m2,out_of_range,valid"
     flows = [float(r.split(",")[1]) for r in lines[1:]]

@@ -14,6 +14,7 @@ import numpy as np
 
 from gateway.greenhouse import Greenhouse
 from gateway.model.model import Model
+from gateway.model.sky import WITHOUT_HUMIDITY
 from gateway.series import Series
 
 SKY_COMMANDS = ("replay", "diagnose")
@@ -84,11 +85,7 @@ def outside_humidity(series: Series, data: str, sky: bool, evidence: bool) -> li
     (Brutsaert 1975; gateway/model/sky.py ``clear_sky_emissivity``)."""
     if not (sky or evidence):
         return []
-    swinbank = ("the sky temperature's clear-sky emissivity comes from the outside air "
-                "temperature alone (Swinbank 1963) instead of from its vapour pressure "
-                "(Brutsaert 1975; gateway/model/sky.py), so the long-wave loss to the sky on "
-                "clear nights is less certain: a dry and a humid night of the same "
-                "temperature get the same sky")
+    swinbank = WITHOUT_HUMIDITY
     how = missing(series, "rh_out")
     if how:
         parts = ([swinbank] if sky else []) + ([HUMIDITY_EVIDENCE] if evidence else [])

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from gateway.cli import CliError
-from gateway.cli.notes import Note, echo, input_notes, site_note_text
+from gateway.cli.notes import Note, echo, input_notes
 from gateway.greenhouse import Greenhouse, GreenhouseError, Site, list_presets, load_greenhouse
 from gateway.kitcsv import KitCsvError, parse_time
 from gateway.model import MODEL_NAMES, build_model, check_parameters
@@ -63,12 +63,6 @@ def add_site_argument(p: argparse.ArgumentParser) -> None:
 def with_site(gh: Greenhouse, site: tuple[float, float] | None) -> Greenhouse:
     """The greenhouse with ``--site LAT,LON`` applied (unchanged without one)."""
     return gh if site is None else replace(gh, site=Site(*site))
-
-
-def site_note(gh: Greenhouse, greenhouse: str) -> None:
-    """Without a site at all, the note of what the sky temperature then rests on (stderr)."""
-    if gh.site is None:
-        print(f"note: {site_note_text(greenhouse)}", file=sys.stderr)
 
 
 def positive_number(text: str) -> float:

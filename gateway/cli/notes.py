@@ -3,7 +3,8 @@
 column the model reads but the data lacks, a record too short to judge.
 
 One place builds the notes of a run: :func:`input_notes` when the data is loaded,
-:func:`short_heldout_note` after a diagnosis, :func:`params_notes` for ``replay --params``. The
+:func:`short_heldout_note` after a diagnosis, :func:`params_notes` for ``replay --params``,
+:func:`vsensor_notes` for what ``vsensor`` says of its run. The
 commands render that one list: on stderr as each note is made (before a long computation),
 in their JSON (``"notes": [{"code", "level", "message"}]``, empty when there is nothing to say),
 after their text report and in diagnose's ``report.md``. A note's ``code`` is stable; its
@@ -79,6 +80,19 @@ def input_notes(series: Series, gh: Greenhouse, model: Model, data: str, greenho
     for code, message in column_notes(series, gh, model, data, command):
         notes.append(Note(code, message))
     return notes
+
+
+VSENSOR_WARNINGS = ("other_greenhouse",)
+"""vsensor notes whose figures are likely wrong: a sensor trained on another house flags every
+minute (docs/vsensor.md)."""
+
+
+def vsensor_notes(made: Iterable[tuple[str, str]]) -> list[Note]:
+    """The notes of a vsensor run from its (code, message) pairs (gateway/vsensor/batch.py
+    ``BatchResult.notes``): ``not_scored`` (no reference flow for the CSV) a note,
+    ``other_greenhouse`` a warning."""
+    return [Note(code, message, "warning" if code in VSENSOR_WARNINGS else "note")
+            for code, message in made]
 
 
 def site_note_text(greenhouse: str) -> str:

@@ -11,10 +11,10 @@ from gateway.cli.common import (
     check_output,
     dump_json,
     progress_bar,
-    site_note,
     with_site,
     writing,
 )
+from gateway.cli.notes import Note, as_json, echo, site_note_text, text_block, vsensor_notes
 from gateway.greenhouse import GreenhouseError, list_presets, load_greenhouse
 from gateway.kitcsv import KitCsvError
 from gateway.model import MODEL_NAMES, build_model
@@ -70,7 +70,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         gh = load_greenhouse(args.greenhouse)
         gh = with_site(gh, args.site)
-        site_note(gh, args.greenhouse)
+        site = [] if gh.site is not None else [Note("no_site", site_note_text(args.greenhouse))]
+        echo(site)
         model = build_model(args.model_kind, gh)
     except GreenhouseError as exc:
         raise CliError(str(exc)) from None
@@ -78,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
         series = load_series(args.data, step=60.0, required=model.requires)
     except KitCsvError as exc:
         raise CliError(str(exc)) from None
+    notes = [Note("csv_reader", text, echo=False) for text in series.notices] + site
     try:
         path = args.sensor or shipped_model(args.model_kind)
     except FileNotFoundError as exc:
@@ -91,6 +93,9 @@ def run(args: argparse.Namespace) -> int:
                                 progress=lambda done: bar(advance=100), sensor=sensor)
     except (ModelMismatch, FileNotFoundError) as exc:
         raise CliError(str(exc)) from None
+    made = vsensor_notes(result.notes)
+    echo(made)
+    notes += made
     sensors = score(result)
     main = next(iter(sensors))
     report = {
@@ -99,12 +104,13 @@ def run(args: argparse.Namespace) -> int:
         "baselines": {k: v for k, v in sensors.items() if k != main},
         "reference": (f"explicit vent-based flow of the adaptive {result.reference_kind} model "
                       "(III.31)" if result.reference_kind else None),
-        "notes": result.notes,
+        "notes": as_json(notes),
     }
     if args.json:  # the report first: a failed write below still leaves the result on screen
         dump_json(report)
     else:
         _print_human(report, main)
+        sys.stdout.write(text_block(notes))
     if args.out:
         with writing("--out", args.out):
             write_flows(result, args.out)
@@ -142,8 +148,6 @@ def _print_human(rep: dict, main: str) -> None:
               f"{rep['steps']} steps, {rep['flagged']} flagged, {rep['out_of_range']} with inputs "
               f"outside the training ranges, {rep['missing']} with missing inputs, "
               f"{rep['clamped']} clamped\n")
-    for note in rep["notes"]:
-        out.write(f"  note: {note}\n")
     if rep["out_of_range_by_input"]:
         out.write("  outside the training range: "
                   + ", ".join(f"{k} {v}" for k, v in rep["out_of_range_by_input"].items()) + "\n")

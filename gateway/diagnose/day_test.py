@@ -82,14 +82,24 @@ def _cells(day: np.ndarray, key: np.ndarray, r: np.ndarray, nb: int,
     return np.where(cnt >= min_n, tot / np.maximum(cnt, 1), np.nan)
 
 
+def nan_median(a: np.ndarray) -> np.ndarray:
+    """Median of the finite values of ``a`` along its last axis; NaN, said explicitly and
+    without numpy's "All-NaN slice" warning, where there is none (the hours before a record's
+    first reading in its first day, a day without readings of a state variable)."""
+    some = np.isfinite(a).any(axis=-1)
+    if some.all():
+        return np.nanmedian(a, axis=-1)
+    med = np.nanmedian(np.where(some[..., None], a, 0.0), axis=-1)
+    return np.where(some, med, np.nan)
+
+
 def sharp_part(m: np.ndarray) -> np.ndarray:
     """Day profiles ``m`` (..., clock bins of ``BIN_S``) minus their own circular running
     median over ±2 h: what is left of the smooth daily course a weather regime moves."""
     nb = m.shape[-1]
     w = int(round(2 * 3600 / BIN_S))
     idx = (np.arange(nb)[:, None] + np.arange(-w, w + 1)[None, :]) % nb
-    with np.errstate(all="ignore"):
-        return m - np.nanmedian(m[..., idx], axis=-1)
+    return m - nan_median(m[..., idx])
 
 
 def clock_label(j: int) -> str:
@@ -111,8 +121,7 @@ def _state_units(day: np.ndarray, v: np.ndarray, edges: np.ndarray, r: np.ndarra
     nb = len(edges) - 1
     key = np.where(np.isfinite(v), np.clip(np.searchsorted(edges, v, "right") - 1, 0, nb - 1), -1)
     m = _cells(day, key, r, nb, min_n)
-    with np.errstate(all="ignore"):
-        return m - np.nanmedian(m, axis=1, keepdims=True)
+    return m - nan_median(m)[:, None]
 
 
 def _edges(parts: list[np.ndarray]) -> np.ndarray:

@@ -24,6 +24,7 @@ import numpy as np
 
 from gateway.estimate.outlook import Outlook, forecast_drivers
 from gateway.greenhouse import Greenhouse
+from gateway.model import solar
 from gateway.model.drivers import prepare_drivers
 from gateway.series import Series
 
@@ -94,7 +95,11 @@ def live_block(outlook: Outlook, history: Mapping[str, np.ndarray], time: np.nda
     """The drivers of the one forecast the live gateway makes now (the last row of ``history``):
     rows ``[now, now + 1, …, now + horizon - 1]``, row 0 the latest readings, the others the
     outlook's, derived as ``outlook_drivers`` derives a block's rows: with the cloud fraction
-    ``cloud`` [-] (the estimator's at now) held over the horizon."""
+    ``cloud`` [-] (the estimator's at now) held over the horizon. The outlook reads ``i_glob``
+    as replay's does, through ``solar.measured_global`` (``outlook_drivers`` is given the
+    prepared drivers): a negative pyranometer offset counts as 0."""
+    if "i_glob" in history:
+        history = {**history, "i_glob": solar.measured_global(history["i_glob"])}
     ahead = outlook.drivers(history, time, horizon, dt)
     cols = {c: np.concatenate([np.asarray(history[c], float)[-1:], ahead[c][: horizon - 1]])
             for c in history}

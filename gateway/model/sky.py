@@ -69,6 +69,13 @@ KC_A, KC_B = 0.75, 3.4
 CLOUD_EMISSIVITY = 0.84
 """Unsworth & Monteith (1975): share of the cloudy sky's emission above the clear sky's."""
 
+WITHOUT_HUMIDITY = ("the sky temperature's clear-sky emissivity comes from the outside air "
+                    "temperature alone (Swinbank 1963) instead of from its vapour pressure "
+                    "(Brutsaert 1975; gateway/model/sky.py), so the long-wave loss to the sky on "
+                    "clear nights is less certain: a dry and a humid night of the same "
+                    "temperature get the same sky")
+"""What a run without the outside humidity loses, as its notes and the live log say it."""
+
 
 def clear_sky_emissivity(t_air: ArrayLike, vapour_pressure: ArrayLike | None = None) -> np.ndarray:
     """Clear-sky emissivity [-] at air temperature ``t_air`` [°C] and vapour pressure [kPa]

@@ -33,7 +33,8 @@ def measured_global(i_glob: ArrayLike) -> np.ndarray:
     pyranometer's small negative offset at night (the kit CSV accepts down to -10 W m-2,
     gateway/kitcsv.py) counts as 0, and a missing value (NaN) stays missing. The one place
     of this rule: the model's drivers (drivers.py), the cloudiness read from the radiation,
-    whole series or one sample at a time (sky.py)."""
+    whole series or one sample at a time (sky.py), the live gateway's weather outlook
+    (gateway/estimate/horizon.py ``live_block``; replay's reads the drivers)."""
     return np.maximum(np.asarray(i_glob, dtype=float), 0.0)
 
 

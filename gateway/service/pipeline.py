@@ -18,6 +18,8 @@ line names what was kept, added and dropped); one that cannot be used starts ane
 A virtual ventilation sensor reads the fluxes of its own model kind: the forecasting estimator's
 when the kinds agree, else those of a second estimator of its kind stepped on the same minutes
 (gateway/service/ventilation.py; its state is saved beside the forecasting one).
+Minutes with an outside temperature and no rh_out (the sky temperature then from T_out alone)
+are said in the log once per outage, not per minute (gateway/service/humidity_watch.py).
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ from gateway.estimate.state_migration import migrate_state
 from gateway.greenhouse import Greenhouse
 from gateway.model.model import Model
 from gateway.service.forecaster import LiveForecaster
+from gateway.service.humidity_watch import HumidityWatch
 from gateway.service.minutes import KIT_COLUMNS, Minute, final_before, first_minute, read_minutes
 from gateway.service.settings import EstimatorSettings, GreenhouseSettings
 from gateway.service.ventilation import HISTORY_KEY, STATE_KEY, SensorFeed, VentilationSensor
@@ -48,6 +51,8 @@ log = logging.getLogger("serra.gateway")
 DT = 60.0
 BATCH = 30  # minutes per transaction while catching up
 COMMIT_S = 0.5  # [wall s] a batch is committed early when it takes longer than this
+HUMIDITY_BACK_MIN = 60
+"""Minutes rh_out must be back in a row before the log says so (humidity_watch.py)."""
 
 
 @dataclass
@@ -87,6 +92,7 @@ class GreenhousePipeline:
         self.history_min = history_min
         self.hist: dict[str, deque[float]] = {c: deque(maxlen=history_min) for c in KIT_COLUMNS}
         self.hist_minute: int | None = None
+        self.humidity = HumidityWatch(name, HUMIDITY_BACK_MIN)
         self.state = "waiting for data"
 
     def _start_fresh(self) -> None:
@@ -196,6 +202,9 @@ class GreenhousePipeline:
                 report.stepped += 1
         rows += self._step(m)
         report.stepped += 1
+        said = self.humidity.see(m.minute, m.values)
+        if said:
+            report.notes.append(said)
         return rows
 
     def _remember(self, m: Minute) -> None:

@@ -51,7 +51,9 @@ class BatchResult:
     reference_flow: np.ndarray | None = None  # explicit flow [m3 s-1] when the CSV has vents
     reference_q: np.ndarray | None = None
     dt_in_out: np.ndarray | None = None
-    notes: list[str] = field(default_factory=list)
+    notes: list[tuple[str, str]] = field(default_factory=list)
+    """(code, message) of what the run says beside its figures: ``not_scored``,
+    ``other_greenhouse``; the CLI makes them notes (gateway/cli/notes.py ``vsensor_notes``)."""
     reference_kind: str | None = None  # the model kind of the reference flow, when there is one
 
 
@@ -116,7 +118,7 @@ def run_series(model_path: str | Path, series: Series, gh: Greenhouse, kind: str
     target = sensor.info.meta.get("target_model_kind") or kind
     unscored = unscored_reason(sensor, series, gh, kind)
     if unscored:
-        result.notes.append(unscored)
+        result.notes.append(("not_scored", unscored))
     elif has_vents(series):
         vent = run_adaptive(target, series, gh, vents=True, overrides=overrides, seed=seed,
                             progress=progress)
@@ -126,7 +128,8 @@ def run_series(model_path: str | Path, series: Series, gh: Greenhouse, kind: str
         result.reference_q = heat_loss(vent.flow, dt, gh)
         result.reference_kind = target
     if sensor.mismatch:
-        result.notes.append("model trained on another greenhouse: " + "; ".join(sensor.mismatch))
+        result.notes.append(("other_greenhouse",
+                             "model trained on another greenhouse: " + "; ".join(sensor.mismatch)))
     return result
 
 

@@ -10,6 +10,8 @@ from tests.generality.cases import MIN_VISIBLE_K, verdict, visible_change
 from tests.generality.generators import KIT, generate
 from tests.generality.windows import bleiswijk_window
 
+SETPOINT = 12.0
+
 
 @pytest.fixture(scope="module")
 def window():
@@ -66,3 +68,27 @@ def test_a_change_the_reading_does_not_show_is_measured_as_such(window):
     heater = visible_change(generate("refsim", window, "heater", change_day=1.4), without)
     assert heater > 1.0
     assert capped < MIN_VISIBLE_K
+
+
+def test_the_heated_study_case_is_a_public_call_that_heats_from_the_first_sample():
+    """tests/generality/heated_study.py's heated house: ``generate`` with the two-node house's
+    ``thermostat`` from day 0 at a setpoint of its own, changing no module state. One winter day:
+    the heating holds the air near the setpoint (a proportional 60 W m-2 K-1 pipe: it sits a
+    little below), and where the unheated house is warmer than the setpoint nothing changes."""
+    from tests.generality import generators
+
+    w = bleiswijk_window("2009-11-26T00:00", 1.0, "one winter day")  # 7-9 °C outside
+    specs = dict(generators.TWONODE_SPECS)
+    heated = generate("twonode", w, "thermostat", change_day=0.0, amount=SETPOINT)
+    base = generate("twonode", w, "none")
+    assert generators.TWONODE_SPECS == specs
+    assert heated.start == w.start and heated.size == f"thermostat amp={SETPOINT:g}"
+    t, t0 = heated.columns["t_in"], base.columns["t_in"]
+    assert np.all(t >= t0 - 0.05)  # the same sensor noise on both
+    cold = t0 < SETPOINT - 3.0  # unheated, the air more than 3 K below the setpoint
+    assert cold.sum() > 100  # most of the day
+    assert np.all(np.abs(t[cold] - SETPOINT) < 1.0)
+    with pytest.raises(ValueError, match="two-node"):
+        generate("refsim", w, "heater", amount=10.0)
+    with pytest.raises(ValueError, match="thermostat"):
+        generate("refsim", w, "thermostat")

@@ -140,6 +140,23 @@ def test_a_reset_stepper_steps_as_a_new_one_bit_for_bit(which, a, request):
             assert np.array_equal(mine, new), (seed, s)
 
 
+@pytest.mark.parametrize("which", ["almeria", "prototype_vc"])
+def test_a_row_at_a_time_steps_as_all_rows_at_once_bit_for_bit(which, request):
+    """``Stepper`` steps one row (an int: ``_step_row``, the online cost's and free runs' path)
+    with the same operations as a slice of rows (``__call__``'s general path), over more rows
+    than a block (``Stepper.BLOCK``), so a change to one path shows here as a change to both."""
+    model, x, gh = request.getfixturevalue(which)
+    n = 70
+    x = model.prepare({k: np.asarray(v)[650 : 650 + n] for k, v in x.items()})
+    rows = np.ascontiguousarray(random_population(model, gh, 5).T)
+    p = {name: rows[j, :, None] for j, name in enumerate(model.names)}
+    state = x["t_in"][None, :] + np.random.default_rng(3).normal(0.0, 1.0, (5, n))
+    at_once = model.stepper(p, x, model.capacity(gh), 60.0)(state, slice(0, n))
+    step = model.stepper(p, x, model.capacity(gh), 60.0)
+    by_row = np.concatenate([step(state[:, s : s + 1], s) for s in range(n)], axis=1)
+    assert np.all(np.isfinite(at_once)) and np.array_equal(by_row, at_once)
+
+
 def test_one_step_at_the_measured_state_is_what_free_run_does_for_one_step(almeria):
     model, x, gh = almeria
     theta = model.defaults(gh)[None, :]

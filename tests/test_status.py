@@ -17,10 +17,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gateway.protocol import CHANNELS
 from gateway.status import render
 from gateway.status.messages import Messages
 from gateway.status.snapshot import Link, attention
+from gateway.status.store_source import DROP
 from gateway.store import Store
+from gateway.store.aggregate import aggregate
 from tests.status_helpers import beating, fresh_status, snap_of
 from tests.status_store import MODEL, Filled, records
 
@@ -82,6 +85,58 @@ def test_a_rotated_key_shows_the_boards_own_boot_counter(store: Filled) -> None:
     kit = next(k for k in snap_of(store).kits if k.device_id == 7)
     assert (kit.boot, kit.stored_boot) == (1, 2)
     assert "stored as boot 2" in "\n".join(t.plain for t in render.kit_lines(snap_of(store)))
+
+
+def _ranges(snap) -> dict[str, tuple[float, float, float]]:
+    """The greenhouse panel's channel lines, as printed: label → (latest, min, max)."""
+    out = {}
+    for label in ("T in", "RH in", "T out", "RH out", "I glob", "wind"):
+        line = next(t.plain for t in render.greenhouse_lines(snap, 0) if t.plain.startswith(label))
+        words = line[len(label):].split()
+        lo, hi = words[-1].split("..")
+        out[label] = (float(words[0]), float(lo), float(hi))
+    return out
+
+
+def test_the_range_beside_a_sparkline_holds_the_latest_reading(store: Filled) -> None:
+    """The screen once showed a latest wind of 5.6 m/s beside 1.9..5.4: the range was of the
+    sparkline's bins, means of several minutes. It is of the minutes themselves and of the latest
+    reading, also while that reading's minute is not aggregated yet."""
+    wind = CHANNELS.index("wind")
+    with sqlite3.connect(store.path) as c:
+        top = c.execute("SELECT max(wind) FROM minute WHERE device_id=7").fetchone()[0]
+    rec, at = records(7, range(130, 131))[0]
+    gust = round(top + 1.3, 1)  # as the panel prints it ({:.1f})
+    rec = rec._replace(values=rec.values[:wind] + (gust,) + rec.values[wind + 1:])
+    s = Store(store.path)
+    try:
+        s.write_batch([(rec, at)])  # stored, its minute not aggregated yet
+    finally:
+        s.close()
+    beat = fresh_status(store)
+    before = _ranges(snap_of(store, wall=beat + 0.1))
+    assert before["wind"] == (gust, before["wind"][1], gust)
+    for label, (latest, lo, hi) in before.items():
+        assert lo <= latest <= hi, label
+    s = Store(store.path)
+    try:
+        while aggregate(s.conn):
+            pass
+    finally:
+        s.close()
+    snap = snap_of(store, wall=beat + 0.1)
+    g = snap.greenhouses[0]
+    with sqlite3.connect(store.path) as c:  # the minutes the panel bins (each at its middle)
+        rows = c.execute("SELECT wind FROM minute WHERE device_id=7 AND minute>? AND minute<=? "
+                         "AND wind_qc & ? = 0", (g.series["wind"].start - 30, snap.now - 30,
+                                                 DROP)).fetchall()
+    assert g.series["wind"].extent == (min(r[0] for r in rows), max(r[0] for r in rows))
+    assert g.series["wind"].extent[1] == pytest.approx(gust)
+    assert g.series["wind"].hi < gust - 0.05  # the bins' means stay below it
+    after = _ranges(snap)
+    assert after["wind"][2] == gust
+    for label, (latest, lo, hi) in after.items():
+        assert lo <= latest <= hi, label
 
 
 def test_the_ventilation_estimate_when_a_virtual_sensor_is_set(store: Filled) -> None:

@@ -22,10 +22,11 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
 
+from gateway.estimate.online_output import Counters, Prediction
 from gateway.estimate.sample_check import STUCK_SAMPLES, StuckRun, check_sample
 from gateway.estimate.settings import DEFAULT_ITERATIONS, GroupSettings, online_settings  # noqa: F401 (re-exported)
 from gateway.estimate.swarm import ALMERIA_OFFLINE, SearchResult, bat
@@ -38,35 +39,6 @@ from gateway.series import Series
 
 MIN_RADIATION_PAIRS = 10
 """The radiation sub-model is only re-estimated with at least this many sunlit samples."""
-
-
-@dataclass
-class Prediction:
-    """What ``OnlineEstimator.update`` returns for the sample at t.
-
-    ``t_in``: predicted inside temperature at t + 1 [°C] (None when it cannot be made);
-    ``theta``: parameters in force for that prediction (k,); ``estimated``: outputs whose group
-    ran at this step; ``faults``: columns of this sample that were dropped; ``dead_reckoning``:
-    True when the measured T_in[t] was missing and the previous prediction served as state.
-    """
-
-    t_in: float | None
-    theta: np.ndarray
-    estimated: tuple[str, ...] = ()
-    faults: tuple[str, ...] = ()
-    dead_reckoning: bool = False
-
-
-@dataclass
-class Counters:
-    """Counts for the replay report and the gateway's health page."""
-
-    samples: int = 0
-    faulty_samples: int = 0  # samples with at least one dropped value
-    faults: dict[str, int] = field(default_factory=dict)  # per column and reason
-    estimated: dict[str, int] = field(default_factory=dict)  # per group
-    skipped: dict[str, int] = field(default_factory=dict)  # group due but window incomplete
-    no_prediction: int = 0
 
 
 class OnlineEstimator:

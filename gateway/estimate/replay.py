@@ -35,7 +35,8 @@ import numpy as np
 from gateway.estimate import arx as arx_baseline
 from gateway.estimate import combination, correction, disturbance
 from gateway.estimate.horizon import INSIDE_READINGS, HorizonDrivers, measured_weather_blocks, outlook_drivers
-from gateway.estimate.online import Counters, GroupSettings, OnlineEstimator
+from gateway.estimate.online import GroupSettings, OnlineEstimator
+from gateway.estimate.online_output import Counters
 from gateway.estimate.outlook import Outlook, default_outlook, make_outlook
 from gateway.estimate.sample_check import stuck_limit
 from gateway.greenhouse import Greenhouse

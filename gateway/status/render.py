@@ -151,7 +151,8 @@ def greenhouse_lines(snap: S.Snapshot, index: int) -> list[Text]:
         st = side.status.get(ch, "")
         cell = _channel_value(ch, v, fmt) + (f" {unit}" if v is not None and unit else "")
         s = g.series.get(ch)
-        rng = (f"{number(s.lo, fmt)}..{number(s.hi, fmt)}" if s is not None and s.finite else "no data")
+        vr = S.value_range(s, v, side.t)
+        rng = f"{number(vr[0], fmt)}..{number(vr[1], fmt)}" if vr is not None else "no data"
         style = WARN if st and st != "ok" else ""
         note = f" {st}" if st and st != "ok" else ""
         lines.append(_line(f"{label:<7} ", (f"{cell + note:>10}", style), "  ",

@@ -21,11 +21,14 @@ DAY = 86400.0
 
 @dataclass(frozen=True)
 class Series:
-    """24 h of one quantity in equal bins (oldest first, NaN where no data)."""
+    """24 h of one quantity in equal bins (oldest first, NaN where no data). ``lo``/``hi``: of the
+    bins' means (the sparkline's scale); ``extent``: (min, max) of the points binned, NaN without
+    any (the range shown beside the sparkline: ``value_range``)."""
 
     values: tuple[float, ...]
     start: float  # [unix s] start of the first bin
     end: float  # [unix s] end of the last bin
+    extent: tuple[float, float] = (math.nan, math.nan)
 
     @property
     def finite(self) -> list[float]:
@@ -50,18 +53,37 @@ def span_of(first: float | None, end: float) -> float:
 
 def bin_series(points: Iterable[tuple[float, float | None]], end: float, bins: int = 36,
                span: float = DAY) -> Series:
-    """(t, value) points → the mean of each of ``bins`` equal bins over (end − span, end]."""
+    """(t, value) points → the mean of each of ``bins`` equal bins over (end − span, end], and
+    the points' own min and max there."""
     start = end - span
     width = span / bins
     sums, counts = [0.0] * bins, [0] * bins
+    lo, hi = math.inf, -math.inf
     for t, v in points:
         if v is None or not math.isfinite(v) or not start < t <= end:
             continue
         i = min(int((t - start) / width), bins - 1)
         sums[i] += v
         counts[i] += 1
+        lo, hi = min(lo, v), max(hi, v)
+    extent = (lo, hi) if lo <= hi else (math.nan, math.nan)
     return Series(tuple(s / n if n else math.nan for s, n in zip(sums, counts, strict=True)),
-                  start, end)
+                  start, end, extent)
+
+
+def value_range(series: Series | None, latest: float | None,
+                at: float | None) -> tuple[float, float] | None:
+    """The min..max shown beside a channel's sparkline: of every point of ``series`` (its minutes,
+    not the bins' means, which smooth a gust below the reading it came from) and of the ``latest``
+    reading shown beside it (taken at ``at``, unix s) when that lies in the series' window, so the
+    latest shown is always inside the range, also before its minute is aggregated or when the
+    minute's quality check dropped it. None: nothing to show."""
+    lo, hi = series.extent if series is not None else (math.nan, math.nan)
+    if (series is not None and latest is not None and math.isfinite(latest) and at is not None
+            and series.start < at):
+        lo = latest if math.isnan(lo) else min(lo, latest)
+        hi = latest if math.isnan(hi) else max(hi, latest)
+    return None if math.isnan(lo) else (lo, hi)
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,8 @@ Change kinds, the same physical meaning in each generator (each generator's own 
 ``night_heater`` (25 W m-2 while dark), ``thermal_mass`` (water added), ``sun_sensor`` (inside
 sensor heated by the sun, 0.006 K per W m-2 inside), ``drift`` (0.5 K d-1); outside the
 diagnosis library: ``misting`` (evaporative cooling at midday) and ``controller`` (another vent
-controller).
+controller). The two-node house alone has ``thermostat`` (the air heated to a setpoint: a
+heated house, tests/generality/heated_study.py, which runs it from ``change_day=0``).
 """
 
 from __future__ import annotations
@@ -37,6 +38,8 @@ HELD_OUT = ("vanthoor",)
 KINDS = ("transmission", "ventilation", "heater", "night_heater", "thermal_mass", "sun_sensor",
          "drift")
 OUTSIDE = ("misting", "controller")
+TWONODE_ONLY = ("thermostat",)
+"""Changes only the two-node house has (TWONODE_SPECS): not in the suite's table."""
 EXPECTED = {
     "transmission": {"solar_gain_change"},
     "ventilation": {"extra_ventilation"},
@@ -84,15 +87,24 @@ class KitData:
 
 
 def generate(generator: str, window: Window, kind: str = "none", seed: int = 1,
-             change_day: float = CHANGE_DAY) -> KitData:
-    """Kit data of ``generator`` on ``window`` with the change ``kind`` from ``change_day``."""
+             change_day: float = CHANGE_DAY, amount: float | None = None) -> KitData:
+    """Kit data of ``generator`` on ``window`` with the change ``kind`` from ``change_day`` [d]
+    (0: from the first sample). ``amount``: the two-node house's size of the change in its own
+    unit instead of TWONODE_SPECS' (the ``thermostat`` setpoint [°C]); the other generators
+    take their sizes as they are."""
     if generator not in GENERATORS:
         raise ValueError(f"unknown generator {generator!r} (known: {', '.join(GENERATORS)})")
-    if kind != "none" and kind not in KINDS + OUTSIDE:
-        raise ValueError(f"unknown change {kind!r} (known: {', '.join(KINDS + OUTSIDE)})")
+    known = KINDS + OUTSIDE + (TWONODE_ONLY if generator == "twonode" else ())
+    if kind != "none" and kind not in known:
+        raise ValueError(f"unknown change {kind!r} for {generator} (known: {', '.join(known)})")
+    if amount is not None and (generator != "twonode" or kind == "none"):
+        raise ValueError("amount sizes a two-node house's change only")
     start = None if kind == "none" else window.at_day(change_day)
-    make = {"refsim": _refsim, "twonode": _twonode, "vanthoor": _vanthoor}[generator]
-    time, cols, size = make(window, kind, start, seed)
+    if generator == "twonode":
+        time, cols, size = _twonode(window, kind, start, seed, amount)
+    else:
+        make = {"refsim": _refsim, "vanthoor": _vanthoor}[generator]
+        time, cols, size = make(window, kind, start, seed)
     return KitData(time, cols, generator, window, kind, start, size)
 
 
@@ -169,13 +181,16 @@ TWONODE_SPECS = {"transmission": ("whitening", 0.7), "ventilation": ("door", 4.0
                  "heater": ("heater", 25.0), "night_heater": ("nightheater", 25.0),
                  "thermal_mass": ("barrels", 20e3), "sun_sensor": ("sunsensor", 0.006),
                  "drift": ("drift", 0.5), "misting": ("misting", 60.0),
-                 "controller": ("controller", 0.0)}
+                 "controller": ("controller", 0.0), "thermostat": ("thermostat", 12.0)}
+"""Change kind → (tests/twonode.py's effect, its size): the thermostat's is a setpoint [°C]."""
 
 
-def _twonode(window: Window, kind: str, start, seed: int):
+def _twonode(window: Window, kind: str, start, seed: int, amount: float | None = None):
     from tests import twonode
 
     effect, amp = TWONODE_SPECS.get(kind, (None, None))
+    if amount is not None:
+        amp = amount
     at = None if start is None else str(start)
     w, rec, on, tsec, _, _ = twonode.simulate("house", None, None, effect, at, amp, seed,
                                               weather=window.twonode_weather(),

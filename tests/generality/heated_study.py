@@ -33,9 +33,7 @@ def kit_data(window: str, setpoint: float | None, seed: int = 1) -> gen.KitData:
     w = load_window(window)
     if setpoint is None:
         return gen.generate("twonode", w, "none", seed)
-    gen.TWONODE_SPECS["thermostat"] = ("thermostat", setpoint)
-    time, cols, size = gen._twonode(w, "thermostat", w.at_day(0.0), seed)
-    return gen.KitData(time, cols, "twonode", w, "none", None, size)
+    return gen.generate("twonode", w, "thermostat", seed, change_day=0.0, amount=setpoint)
 
 
 def run(window: str, setpoint: float | None) -> dict:

@@ -103,7 +103,9 @@ def test_a_vented_greenhouse_is_diagnosed_with_the_prototype(tmp_path: Path) -> 
             {"name": "north", "greenhouse": "biskra-prototype", "model": "prototype+vent_control",
              "inside": 7},
             {"name": "south", "greenhouse": "biskra-prototype", "model": "prototype", "inside": 8},
-            {"name": "east", "greenhouse": "almeria-palmerillas", "model": "almeria", "inside": 9}]},
+            {"name": "east", "greenhouse": "almeria-palmerillas", "model": "almeria", "inside": 9},
+            {"name": "west", "greenhouse": "biskra-prototype",
+             "model": "prototype+vent_control+heating", "inside": 10}]},
         "test.toml", tmp_path)
     used = {}
     for g in cfg.greenhouses:
@@ -111,4 +113,5 @@ def test_a_vented_greenhouse_is_diagnosed_with_the_prototype(tmp_path: Path) -> 
         assert cmd[1:4] == ["-m", "gateway", "diagnose"] and cmd[-1] == "--json"
         assert cmd[cmd.index("--data") + 1] == str(tmp_path / f"{g.name}.csv")
         used[g.name] = cmd[cmd.index("--model") + 1]
-    assert used == {"north": "prototype", "south": "prototype", "east": "almeria"}
+    assert used == {"north": "prototype", "south": "prototype", "east": "almeria",
+                    "west": "prototype"}

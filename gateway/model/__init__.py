@@ -8,16 +8,23 @@ from gateway.model.model import Model
 VENTED_PROTOTYPE = "prototype+vent_control"
 """The prototype with the air exchange of vents moved by a climate computer or by hand, which the
 kit does not see (gateway/model/vent_control.py); the shipped gateway.toml's model (issue 10)."""
-MODEL_NAMES = ("prototype", VENTED_PROTOTYPE, "almeria")
+HEATED_PROTOTYPE = "prototype+vent_control+heating"
+"""The vented prototype with the heat of a thermostat-run heater the kit does not see
+(gateway/model/heating_control.py): for a heated house, chosen by its user (docs/effects.md,
+"A heated house")."""
+PROTOTYPES = ("prototype", VENTED_PROTOTYPE, HEATED_PROTOTYPE)
+MODEL_NAMES = (*PROTOTYPES, "almeria")
 
 
 def build_model(name: str, gh: Greenhouse) -> Model:
     """``prototype`` (III.14–III.22), ``prototype+vent_control`` (the same with two more
-    parameters for unseen controller-moved vents) or ``almeria`` (III.23–III.35) for ``gh``."""
-    if name in ("prototype", VENTED_PROTOTYPE):
+    parameters for unseen controller-moved vents), ``prototype+vent_control+heating`` (and two
+    more for an unseen thermostat-run heater) or ``almeria`` (III.23–III.35) for ``gh``."""
+    if name in PROTOTYPES:
         from gateway.model.prototype import build_prototype
 
-        return build_prototype(gh, vent_control=name == VENTED_PROTOTYPE)
+        return build_prototype(gh, vent_control=name != "prototype",
+                               heating=name == HEATED_PROTOTYPE)
     if name == "almeria":
         from gateway.model.almeria import build_almeria
 

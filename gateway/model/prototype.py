@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from gateway.greenhouse import Greenhouse
+from gateway.model.heating_control import HeatingControl
 from gateway.model.model import Model
 from gateway.model.terms import ALWAYS, SUNLIT, FluxTerm, Index, Parameter, const, row_values
 from gateway.model.vent_control import ControlledVentilation
@@ -135,20 +136,28 @@ def prototype_capacity(gh: Greenhouse) -> float:
     return gh.air_density * gh.volume / gh.floor_area
 
 
-def build_prototype(gh: Greenhouse | None = None, vent_control: bool = False) -> Model:
+def build_prototype(gh: Greenhouse | None = None, vent_control: bool = False,
+                    heating: bool = False) -> Model:
     """The four-term model of III.14–III.22 (table 2 constants from ``gh``); ``vent_control``
     adds the air exchange of controller-moved vents (gateway/model/vent_control.py, two more
     parameters; ``--model prototype+vent_control``, the shipped gateway.toml's model since issue
-    10 item 3: docs/effects.md, forecasts)."""
+    10 item 3: docs/effects.md, forecasts); ``heating`` (with ``vent_control``) the heat of a
+    thermostat-run heater (gateway/model/heating_control.py; ``prototype+vent_control+heating``)."""
+    if heating and not vent_control:
+        raise ValueError("the heated prototype is the vented one plus the heater")
     rho = 1.205 if gh is None else gh.air_density
     terms: tuple[FluxTerm, ...] = (SolarGain(), CoverConvection(), AirLeakage(rho), SkyRadiation())
     if vent_control:
         terms += (ControlledVentilation(rho),)
+    if heating:
+        terms += (HeatingControl(),)
+    name = "prototype" + "+vent_control" * vent_control + "+heating" * heating
     return Model(
-        name="prototype+vent_control" if vent_control else "prototype",
+        name=name,
         terms=terms,
         capacity=prototype_capacity,
         description="four-parameter grey-box model of the low-cost kit (III.14–III.22)"
-        + (" with controller-moved vents" if vent_control else ""),
+        + (" with controller-moved vents" if vent_control else "")
+        + (" and a thermostat-run heater" if heating else ""),
         capacity_equation="III.14",
     )

@@ -2,13 +2,14 @@
 
 Every ``every_hours`` (gateway clock) each greenhouse's last ``days`` of minutes are written as a
 kit CSV and handed to ``python -m gateway diagnose --json`` (the diagnosis's own entry point; a
-greenhouse running ``prototype+vent_control`` is diagnosed with ``--model prototype``, whose base
-chooses the vent controller part for itself: ``diagnose_command``) in a subprocess at low
-priority, so ingest and the estimators never wait for it. Its findings are stored under a stable
-identity: a finding of the same effect in the same greenhouse whose start is within ``MATCH_S``
-of a known one *is* that one (a daily re-run moves the estimated start a little); it is published
-again only when it changed (start moved by more than ``MOVE_S`` or amplitude by more than
-``CHANGE_REL``), as a new revision, never re-announced daily.
+greenhouse running ``prototype+vent_control`` or its heated variant is diagnosed with
+``--model prototype``, whose base chooses the vent controller part for itself:
+``diagnose_command``) in a subprocess at low priority, so ingest and the estimators never wait
+for it. Its findings are stored under a stable identity: a finding of the same effect in the same
+greenhouse whose start is within ``MATCH_S`` of a known one *is* that one (a daily re-run moves
+the estimated start a little); it is published again only when it changed (start moved by more
+than ``MOVE_S`` or amplitude by more than ``CHANGE_REL``), as a new revision, never re-announced
+daily.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from gateway.kitcsv import write_kit_csv
-from gateway.model import VENTED_PROTOTYPE
+from gateway.model import PROTOTYPES
 from gateway.service.minutes import KIT_COLUMNS, read_minutes
 from gateway.service.resources import GreenhouseResources
 from gateway.service.settings import GatewayConfig, GreenhouseSettings
@@ -58,7 +59,7 @@ def diagnose_command(g: GreenhouseSettings, data: Path) -> list[str]:
     greenhouse running the vented prototype is diagnosed as the prototype: its base chooses the
     vent controller part for itself (gateway/diagnose/base.py ``options``, on its inner validation
     split), as the diagnosis was tuned and measured (the generality suite's diagnosis cases)."""
-    model = "prototype" if g.model == VENTED_PROTOTYPE else g.model  # as the diagnosis was tuned
+    model = "prototype" if g.model in PROTOTYPES else g.model  # as the diagnosis was tuned
     return [sys.executable, "-m", "gateway", "diagnose", "--data", str(data), "--greenhouse",
             g.greenhouse, "--model", model, "--json"]
 

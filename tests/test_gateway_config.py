@@ -56,7 +56,8 @@ def with_(path: str, value, base: dict | None = None) -> dict:
     ("greenhouse.0.inside", "7", "greenhouse[1].inside: must be a whole number, got '7'"),
     ("greenhouse.0.name", "history", "greenhouse[1].name: 'history' is not usable"),
     ("greenhouse.0.model", "tomato",
-     "greenhouse[1].model: 'tomato' is not one of prototype, prototype+vent_control, almeria"),
+     "greenhouse[1].model: 'tomato' is not one of prototype, prototype+vent_control, "
+     "prototype+vent_control+heating, almeria"),
     ("greenhouse.0.outlook", "crystal-ball", "greenhouse[1].outlook: unknown weather outlook"),
     ("greenhouse.0.greenhouse", "nowhere.toml", "greenhouse[1].greenhouse: "),
     ("greenhouse.0.vents", 3, "greenhouse[1].vents: unknown key"),

@@ -5,18 +5,22 @@ a stable identity, published once (tests/test_gateway_pipeline.py covers the ide
 from __future__ import annotations
 
 import asyncio
+import logging
 import math
+from collections.abc import Callable
 from pathlib import Path
+
+import pytest
 
 from gateway import protocol as p
 from gateway.service.config import parse_config
-from gateway.service.diagnosis import DiagnosisScheduler, diagnose_command
+from gateway.service.diagnosis import DiagnosisRun, DiagnosisScheduler, diagnose_command
 from gateway.service.resources import prepare
 from gateway.store import Store
 from gateway.store.aggregate import aggregate
 from gateway.store.keys import write_keys
 from gateway.store.live import findings
-from tests.gateway_harness import KEY
+from tests.gateway_harness import EPOCH, KEY, sim_trace
 
 START = 1_257_033_600.0  # 2009-11-01T00:00Z
 DAYS = 6.0
@@ -48,23 +52,26 @@ def stored_kit(db: Path) -> float:
     return START + 60 * len(sim.time)
 
 
-def test_scheduled_diagnosis_runs_in_a_subprocess_and_stores_its_findings(tmp_path: Path) -> None:
-    db = tmp_path / "gw.db"
-    end = stored_kit(db)
+def due_scheduler(tmp_path: Path, db: Path, end: float, days: float, min_days: float,
+                  on_findings: Callable[[], None]) -> DiagnosisScheduler:
+    """The scheduler of greenhouse ``north`` (kit 7, the prototype) at gateway time ``end``, a
+    run due."""
     write_keys(tmp_path / "keys.txt", {7: KEY})
     cfg = parse_config({
-        "gateway": {"farm": "f1", "db": "gw.db", "keys": "keys.txt"},
-        "diagnosis": {"every_hours": 24, "days": DAYS, "min_days": 2},
+        "gateway": {"farm": "f1", "db": db.name, "keys": "keys.txt"},
+        "diagnosis": {"every_hours": 24, "days": days, "min_days": min_days},
         "greenhouse": [{"name": "north", "greenhouse": "biskra-prototype", "model": "prototype",
                         "inside": 7}]}, "test.toml", tmp_path)
-    resources = prepare(cfg)
     store = Store(db)
     store.set_meta("diagnosis_last", repr(end - 25 * 3600))  # a run is due
     store.close()
-    woken = []
-    sched = DiagnosisScheduler(cfg, resources, lambda: end, tmp_path, lambda: woken.append(1))
+    return DiagnosisScheduler(cfg, prepare(cfg), lambda: end, tmp_path, on_findings)
 
-    async def one_round() -> None:
+
+def one_round(sched: DiagnosisScheduler) -> DiagnosisRun:
+    """The scheduler's task until greenhouse north's run is done (the diagnose subprocess)."""
+
+    async def until_done() -> None:
         task = asyncio.create_task(sched.run_forever(tick=0.05))
         try:
             for _ in range(6000):  # the subprocess takes seconds; a generous deadline
@@ -79,8 +86,16 @@ def test_scheduled_diagnosis_runs_in_a_subprocess_and_stores_its_findings(tmp_pa
             except asyncio.CancelledError:
                 pass
 
-    asyncio.run(one_round())
-    run = sched.last["north"]
+    asyncio.run(until_done())
+    return sched.last["north"]
+
+
+def test_scheduled_diagnosis_runs_in_a_subprocess_and_stores_its_findings(tmp_path: Path) -> None:
+    db = tmp_path / "gw.db"
+    end = stored_kit(db)
+    woken: list[int] = []
+    sched = due_scheduler(tmp_path, db, end, DAYS, 2, lambda: woken.append(1))
+    run = one_round(sched)
     assert run.ok, run.note
     assert f"diagnosis of {DAYS:.1f} days" in run.note
     store = Store(db)
@@ -92,6 +107,45 @@ def test_scheduled_diagnosis_runs_in_a_subprocess_and_stores_its_findings(tmp_pa
     assert (first.revision, first.published_revision) == (1, 0)  # published once, by the worker
     assert float(store.get_meta("diagnosis_last")) == end  # next run one period later
     store.close()
+
+
+def test_what_the_diagnosis_says_of_the_data_is_kept_with_the_run(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """``diagnose --json`` says what is unusual in the data beside its findings ("notes",
+    gateway/cli/notes.py); the scheduler kept the findings only, and a warning that the figures
+    are likely wrong was lost. Here the kit's clock is 12 h off (its daylight falls in the site's
+    night: site_time_mismatch, a warning) and 1.75 days hold too few out to judge a change
+    (short_heldout, a note): the run keeps both, in the gateway's status, and logs each once."""
+    db = tmp_path / "gw.db"
+    trace = sim_trace(days=2.0)  # from 06:00: 42 h, the least diagnose takes
+    shift = 12 * 3600.0
+    store = Store(db)
+    items = []
+    for k in range(len(trace["t_in"])):
+        vals = [float(trace[c][k]) for c in p.CHANNELS]
+        st = tuple(p.ST_OK if math.isfinite(v) else p.ST_TIMEOUT for v in vals)
+        items.append((p.Record(7, 0, k, k * 60_000, 0, 60.0, tuple(
+            v if math.isfinite(v) else None for v in vals), st), EPOCH + shift + 60 * k + 30))
+    store.write_batch(items)
+    while aggregate(store.conn):
+        pass
+    store.close()
+    end = EPOCH + shift + 60 * len(items)
+    sched = due_scheduler(tmp_path, db, end, 2.0, 1.5, lambda: None)
+    with caplog.at_level(logging.INFO, logger="serra.gateway"):
+        run = one_round(sched)
+    assert run.ok and run.findings == 0, run.note
+    levels = {n["code"]: n["level"] for n in run.notes}
+    assert levels == {"site_time_mismatch": "warning", "short_heldout": "note"}
+    assert all(n["message"] for n in run.notes)
+    assert sched.status()["north"]["notes"] == run.notes  # the status row the service writes
+    said = [(r.levelno, r.getMessage()) for r in caplog.records if "[site_time_mismatch]" in
+            r.getMessage() or "[short_heldout]" in r.getMessage()]
+    text = {n["code"]: n["message"] for n in run.notes}
+    assert said == [
+        (logging.WARNING, f"greenhouse north: diagnosis warning: {text['site_time_mismatch']} "
+                          "[site_time_mismatch]"),
+        (logging.INFO, f"greenhouse north: diagnosis note: {text['short_heldout']} [short_heldout]")]
 
 
 def test_a_vented_greenhouse_is_diagnosed_with_the_prototype(tmp_path: Path) -> None:

@@ -139,6 +139,44 @@ def test_the_range_beside_a_sparkline_holds_the_latest_reading(store: Filled) ->
         assert lo <= latest <= hi, label
 
 
+def test_the_measured_range_is_of_the_measurements_alone(store: Filled) -> None:
+    """Under "Inside T" the range beside "measured" was of the bins of both sparklines, the
+    measured and the +60-min forecasts (12.3..17.9 beside a T in row of 12.8..16.4). It is of the
+    measured minutes and the latest measured alone; the two sparklines keep their common scale,
+    for drawing only. Here two forecasts valid inside the window are far off, one each way."""
+    wall = fresh_status(store) + 0.1  # one instant for every snapshot (a 300x clock)
+    snap = snap_of(store, wall=wall)
+    g = snap.greenhouses[0]
+    ms = g.temperature.measured_series
+    assert ms is not None and snap.now is not None
+    with sqlite3.connect(store.path) as c:  # the minutes the panel bins (each at its middle)
+        rows = [r[0] for r in c.execute(
+            "SELECT value FROM estimates WHERE greenhouse='north' AND name='t_in' AND t+30>? "
+            "AND t+30<=? AND value IS NOT NULL", (ms.start, snap.now))]
+        lo, hi = min(rows + [g.temperature.measured]), max(rows + [g.temperature.measured])
+        valid = "FROM estimates WHERE greenhouse='north' AND name='t_in+60min' AND t+3630<=?"
+        first = c.execute(f"SELECT min(t) {valid}", (snap.now,)).fetchone()[0]
+        last = c.execute(f"SELECT max(t) {valid}", (snap.now,)).fetchone()[0]
+        assert first is not None and last - first > 1800  # not in the same bin
+        c.execute("UPDATE estimates SET value=? WHERE greenhouse='north' AND name='t_in+60min' "
+                  "AND t=?", (hi + 10.0, first))
+        c.execute("UPDATE estimates SET value=? WHERE greenhouse='north' AND name='t_in+60min' "
+                  "AND t=?", (lo - 10.0, last))
+    snap = snap_of(store, wall=wall)
+    t = snap.greenhouses[0].temperature
+    assert t.forecast_series is not None and t.measured_series is not None
+    assert t.forecast_series.hi > hi + 0.5 and t.forecast_series.lo < lo - 0.5
+    lines = [x.plain for x in render.greenhouse_lines(snap, 0)]
+    line = next(x for x in lines if x.startswith("measured "))
+    assert line.endswith(f" {lo:.1f}..{hi:.1f} °C"), line
+    # the sparklines share one scale, the bins' of both, for drawing only
+    scale = (min(t.measured_series.lo, t.forecast_series.lo),
+             max(t.measured_series.hi, t.forecast_series.hi))
+    assert render.sparkline(t.measured_series, *scale) in line
+    ahead = next(x for x in lines if x.startswith("+60 min "))
+    assert render.sparkline(t.forecast_series, *scale) in ahead
+
+
 def test_the_ventilation_estimate_when_a_virtual_sensor_is_set(store: Filled) -> None:
     text = "\n".join(t.plain for t in render.greenhouse_lines(snap_of(store), 0))
     assert "Ventilation no virtual sensor" in text

@@ -22,7 +22,7 @@ import sqlite3
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -132,11 +132,17 @@ def _save_last(conn: sqlite3.Connection, t: float) -> None:
 
 @dataclass
 class DiagnosisRun:
+    """One greenhouse's latest run, as the gateway's status says it (``gateway_status``, row
+    ``diagnosis``). ``notes``: what diagnose said of the data beside its findings, its JSON's
+    ``{code, level, message}`` records as given (gateway/cli/notes.py: data_gaps,
+    site_time_mismatch, short_heldout, …)."""
+
     greenhouse: str
     when: float
     ok: bool
     note: str
     findings: int = 0
+    notes: list[dict[str, str]] = field(default_factory=list)
 
 
 class DiagnosisScheduler:
@@ -150,8 +156,8 @@ class DiagnosisScheduler:
         self.proc: asyncio.subprocess.Process | None = None
 
     def status(self) -> dict[str, Any]:
-        return {g: {"when": r.when, "ok": r.ok, "note": r.note, "findings": r.findings}
-                for g, r in self.last.items()}
+        return {g: {"when": r.when, "ok": r.ok, "note": r.note, "findings": r.findings,
+                    "notes": r.notes} for g, r in self.last.items()}
 
     async def run_forever(self, tick: float = 5.0) -> None:
         d = self.cfg.diagnosis
@@ -207,6 +213,11 @@ class DiagnosisScheduler:
             log.warning(note)
             return DiagnosisRun(name, now, False, note)
         result = json.loads(out)
+        data_notes = list(result.get("notes", []))
+        for d in data_notes:  # each once per run; a warning: the figures are likely wrong
+            log.log(logging.WARNING if d.get("level") == "warning" else logging.INFO,
+                    "greenhouse %s: diagnosis %s: %s [%s]", name, d.get("level", "note"),
+                    d.get("message", ""), d.get("code", "?"))
         notes = await _settled(store_findings, conn, name, result["findings"], now)
         for n in notes:
             log.info(n)
@@ -215,7 +226,7 @@ class DiagnosisScheduler:
         note = (f"greenhouse {name}: diagnosis of {rows / 1440:.1f} days in "
                 f"{time.monotonic() - t0:.0f} s: {len(result['findings'])} finding(s)")
         log.info(note)
-        return DiagnosisRun(name, now, True, note, len(result["findings"]))
+        return DiagnosisRun(name, now, True, note, len(result["findings"]), data_notes)
 
     def kill(self) -> None:
         if self.proc is not None and self.proc.returncode is None:

@@ -178,14 +178,11 @@ def _temperature_lines(t: S.Temperature) -> list[Text]:
         fc = " · ".join(f"+{h} min {v:.2f}" for h, v in sorted(t.forecasts.items()))
         h = max(t.forecasts)
         out.append(_line(f"forecast  {fc} °C", (f" ({t.outlook})", DIM)))
-        lo = min(x for x in (t.measured_series.lo if t.measured_series else math.nan,
-                             t.forecast_series.lo if t.forecast_series else math.nan)
-                 if math.isfinite(x)) if _any_finite(t) else None
-        hi = max(x for x in (t.measured_series.hi if t.measured_series else math.nan,
-                             t.forecast_series.hi if t.forecast_series else math.nan)
-                 if math.isfinite(x)) if _any_finite(t) else None
+        lo, hi = _common_scale(t)
+        vr = S.value_range(t.measured_series, t.measured, t.t)
+        rng = f"{number(vr[0], '{:.1f}')}..{number(vr[1], '{:.1f}')} °C" if vr else "no data"
         out.append(_line(f"{'measured':<9}  ", (f"{sparkline(t.measured_series, lo, hi):<36}", "cyan"),
-                         f" {number(lo, '{:.1f}')}..{number(hi, '{:.1f}')} °C"))
+                         f" {rng}"))
         out.append(_line(f"{f'+{h} min':<9}  ", (f"{sparkline(t.forecast_series, lo, hi):<36}", "magenta"),
                          f" at validity; next {hhmm(t.t + 60 * h)}"))
     skill = [s for s in t.skill if s.n]
@@ -197,8 +194,12 @@ def _temperature_lines(t: S.Temperature) -> list[Text]:
     return out
 
 
-def _any_finite(t: S.Temperature) -> bool:
-    return any(s is not None and s.finite for s in (t.measured_series, t.forecast_series))
+def _common_scale(t: S.Temperature) -> tuple[float | None, float | None]:
+    """The one scale both inside-temperature sparklines are drawn on (measured and forecast
+    comparable by eye): the bins' of both. For drawing only: the range printed beside "measured"
+    is of the measurements (``S.value_range``). (None, None): neither has a bin."""
+    bins = [x for s in (t.measured_series, t.forecast_series) if s is not None for x in s.finite]
+    return (min(bins), max(bins)) if bins else (None, None)
 
 
 def _parameter_lines(g: S.GreenhouseView) -> list[Text]:

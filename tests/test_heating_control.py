@@ -1,5 +1,6 @@
 """A thermostat-run heater the kit does not see (gateway/model/heating_control.py): units, bounds,
-a known value, the exact slope, and the heated prototype holding a cold night's air."""
+a known value, and the heated prototype holding a cold night's air (its exact slope:
+tests/test_model.py, every term of every model)."""
 
 import numpy as np
 import pytest
@@ -31,21 +32,6 @@ def test_known_value_below_and_above_the_setpoint():
     np.testing.assert_allclose(q * 1006.0, 180.0, rtol=1e-3)
     off = HeatingControl().flux(p, x, np.array([[17.0]]), 0)
     assert 0.0 <= float(off[0, 0]) < 1e-4 * float(q[0, 0])
-
-
-def test_slope_is_minus_the_derivative_of_the_flux():
-    rng = np.random.default_rng(5)
-    term = HeatingControl()
-    x = {"t_out": rng.uniform(-5.0, 15.0, 200)}
-    p = {"c_hc": rng.uniform(0.0, 0.2, (4, 1)), "t_hs": rng.uniform(0.0, 25.0, (4, 1))}
-    state = rng.uniform(-5.0, 30.0, (4, 200))
-    t = slice(0, 200)
-    g, s, k = term.linearised(p, x, state, t)
-    h = 1e-5
-    num = -(term.flux(p, x, state + h, t) - term.flux(p, x, state - h, t)) / (2 * h)
-    np.testing.assert_allclose(k, num, rtol=1e-5, atol=1e-12)
-    g0, s0 = term.coefficients(p, x, state, t)
-    np.testing.assert_allclose(g - s * state, g0 - s0 * state, rtol=1e-12)
 
 
 def test_the_model_name_builds_the_vented_prototype_plus_the_heater(prototype_gh):

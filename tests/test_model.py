@@ -36,6 +36,15 @@ def prototype_vc(weather_minutes, prototype_gh):
     return model, prepare_drivers(series, prototype_gh), prototype_gh
 
 
+@pytest.fixture(scope="module")
+def prototype_hc(prototype_vc):
+    """The vented prototype with a thermostat-run heater (gateway/model/heating_control.py)."""
+    from gateway.model.prototype import build_prototype
+
+    _, x, gh = prototype_vc
+    return build_prototype(gh, vent_control=True, heating=True), x, gh
+
+
 def random_population(model, gh, n, seed=0):
     lo, hi = model.bounds(gh)
     return lo + np.random.default_rng(seed).random((n, len(lo))) * (hi - lo)
@@ -247,7 +256,7 @@ def test_free_run_is_stable_for_15_days_at_every_corner_of_the_box(weather_minut
     assert model.capacity(almeria_gh) / hi[model.index("c_cnd_cnv")] < 60.0
 
 
-@pytest.mark.parametrize("which", ["almeria", "prototype", "prototype_vc"])
+@pytest.mark.parametrize("which", ["almeria", "prototype", "prototype_vc", "prototype_hc"])
 def test_each_terms_slope_is_minus_the_derivative_of_its_flux(which, request):
     """FluxTerm.linearised: k = -dQ/dT_in (central differences), for a population over a day."""
     model, x, gh = request.getfixturevalue(which)

@@ -30,6 +30,7 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from gateway.model import PROTOTYPES  # noqa: E402
 from tests.generality.cases import FORECAST_MODEL, Case, run  # noqa: E402
 from tests.generality.generators import GENERATORS, HELD_OUT  # noqa: E402
 from tests.generality.report import MAIN_WINDOWS, goals  # noqa: E402
@@ -125,8 +126,7 @@ def rescore(folder: Path, blocks: Callable | None = None) -> list[dict]:
         if blocks is not None:
             res.ahead = blocks(res)
         score_forecasts(res, steps_of(HORIZONS, res.dt))
-        vented = any(t.name == "q_vent_control" for t in res.model.terms)
-        case = Case("forecast", generator, window, model="prototype+vent_control" if vented else "prototype")
+        case = Case("forecast", generator, window, model=res.model.name)
         results.append({"case": asdict(case), **forecast_report(res),
                         "seconds": time.perf_counter() - t0})
     return results
@@ -137,9 +137,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2, help="parallel processes (2)")
     ap.add_argument("--generators", default=",".join(GENERATORS))
     ap.add_argument("--windows", default=",".join(MAIN_WINDOWS))
-    ap.add_argument("--model", default=FORECAST_MODEL, choices=("prototype", "prototype+vent_control"),
+    ap.add_argument("--model", default=FORECAST_MODEL, choices=PROTOTYPES,
                     help=f"the replayed model ({FORECAST_MODEL}, the live default; prototype: the "
-                    "four-parameter model without gateway/model/vent_control.py)")
+                    "four-parameter model without gateway/model/vent_control.py; "
+                    "prototype+vent_control+heating: with a thermostat-run heater, opt-in)")
     ap.add_argument("--json", default=str(RESULTS), help=f"results file ({RESULTS.relative_to(ROOT)})")
     ap.add_argument("--keep", metavar="DIR", help="also pickle each replay into DIR (to study the "
                     "forecasts without replaying again)")

@@ -176,11 +176,12 @@ def test_the_last_run_is_shown_again_after_a_restart(tmp_path: Path) -> None:
     store.close()
     src = StoreSource(db)
     try:
-        words = src.snapshot(wall=later).gateway.diagnosis["north"]
+        shown = src.snapshot(wall=later).gateway.diagnosis["north"]
     finally:
         src.close()
     stamp = time.strftime("%Y-%m-%d %H:%M", time.gmtime(end))
-    assert words.startswith(f"last run {stamp} ok, 0 findings (greenhouse north: diagnosis of ")
+    assert shown.words.startswith(f"last run {stamp} ok, 0 findings (greenhouse north: diagnosis")
+    assert [code for code, _ in shown.warnings] == ["site_time_mismatch"]
 
 
 def test_a_kept_run_that_cannot_be_read_is_said_and_left_out(

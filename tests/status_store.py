@@ -70,7 +70,8 @@ def gh_config(name: str = "north", inside: int = 7, vsensor: str | None = None) 
 def status_rows(now: float, *, heartbeat: float | None = None, peers: int = 1,
                 pending: int = 0, waiting: tuple[str, ...] = (), scale: float = 300.0,
                 alarm_at: int = 800,
-                ingest: dict[str, int] | None = None, refused: dict | None = None) -> dict[str, Any]:
+                ingest: dict[str, int] | None = None, refused: dict | None = None,
+                diagnosis: dict | None = None) -> dict[str, Any]:
     beat = time.time() if heartbeat is None else heartbeat
     rows: dict[str, Any] = {
         "gateway": {"pid": 4242, "started": beat - 3600, "heartbeat": beat, "uptime_s": 3600.0,
@@ -88,6 +89,8 @@ def status_rows(now: float, *, heartbeat: float | None = None, peers: int = 1,
     }
     if refused is not None:
         rows["refused"] = refused
+    if diagnosis is not None:  # greenhouse → DiagnosisRun.row() (gateway/service/diagnosis.py)
+        rows["diagnosis"] = diagnosis
     return rows
 
 

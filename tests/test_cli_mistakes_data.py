@@ -4,6 +4,8 @@ was wrong, exit status 2, never a traceback."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -53,6 +55,72 @@ def test_vsensor_missing_sensor_file_is_named(capsys, tmp_path):
     assert main(["vsensor", "--data", str(data), "--greenhouse", "biskra-prototype",
                  "--model-kind", "prototype", "--sensor", str(onnx)]) == 2
     assert f"--sensor {onnx}: no such file" in one_error_line(capsys)
+
+
+def _vsensor_on(data, kind: str, greenhouse: str, *more: str) -> int:
+    return main(["vsensor", "--data", str(data), "--greenhouse", greenhouse, "--model-kind", kind,
+                 "--no-baselines", *more])
+
+
+@pytest.mark.parametrize(("kind", "greenhouse", "drop", "said"), [
+    ("prototype", "biskra-prototype", ("rh_in",),
+     "no column rh_in (the sensor's inputs drh_in_out, vpd_in)"),
+    ("prototype", "biskra-prototype", ("rh_in", "rh_out"),
+     "no column rh_in (the sensor's inputs drh_in_out, vpd_in); no column rh_out (the sensor's "
+     "input drh_in_out)"),
+    ("almeria", "almeria-palmerillas", ("rh_out",),
+     "no column rh_out (the sensor's input drh_in_out)")])
+def test_vsensor_without_a_column_its_sensor_reads_names_the_file_column_and_sensor(
+        capsys, tmp_path, kind, greenhouse, drop, said):
+    """A CSV without a column the sensor makes an input from ran with that input NaN on every
+    minute (all flagged); it is now one line naming the file, the column(s), the inputs made
+    from them and the sensor."""
+    from gateway.vsensor.models import shipped_model
+
+    full = kit_csv(tmp_path, name="full.csv")
+    lines = full.read_text().splitlines()
+    header = lines[0].split(",")
+    keep = [i for i, h in enumerate(header) if h not in drop]
+    extra = ",t_soil" if kind == "almeria" else ""
+    rows = [",".join(header[i] for i in keep) + extra]
+    rows += [",".join(r.split(",")[i] for i in keep) + (",18.0" if extra else "")
+             for r in lines[1:]]
+    data = tmp_path / "lacks.csv"
+    data.write_text("\n".join(rows) + "\n")
+    assert _vsensor_on(data, kind, greenhouse) == 2
+    assert one_error_line(capsys) == (
+        f"error: {data}: {said}: the virtual sensor {shipped_model(kind)} ({kind} kind) cannot "
+        "run without them; give the column(s) with values (cells left empty here and there only "
+        "flag their minutes)")
+
+
+def test_vsensor_with_a_column_empty_everywhere_or_here_and_there(capsys, tmp_path):
+    """A column with no value at all is as good as absent (refused, named); one with some
+    empty cells runs as before, those minutes flagged for the missing input."""
+    full = kit_csv(tmp_path, name="full.csv")
+    lines = full.read_text().splitlines()
+    col = lines[0].split(",").index("rh_in")
+
+    def blank(name: str, rows: set[int]) -> object:
+        out = [lines[0]]
+        for k, r in enumerate(lines[1:]):
+            cells = r.split(",")
+            cells[col] = "" if k in rows else cells[col]
+            out.append(",".join(cells))
+        path = tmp_path / name
+        path.write_text("\n".join(out) + "\n")
+        return path
+
+    empty = blank("empty.csv", set(range(len(lines))))
+    assert _vsensor_on(empty, "prototype", "biskra-prototype") == 2
+    line = one_error_line(capsys)
+    assert line.startswith(f"error: {empty}: column rh_in is empty (the sensor's inputs "
+                           "drh_in_out, vpd_in): the virtual sensor ")
+    holes = blank("holes.csv", set(range(10, 20)))
+    assert _vsensor_on(holes, "prototype", "biskra-prototype", "--json") == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["missing_by_input"]["drh_in_out"] > 0 and rep["flagged"] >= rep["missing"] > 0
+    assert "data_gaps" in [n["code"] for n in rep["notes"]]
 
 
 def test_a_typo_in_the_header_names_the_unknown_column_and_the_kit_name(capsys, tmp_path):

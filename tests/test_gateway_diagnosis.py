@@ -7,6 +7,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -16,10 +17,11 @@ from gateway import protocol as p
 from gateway.service.config import parse_config
 from gateway.service.diagnosis import DiagnosisRun, DiagnosisScheduler, diagnose_command
 from gateway.service.resources import prepare
+from gateway.status.store_source import StoreSource
 from gateway.store import Store
 from gateway.store.aggregate import aggregate
 from gateway.store.keys import write_keys
-from gateway.store.live import findings
+from gateway.store.live import findings, set_status
 from tests.gateway_harness import EPOCH, KEY, sim_trace
 
 START = 1_257_033_600.0  # 2009-11-01T00:00Z
@@ -109,15 +111,10 @@ def test_scheduled_diagnosis_runs_in_a_subprocess_and_stores_its_findings(tmp_pa
     store.close()
 
 
-def test_what_the_diagnosis_says_of_the_data_is_kept_with_the_run(
-        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
-    """``diagnose --json`` says what is unusual in the data beside its findings ("notes",
-    gateway/cli/notes.py); the scheduler kept the findings only, and a warning that the figures
-    are likely wrong was lost. Here the kit's clock is 12 h off (its daylight falls in the site's
-    night: site_time_mismatch, a warning) and 1.75 days hold too few out to judge a change
-    (short_heldout, a note): the run keeps both, in the gateway's status, and logs each once."""
-    db = tmp_path / "gw.db"
-    trace = sim_trace(days=2.0)  # from 06:00: 42 h, the least diagnose takes
+def shifted_kit(db: Path) -> float:
+    """42 h of the simulated kit (from 06:00, the least diagnose takes) whose clock is 12 h off,
+    stored as its records; returns the end time."""
+    trace = sim_trace(days=2.0)
     shift = 12 * 3600.0
     store = Store(db)
     items = []
@@ -130,7 +127,18 @@ def test_what_the_diagnosis_says_of_the_data_is_kept_with_the_run(
     while aggregate(store.conn):
         pass
     store.close()
-    end = EPOCH + shift + 60 * len(items)
+    return EPOCH + shift + 60 * len(items)
+
+
+def test_what_the_diagnosis_says_of_the_data_is_kept_with_the_run(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """``diagnose --json`` says what is unusual in the data beside its findings ("notes",
+    gateway/cli/notes.py); the scheduler kept the findings only, and a warning that the figures
+    are likely wrong was lost. Here the kit's clock is 12 h off (its daylight falls in the site's
+    night: site_time_mismatch, a warning) and 1.75 days hold too few out to judge a change
+    (short_heldout, a note): the run keeps both, in the gateway's status, and logs each once."""
+    db = tmp_path / "gw.db"
+    end = shifted_kit(db)
     sched = due_scheduler(tmp_path, db, end, 2.0, 1.5, lambda: None)
     with caplog.at_level(logging.INFO, logger="serra.gateway"):
         run = one_round(sched)
@@ -146,6 +154,57 @@ def test_what_the_diagnosis_says_of_the_data_is_kept_with_the_run(
         (logging.WARNING, f"greenhouse north: diagnosis warning: {text['site_time_mismatch']} "
                           "[site_time_mismatch]"),
         (logging.INFO, f"greenhouse north: diagnosis note: {text['short_heldout']} [short_heldout]")]
+
+
+def test_the_last_run_is_shown_again_after_a_restart(tmp_path: Path) -> None:
+    """The scheduler held its last run in memory only: after a restart the status had no
+    diagnosis row until the next run, a day later. Now each run is kept in the store, and a new
+    scheduler on the same file (a restart) has it, notes and all, before any run of its own; the
+    status screen shows it from the status row the service writes."""
+    db = tmp_path / "gw.db"
+    end = shifted_kit(db)
+    sched = due_scheduler(tmp_path, db, end, 2.0, 1.5, lambda: None)
+    run = one_round(sched)
+    assert run.ok and {n["code"] for n in run.notes} == {"site_time_mismatch", "short_heldout"}
+    later = end + 3600.0  # an hour on: the next run is 23 h away
+    restarted = DiagnosisScheduler(sched.cfg, sched.resources, lambda: later, tmp_path,
+                                   lambda: None)
+    assert restarted.last == {"north": run}
+    assert restarted.status() == sched.status() == {"north": run.row()}
+    store = Store(db)
+    set_status(store.conn, {"diagnosis": restarted.status()}, later)  # as the worker writes it
+    store.close()
+    src = StoreSource(db)
+    try:
+        shown = src.snapshot(wall=later).gateway.diagnosis["north"]
+    finally:
+        src.close()
+    stamp = time.strftime("%Y-%m-%d %H:%M", time.gmtime(end))
+    assert shown.words.startswith(f"last run {stamp} ok, 0 findings (greenhouse north: diagnosis")
+    assert [code for code, _ in shown.warnings] == ["site_time_mismatch"]
+
+
+def test_a_kept_run_that_cannot_be_read_is_said_and_left_out(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """A damaged ``meta`` row does not stop the gateway: a warning names the store, the row and
+    what is wrong, and the status has no row for that greenhouse until its next run."""
+    db = tmp_path / "gw.db"
+    bad = [('{"when": "yesterday", "ok": true, "note": "", "findings": 0, "notes": []}',
+            "key 'when': 'yesterday' is not a number"),
+           ('{"when": 1, "ok": true, "note": "", "findings": 0, "notes": ["x"]}',
+            "key 'notes': every note must be a {code, level, message} object"),
+           ("{not json", "not JSON (Expecting property name")]
+    for value, why in bad:
+        store = Store(db)
+        store.set_meta("diagnosis_run/north", value)
+        store.close()
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="serra.gateway"):
+            sched = due_scheduler(tmp_path, db, START, 2.0, 1.5, lambda: None)
+        assert sched.last == {} and sched.status() == {}
+        (said,) = [r.getMessage() for r in caplog.records]
+        assert said.startswith(f"{db}: meta diagnosis_run/north: not a diagnosis run, ignored: "
+                               f"{why}"), said
 
 
 def test_a_vented_greenhouse_is_diagnosed_with_the_prototype(tmp_path: Path) -> None:

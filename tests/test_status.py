@@ -229,6 +229,54 @@ def test_empty_store_and_ingest_only_store(tmp_path: Path) -> None:
     assert attention(snap) == []
 
 
+def diagnosis_run(now: float, *notes: tuple[str, str]) -> dict:
+    """A greenhouse's ``diagnosis`` status row as the service writes it, with notes
+    (code, level) whose messages are as long as diagnose's."""
+    said = {"site_time_mismatch": "96 % of the radiation above 50 W m-2 is measured while the "
+            "sun is below the horizon at latitude 34.85, longitude 5.73 (east positive)",
+            "short_heldout": "only 0.8 days are held out"}
+    return {"when": now - 3600, "ok": True, "findings": 0,
+            "note": "greenhouse north: diagnosis of 1.8 days in 12 s: 0 finding(s)",
+            "notes": [{"code": c, "level": lv, "message": said.get(c, f"{c} went wrong")}
+                      for c, lv in notes]}
+
+
+def test_the_diagnosis_warnings_are_shown_under_its_run(store: Filled) -> None:
+    """The run's notes were kept in its status row but not shown. A warning (the figures are
+    likely wrong) now gets a line of its own under the run on the gateway panel and is named on
+    the greenhouse's findings line; a plain note adds nothing (it is in the row and the log)."""
+    run = diagnosis_run(store.now, ("site_time_mismatch", "warning"), ("short_heldout", "note"))
+    beat = fresh_status(store, diagnosis={"north": run})
+    snap = snap_of(store, wall=beat + 0.1)
+    gw = [t.plain for t in render.gateway_lines(snap)]
+    i = next(k for k, line in enumerate(gw) if line.startswith("Diagnosis  north: last run "))
+    assert gw[i + 1].startswith("           warning site_time_mismatch: 96 % of the radiation ")
+    assert gw[i + 1].endswith("…") and len(gw[i + 1]) == render.WIDTH  # cut, never wrapped
+    assert not gw[i + 2].startswith("     ")  # one warning, one line; no line for the note
+    text = render.plain(snap)
+    assert "Findings   1 · diagnosis warning: site_time_mismatch (last run " in text
+    assert gw[i + 1] in text  # --once has it too
+    quiet = diagnosis_run(store.now, ("short_heldout", "note"))
+    snap = snap_of(store, wall=fresh_status(store, diagnosis={"north": quiet}) + 0.1)
+    gw = [t.plain for t in render.gateway_lines(snap)]
+    i = next(k for k, line in enumerate(gw) if line.startswith("Diagnosis  north: last run "))
+    text = render.plain(snap)
+    assert not gw[i + 1].startswith("     ") and "warning " not in text and "short_" not in text
+    many = diagnosis_run(store.now, *[(f"code_{k}", "warning") for k in range(5)])
+    snap = snap_of(store, wall=fresh_status(store, diagnosis={"north": many}) + 0.1)
+    gw = [t.plain for t in render.gateway_lines(snap)]
+    i = next(k for k, line in enumerate(gw) if line.startswith("Diagnosis  north: last run "))
+    assert gw[i + 1:i + 5] == ["           warning code_0: code_0 went wrong",
+                               "           warning code_1: code_1 went wrong",
+                               "           warning code_2: code_2 went wrong",
+                               "           and 2 more warnings (the gateway's log)"]
+    findings_line = next(t.plain for t in render.greenhouse_lines(snap, 0)
+                         if t.plain.startswith("Findings"))
+    assert findings_line.startswith("Findings   1 · diagnosis warnings: code_0, code_1, code_2, ")
+    assert all(len(t.plain) <= render.WIDTH for panel in render.PANELS
+               for t in render.panel_lines(snap, panel))
+
+
 def test_every_panel_line_fits_80_columns(store: Filled) -> None:
     beat = fresh_status(store, peers=0, waiting=("a", "b"), pending=900,
                         ingest={"stored": 10**7, "duplicate": 10**6, "bad_tag": 12345,

@@ -8,9 +8,12 @@ import pytest
 
 from gateway.greenhouse import load_greenhouse
 from gateway.vsensor.features import (
+    EXTRAS,
+    columns_read,
     feature_names,
     filter_gains,
     flow_from_heat_loss,
+    flux_names,
     heat_loss,
     low_pass,
     raw_features,
@@ -65,6 +68,25 @@ def test_the_inside_vapour_pressure_deficit_input_against_published_values():
     assert feature_names("prototype", ("vpd_in",))[-1] == "vpd_in"
     np.testing.assert_allclose(raw[:2, -1], [1.584, 0.246], atol=2e-3)
     assert np.isnan(raw[2, -1])
+
+
+@pytest.mark.parametrize("kind", ["almeria", "prototype"])
+def test_the_columns_read_are_those_the_inputs_are_made_from(kind):
+    """``columns_read`` (what vsensor checks the CSV for) against the code that makes the
+    inputs: with a column all NaN, exactly the inputs it names are NaN, and every measured
+    input is made from some column."""
+    extra = tuple(EXTRAS)
+    names = feature_names(kind, extra)
+    x = {c: np.full(2, 20.0) for c in ("t_in", "t_out", "rh_in", "rh_out", "wind")}
+    fluxes = {n: np.zeros(2) for n in flux_names(kind)}
+    assert np.all(np.isfinite(raw_features(kind, x, fluxes, extra)))
+    reads = columns_read(kind, extra)
+    assert set(reads) == set(x)
+    for col, inputs in reads.items():
+        raw = raw_features(kind, {**x, col: np.full(2, np.nan)}, fluxes, extra)
+        assert [n for j, n in enumerate(names) if np.isnan(raw[0, j])] == list(inputs)
+    made = {n for inputs in reads.values() for n in inputs}
+    assert made == set(names) - set(flux_names(kind))
 
 
 def test_dataset_inputs_and_target():

@@ -19,6 +19,10 @@ from gateway.series import Series
 
 SKY_COMMANDS = ("replay", "diagnose")
 """Commands that read the sky temperature whatever the model (see the module docstring)."""
+NO_VENT_COMMANDS = ("vsensor",)
+"""Commands whose model runs without the vent openings by design (vsensor's inputs are its
+replay without them, docs/vsensor.md): no note for openings the data lacks; they decide only
+whether the run is scored against the explicit flow (``reference`` null without them)."""
 HUMIDITY_EVIDENCE = ("the diagnosis's humidity evidence (the night vapour balance that tells "
                      "more air exchange from less sun, docs/effects.md, \"Humidity evidence\") "
                      "is off, and the temperatures alone decide")
@@ -60,7 +64,7 @@ def column_notes(series: Series, gh: Greenhouse, model: Model, data: str,
         if how:
             out.append(("no_rh_in", f"{data}: {how} (inside relative humidity): "
                         f"{HUMIDITY_EVIDENCE}"))
-    if {"vent_roof", "vent_side"} & used:
+    if {"vent_roof", "vent_side"} & used and command not in NO_VENT_COMMANDS:
         out += vent_openings(series, gh, model, data)
     if "lai" in used and missing(series, "lai"):
         zero = " (0: no transpiration at all)" if gh.crop.lai <= 0 else ""

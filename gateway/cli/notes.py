@@ -1,6 +1,6 @@
-"""What calibrate, replay and diagnose say beside their figures about unusual but valid data
-(docs/data-format.md, "Notes"): holes, a missing site, a site or clock off by hours, an optional
-column the model reads but the data lacks, a record too short to judge.
+"""What calibrate, replay, diagnose and vsensor say beside their figures about unusual but valid
+data (docs/data-format.md, "Notes"): holes, a missing site, a site or clock off by hours, an
+optional column the model reads but the data lacks, a record too short to judge.
 
 One place builds the notes of a run: :func:`input_notes` when the data is loaded,
 :func:`short_heldout_note` after a diagnosis, :func:`params_notes` for ``replay --params``,
@@ -63,13 +63,16 @@ def text_block(notes: Sequence[Note]) -> str:
 
 
 def input_notes(series: Series, gh: Greenhouse, model: Model, data: str, greenhouse: str,
-                command: str | None = None) -> list[Note]:
+                command: str | None = None, needs: Sequence[str] = ()) -> list[Note]:
     """Every note the loaded data gives rise to, in the order they are printed: the CSV
-    reader's notices, holes in the columns the model needs, no site, daylight in the site's
-    night, optional columns the run reads but the data lacks (column_notes.py).
-    ``command``: ``calibrate``, ``replay`` or ``diagnose`` (what reads which column)."""
+    reader's notices, holes in the columns the model needs (and ``needs``, the columns the run
+    reads besides: vsensor's inputs), no site, daylight in the site's night, optional columns
+    the run reads but the data lacks (column_notes.py). ``command``: ``calibrate``,
+    ``replay``, ``diagnose`` or ``vsensor`` (what reads which column)."""
     notes = [Note("csv_reader", text, echo=False) for text in series.notices]
-    gap = gap_note(series, model.requires)
+    extra = [c for c in needs if c not in model.requires]
+    gap = gap_note(series, [*model.requires, *extra],
+                   "the model or the sensor" if extra else "the model")
     if gap:
         notes.append(Note("data_gaps", f"{data}: {gap}"))
     if gh.site is None:
@@ -141,11 +144,12 @@ def night_radiation_note(series: Series, gh: Greenhouse) -> str | None:
             "the outlook are read against the wrong sun (docs/data-format.md)")
 
 
-def gap_note(series: Series, names: tuple[str, ...] | list[str]) -> str | None:
-    """What the data lacks on the grid, said once: rows without a value of a column the model
-    needs (gaps longer than the interpolation limit, empty cells), as holes, with the longest
-    one's length and start; None when nothing is missing. Nothing is filled in beyond the
-    interpolation of docs/data-format.md."""
+def gap_note(series: Series, names: tuple[str, ...] | list[str], who: str = "the model"
+             ) -> str | None:
+    """What the data lacks on the grid, said once: rows without a value of a column ``who``
+    needs (``names``; gaps longer than the interpolation limit, empty cells), as holes, with
+    the longest one's length and start; None when nothing is missing. Nothing is filled in
+    beyond the interpolation of docs/data-format.md."""
     cols = [series[c] for c in names if c in series.columns]
     if not cols or len(series) == 0:
         return None
@@ -158,7 +162,7 @@ def gap_note(series: Series, names: tuple[str, ...] | list[str]) -> str | None:
     minutes = (ends[k] - starts[k]) * series.step / 60.0
     length = f"{minutes / 60.0:.1f} h" if minutes >= 120 else f"{minutes:g} min"
     return (f"{int(missing.sum())} of {len(series)} rows on the {series.step:g} s grid lack a "
-            f"value the model needs, in {len(starts)} hole(s), the longest {length} from "
+            f"value {who} needs, in {len(starts)} hole(s), the longest {length} from "
             f"{series.time[starts[k]]}Z; no value is made up for them (docs/data-format.md)")
 
 

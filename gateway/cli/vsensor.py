@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Sequence
 
 from gateway.cli import CliError
+from gateway.cli.column_notes import missing
 from gateway.cli.common import (
     add_site_argument,
     check_output,
@@ -14,12 +16,12 @@ from gateway.cli.common import (
     with_site,
     writing,
 )
-from gateway.cli.notes import Note, as_json, echo, site_note_text, text_block, vsensor_notes
+from gateway.cli.notes import as_json, echo, input_notes, text_block, vsensor_notes
 from gateway.greenhouse import GreenhouseError, list_presets, load_greenhouse
 from gateway.kitcsv import KitCsvError
 from gateway.model import MODEL_NAMES, build_model
-from gateway.series import load_series
-from gateway.vsensor.features import MODEL_KINDS
+from gateway.series import Series, load_series
+from gateway.vsensor.features import MODEL_KINDS, columns_read
 
 SHIPPED = "the model shipped for the kind (gateway/vsensor/models/<kind>.onnx)"
 
@@ -68,10 +70,7 @@ def run(args: argparse.Namespace) -> int:
     check_output(args.out, "--out", inputs={"--data": args.data, "--greenhouse": args.greenhouse,
                                             "--sensor": args.sensor})
     try:
-        gh = load_greenhouse(args.greenhouse)
-        gh = with_site(gh, args.site)
-        site = [] if gh.site is not None else [Note("no_site", site_note_text(args.greenhouse))]
-        echo(site)
+        gh = with_site(load_greenhouse(args.greenhouse), args.site)
         model = build_model(args.model_kind, gh)
     except GreenhouseError as exc:
         raise CliError(str(exc)) from None
@@ -79,13 +78,16 @@ def run(args: argparse.Namespace) -> int:
         series = load_series(args.data, step=60.0, required=model.requires)
     except KitCsvError as exc:
         raise CliError(str(exc)) from None
-    notes = [Note("csv_reader", text, echo=False) for text in series.notices] + site
     try:
         path = args.sensor or shipped_model(args.model_kind)
     except FileNotFoundError as exc:
         raise CliError(str(exc)) from None
     try:
         sensor = VentSensor(path, gh, args.model_kind, clamp_inputs=args.clamp_inputs)
+        reads = columns_read(args.model_kind, sensor.extra)
+        check_columns(series, args.data, str(path), args.model_kind, reads, model.requires)
+        notes = input_notes(series, gh, model, args.data, args.greenhouse, "vsensor", list(reads))
+        echo(notes)
         replays = replays_needed(sensor, series, gh, args.model_kind)
         with progress_bar("vsensor", replays * len(series), True) as bar:
             result = run_series(path, series, gh, args.model_kind, seed=args.seed,
@@ -115,6 +117,28 @@ def run(args: argparse.Namespace) -> int:
         with writing("--out", args.out):
             write_flows(result, args.out)
     return 0
+
+
+def check_columns(series: Series, data: str, sensor: str, kind: str,
+                  reads: dict[str, tuple[str, ...]], requires: Sequence[str]) -> None:
+    """Every column the sensor makes its inputs from (``reads``: column → inputs,
+    ``features.columns_read``) and every column its ``kind`` model needs must hold values:
+    without one, every minute would be flagged for a missing input. A column with values on
+    some rows only is fine (its empty minutes are flagged). CliError naming the file, each
+    column missing or empty and what reads it."""
+    bad = []
+    for col, inputs in reads.items():
+        how = missing(series, col)
+        if how:
+            bad.append(f"{how} (the sensor's input{'s' * (len(inputs) > 1)} {', '.join(inputs)})")
+    for col in requires:
+        how = missing(series, col)
+        if how and col not in reads:
+            bad.append(f"{how} (the '{kind}' model's fluxes)")
+    if bad:
+        raise CliError(f"{data}: {'; '.join(bad)}: the virtual sensor {sensor} ({kind} kind) "
+                       "cannot run without them; give the column(s) with values (cells left "
+                       "empty here and there only flag their minutes)")
 
 
 def sensor_file(path: str | None) -> None:

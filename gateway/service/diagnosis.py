@@ -9,7 +9,8 @@ for it. Its findings are stored under a stable identity: a finding of the same e
 greenhouse whose start is within ``MATCH_S`` of a known one *is* that one (a daily re-run moves
 the estimated start a little); it is published again only when it changed (start moved by more
 than ``MOVE_S`` or amplitude by more than ``CHANGE_REL``), as a new revision, never re-announced
-daily.
+daily. Each greenhouse's last run (time, outcome, summary, notes) is kept in the store's ``meta``
+(:data:`RUN_META`), so the status shows it again right after a restart.
 """
 
 from __future__ import annotations
@@ -133,9 +134,9 @@ def _save_last(conn: sqlite3.Connection, t: float) -> None:
 @dataclass
 class DiagnosisRun:
     """One greenhouse's latest run, as the gateway's status says it (``gateway_status``, row
-    ``diagnosis``). ``notes``: what diagnose said of the data beside its findings, its JSON's
-    ``{code, level, message}`` records as given (gateway/cli/notes.py: data_gaps,
-    site_time_mismatch, short_heldout, …)."""
+    ``diagnosis``). ``when``: gateway clock [unix s]. ``notes``: what diagnose said of the data
+    beside its findings, its JSON's ``{code, level, message}`` records as given
+    (gateway/cli/notes.py: data_gaps, site_time_mismatch, short_heldout, …)."""
 
     greenhouse: str
     when: float
@@ -144,20 +145,83 @@ class DiagnosisRun:
     findings: int = 0
     notes: list[dict[str, str]] = field(default_factory=list)
 
+    def row(self) -> dict[str, Any]:
+        """The run as the status row (and the store's ``meta``) hold it."""
+        return {"when": self.when, "ok": self.ok, "note": self.note, "findings": self.findings,
+                "notes": self.notes}
+
+
+RUN_META = "diagnosis_run/"
+"""``meta`` name prefix of a greenhouse's last run (``diagnosis_run/<greenhouse>``, JSON of
+:meth:`DiagnosisRun.row`): the status shows it again right after a restart."""
+
+
+def save_run(conn: sqlite3.Connection, run: DiagnosisRun) -> None:
+    """Keep ``run`` as its greenhouse's last run (replacing the one before)."""
+    conn.execute("INSERT OR REPLACE INTO meta (name, value) VALUES (?, ?)",
+                 (RUN_META + run.greenhouse, json.dumps(run.row())))
+
+
+def _run_of(greenhouse: str, value: str) -> DiagnosisRun:
+    """A stored run back; ValueError saying what is wrong with it."""
+    try:
+        d = json.loads(value)
+    except json.JSONDecodeError as e:
+        raise ValueError(f"not JSON ({e})") from None
+    if not isinstance(d, dict):
+        raise ValueError(f"a JSON object expected, got {type(d).__name__}")
+    kinds = {"when": ((int, float), "a number"), "ok": ((bool,), "true or false"),
+             "note": ((str,), "a string"), "findings": ((int,), "a whole number"),
+             "notes": ((list,), "a list")}
+    for key, (types, what) in kinds.items():
+        v = d.get(key)
+        if not isinstance(v, types) or (key != "ok" and isinstance(v, bool)):
+            raise ValueError(f"key {key!r}: {v!r} is not {what}")
+    if not all(isinstance(n, dict) for n in d["notes"]):
+        raise ValueError("key 'notes': every note must be a {code, level, message} object")
+    return DiagnosisRun(greenhouse, float(d["when"]), d["ok"], d["note"], d["findings"],
+                        list(d["notes"]))
+
+
+def load_runs(conn: sqlite3.Connection, greenhouses: list[str], where: str = "store"
+              ) -> dict[str, DiagnosisRun]:
+    """The last run kept of each of ``greenhouses`` (those never run are absent). A stored run
+    that cannot be read is logged as a warning naming ``where`` and the ``meta`` row, and left
+    out: the status shows no row for it until its next run."""
+    out = {}
+    for name in greenhouses:
+        r = conn.execute("SELECT value FROM meta WHERE name=?", (RUN_META + name,)).fetchone()
+        if r is None:
+            continue
+        try:
+            out[name] = _run_of(name, r[0])
+        except ValueError as e:
+            log.warning("%s: meta %s%s: not a diagnosis run, ignored: %s", where, RUN_META, name, e)
+    return out
+
 
 class DiagnosisScheduler:
-    """The asyncio task that runs the diagnosis on schedule (``run_forever``)."""
+    """The asyncio task that runs the diagnosis on schedule (``run_forever``). Each run is kept
+    in the store as its greenhouse's last (:func:`save_run`) and read back when the scheduler is
+    made, so the status has each greenhouse's last run from the start (``last``)."""
 
     def __init__(self, cfg: GatewayConfig, resources: list[GreenhouseResources],
                  clock: Callable[[], float], workdir: Path, on_findings: Callable[[], None]) -> None:
         self.cfg, self.resources, self.clock = cfg, resources, clock
         self.workdir, self.on_findings = workdir, on_findings
-        self.last: dict[str, DiagnosisRun] = {}
+        self.last: dict[str, DiagnosisRun] = self._kept()
         self.proc: asyncio.subprocess.Process | None = None
 
+    def _kept(self) -> dict[str, DiagnosisRun]:
+        """Each greenhouse's last run as the store keeps it (before a restart, say)."""
+        conn = open_db(self.cfg.db)
+        try:
+            return load_runs(conn, [r.settings.name for r in self.resources], str(self.cfg.db))
+        finally:
+            conn.close()
+
     def status(self) -> dict[str, Any]:
-        return {g: {"when": r.when, "ok": r.ok, "note": r.note, "findings": r.findings,
-                    "notes": r.notes} for g, r in self.last.items()}
+        return {g: r.row() for g, r in self.last.items()}
 
     async def run_forever(self, tick: float = 5.0) -> None:
         d = self.cfg.diagnosis
@@ -173,7 +237,9 @@ class DiagnosisScheduler:
                 now = self.clock()
                 if now - last >= d.every_hours * 3600:
                     for r in self.resources:
-                        self.last[r.settings.name] = await self.run_one(conn, r, now)
+                        run = await self.run_one(conn, r, now)
+                        await _settled(save_run, conn, run)
+                        self.last[r.settings.name] = run
                     last = now
                     await _settled(_save_last, conn, last)
                 await asyncio.sleep(tick)

@@ -160,7 +160,7 @@ def greenhouse_lines(snap: S.Snapshot, index: int) -> list[Text]:
     lines += _temperature_lines(g.temperature)
     lines += _parameter_lines(g)
     lines.append(_ventilation_line(g.ventilation))
-    lines += _finding_lines(g, snap.gateway.diagnosis.get(g.name, ""))
+    lines += _finding_lines(g, snap.gateway.diagnosis.get(g.name))
     if g.inside.t is not None and S.silent(g.inside.t, snap.now):
         lines.insert(1, _line((f"inside kit {g.inside_device} silent for "
                                f"{duration((snap.now or 0) - g.inside.t)}", ALARM)))
@@ -233,11 +233,22 @@ def _ventilation_line(v: S.Ventilation) -> Text:
                  f"{number(v.heat_loss, '{:.0f}')} W/m² at {hhmm(v.t)}", flag)
 
 
-def _finding_lines(g: S.GreenhouseView, diagnosis: str) -> list[Text]:
+def _warned(d: S.Diagnosis | None) -> str | tuple[str, str]:
+    """The last run's warnings, before its words (which a long note may cut): the figures are
+    likely wrong. "" without any."""
+    if d is None or not d.warnings:
+        return ""
+    codes = ", ".join(code for code, _ in d.warnings)
+    n = len(d.warnings)
+    return (f" · diagnosis warning{'s' * (n > 1)}: {codes}", WARN)
+
+
+def _finding_lines(g: S.GreenhouseView, diagnosis: S.Diagnosis | None) -> list[Text]:
+    run = f" ({diagnosis.words})" if diagnosis else ""
     if not g.findings:
-        return [_line("Findings   ", ("none", DIM), f" ({diagnosis})" if diagnosis else
+        return [_line("Findings   ", ("none", DIM), _warned(diagnosis), run if diagnosis else
                       " (the diagnosis has not run yet: [diagnosis] every_hours)")]
-    out = [_line(f"Findings   {len(g.findings)}" + (f" ({diagnosis})" if diagnosis else ""))]
+    out = [_line(f"Findings   {len(g.findings)}", _warned(diagnosis), run)]
     for f in g.findings[-3:]:
         since = f"since {stamp(f.start)}" if f.start is not None else "since before the data"
         out.append(_line(" ", (f.effect, WARN), f" {since}, rev {f.revision}: {f.summary}"))
@@ -344,11 +355,30 @@ def gateway_lines(snap: S.Snapshot) -> list[Text]:
         out.append(_line(f"Store      {size(d.store_bytes)}{used}"))
         if d.path:
             out.append(_line((f"           {tail(d.path, WIDTH - 11)}", DIM)))
-    for name, words in sorted(gw.diagnosis.items()):
-        out.append(_line(f"Diagnosis  {name}: {words}"))
+    out += _diagnosis_lines(gw)
     for n in snap.notes:
         out.append(_line(("Note       " + n, WARN)))
     out.append(_line((f"Source     {tail(snap.source, WIDTH - 11)}", DIM)))
+    return out
+
+
+SHOWN_WARNINGS = 3
+"""A run's warnings shown on the gateway panel, one line each (the rest counted)."""
+
+
+def _diagnosis_lines(gw: S.Gateway) -> list[Text]:
+    """Each greenhouse's last run; under it, only when it has any, its warnings (code and
+    the start of the message; the whole message is in the gateway's log)."""
+    out = []
+    for name, d in sorted(gw.diagnosis.items()):
+        out.append(_line(f"Diagnosis  {name}: {d.words}"))
+        for code, message in d.warnings[:SHOWN_WARNINGS]:
+            out.append(_line(("           warning ", WARN), (code, f"bold {WARN}"),
+                             (f": {message}", WARN)))
+        if len(d.warnings) > SHOWN_WARNINGS:
+            more = len(d.warnings) - SHOWN_WARNINGS
+            out.append(_line((f"           and {more} more warning{'s' * (more > 1)} "
+                              "(the gateway's log)", WARN)))
     return out
 
 

@@ -216,6 +216,16 @@ class Disk:
 
 
 @dataclass(frozen=True)
+class Diagnosis:
+    """A greenhouse's last diagnosis run (``gateway_status`` row ``diagnosis``): ``words``, the
+    run in words; ``warnings``, its warning-level notes (the figures are likely wrong) as
+    (code, message). Its lesser notes stay in the row and the gateway's log."""
+
+    words: str
+    warnings: tuple[tuple[str, str], ...] = ()
+
+
+@dataclass(frozen=True)
 class Gateway:
     running: bool | None = None  # None: unknown (never seen)
     pid: int | None = None
@@ -226,7 +236,7 @@ class Gateway:
     outbox: Outbox = field(default_factory=Outbox)
     disk: Disk = field(default_factory=Disk)
     ingest: dict[str, int] = field(default_factory=dict)  # packet counters by outcome
-    diagnosis: dict[str, str] = field(default_factory=dict)  # greenhouse → last run, in words
+    diagnosis: dict[str, Diagnosis] = field(default_factory=dict)  # greenhouse → last run
 
     @property
     def rejects(self) -> dict[str, int]:

@@ -88,7 +88,7 @@ class StoreSource:
         alarm_at = ob.get("alarm_at")
         outbox = S.Outbox(pending, ob.get("max"), alarm_at,
                           bool(alarm_at is not None and pending >= alarm_at), oldest)
-        diag = {name: _diagnosis_words(d) for name, d in
+        diag = {name: _diagnosis(d) for name, d in
                 status.get("diagnosis", ({}, 0.0))[0].items() if isinstance(d, dict)}
         refused = status.get("refused", ({}, 0.0))[0]
         gw = S.Gateway(
@@ -300,14 +300,18 @@ def _finding(f) -> S.Finding:
                      f.last_seen, f.revision)
 
 
-def _diagnosis_words(d: dict[str, Any]) -> str:
+def _diagnosis(d: dict[str, Any]) -> S.Diagnosis:
+    """A greenhouse's ``diagnosis`` status row (gateway/service/diagnosis.py ``DiagnosisRun``)
+    → its words and warnings."""
     when = d.get("when")
     stamp = time.strftime("%Y-%m-%d %H:%M", time.gmtime(when)) if isinstance(when, int | float) else "?"
     ok = "ok" if d.get("ok") else "failed"
     note = f" ({d['note']})" if d.get("note") else ""
     n = d.get("findings")
     found = f", {n} finding{'s' * (n != 1)}" if isinstance(n, int) else ""
-    return f"last run {stamp} {ok}{found}{note}"
+    warnings = tuple((str(x.get("code", "?")), str(x.get("message", "")))
+                     for x in d.get("notes") or () if isinstance(x, dict) and x.get("level") == "warning")
+    return S.Diagnosis(f"last run {stamp} {ok}{found}{note}", warnings)
 
 
 def _ago(s: float | None) -> str:

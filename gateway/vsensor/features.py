@@ -95,6 +95,28 @@ EXTRAS: dict[str, tuple[Feature, Callable[[Callable[[str], np.ndarray]], np.ndar
 ones it was trained with and the runtime computes them): name → (feature, f(column getter))."""
 
 
+INPUT_COLUMNS: dict[str, tuple[str, ...]] = {
+    "wind": ("wind",),
+    "dt_in_out": ("t_in", "t_out"),
+    "drh_in_out": ("rh_in", "rh_out"),
+    "dvp_in_out": ("t_in", "rh_in", "t_out", "rh_out"),
+    "vpd_in": ("t_in", "rh_in"),
+    "wind_dt": ("wind", "t_in", "t_out"),
+}
+"""The kit columns each measured input is made from (:func:`raw_features`); the flux inputs
+come from the adaptive model, whose own columns are its ``Model.requires``."""
+
+
+def columns_read(kind: str, extra: Sequence[str] = ()) -> dict[str, tuple[str, ...]]:
+    """Kit column → the inputs made from it, of a sensor fed by ``kind`` fluxes with the
+    ``extra`` inputs (a column missing from the data makes those inputs NaN on every row)."""
+    out: dict[str, list[str]] = {}
+    for f in features(kind, extra):
+        for c in INPUT_COLUMNS.get(f.name, ()):
+            out.setdefault(c, []).append(f.name)
+    return {c: tuple(names) for c, names in out.items()}
+
+
 def features(kind: str, extra: Sequence[str] = ()) -> tuple[Feature, ...]:
     """The sensor's inputs, in order, for fluxes of the ``kind`` model (plus ``extra``)."""
     if kind not in _FLUXES:

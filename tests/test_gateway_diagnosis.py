@@ -180,7 +180,7 @@ def test_the_last_run_is_shown_again_after_a_restart(tmp_path: Path) -> None:
     finally:
         src.close()
     stamp = time.strftime("%Y-%m-%d %H:%M", time.gmtime(end))
-    assert shown.words.startswith(f"last run {stamp} ok, 0 findings (greenhouse north: diagnosis")
+    assert shown.words.startswith(f"last run {stamp} ok, 0 findings (diagnosis")
     assert [code for code, _ in shown.warnings] == ["site_time_mismatch"]
 
 

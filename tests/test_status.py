@@ -236,7 +236,7 @@ def diagnosis_run(now: float, *notes: tuple[str, str]) -> dict:
             "sun is below the horizon at latitude 34.85, longitude 5.73 (east positive)",
             "short_heldout": "only 0.8 days are held out"}
     return {"when": now - 3600, "ok": True, "findings": 0,
-            "note": "greenhouse north: diagnosis of 1.8 days in 12 s: 0 finding(s)",
+            "note": "diagnosis of 1.8 days in 12 s: 0 finding(s)",
             "notes": [{"code": c, "level": lv, "message": said.get(c, f"{c} went wrong")}
                       for c, lv in notes]}
 

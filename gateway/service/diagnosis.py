@@ -251,9 +251,8 @@ class DiagnosisScheduler:
         path = self.workdir / f"diagnosis-{name}.csv"
         rows = await _settled(export_window, conn, r, now - d.days * 86400, now, path)
         if rows < d.min_days * 1440:
-            note = (f"greenhouse {name}: diagnosis skipped, {rows / 1440:.1f} days of data "
-                    f"(needs {d.min_days:g})")
-            log.info(note)
+            note = f"diagnosis skipped, {rows / 1440:.1f} days of data (needs {d.min_days:g})"
+            log.info("greenhouse %s: %s", name, note)
             return DiagnosisRun(name, now, True, note)
         cmd = diagnose_command(r.settings, path)
         t0 = time.monotonic()
@@ -268,15 +267,15 @@ class DiagnosisScheduler:
         except TimeoutError:
             proc.kill()
             await proc.wait()
-            note = f"greenhouse {name}: diagnosis abandoned after {d.timeout_s:g} s"
-            log.warning(note)
+            note = f"diagnosis abandoned after {d.timeout_s:g} s"
+            log.warning("greenhouse %s: %s", name, note)
             return DiagnosisRun(name, now, False, note)
         finally:
             self.proc = None
         if proc.returncode != 0:
             msg = err.decode(errors="replace").strip().splitlines()[-1:] or ["no message"]
-            note = f"greenhouse {name}: diagnosis failed (exit {proc.returncode}): {msg[0]}"
-            log.warning(note)
+            note = f"diagnosis failed (exit {proc.returncode}): {msg[0]}"
+            log.warning("greenhouse %s: %s", name, note)
             return DiagnosisRun(name, now, False, note)
         result = json.loads(out)
         data_notes = list(result.get("notes", []))
@@ -289,9 +288,9 @@ class DiagnosisScheduler:
             log.info(n)
         if notes:
             self.on_findings()
-        note = (f"greenhouse {name}: diagnosis of {rows / 1440:.1f} days in "
-                f"{time.monotonic() - t0:.0f} s: {len(result['findings'])} finding(s)")
-        log.info(note)
+        note = (f"diagnosis of {rows / 1440:.1f} days in {time.monotonic() - t0:.0f} s: "
+                f"{len(result['findings'])} finding(s)")
+        log.info("greenhouse %s: %s", name, note)
         return DiagnosisRun(name, now, True, note, len(result["findings"]), data_notes)
 
     def kill(self) -> None:

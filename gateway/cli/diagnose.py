@@ -91,8 +91,8 @@ def live_model_hint(model_name: str, structure: list[dict],
         return (f"the air is held at a floor near {floor.floor:.1f} °C on cold nights (it follows "
                 f"{floor.ratio:.2f} of the outside's night-to-night swing) by a heater the kit does "
                 f"not see: replay and the live gateway carry it with --model {HEATED_PROTOTYPE} "
-                f"(model = \"{HEATED_PROTOTYPE}\" in gateway.toml){also}; docs/effects.md, \"A "
-                "heated house: the hint\"")
+                f"(model = \"{HEATED_PROTOTYPE}\" in gateway.toml){also}; "
+                "docs/effects.md, \"A heated house: the hint\"")
     if model_name != "prototype" or not kept:
         return None
     return (f"the base kept the vent controller (vents a climate computer opens, unseen by the "

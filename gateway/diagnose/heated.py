@@ -132,6 +132,6 @@ def heated_floor(series: Series) -> HeatedFloor:
         return HeatedFloor(False, *args, f"the cold nights' air is {lift:.1f} K above the "
                            f"outside (a held floor needs {MIN_LIFT_K:g})")
     held = ratio < MAX_RATIO
-    return HeatedFloor(held, *args, f"the air follows {ratio:.2f} of the outside's swing over "
-                       f"{len(cold)} cold nights ({'held' if held else 'following'}: "
-                       f"held below {MAX_RATIO:g})")
+    return HeatedFloor(held, *args, f"the air follows {ratio:.2f} of the outside's night-to-night "
+                       f"swing over {len(cold)} cold nights: {'held' if held else 'following'} "
+                       f"(held below {MAX_RATIO:g})")

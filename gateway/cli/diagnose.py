@@ -4,10 +4,14 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
 from gateway.cli import CliError
 from gateway.cli.common import add_data_arguments, check_output, dump_json, load_run, writing
 from gateway.cli.notes import Note, as_json, echo, short_heldout_note, text_block
+
+if TYPE_CHECKING:
+    from gateway.diagnose.heated import HeatedFloor
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -30,6 +34,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from gateway.diagnose import diagnose, to_json
+    from gateway.diagnose.heated import heated_floor
 
     if not 0.1 <= args.split <= 0.9:
         raise CliError(f"--split {args.split}: must be between 0.1 and 0.9")
@@ -50,9 +55,11 @@ def run(args: argparse.Namespace) -> int:
     made = [Note("short_heldout", short)] if short else []
     echo(made)
     notes = inputs.notes + made
-    hint = live_model_hint(args.model, d.structure)
+    floor = heated_floor(inputs.series)
+    hint = live_model_hint(args.model, d.structure, floor)
     if args.json:  # the findings first: a failed write below still leaves them on screen
-        dump_json({**to_json(d), "hint": hint, "notes": as_json(notes)})
+        dump_json({**to_json(d), "hint": hint, "heated_floor": floor.to_json(),
+                   "notes": as_json(notes)})
     else:
         _print_human(d)
         sys.stdout.write(text_block(notes))
@@ -67,13 +74,25 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def live_model_hint(model_name: str, structure: list[dict]) -> str | None:
-    """What the base's structure choice says for the online estimator: a kept vent controller
-    part (it extrapolated better on the inner validation split) means vents a climate computer
-    moves, which the prototype follows only a step behind and its forecasts not at all."""
-    from gateway.model import VENTED_PROTOTYPE
+def live_model_hint(model_name: str, structure: list[dict],
+                    floor: HeatedFloor | None = None) -> str | None:
+    """Which model the online estimator should run, or None (one string, the JSON's "hint").
+
+    A kept vent controller part (it extrapolated better on the inner validation split) means
+    vents a climate computer moves, which the prototype follows only a step behind and its
+    forecasts not at all. Air held at a floor on cold nights (``floor.held``,
+    gateway/diagnose/heated.py) means a heater a thermostat runs: the heated prototype carries
+    it and the vent controller too, so it is the one model named when both are seen."""
+    from gateway.model import HEATED_PROTOTYPE, VENTED_PROTOTYPE
 
     kept = any(st["structure"] == "vent controller" and st["kept"] for st in structure)
+    if floor is not None and floor.held and model_name in ("prototype", VENTED_PROTOTYPE):
+        also = " (it carries the vent controller the base kept too)" if kept else ""
+        return (f"the air is held at a floor near {floor.floor:.1f} °C on cold nights (it follows "
+                f"{floor.ratio:.2f} of the outside's night-to-night swing) by a heater the kit does "
+                f"not see: replay and the live gateway carry it with --model {HEATED_PROTOTYPE} "
+                f"(model = \"{HEATED_PROTOTYPE}\" in gateway.toml){also}; "
+                "docs/effects.md, \"A heated house: the hint\"")
     if model_name != "prototype" or not kept:
         return None
     return (f"the base kept the vent controller (vents a climate computer opens, unseen by the "

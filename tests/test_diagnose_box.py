@@ -127,6 +127,8 @@ def test_cli_json_and_report(tmp_path, capsys, monkeypatch, whitened_prototype):
         assert (tmp_path / "rep" / name).stat().st_size > 0
     report = (tmp_path / "rep" / "report.md").read_text(encoding="utf-8")
     assert "solar gain fell" in report
+    # a hint is said in the report as in the JSON, none without one
+    assert (f"**Hint:** {out['hint']}." in report) if out["hint"] else "**Hint:**" not in report
     # ordinary data: nothing to note (tests/test_cli_notes.py has the unusual record)
     assert out["notes"] == [] and "## Notes" not in report
 

@@ -139,8 +139,9 @@ def test_cli_json_and_text_carry_the_hint(tmp_path, capsys, monkeypatch, held):
     assert out["heated_floor"]["held"] is held
     if held:
         assert "--model prototype+vent_control+heating" in out["hint"]
+        assert out["hint_model"] == "prototype+vent_control+heating"
     else:
-        assert out["hint"] is None
+        assert out["hint"] is None and out["hint_model"] is None
     assert main(argv) == 0
     lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("hint: ")]
     assert len(lines) == (1 if held else 0)

@@ -58,7 +58,9 @@ def run(args: argparse.Namespace) -> int:
     floor = heated_floor(inputs.series)
     hint = live_model_hint(args.model, d.structure, floor)
     if args.json:  # the findings first: a failed write below still leaves them on screen
-        dump_json({**to_json(d), "hint": hint, "heated_floor": floor.to_json(),
+        dump_json({**to_json(d), "hint": hint,
+                   "hint_model": hinted_model(args.model, d.structure, floor),
+                   "heated_floor": floor.to_json(),
                    "notes": as_json(notes)})
     else:
         _print_human(d)
@@ -69,14 +71,14 @@ def run(args: argparse.Namespace) -> int:
         from gateway.diagnose.report import write_report
 
         with writing("--report", args.report):
-            path = write_report(d, args.report, args.data, as_json(notes))
+            path = write_report(d, args.report, args.data, as_json(notes), hint)
         say(f"report written to {path}")
     return 0
 
 
-def live_model_hint(model_name: str, structure: list[dict],
-                    floor: HeatedFloor | None = None) -> str | None:
-    """Which model the online estimator should run, or None (one string, the JSON's "hint").
+def hinted_model(model_name: str, structure: list[dict],
+                 floor: HeatedFloor | None = None) -> str | None:
+    """The model the online estimator should run instead of ``model_name``, or None.
 
     A kept vent controller part (it extrapolated better on the inner validation split) means
     vents a climate computer moves, which the prototype follows only a step behind and its
@@ -85,19 +87,32 @@ def live_model_hint(model_name: str, structure: list[dict],
     it and the vent controller too, so it is the one model named when both are seen."""
     from gateway.model import HEATED_PROTOTYPE, VENTED_PROTOTYPE
 
-    kept = any(st["structure"] == "vent controller" and st["kept"] for st in structure)
     if floor is not None and floor.held and model_name in ("prototype", VENTED_PROTOTYPE):
+        return HEATED_PROTOTYPE
+    kept = any(st["structure"] == "vent controller" and st["kept"] for st in structure)
+    return VENTED_PROTOTYPE if model_name == "prototype" and kept else None
+
+
+def live_model_hint(model_name: str, structure: list[dict],
+                    floor: HeatedFloor | None = None) -> str | None:
+    """:func:`hinted_model` in words (one string, the JSON's "hint"), or None."""
+    from gateway.model import HEATED_PROTOTYPE
+
+    model = hinted_model(model_name, structure, floor)
+    if model is None:
+        return None
+    if model == HEATED_PROTOTYPE:
+        assert floor is not None and floor.floor is not None and floor.ratio is not None
+        kept = any(st["structure"] == "vent controller" and st["kept"] for st in structure)
         also = " (it carries the vent controller the base kept too)" if kept else ""
         return (f"the air is held at a floor near {floor.floor:.1f} °C on cold nights (it follows "
                 f"{floor.ratio:.2f} of the outside's night-to-night swing) by a heater the kit does "
-                f"not see: replay and the live gateway carry it with --model {HEATED_PROTOTYPE} "
-                f"(model = \"{HEATED_PROTOTYPE}\" in gateway.toml){also}; "
+                f"not see: replay and the live gateway carry it with --model {model} "
+                f"(model = \"{model}\" in gateway.toml){also}; "
                 "docs/effects.md, \"A heated house: the hint\"")
-    if model_name != "prototype" or not kept:
-        return None
     return (f"the base kept the vent controller (vents a climate computer opens, unseen by the "
-            f"kit): replay and the live gateway carry it with --model {VENTED_PROTOTYPE} "
-            f"(model = \"{VENTED_PROTOTYPE}\" in gateway.toml; docs/effects.md, \"Forecasts: "
+            f"kit): replay and the live gateway carry it with --model {model} "
+            f"(model = \"{model}\" in gateway.toml; docs/effects.md, \"Forecasts: "
             "the vent controller the kit does not see\")")
 
 

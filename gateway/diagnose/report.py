@@ -13,10 +13,11 @@ MODES = (("free_run", "free run"), ("one_step", "one-step"))
 
 
 def write_report(d: Diagnosis, out: str | Path, source: str,
-                 notes: Sequence[Mapping[str, str]] = ()) -> Path:
+                 notes: Sequence[Mapping[str, str]] = (), hint: str | None = None) -> Path:
     """Write ``report.md`` and the PNGs into ``out``; return the markdown path. ``notes``: the
     run's notes on its data ({code, level, message}, gateway/cli/notes.py), a "Notes" section
-    ahead of the figures when there are any."""
+    ahead of the figures when there are any. ``hint``: which model the online estimator should
+    run (gateway/cli/diagnose.py ``live_model_hint``), a line under the findings."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     _plot_residuals(d, out / "residual.png")
@@ -26,6 +27,7 @@ def write_report(d: Diagnosis, out: str | Path, source: str,
              f"Model `{d.model.name}`; calibration part up to {str(d.time[d.split_index])[:16]} UTC, "
              f"held-out part after it ({len(d.blocks)} blocks, free runs restarted at each block). "
              f"{d.seconds:.1f} s.", "", *notes_section(notes),
+             *([f"**Hint:** {hint}.", ""] if hint else []),
              "## Base structure (calibration part only)", "",
              "Before any effect is searched, the thesis model gets an effective heat capacity and "
              "optional parts, each kept only if BIC on the calibration part falls "

@@ -65,6 +65,21 @@ def diagnose_command(g: GreenhouseSettings, data: Path) -> list[str]:
             g.greenhouse, "--model", model, "--json"]
 
 
+def model_hint_notes(running: str, result: dict[str, Any]) -> list[dict[str, str]]:
+    """diagnose's hint (its JSON's ``hint``, ``hint_model``) as a run's note, when it names a
+    model other than the one the greenhouse's estimator runs (``running``): the diagnosis runs
+    as ``prototype`` whatever prototype the gateway runs, so its vent-controller hint to a
+    gateway already on the vented (or heated) model says nothing new."""
+    from gateway.model import HEATED_PROTOTYPE, VENTED_PROTOTYPE
+
+    model, hint = result.get("hint_model"), result.get("hint")
+    carried = {VENTED_PROTOTYPE: (VENTED_PROTOTYPE, HEATED_PROTOTYPE),
+               HEATED_PROTOTYPE: (HEATED_PROTOTYPE,)}
+    if not model or not hint or running in carried.get(model, (model,)):
+        return []
+    return [{"code": "model_hint", "level": "note", "message": hint}]
+
+
 def _parse(start: str | None) -> float | None:
     if not start:
         return None
@@ -278,7 +293,7 @@ class DiagnosisScheduler:
             log.warning("greenhouse %s: %s", name, note)
             return DiagnosisRun(name, now, False, note)
         result = json.loads(out)
-        data_notes = list(result.get("notes", []))
+        data_notes = list(result.get("notes", [])) + model_hint_notes(r.settings.model, result)
         for d in data_notes:  # each once per run; a warning: the figures are likely wrong
             log.log(logging.WARNING if d.get("level") == "warning" else logging.INFO,
                     "greenhouse %s: diagnosis %s: %s [%s]", name, d.get("level", "note"),

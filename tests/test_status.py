@@ -256,12 +256,17 @@ def test_the_diagnosis_warnings_are_shown_under_its_run(store: Filled) -> None:
     text = render.plain(snap)
     assert "Findings   1 · diagnosis warning: site_time_mismatch (last run " in text
     assert gw[i + 1] in text  # --once has it too
+    assert attention(snap) == ["diagnosis of north warns: site_time_mismatch"]  # --once exits 1
     quiet = diagnosis_run(store.now, ("short_heldout", "note"))
     snap = snap_of(store, wall=fresh_status(store, diagnosis={"north": quiet}) + 0.1)
     gw = [t.plain for t in render.gateway_lines(snap)]
     i = next(k for k, line in enumerate(gw) if line.startswith("Diagnosis  north: last run "))
     text = render.plain(snap)
     assert not gw[i + 1].startswith("     ") and "warning " not in text and "short_" not in text
+    assert attention(snap) == []  # a note needs nobody
+    failed = {**quiet, "ok": False, "note": "diagnosis abandoned after 600 s"}
+    snap = snap_of(store, wall=fresh_status(store, diagnosis={"north": failed}) + 0.1)
+    assert attention(snap) == ["diagnosis of north failed"]
     many = diagnosis_run(store.now, *[(f"code_{k}", "warning") for k in range(5)])
     snap = snap_of(store, wall=fresh_status(store, diagnosis={"north": many}) + 0.1)
     gw = [t.plain for t in render.gateway_lines(snap)]

@@ -223,6 +223,7 @@ class Diagnosis:
 
     words: str
     warnings: tuple[tuple[str, str], ...] = ()
+    ok: bool = True  # False: the run failed (timed out, exited with an error)
 
 
 @dataclass(frozen=True)
@@ -286,4 +287,9 @@ def attention(snap: Snapshot) -> list[str]:
             out.append(f"kit {k.device_id} refused: {k.refused}")
         elif k.silent and k.greenhouses:
             out.append(f"kit {k.device_id} silent")
+    for name, d in sorted(gw.diagnosis.items()):  # a wrong clock or site: figures likely wrong
+        if not d.ok:
+            out.append(f"diagnosis of {name} failed")
+        if d.warnings:
+            out.append(f"diagnosis of {name} warns: {', '.join(c for c, _ in d.warnings)}")
     return out

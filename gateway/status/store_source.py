@@ -311,7 +311,7 @@ def _diagnosis(d: dict[str, Any]) -> S.Diagnosis:
     found = f", {n} finding{'s' * (n != 1)}" if isinstance(n, int) else ""
     warnings = tuple((str(x.get("code", "?")), str(x.get("message", "")))
                      for x in d.get("notes") or () if isinstance(x, dict) and x.get("level") == "warning")
-    return S.Diagnosis(f"last run {stamp} {ok}{found}{note}", warnings)
+    return S.Diagnosis(f"last run {stamp} {ok}{found}{note}", warnings, bool(d.get("ok")))
 
 
 def _ago(s: float | None) -> str:

@@ -5,6 +5,7 @@ a stable identity, published once (tests/test_gateway_pipeline.py covers the ide
 from __future__ import annotations
 
 import asyncio
+import json
 import logging
 import math
 import time
@@ -193,7 +194,9 @@ def test_a_kept_run_that_cannot_be_read_is_said_and_left_out(
             "key 'when': 'yesterday' is not a number"),
            ('{"when": 1, "ok": true, "note": "", "findings": 0, "notes": ["x"]}',
             "key 'notes': every note must be a {code, level, message} object"),
-           ("{not json", "not JSON (Expecting property name")]
+           ("{not json", "not JSON (Expecting property name"),
+           ('{"when": NaN, "ok": true, "note": "", "findings": 0, "notes": []}',
+            "key 'when': nan is not a finite number")]
     for value, why in bad:
         store = Store(db)
         store.set_meta("diagnosis_run/north", value)
@@ -205,6 +208,27 @@ def test_a_kept_run_that_cannot_be_read_is_said_and_left_out(
         (said,) = [r.getMessage() for r in caplog.records]
         assert said.startswith(f"{db}: meta diagnosis_run/north: not a diagnosis run, ignored: "
                                f"{why}"), said
+
+
+def test_a_run_kept_before_the_note_lost_the_greenhouse_name_reads_without_it(
+        tmp_path: Path) -> None:
+    """Runs kept by the first version of this (e45d486) have notes that start "greenhouse
+    north: "; the status row already names the greenhouse, so the screen said it twice
+    ("Diagnosis  north: last run … (greenhouse north: diagnosis of …)") until the next run.
+    Read back, the prefix goes; a note naming another greenhouse keeps it."""
+    db = tmp_path / "gw.db"
+    old = {"when": START, "ok": True, "findings": 1, "notes": [],
+           "note": "greenhouse north: diagnosis of 14.0 days in 9 s: 1 finding(s)"}
+    store = Store(db)
+    store.set_meta("diagnosis_run/north", json.dumps(old))
+    store.close()
+    sched = due_scheduler(tmp_path, db, START, 2.0, 1.5, lambda: None)
+    assert sched.last["north"].note == "diagnosis of 14.0 days in 9 s: 1 finding(s)"
+    store = Store(db)
+    store.set_meta("diagnosis_run/north", json.dumps({**old, "note": "greenhouse south: x"}))
+    store.close()
+    sched = due_scheduler(tmp_path, db, START, 2.0, 1.5, lambda: None)
+    assert sched.last["north"].note == "greenhouse south: x"
 
 
 def test_a_vented_greenhouse_is_diagnosed_with_the_prototype(tmp_path: Path) -> None:

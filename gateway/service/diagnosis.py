@@ -18,6 +18,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import math
 import os
 import sqlite3
 import sys
@@ -178,7 +179,9 @@ def save_run(conn: sqlite3.Connection, run: DiagnosisRun) -> None:
 
 
 def _run_of(greenhouse: str, value: str) -> DiagnosisRun:
-    """A stored run back; ValueError saying what is wrong with it."""
+    """A stored run back; ValueError saying what is wrong with it. A note kept before the
+    status row named the greenhouse itself ("greenhouse north: diagnosis of …") loses that
+    prefix, so the row does not say the name twice."""
     try:
         d = json.loads(value)
     except json.JSONDecodeError as e:
@@ -192,9 +195,16 @@ def _run_of(greenhouse: str, value: str) -> DiagnosisRun:
         v = d.get(key)
         if not isinstance(v, types) or (key != "ok" and isinstance(v, bool)):
             raise ValueError(f"key {key!r}: {v!r} is not {what}")
+    try:
+        when = float(d["when"])
+    except OverflowError:  # an integer of hundreds of digits
+        when = math.inf
+    if not math.isfinite(when):
+        raise ValueError(f"key 'when': {d['when']!r} is not a finite number")
     if not all(isinstance(n, dict) for n in d["notes"]):
         raise ValueError("key 'notes': every note must be a {code, level, message} object")
-    return DiagnosisRun(greenhouse, float(d["when"]), d["ok"], d["note"], d["findings"],
+    note = d["note"].removeprefix(f"greenhouse {greenhouse}: ")
+    return DiagnosisRun(greenhouse, when, d["ok"], note, d["findings"],
                         list(d["notes"]))
 
 

@@ -231,6 +231,36 @@ def test_a_run_kept_before_the_note_lost_the_greenhouse_name_reads_without_it(
     assert sched.last["north"].note == "greenhouse south: x"
 
 
+@pytest.mark.parametrize(("stdout", "why"), [
+    ("loading 50%", "not JSON (Expecting value: line 1 column 1 (char 0); it begins "
+     "'loading 50%')"),
+    ('{"findings": [{"summary": "no effect named"}]}',
+     "no list of findings each naming its effect"),
+    ('[1, 2]', "a JSON object expected, got list")])
+def test_output_the_scheduler_cannot_read_is_a_failed_run_not_a_stopped_gateway(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture,
+        stdout: str, why: str) -> None:
+    """``json.loads`` of diagnose's stdout raised in the scheduler's task, which the service
+    supervises: anything else on stdout stopped the whole gateway. Now it is a failed run,
+    logged, kept and shown as the others (``status --once`` names it)."""
+    import sys
+
+    import gateway.service.diagnosis as sd
+
+    db = tmp_path / "gw.db"
+    end = shifted_kit(db)
+    monkeypatch.setattr(sd, "diagnose_command",
+                        lambda g, path: [sys.executable, "-c", f"print({stdout!r})"])
+    sched = due_scheduler(tmp_path, db, end, 2.0, 1.5, lambda: None)
+    with caplog.at_level(logging.WARNING, logger="serra.gateway"):
+        run = one_round(sched)
+    assert not run.ok and run.note == f"diagnosis output unreadable: {why}"
+    assert [r.getMessage() for r in caplog.records] == [f"greenhouse north: {run.note}"]
+    store = Store(db)
+    assert json.loads(store.get_meta("diagnosis_run/north"))["ok"] is False
+    store.close()
+
+
 def test_a_vented_greenhouse_is_diagnosed_with_the_prototype(tmp_path: Path) -> None:
     """The live default prototype+vent_control forecasts with the vent term; its diagnosis stays
     the prototype's (whose base chooses that part itself); the other models pass through."""

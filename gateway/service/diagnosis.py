@@ -66,6 +66,28 @@ def diagnose_command(g: GreenhouseSettings, data: Path) -> list[str]:
             g.greenhouse, "--model", model, "--json"]
 
 
+def diagnose_result(out: bytes) -> dict[str, Any]:
+    """``diagnose --json``'s stdout as the scheduler reads it: a JSON object whose
+    ``findings`` is a list of objects each naming its ``effect`` and whose ``notes``, when
+    given, a list of objects. ValueError saying what is wrong (anything else on stdout, say a
+    library's message, would otherwise end the scheduler's task and with it the gateway)."""
+    try:
+        result = json.loads(out)
+    except ValueError as e:  # JSONDecodeError, bytes that are not UTF-8
+        first = out.decode(errors="replace").strip().splitlines()[:1] or ["nothing"]
+        raise ValueError(f"not JSON ({e}; it begins {first[0][:60]!r})") from None
+    if not isinstance(result, dict):
+        raise ValueError(f"a JSON object expected, got {type(result).__name__}")
+    found = result.get("findings")
+    if not isinstance(found, list) or not all(isinstance(f, dict) and "effect" in f
+                                              for f in found):
+        raise ValueError("no list of findings each naming its effect")
+    notes = result.get("notes", [])
+    if not isinstance(notes, list) or not all(isinstance(n, dict) for n in notes):
+        raise ValueError("its notes are not a list of {code, level, message} objects")
+    return result
+
+
 def model_hint_notes(running: str, result: dict[str, Any]) -> list[dict[str, str]]:
     """diagnose's hint (its JSON's ``hint``, ``hint_model``) as a run's note, when it names a
     model other than the one the greenhouse's estimator runs (``running``): the diagnosis runs
@@ -302,7 +324,12 @@ class DiagnosisScheduler:
             note = f"diagnosis failed (exit {proc.returncode}): {msg[0]}"
             log.warning("greenhouse %s: %s", name, note)
             return DiagnosisRun(name, now, False, note)
-        result = json.loads(out)
+        try:
+            result = diagnose_result(out)
+        except ValueError as e:  # a failed run, as a crash is: the gateway goes on
+            note = f"diagnosis output unreadable: {e}"
+            log.warning("greenhouse %s: %s", name, note)
+            return DiagnosisRun(name, now, False, note)
         data_notes = list(result.get("notes", [])) + model_hint_notes(r.settings.model, result)
         for d in data_notes:  # each once per run; a warning: the figures are likely wrong
             log.log(logging.WARNING if d.get("level") == "warning" else logging.INFO,

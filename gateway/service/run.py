@@ -179,9 +179,9 @@ async def run_gateway(cfg: GatewayConfig, resources: list[GreenhouseResources],
             waiter.cancel()
             if ingest.done():
                 _ingest_failed(ingest, cfg)
-            if cfg.diagnosis.enabled:
-                gw.diagnosis = DiagnosisScheduler(cfg, resources, gw.clock.now, Path(tmp),
-                                                  gw.worker.wake.set)
+            if cfg.diagnosis.enabled:  # it reads its kept runs from the store: off the loop
+                gw.diagnosis = await asyncio.to_thread(
+                    DiagnosisScheduler, cfg, resources, gw.clock.now, Path(tmp), gw.worker.wake.set)
                 tasks.append(asyncio.create_task(gw.diagnosis.run_forever(), name="diagnosis"))
             _announce(gw)
             if on_ready is not None:

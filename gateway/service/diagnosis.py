@@ -331,10 +331,10 @@ class DiagnosisScheduler:
             log.warning("greenhouse %s: %s", name, note)
             return DiagnosisRun(name, now, False, note)
         data_notes = list(result.get("notes", [])) + model_hint_notes(r.settings.model, result)
-        for d in data_notes:  # each once per run; a warning: the figures are likely wrong
-            log.log(logging.WARNING if d.get("level") == "warning" else logging.INFO,
-                    "greenhouse %s: diagnosis %s: %s [%s]", name, d.get("level", "note"),
-                    d.get("message", ""), d.get("code", "?"))
+        for said in data_notes:  # each once per run; a warning: the figures are likely wrong
+            log.log(logging.WARNING if said.get("level") == "warning" else logging.INFO,
+                    "greenhouse %s: diagnosis %s: %s [%s]", name, said.get("level", "note"),
+                    said.get("message", ""), said.get("code", "?"))
         notes = await _settled(store_findings, conn, name, result["findings"], now)
         for n in notes:
             log.info(n)

@@ -72,13 +72,15 @@ def due_scheduler(tmp_path: Path, db: Path, end: float, days: float, min_days: f
 
 
 def one_round(sched: DiagnosisScheduler) -> DiagnosisRun:
-    """The scheduler's task until greenhouse north's run is done (the diagnose subprocess)."""
+    """The scheduler's task until greenhouse north's run is done (the diagnose subprocess): a
+    new run, not the one it read back from the store."""
+    kept = sched.last.get("north")
 
     async def until_done() -> None:
         task = asyncio.create_task(sched.run_forever(tick=0.05))
         try:
             for _ in range(6000):  # the subprocess takes seconds; a generous deadline
-                if "north" in sched.last:
+                if sched.last.get("north") is not kept:
                     return
                 await asyncio.sleep(0.05)
             raise AssertionError("the diagnosis did not run")

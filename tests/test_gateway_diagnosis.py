@@ -18,6 +18,7 @@ from gateway import protocol as p
 from gateway.service.config import parse_config
 from gateway.service.diagnosis import DiagnosisRun, DiagnosisScheduler, diagnose_command
 from gateway.service.resources import prepare
+from gateway.status.snapshot import attention
 from gateway.status.store_source import StoreSource
 from gateway.store import Store
 from gateway.store.aggregate import aggregate
@@ -261,6 +262,38 @@ def test_output_the_scheduler_cannot_read_is_a_failed_run_not_a_stopped_gateway(
     store = Store(db)
     assert json.loads(store.get_meta("diagnosis_run/north"))["ok"] is False
     store.close()
+
+
+def test_a_gateway_without_the_diagnosis_leaves_no_earlier_run_on_the_status(
+        tmp_path: Path) -> None:
+    """Status rows are replaced, never dropped, and a gateway whose diagnosis is switched off
+    wrote no ``diagnosis`` row: the last one an earlier run wrote stayed, and since its warnings
+    and failures ask for attention, ``status --once`` exited 1 for ever. Now the row is written
+    empty."""
+    from gateway.service.run import Gateway
+
+    db = tmp_path / "gw.db"
+    write_keys(tmp_path / "keys.txt", {7: KEY})
+    cfg = parse_config({
+        "gateway": {"farm": "f1", "db": db.name, "keys": "keys.txt"},
+        "diagnosis": {"enabled": False}, "zenoh": {"enabled": False},
+        "greenhouse": [{"name": "north", "greenhouse": "biskra-prototype", "model": "prototype",
+                        "inside": 7}]}, "test.toml", tmp_path)
+    failed = DiagnosisRun("north", START, False, "diagnosis abandoned after 1800 s")
+    store = Store(db)
+    set_status(store.conn, {"diagnosis": {"north": failed.row()}}, START)  # an earlier run's
+    store.close()
+    gw = Gateway(cfg, prepare(cfg))
+    store = Store(db)
+    set_status(store.conn, gw._status_extra(), START + 60)  # as the worker writes it
+    store.close()
+    src = StoreSource(db)
+    try:
+        snap = src.snapshot(wall=START + 60)
+    finally:
+        src.close()
+    assert snap.gateway.diagnosis == {}
+    assert not [a for a in attention(snap) if "diagnosis" in a]
 
 
 def test_a_vented_greenhouse_is_diagnosed_with_the_prototype(tmp_path: Path) -> None:

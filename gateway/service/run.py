@@ -80,8 +80,10 @@ class Gateway:
                             "endpoints": list(self.cfg.zenoh.connect), **asdict(self.opener.state)}
         else:
             out["zenoh"] = {"enabled": False}
-        if self.diagnosis is not None:
-            out["diagnosis"] = self.diagnosis.status()
+        # always written: status rows are replaced, never dropped, so a gateway without the
+        # diagnosis (switched off, or not made yet at start) would leave an earlier run's row on
+        # the screen, its failure or warnings asking for attention for ever
+        out["diagnosis"] = self.diagnosis.status() if self.diagnosis is not None else {}
         return out
 
     def start_zenoh(self) -> None:

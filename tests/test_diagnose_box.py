@@ -15,7 +15,7 @@ import pickle
 import numpy as np
 import pytest
 
-from gateway.diagnose import diagnose
+from gateway.diagnose import diagnose, heated
 from gateway.diagnose import judge as jd
 from gateway.diagnose.effects import LIBRARY
 from tests import diagnose_cases as cases
@@ -110,6 +110,11 @@ def test_cli_json_and_report(tmp_path, capsys, monkeypatch, whitened_prototype):
         return copy.deepcopy(whitened_prototype[4])
 
     monkeypatch.setattr(gateway.diagnose, "diagnose", reuse)
+    # a 6-day record is too short for the heated-house detector (8 nights): its verdict is set
+    # to "held", so that the JSON and the report must carry a hint (tests/test_diagnose_heated.py
+    # tests the detector itself)
+    floor = heated.HeatedFloor(True, 10, 5, 0.1, 12.0, 4.0, 1.0, "held (set by the test)")
+    monkeypatch.setattr(heated, "heated_floor", lambda series: floor)
     cases.data(tmp_path, "prototype", "cover_transmission")
     rc = main(["diagnose", "--data", str(tmp_path / "prototype.csv"), "--greenhouse",
                "biskra-prototype", "--model", "prototype", "--step", "300", "--json",
@@ -118,8 +123,9 @@ def test_cli_json_and_report(tmp_path, capsys, monkeypatch, whitened_prototype):
     out = json.loads(capsys.readouterr().out)
     from gateway.cli.diagnose import live_model_hint
 
-    # the JSON's hint is the one the reported base structure gives (a string or null)
-    assert out["hint"] == live_model_hint("prototype", out["base_structure"])
+    # the JSON's hint is the one the reported base structure and the detector give
+    assert out["hint"] and out["hint"] == live_model_hint("prototype", out["base_structure"], floor)
+    assert out["hint_model"] == "prototype+vent_control+heating"
     assert out["findings"][0]["effect"] == "solar_gain_change"
     assert out["findings"][0]["params"]["d_solar"] < -0.3
     assert out["after"]["free_run"]["mae"] < out["before"]["free_run"]["mae"]
@@ -127,8 +133,7 @@ def test_cli_json_and_report(tmp_path, capsys, monkeypatch, whitened_prototype):
         assert (tmp_path / "rep" / name).stat().st_size > 0
     report = (tmp_path / "rep" / "report.md").read_text(encoding="utf-8")
     assert "solar gain fell" in report
-    # a hint is said in the report as in the JSON, none without one
-    assert (f"**Hint:** {out['hint']}." in report) if out["hint"] else "**Hint:**" not in report
+    assert f"**Hint:** {out['hint']}." in report  # the report says the hint as the JSON does
     # ordinary data: nothing to note (tests/test_cli_notes.py has the unusual record)
     assert out["notes"] == [] and "## Notes" not in report
 

@@ -134,7 +134,14 @@ def test_cli_json_and_text_carry_the_hint(tmp_path, capsys, monkeypatch, held):
                                       '3069.5\n[site]\nlatitude = 52.03\nlongitude = 4.53\n')
     argv = ["diagnose", "--data", str(tmp_path / "kit.csv"), "--greenhouse",
             str(tmp_path / "gh.toml"), "--model", "prototype", "--step", "300"]
-    assert main([*argv, "--json"]) == 0
+    reported = []  # --report's hint: what write_report is given (its figures need a real run)
+
+    def report(d, out, source, notes=(), hint=None):
+        reported.append(hint)
+        return tmp_path / "rep" / "report.md"
+
+    monkeypatch.setattr("gateway.diagnose.report.write_report", report)
+    assert main([*argv, "--json", "--report", str(tmp_path / "rep")]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["heated_floor"]["held"] is held
     if held:
@@ -142,6 +149,7 @@ def test_cli_json_and_text_carry_the_hint(tmp_path, capsys, monkeypatch, held):
         assert out["hint_model"] == "prototype+vent_control+heating"
     else:
         assert out["hint"] is None and out["hint_model"] is None
+    assert reported == [out["hint"]]
     assert main(argv) == 0
     lines = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("hint: ")]
     assert len(lines) == (1 if held else 0)

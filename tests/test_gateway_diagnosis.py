@@ -5,6 +5,7 @@ a stable identity, published once (tests/test_gateway_pipeline.py covers the ide
 from __future__ import annotations
 
 import asyncio
+import json
 import logging
 import math
 import time
@@ -17,6 +18,7 @@ from gateway import protocol as p
 from gateway.service.config import parse_config
 from gateway.service.diagnosis import DiagnosisRun, DiagnosisScheduler, diagnose_command
 from gateway.service.resources import prepare
+from gateway.status.snapshot import attention
 from gateway.status.store_source import StoreSource
 from gateway.store import Store
 from gateway.store.aggregate import aggregate
@@ -71,13 +73,15 @@ def due_scheduler(tmp_path: Path, db: Path, end: float, days: float, min_days: f
 
 
 def one_round(sched: DiagnosisScheduler) -> DiagnosisRun:
-    """The scheduler's task until greenhouse north's run is done (the diagnose subprocess)."""
+    """The scheduler's task until greenhouse north's run is done (the diagnose subprocess): a
+    new run, not the one it read back from the store."""
+    kept = sched.last.get("north")
 
     async def until_done() -> None:
         task = asyncio.create_task(sched.run_forever(tick=0.05))
         try:
             for _ in range(6000):  # the subprocess takes seconds; a generous deadline
-                if "north" in sched.last:
+                if sched.last.get("north") is not kept:
                     return
                 await asyncio.sleep(0.05)
             raise AssertionError("the diagnosis did not run")
@@ -193,7 +197,9 @@ def test_a_kept_run_that_cannot_be_read_is_said_and_left_out(
             "key 'when': 'yesterday' is not a number"),
            ('{"when": 1, "ok": true, "note": "", "findings": 0, "notes": ["x"]}',
             "key 'notes': every note must be a {code, level, message} object"),
-           ("{not json", "not JSON (Expecting property name")]
+           ("{not json", "not JSON (Expecting property name"),
+           ('{"when": NaN, "ok": true, "note": "", "findings": 0, "notes": []}',
+            "key 'when': nan is not a finite number")]
     for value, why in bad:
         store = Store(db)
         store.set_meta("diagnosis_run/north", value)
@@ -205,6 +211,89 @@ def test_a_kept_run_that_cannot_be_read_is_said_and_left_out(
         (said,) = [r.getMessage() for r in caplog.records]
         assert said.startswith(f"{db}: meta diagnosis_run/north: not a diagnosis run, ignored: "
                                f"{why}"), said
+
+
+def test_a_run_kept_before_the_note_lost_the_greenhouse_name_reads_without_it(
+        tmp_path: Path) -> None:
+    """Runs kept by the first version of this (e45d486) have notes that start "greenhouse
+    north: "; the status row already names the greenhouse, so the screen said it twice
+    ("Diagnosis  north: last run … (greenhouse north: diagnosis of …)") until the next run.
+    Read back, the prefix goes; a note naming another greenhouse keeps it."""
+    db = tmp_path / "gw.db"
+    old = {"when": START, "ok": True, "findings": 1, "notes": [],
+           "note": "greenhouse north: diagnosis of 14.0 days in 9 s: 1 finding(s)"}
+    store = Store(db)
+    store.set_meta("diagnosis_run/north", json.dumps(old))
+    store.close()
+    sched = due_scheduler(tmp_path, db, START, 2.0, 1.5, lambda: None)
+    assert sched.last["north"].note == "diagnosis of 14.0 days in 9 s: 1 finding(s)"
+    store = Store(db)
+    store.set_meta("diagnosis_run/north", json.dumps({**old, "note": "greenhouse south: x"}))
+    store.close()
+    sched = due_scheduler(tmp_path, db, START, 2.0, 1.5, lambda: None)
+    assert sched.last["north"].note == "greenhouse south: x"
+
+
+@pytest.mark.parametrize(("stdout", "why"), [
+    ("loading 50%", "not JSON (Expecting value: line 1 column 1 (char 0); it begins "
+     "'loading 50%')"),
+    ('{"findings": [{"summary": "no effect named"}]}',
+     "no list of findings each naming its effect"),
+    ('[1, 2]', "a JSON object expected, got list")])
+def test_output_the_scheduler_cannot_read_is_a_failed_run_not_a_stopped_gateway(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture,
+        stdout: str, why: str) -> None:
+    """``json.loads`` of diagnose's stdout raised in the scheduler's task, which the service
+    supervises: anything else on stdout stopped the whole gateway. Now it is a failed run,
+    logged, kept and shown as the others (``status --once`` names it)."""
+    import sys
+
+    import gateway.service.diagnosis as sd
+
+    db = tmp_path / "gw.db"
+    end = shifted_kit(db)
+    monkeypatch.setattr(sd, "diagnose_command",
+                        lambda g, path: [sys.executable, "-c", f"print({stdout!r})"])
+    sched = due_scheduler(tmp_path, db, end, 2.0, 1.5, lambda: None)
+    with caplog.at_level(logging.WARNING, logger="serra.gateway"):
+        run = one_round(sched)
+    assert not run.ok and run.note == f"diagnosis output unreadable: {why}"
+    assert [r.getMessage() for r in caplog.records] == [f"greenhouse north: {run.note}"]
+    store = Store(db)
+    assert json.loads(store.get_meta("diagnosis_run/north"))["ok"] is False
+    store.close()
+
+
+def test_a_gateway_without_the_diagnosis_leaves_no_earlier_run_on_the_status(
+        tmp_path: Path) -> None:
+    """Status rows are replaced, never dropped, and a gateway whose diagnosis is switched off
+    wrote no ``diagnosis`` row: the last one an earlier run wrote stayed, and since its warnings
+    and failures ask for attention, ``status --once`` exited 1 for ever. Now the row is written
+    empty."""
+    from gateway.service.run import Gateway
+
+    db = tmp_path / "gw.db"
+    write_keys(tmp_path / "keys.txt", {7: KEY})
+    cfg = parse_config({
+        "gateway": {"farm": "f1", "db": db.name, "keys": "keys.txt"},
+        "diagnosis": {"enabled": False}, "zenoh": {"enabled": False},
+        "greenhouse": [{"name": "north", "greenhouse": "biskra-prototype", "model": "prototype",
+                        "inside": 7}]}, "test.toml", tmp_path)
+    failed = DiagnosisRun("north", START, False, "diagnosis abandoned after 1800 s")
+    store = Store(db)
+    set_status(store.conn, {"diagnosis": {"north": failed.row()}}, START)  # an earlier run's
+    store.close()
+    gw = Gateway(cfg, prepare(cfg))
+    store = Store(db)
+    set_status(store.conn, gw._status_extra(), START + 60)  # as the worker writes it
+    store.close()
+    src = StoreSource(db)
+    try:
+        snap = src.snapshot(wall=START + 60)
+    finally:
+        src.close()
+    assert snap.gateway.diagnosis == {}
+    assert not [a for a in attention(snap) if "diagnosis" in a]
 
 
 def test_a_vented_greenhouse_is_diagnosed_with_the_prototype(tmp_path: Path) -> None:

@@ -19,6 +19,7 @@ import pytest
 
 from gateway.protocol import CHANNELS
 from gateway.status import render
+from gateway.status import snapshot as S
 from gateway.status.messages import Messages
 from gateway.status.snapshot import Link, attention
 from gateway.status.store_source import DROP
@@ -280,6 +281,25 @@ def test_the_diagnosis_warnings_are_shown_under_its_run(store: Filled) -> None:
     assert findings_line.startswith("Findings   1 · diagnosis warnings: code_0, code_1, code_2, ")
     assert all(len(t.plain) <= render.WIDTH for panel in render.PANELS
                for t in render.panel_lines(snap, panel))
+
+
+def test_a_diagnosis_row_left_incomplete_is_read_as_far_as_it_goes(store: Filled) -> None:
+    """A ``diagnosis`` status row without ``ok`` read as a failed run (``--once`` exited 1 for
+    it), one whose time was NaN or out of range stopped the snapshot (``time.gmtime`` raises),
+    and notes that were not a list raised too. Now the time is "?", an unknown outcome is said
+    as such and calls nobody, a false ``ok`` is still a failure, odd notes are none."""
+    rows = {"north": {"when": math.nan, "findings": 0, "note": "diagnosis of 1.8 days",
+                      "notes": {"code": "site_time_mismatch", "level": "warning"}},
+            "south": {"when": 1e30, "ok": False, "notes": 5},
+            "west": {"when": None, "ok": True, "notes": [{"code": "c", "level": "warning"}, "x"]}}
+    snap = snap_of(store, wall=fresh_status(store, diagnosis=rows) + 0.1)
+    diag = snap.gateway.diagnosis
+    assert diag["north"] == S.Diagnosis("last run ? outcome unknown, 0 findings "
+                                        "(diagnosis of 1.8 days)", (), True)
+    assert diag["south"] == S.Diagnosis("last run ? failed", (), False)
+    assert diag["west"] == S.Diagnosis("last run ? ok", (("c", ""),), True)
+    assert attention(snap) == ["diagnosis of south failed", "diagnosis of west warns: c"]
+    assert "Diagnosis  north: last run ? outcome unknown" in render.plain(snap)
 
 
 def test_every_panel_line_fits_80_columns(store: Filled) -> None:

@@ -18,6 +18,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import math
 import os
 import sqlite3
 import sys
@@ -63,6 +64,28 @@ def diagnose_command(g: GreenhouseSettings, data: Path) -> list[str]:
     model = "prototype" if g.model in PROTOTYPES else g.model  # as the diagnosis was tuned
     return [sys.executable, "-m", "gateway", "diagnose", "--data", str(data), "--greenhouse",
             g.greenhouse, "--model", model, "--json"]
+
+
+def diagnose_result(out: bytes) -> dict[str, Any]:
+    """``diagnose --json``'s stdout as the scheduler reads it: a JSON object whose
+    ``findings`` is a list of objects each naming its ``effect`` and whose ``notes``, when
+    given, a list of objects. ValueError saying what is wrong (anything else on stdout, say a
+    library's message, would otherwise end the scheduler's task and with it the gateway)."""
+    try:
+        result = json.loads(out)
+    except ValueError as e:  # JSONDecodeError, bytes that are not UTF-8
+        first = out.decode(errors="replace").strip().splitlines()[:1] or ["nothing"]
+        raise ValueError(f"not JSON ({e}; it begins {first[0][:60]!r})") from None
+    if not isinstance(result, dict):
+        raise ValueError(f"a JSON object expected, got {type(result).__name__}")
+    found = result.get("findings")
+    if not isinstance(found, list) or not all(isinstance(f, dict) and "effect" in f
+                                              for f in found):
+        raise ValueError("no list of findings each naming its effect")
+    notes = result.get("notes", [])
+    if not isinstance(notes, list) or not all(isinstance(n, dict) for n in notes):
+        raise ValueError("its notes are not a list of {code, level, message} objects")
+    return result
 
 
 def model_hint_notes(running: str, result: dict[str, Any]) -> list[dict[str, str]]:
@@ -178,7 +201,9 @@ def save_run(conn: sqlite3.Connection, run: DiagnosisRun) -> None:
 
 
 def _run_of(greenhouse: str, value: str) -> DiagnosisRun:
-    """A stored run back; ValueError saying what is wrong with it."""
+    """A stored run back; ValueError saying what is wrong with it. A note kept before the
+    status row named the greenhouse itself ("greenhouse north: diagnosis of …") loses that
+    prefix, so the row does not say the name twice."""
     try:
         d = json.loads(value)
     except json.JSONDecodeError as e:
@@ -192,9 +217,16 @@ def _run_of(greenhouse: str, value: str) -> DiagnosisRun:
         v = d.get(key)
         if not isinstance(v, types) or (key != "ok" and isinstance(v, bool)):
             raise ValueError(f"key {key!r}: {v!r} is not {what}")
+    try:
+        when = float(d["when"])
+    except OverflowError:  # an integer of hundreds of digits
+        when = math.inf
+    if not math.isfinite(when):
+        raise ValueError(f"key 'when': {d['when']!r} is not a finite number")
     if not all(isinstance(n, dict) for n in d["notes"]):
         raise ValueError("key 'notes': every note must be a {code, level, message} object")
-    return DiagnosisRun(greenhouse, float(d["when"]), d["ok"], d["note"], d["findings"],
+    note = d["note"].removeprefix(f"greenhouse {greenhouse}: ")
+    return DiagnosisRun(greenhouse, when, d["ok"], note, d["findings"],
                         list(d["notes"]))
 
 
@@ -292,12 +324,17 @@ class DiagnosisScheduler:
             note = f"diagnosis failed (exit {proc.returncode}): {msg[0]}"
             log.warning("greenhouse %s: %s", name, note)
             return DiagnosisRun(name, now, False, note)
-        result = json.loads(out)
+        try:
+            result = diagnose_result(out)
+        except ValueError as e:  # a failed run, as a crash is: the gateway goes on
+            note = f"diagnosis output unreadable: {e}"
+            log.warning("greenhouse %s: %s", name, note)
+            return DiagnosisRun(name, now, False, note)
         data_notes = list(result.get("notes", [])) + model_hint_notes(r.settings.model, result)
-        for d in data_notes:  # each once per run; a warning: the figures are likely wrong
-            log.log(logging.WARNING if d.get("level") == "warning" else logging.INFO,
-                    "greenhouse %s: diagnosis %s: %s [%s]", name, d.get("level", "note"),
-                    d.get("message", ""), d.get("code", "?"))
+        for said in data_notes:  # each once per run; a warning: the figures are likely wrong
+            log.log(logging.WARNING if said.get("level") == "warning" else logging.INFO,
+                    "greenhouse %s: diagnosis %s: %s [%s]", name, said.get("level", "note"),
+                    said.get("message", ""), said.get("code", "?"))
         notes = await _settled(store_findings, conn, name, result["findings"], now)
         for n in notes:
             log.info(n)

@@ -80,8 +80,10 @@ class Gateway:
                             "endpoints": list(self.cfg.zenoh.connect), **asdict(self.opener.state)}
         else:
             out["zenoh"] = {"enabled": False}
-        if self.diagnosis is not None:
-            out["diagnosis"] = self.diagnosis.status()
+        # always written: status rows are replaced, never dropped, so a gateway without the
+        # diagnosis (switched off, or not made yet at start) would leave an earlier run's row on
+        # the screen, its failure or warnings asking for attention for ever
+        out["diagnosis"] = self.diagnosis.status() if self.diagnosis is not None else {}
         return out
 
     def start_zenoh(self) -> None:
@@ -179,9 +181,9 @@ async def run_gateway(cfg: GatewayConfig, resources: list[GreenhouseResources],
             waiter.cancel()
             if ingest.done():
                 _ingest_failed(ingest, cfg)
-            if cfg.diagnosis.enabled:
-                gw.diagnosis = DiagnosisScheduler(cfg, resources, gw.clock.now, Path(tmp),
-                                                  gw.worker.wake.set)
+            if cfg.diagnosis.enabled:  # it reads its kept runs from the store: off the loop
+                gw.diagnosis = await asyncio.to_thread(
+                    DiagnosisScheduler, cfg, resources, gw.clock.now, Path(tmp), gw.worker.wake.set)
                 tasks.append(asyncio.create_task(gw.diagnosis.run_forever(), name="diagnosis"))
             _announce(gw)
             if on_ready is not None:

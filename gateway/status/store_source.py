@@ -302,16 +302,26 @@ def _finding(f) -> S.Finding:
 
 def _diagnosis(d: dict[str, Any]) -> S.Diagnosis:
     """A greenhouse's ``diagnosis`` status row (gateway/service/diagnosis.py ``DiagnosisRun``)
-    → its words and warnings."""
+    → its words and warnings. A row left incomplete reads as far as it goes: a time that is no
+    time (text, NaN, out of range) is "?", an outcome neither true nor false is "outcome
+    unknown" (not a failure: nobody is called for it), notes not in a list are none."""
     when = d.get("when")
-    stamp = time.strftime("%Y-%m-%d %H:%M", time.gmtime(when)) if isinstance(when, int | float) else "?"
-    ok = "ok" if d.get("ok") else "failed"
+    stamp = "?"
+    if isinstance(when, int | float) and not isinstance(when, bool):  # gmtime(None) is now
+        try:
+            stamp = time.strftime("%Y-%m-%d %H:%M", time.gmtime(when))
+        except (ValueError, OverflowError, OSError):  # NaN, out of range
+            pass
+    ok = d.get("ok")
+    outcome = "ok" if ok is True else "failed" if ok is False else "outcome unknown"
     note = f" ({d['note']})" if d.get("note") else ""
     n = d.get("findings")
     found = f", {n} finding{'s' * (n != 1)}" if isinstance(n, int) else ""
+    notes = d.get("notes")
     warnings = tuple((str(x.get("code", "?")), str(x.get("message", "")))
-                     for x in d.get("notes") or () if isinstance(x, dict) and x.get("level") == "warning")
-    return S.Diagnosis(f"last run {stamp} {ok}{found}{note}", warnings, bool(d.get("ok")))
+                     for x in (notes if isinstance(notes, list) else ())
+                     if isinstance(x, dict) and x.get("level") == "warning")
+    return S.Diagnosis(f"last run {stamp} {outcome}{found}{note}", warnings, ok is not False)
 
 
 def _ago(s: float | None) -> str:

@@ -167,9 +167,11 @@ class Structured(Model):
         return replace(self, night_sky=ns, extra=self.extra + ns.parameters)
 
     # -- parameters at a time ------------------------------------------------------------------
-    def _at(self, p: Mapping[str, np.ndarray], x, t: Index) -> dict[str, np.ndarray]:
+    def _at(self, p: Mapping[str, np.ndarray], x, t: Index) -> Mapping[str, np.ndarray]:
+        """The parameters in force at ``t`` (``p`` itself, not a copy, without modulations:
+        the caller only reads them)."""
         if not self.modulations:
-            return dict(p)
+            return p
         q = dict(p)
         for m in self.modulations:
             f = m.factor(p, x, t)
@@ -184,18 +186,20 @@ class Structured(Model):
         return recomputed.inputs(self.night_sky, self.sensors, p, x, t, given)
 
     def advance(self, q, x, ta, ts, t: Index, c0: float, unit: float, dt: float,
-                given: Mapping[str, np.ndarray] | None = None):
+                given: Mapping[str, np.ndarray] | None = None,
+                air_dt: np.ndarray | None = None):
         """Air (exponential step, stores frozen), then the store(s) (exponential steps, new
         air; ``ts`` is the pair (base store, added store) when there is an added one): the
         model layer's step (gateway/model/step.py) with the zero-order hold that the coarsened
         inputs are built for (fit.coarsen: block means of the inputs over each step).
-        ``given``: drivers at ``t`` the caller already computed (``_inputs``)."""
+        ``given``: drivers at ``t`` the caller already computed (``_inputs``); ``air_dt``:
+        Δ / (c0 m_cap) [s m2 K J-1] when the caller holds it (``m_cap`` not modulated)."""
         x = self._inputs(q, x, t, given)
         g_sum: np.ndarray | float = 0.0
         s_sum: np.ndarray | float = 0.0
         for term in self.terms:
             g, s = term.coefficients(q, x, ta, t)
-            g_sum, s_sum = g_sum + g, s_sum + s
+            g_sum, s_sum = _add(g_sum, g), _add(s_sum, s)
         tw = None
         if self.added is not None:  # states (base store, added store)
             ts, tw = ts
@@ -204,8 +208,9 @@ class Structured(Model):
         if self.store:
             h = unit * q["h_store"]
             g_sum, s_sum = g_sum + h * ts, s_sum + h
-        c = c0 * q["m_cap"]
-        ta_new = stepping.advance(ta, g_sum - s_sum * ta, s_sum, dt / c)
+        if air_dt is None:
+            air_dt = dt / (c0 * q["m_cap"])
+        ta_new = stepping.advance(ta, g_sum - s_sum * ta, s_sum, air_dt)
         if tw is not None and self.added is not None:  # tw is only set with an added store
             tw = self.added.step(q, x, tw, ta_new, t, dt)
         if not self.store:
@@ -286,12 +291,22 @@ class Structured(Model):
         pre = recomputed.windows(self.night_sky, self.sensors, self.modulations, p, x, starts,
                                  horizon)
         out = np.empty((n_p * n, horizon))
+        air_dt = self._air_dt(rows, c0, dt)
         for k in range(horizon):
-            q = self._at(rows, x, t0 + k)
-            ta, ts = self.advance(q, x, ta, ts, t0 + k, c0, unit, dt,
-                                  {name: v[:, k : k + 1] for name, v in pre.items()})
-            out[:, k] = self.reading(rows, x, ta, t0 + k + 1)[:, 0]
+            t = t0 + k
+            q = self._at(rows, x, t)
+            ta, ts = self.advance(q, x, ta, ts, t, c0, unit, dt,
+                                  {name: v[:, k : k + 1] for name, v in pre.items()} if pre
+                                  else None, air_dt)
+            out[:, k] = (self.reading(rows, x, ta, t + 1) if self.sensors else ta)[:, 0]
         return out.reshape(n_p, n, horizon)
+
+    def _air_dt(self, p: Mapping[str, np.ndarray], c0: float, dt: float) -> np.ndarray | None:
+        """Δ / (c0 m_cap) for every step of a run (``advance``'s ``air_dt``), or None when a
+        modulation changes ``m_cap`` (then each step computes its own)."""
+        if any("m_cap" in m.targets for m in self.modulations):
+            return None
+        return dt / (c0 * p["m_cap"])
 
     def one_step(self, theta, x, gh, dt):
         """(P, T): element t predicts the reading at t from the reading at t-1 (store from the
@@ -349,6 +364,17 @@ class Structured(Model):
         for i, (row, s0) in enumerate(zip(np.atleast_2d(theta_rows), starts, strict=True)):
             out[i] = self.shoot(row[None, :], x, gh, dt, np.array([s0]), horizon)[0, 0, -1]
         return out
+
+
+def _add(total: np.ndarray | float, v: np.ndarray | float) -> np.ndarray | float:
+    """``total + v`` of a sum of coefficients, where a float 0.0 on either side adds nothing
+    and costs no array operation: the same numbers (x + 0 = x; only a zero's sign could
+    differ, and neither sum is divided by)."""
+    if isinstance(v, float) and v == 0.0:
+        return total
+    if isinstance(total, float) and total == 0.0:
+        return v
+    return total + v
 
 
 def structure(base: Model, gh: Greenhouse, store: bool) -> Structured:

@@ -15,9 +15,10 @@ import numpy as np
 from gateway.greenhouse import Greenhouse
 from gateway.model import step as stepping
 from gateway.model.model import Model
-from gateway.model.terms import SUNLIT
+from gateway.model.terms import SUNLIT, const
 
 MODES = ("one_step", "free_run")
+_HALF = const(0.5)
 
 
 def slice_drivers(x: Mapping[str, np.ndarray], start: int, stop: int) -> dict[str, np.ndarray]:
@@ -109,6 +110,8 @@ class _LinearOneStep:
     def __init__(self, model, x, gh, dt, free, base) -> None:
         self.model, self.x, self.dt = model, x, dt
         self.c = model.capacity(gh)
+        # C, Δ and Δ/2 as 0-d operands (terms.const): the same operations, no conversion per block
+        self._c, self._dt, self._half = const(self.c), const(dt), const(0.5 * dt)
         self.scheme = model.integration
         meas = x["t_in"]
         self.size = len(meas)
@@ -140,10 +143,12 @@ class _LinearOneStep:
         # known from the data alone, so blocks without such a sample skip the check
         r1, k1 = model.rates(self.base_p, x, self.state, t1, self.c)
         self.end_missing = ~np.isfinite(np.broadcast_to(r1 + k1, (1, n))[0])
+        self._missing = _running_count(self.end_missing)  # blocks without one skip the check
         # Gaps in the inputs or the previous state give NaN for every candidate alike: the
         # comparable samples are those where the base parameters give a finite error.
         self.valid = np.isfinite(self._errors(np.asarray(base, float)[None, :], 0, n))[0]
         self.count = int(self.valid.sum())
+        self._invalid = _running_count(~self.valid)  # blocks without one skip the mask
 
     @staticmethod
     def _unit(term, x, state, t, relin):
@@ -160,35 +165,48 @@ class _LinearOneStep:
 
         return rows
 
-    def _errors(self, theta: np.ndarray, a: int, b: int) -> np.ndarray:
-        """Prediction minus measurement (P, b - a) for rows a..b of the one-step targets."""
-        r0, lam0 = self.start.at(theta, a, b)  # rates [K s-1] and slopes [s-1]
+    def _operands(self, theta: np.ndarray) -> tuple:
+        """What every block of one population's evaluation reads from ``theta``: the parameter
+        columns (``Model.columns``, None when no term is evaluated per candidate) and the free
+        parameters of the start and end sums (``_Sums.at``), taken once per population."""
+        p = self.model.columns(theta) if self.end_other else None
+        return p, self.start.rows(theta), self.end.rows(theta)
+
+    def _errors(self, theta: np.ndarray, a: int, b: int, operands: tuple | None = None) -> np.ndarray:
+        """Prediction minus measurement (P, b - a) for rows a..b of the one-step targets;
+        ``operands``: ``_operands(theta)`` when the caller holds them."""
+        p, lin0, lin1 = self._operands(theta) if operands is None else operands
+        r0, lam0 = self.start.at(lin0, a, b)  # rates [K s-1] and slopes [s-1]
         state = self.state[:, a:b]
         t = slice(a, b)
-        p = self.model.columns(theta) if self.end_other else None
         relin = self.scheme.relinearise
+        c = self._c
         for term in self.other:
             f, k = self._unit(term, self.x, state, t, relin)(p)
-            r0, lam0 = r0 + f / self.c, lam0 + k / self.c
+            r0, lam0 = r0 + f / c, lam0 + k / c
         if self.scheme.hold == "zero_order":
             return stepping.advance(state, r0, lam0, self.dt) - self.target[a:b]
 
         def rates(st, tt):  # the terms that read the state, at the midpoint state
-            f, k = 0.0, 0.0
+            f = k = None  # the first term's own (g - s T, k): no addition to a zero
             for term in self.end_other:
                 if relin:
                     g, s, kk = term.linearised(p, self.x, st, tt)
                 else:
                     g, s = term.coefficients(p, self.x, st, tt)
                     kk = s
-                f, k = f + (g - s * st), k + kk
-            return f / self.c, k / self.c
+                ff = g - s * st
+                f, k = (ff, kk) if f is None else (f + ff, k + kk)
+            if f is None:
+                return 0.0, 0.0
+            return f / c, k / c
 
-        fixed = self.end.at(theta, a, b)  # the others' rate at the start state, and slope
+        fixed = self.end.at(lin1, a, b)  # the others' rate at the start state, and slope
         t1 = stepping.next_index(t, self.size)
         r1, lam1 = stepping.end_rates(rates, state, r0, lam0, t1, self.dt, relin, fixed=fixed,
-                                      check=bool(self.end_missing[a:b].any()))
-        pred = stepping.advance(state, r0, 0.5 * (lam0 + lam1), self.dt, r1)
+                                      check=bool(self._missing[b] > self._missing[a]),
+                                      half=self._half)
+        pred = stepping.advance(state, r0, _HALF * (lam0 + lam1), self._dt, r1)
         return pred - self.target[a:b]
 
     def sse(self, theta: np.ndarray) -> np.ndarray:
@@ -196,9 +214,13 @@ class _LinearOneStep:
         total = np.zeros(theta.shape[0])
         block = max(16, stepping.BLOCK_ELEMENTS // theta.shape[0])
         n = len(self.target)
+        operands = self._operands(theta)
+        bad = self._invalid
         for a in range(0, n, block):
             b = min(a + block, n)
-            err = np.where(self.valid[a:b], self._errors(theta, a, b), 0.0)
+            err = self._errors(theta, a, b, operands)
+            if bad[b] > bad[a]:  # a block without such samples keeps every error as is
+                err = np.where(self.valid[a:b], err, 0.0)
             total += np.einsum("ij,ij->i", err, err)
         return total
 
@@ -237,8 +259,25 @@ class _Sums:
         self.a_u = scale * np.array(self.u).reshape(len(self.cols), self.n)
         self.a_v = scale * np.array(self.v).reshape(len(self.cols), self.n)
         self.u0, self.v0 = scale * self.u0, scale * self.v0
+        # no fixed part (every parameter of these terms is free): ``at`` adds nothing, which
+        # gives the same numbers as adding the zeros (x + 0 = x; only a zero's sign could
+        # differ, and a rate's or slope's zero is never divided by)
+        self.zero = not (self.u0.any() or self.v0.any())
         return self
 
-    def at(self, theta: np.ndarray, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
-        lin = theta[:, self.idx]
-        return self.u0[a:b] + lin @ self.a_u[:, a:b], self.v0[a:b] + lin @ self.a_v[:, a:b]
+    def rows(self, theta: np.ndarray) -> np.ndarray:
+        """The free parameters of these terms (P, k) from a population ``theta`` (P, K)."""
+        return theta[:, self.idx]
+
+    def at(self, lin: np.ndarray, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+        """(u, v) at rows a..b for the free parameters ``lin`` (``rows``)."""
+        u, v = lin @ self.a_u[:, a:b], lin @ self.a_v[:, a:b]
+        if self.zero:
+            return u, v
+        return self.u0[a:b] + u, self.v0[a:b] + v
+
+
+def _running_count(flags: np.ndarray) -> np.ndarray:
+    """c[i] = number of true ``flags`` before i (length n + 1): rows a..b hold one iff
+    c[b] > c[a]."""
+    return np.concatenate([[0], np.cumsum(flags, dtype=np.int64)])

@@ -58,14 +58,15 @@ class CoverConvection(FluxTerm):
         return _H_I_COEF * np.abs(t_in - t_out) ** _H_I_EXP
 
     @classmethod
-    def _h(cls, x, t_in, t: Index):
-        h_o = x["h_o"][t]  # III.9
-        h_i = cls._h_i(t_in, x["t_out"][t])
-        return h_o, h_i, h_o * h_i / (h_o + h_i)  # U = (1/h_o + 1/h_i)^-1, safe when h_i = 0
+    def _h(cls, h_o, t_out, t_in):
+        """(h_i, U) [W m-2 K-1] for h_o (III.9), T_out and T_in."""
+        h_i = cls._h_i(t_in, t_out)
+        return h_i, h_o * h_i / (h_o + h_i)  # U = (1/h_o + 1/h_i)^-1, safe when h_i = 0
 
     def coefficients(self, p, x, t_in, t: Index):
-        s = p["c_cnv_cnd"] * self._h(x, t_in, t)[2]
-        return s * x["t_out"][t], s
+        t_out = x["t_out"][t]  # read once: the free runs call this at every step
+        s = p["c_cnv_cnd"] * self._h(x["h_o"][t], t_out, t_in)[1]
+        return s * t_out, s
 
     def linearised(self, p, x, t_in, t: Index):
         return self._linearised(p["c_cnv_cnd"], x["h_o"][t], x["t_out"][t], t_in)

@@ -7,18 +7,28 @@
     evaluation and final cost, ours vs theirs. Goal: ≥ 10× faster per evaluation, cost ≤ theirs.
 (c) BA vs RSBA over 10 seeds (thesis table 5): median final cost, and RSBA/RIWPSO parameter
     errors (table 4).
+
+``--against REF`` (a git commit or branch) measures only (a) with RIWPSO, this tree against
+REF's code exported by ``git archive``, in interleaved rounds (one process per tree per round,
+each the best of 3 CPU times): the median of the rounds' ratios, steadier on a noisy machine
+than either time (``bench/results/calibration_against.json``).
 """
 
 from __future__ import annotations
 
+import argparse
+import json
+import os
 import sys
 import time
 from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # not tests/bench/gateway.py
-from _common import one_core, write_result  # noqa: E402
+# The tree under test first (this checkout, or the one --against exported): tests/bench/gateway.py
+# must not shadow the gateway package.
+sys.path.insert(0, os.environ.get("SERRA_TREE", str(Path(__file__).resolve().parents[2])))
+from _common import against, one_core, write_result  # noqa: E402
 
 one_core()
 
@@ -34,6 +44,7 @@ from training.identifiability import ASSUMED, load  # noqa: E402
 
 PARTICLES, ITERATIONS = 100, 220
 ROUNDS = 3
+AGAINST_ROUNDS = 4
 
 
 def _problem():
@@ -168,5 +179,41 @@ def run() -> dict:
     return result
 
 
+def thesis_round() -> dict[str, float]:
+    """One process's figure for ``--against``: the thesis task with RIWPSO, best of ROUNDS CPU
+    times [s] (the same seed, so the same cost each time)."""
+    _, _, _, obj, lo, hi = _problem()
+    best, cost = float("inf"), float("nan")
+    for _ in range(ROUNDS):
+        c0 = time.process_time()
+        cost = ours(obj, lo, hi, "riwpso", seed=0)["cost"]
+        best = min(best, time.process_time() - c0)
+    return {"cpu_s": best, "cost": float(cost)}
+
+
+def run_against(ref: str) -> dict:
+    """(a) with RIWPSO, this tree against ``ref``'s code, interleaved (module docstring)."""
+    base, this = against(__file__, ref, AGAINST_ROUNDS)
+    ratios = [t["cpu_s"] / b["cpu_s"] for b, t in zip(base, this, strict=True)]
+    return {"ref": ref, "rounds": {"this": this, ref: base},
+            "summary": {"thesis_task_cpu_s_this": [round(t["cpu_s"], 3) for t in this],
+                        f"thesis_task_cpu_s_at_{ref}": [round(b["cpu_s"], 3) for b in base],
+                        f"this_over_{ref}_median_of_rounds": float(np.median(ratios)),
+                        "same_final_cost": all(b["cost"] == t["cost"]
+                                               for b, t in zip(base, this, strict=True))}}
+
+
 if __name__ == "__main__":
-    print(write_result("calibration", run()))
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--against", metavar="REF",
+                        help="only the thesis task, this tree against this git commit's code")
+    parser.add_argument("--round", action="store_true", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.round:  # one round in this process, JSON on the last line (used by --against)
+        print(json.dumps(thesis_round()))
+    elif args.against:
+        result = run_against(args.against)
+        print(write_result("calibration_against", result))
+        print(json.dumps(result["summary"], indent=2))
+    else:
+        print(write_result("calibration", run()))

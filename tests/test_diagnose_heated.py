@@ -76,6 +76,28 @@ def test_gaps_and_a_missing_night_leave_the_verdict():
     assert f.held and f.nights == len(runs) - 1
 
 
+def test_a_lost_light_reading_does_not_split_a_night():
+    s = series(held=True)
+    runs = night_runs(s["i_glob"], s.step)
+    a, b = runs[2]
+    s.columns["i_glob"][(a + b) // 2] = np.nan  # one reading lost mid-night: still one night
+    assert night_runs(s["i_glob"], s.step) == runs
+    gap = int(4 * 3600 / s.step)  # not bridged (> MAX_GAP_H); each 5-h part is too short a night
+    s.columns["i_glob"][(a + b) // 2 - gap // 2:(a + b) // 2 + gap // 2] = np.nan
+    assert night_runs(s["i_glob"], s.step) == runs[:2] + runs[3:]
+
+
+def test_a_night_the_record_cuts_is_left_out():
+    s = series(held=True)
+    runs = night_runs(s["i_glob"], s.step)
+    a, b = runs[-1]
+    cut = Series(s.time[:b - 12], s.step, {k: v[:b - 12] for k, v in s.columns.items()})
+    assert night_runs(cut["i_glob"], cut.step) == runs[:-1]  # its late part is not in the data
+    lost = series(held=True)
+    lost.columns["i_glob"][b - 30:] = np.nan  # the sunrise not seen: its end unknown
+    assert night_runs(lost["i_glob"], lost.step) == runs[:-1]
+
+
 def test_no_light_or_no_inside_reading_is_no_crash():
     s = series(held=True)
     s.columns["i_glob"][:] = np.nan  # never known to be dark: no nights

@@ -11,7 +11,8 @@ cuts that share to about U_out / (U_out + U_soil + G) ≈ 0.1.
 
 The statistic (no calibration, only the kit's t_in, t_out and i_glob):
 
-1. nights: runs of dark samples (i_glob ≤ ``DARK_W_M2``) at least ``MIN_NIGHT_H`` long;
+1. nights: runs of dark samples (i_glob ≤ ``DARK_W_M2``) at least ``MIN_NIGHT_H`` long that end
+   in the data (a night the record's end cuts is left out; short gaps are bridged);
 2. each night's late part (its last ``LATE_FRACTION``, after the evening's stored heat has gone):
    the mean t_in and t_out over it (rows with both finite, at least ``MIN_VALID`` of them);
 3. the colder ``COLD_FRACTION`` of the nights by that mean t_out (where a heater would work);
@@ -40,6 +41,8 @@ DARK_W_M2 = 5.0
 in the dark; the vent controller's δ_sun uses the same threshold)."""
 MIN_NIGHT_H = 6.0
 """[h] A night is a run of dark samples at least this long (a dull winter afternoon's dip is not)."""
+MAX_GAP_H = 1.0
+"""[h] A gap in i_glob up to this long between dark samples is dark (a lost reading or two)."""
 LATE_FRACTION = 0.5
 """[-] The part of each night read: its last half, when the house has lost the day's stored
 heat (mass time constant ≈ 2 h) and a thermostat, if any, holds it."""
@@ -85,13 +88,27 @@ class HeatedFloor:
 
 
 def night_runs(i_glob: np.ndarray, step: float) -> list[tuple[int, int]]:
-    """(start, stop) index ranges of dark runs (i_glob ≤ DARK_W_M2; NaN is not dark) at least
-    MIN_NIGHT_H long on a grid of ``step`` seconds."""
-    dark = np.nan_to_num(i_glob, nan=np.inf) <= DARK_W_M2
-    edges = np.diff(np.concatenate(([0], dark.astype(np.int8), [0])))
-    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    """(start, stop) index ranges of nights on a grid of ``step`` seconds: dark runs (i_glob ≤
+    DARK_W_M2) at least MIN_NIGHT_H long whose end (the sunrise) is in the data.
+
+    A gap of unknown radiation (NaN) up to MAX_GAP_H long with dark on both sides is dark (one
+    lost reading does not split a night); a longer gap is not. A run that the record's end or a
+    gap cuts short is left out: what it has is the early night, not the late part read.
+    """
+    known = np.isfinite(i_glob)
+    dark = known & (np.nan_to_num(i_glob, nan=np.inf) <= DARK_W_M2)
+    for a, b in _runs(~known):
+        if 0 < a and b < len(dark) and dark[a - 1] and dark[b] and (b - a) * step <= MAX_GAP_H * 3600:
+            dark[a:b] = True
     need = MIN_NIGHT_H * 3600.0 / step
-    return [(int(a), int(b)) for a, b in zip(starts, stops, strict=True) if b - a >= need]
+    return [(a, b) for a, b in _runs(dark) if b - a >= need and b < len(dark) and known[b]]
+
+
+def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
+    """(start, stop) index ranges of the True runs of ``flags``."""
+    edges = np.diff(np.concatenate(([0], flags.astype(np.int8), [0])))
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    return [(int(a), int(b)) for a, b in zip(starts, stops, strict=True)]
 
 
 def late_means(t_in: np.ndarray, t_out: np.ndarray, runs: list[tuple[int, int]]

@@ -198,12 +198,14 @@ def test_minute_aggregates_are_computed_by_the_service(tmp_path: Path) -> None:
         async with Gateway(tmp_path) as g:
             for s in range(3):
                 await g.exchange(pkt(s))
-            for _ in range(100):
-                with sqlite3.connect(g.db) as c:
-                    if c.execute("SELECT sum(n) FROM minute").fetchone()[0] == 3:
-                        return
-                await asyncio.sleep(0.1)
-            raise AssertionError("minute aggregates not computed")
+            def counted() -> bool:
+                c = sqlite3.connect(g.db)
+                try:
+                    return c.execute("SELECT sum(n) FROM minute").fetchone()[0] == 3
+                finally:
+                    c.close()
+
+            await until(counted, "the minute aggregates of 3 packets", timeout=60.0)
 
     run(go())
 

@@ -89,16 +89,15 @@ def outside_humidity(series: Series, data: str, sky: bool, evidence: bool) -> li
     (Brutsaert 1975; gateway/model/sky.py ``clear_sky_emissivity``)."""
     if not (sky or evidence):
         return []
-    swinbank = WITHOUT_HUMIDITY
     how = missing(series, "rh_out")
     if how:
-        parts = ([swinbank] if sky else []) + ([HUMIDITY_EVIDENCE] if evidence else [])
+        parts = ([WITHOUT_HUMIDITY] if sky else []) + ([HUMIDITY_EVIDENCE] if evidence else [])
         return [("no_rh_out", f"{data}: {how} (outside relative humidity): "
                  + "; and ".join(parts))]
     n = empty_rows(series, "rh_out", where="t_out")
     if n and sky:
         return [("rh_out_gaps", f"{data}: column rh_out is empty on {n} of {len(series)} rows "
-                 f"on the {series.step:g} s grid that have an outside temperature: there {swinbank}")]
+                 f"on the {series.step:g} s grid that have an outside temperature: there {WITHOUT_HUMIDITY}")]
     return []
 
 

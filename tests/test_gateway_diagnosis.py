@@ -57,7 +57,7 @@ def stored_kit(db: Path) -> float:
 
 
 def due_scheduler(tmp_path: Path, db: Path, end: float, days: float, min_days: float,
-                  on_findings: Callable[[], None]) -> DiagnosisScheduler:
+                  on_stored: Callable[[], None]) -> DiagnosisScheduler:
     """The scheduler of greenhouse ``north`` (kit 7, the prototype) at gateway time ``end``, a
     run due."""
     write_keys(tmp_path / "keys.txt", {7: KEY})
@@ -69,7 +69,7 @@ def due_scheduler(tmp_path: Path, db: Path, end: float, days: float, min_days: f
     store = Store(db)
     store.set_meta("diagnosis_last", repr(end - 25 * 3600))  # a run is due
     store.close()
-    return DiagnosisScheduler(cfg, prepare(cfg), lambda: end, tmp_path, on_findings)
+    return DiagnosisScheduler(cfg, prepare(cfg), lambda: end, tmp_path, on_stored)
 
 
 def one_round(sched: DiagnosisScheduler) -> DiagnosisRun:

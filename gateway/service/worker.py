@@ -81,7 +81,8 @@ class Worker:
             infos[s.name] = GreenhouseInfo(Place(self.cfg.farm, s.name, s.latitude, s.longitude),
                                            s.inside, s.outside, r.model, lo.tolist(), hi.tolist())
         self.outbox = Outbox(conn, self.cfg.outbox_max, self.cfg.outbox_alarm)
-        self.producers = Producers(conn, self.cfg.farm, infos, self.outbox)
+        self.producers = Producers(conn, self.cfg.farm, infos, self.outbox,
+                                   diagnosis=self.cfg.diagnosis.enabled)
 
     def _run(self) -> None:
         conn = open_db(self.cfg.db)

@@ -149,7 +149,7 @@ class Worker:
     def _service_state(self) -> dict[str, Any]:
         """What the status screen shows of the gateway itself, for one that reads it over Zenoh
         (docs/cloud.md, ``status``): uptime [s], store and disk [bytes], Zenoh peers, ingest
-        counters."""
+        counters, whether the daily diagnosis is on (off: the screen shows no last run)."""
         db = self.cfg.db
         size = sum(os.path.getsize(f) for f in (db, f"{db}-wal") if os.path.exists(f))
         try:
@@ -161,7 +161,8 @@ class Worker:
         z = extra.get("zenoh", {})
         return {"gatewayUptime": round(time.time() - self.started, 1), "storeSize": size, **disk,
                 "zenohPeers": z.get("peers", 0), "zenohRouters": z.get("routers", 0),
-                "ingestCounters": extra.get("ingest", {})}
+                "ingestCounters": extra.get("ingest", {}),
+                "diagnosisEnabled": self.cfg.diagnosis.enabled}
 
     def _report_unassigned(self, conn) -> None:
         known = self.cfg.devices()

@@ -12,6 +12,7 @@ import re
 import pytest
 from referencing.exceptions import NoSuchResource
 
+from gateway.cloud.store import parse
 from gateway.publish import payloads as P
 from gateway.publish import validate as V
 
@@ -90,6 +91,9 @@ def test_a_diagnosis_run_says_when_how_it_went_and_what_it_noted() -> None:
                                         {"code": "?", "level": "note", "message": ""}]
     assert odd["summary"]["value"] == "diagnosis failed"
     assert V.errors(json.loads(P.dumps(odd))) == []
+    # the cloud store keeps every kind alike, indexed by its observation time: the run's
+    got = parse("serra/farm1/north/diagnosis", P.dumps(d))
+    assert (got.kind, got.t, got.idem) == ("diagnosis", T, "dr")
 
 
 def _break(kind: str, path: list, value) -> dict:

@@ -41,7 +41,9 @@ def wait_for(cond: Callable[[], object], timeout: float, what: str, every: float
 def write_config(folder: Path, *, anchor: float, scale: float = 300.0, farm: str = "f1",
                  devices: tuple[int, ...] = (7,), zenoh_listen: str = "tcp/127.0.0.1:0",
                  zenoh_connect: str | None = None, extra: str = "", status_every_s: float = 600,
-                 greenhouses: str | None = None) -> Path:
+                 greenhouses: str | None = None, diagnosis: str = "enabled = false") -> Path:
+    """The gateway's TOML in ``folder`` (keys beside it); ``diagnosis``: the body of its
+    ``[diagnosis]`` table (off unless a test says otherwise)."""
     write_keys(folder / "keys.txt", {d: KEY for d in devices})
     connect = f'connect = ["{zenoh_connect}"]' if zenoh_connect else ""
     gh = greenhouses or (f'[[greenhouse]]\nname = "north"\ngreenhouse = "biskra-prototype"\n'
@@ -61,7 +63,7 @@ listen = ["{zenoh_listen}"]
 {connect}
 resend_on_start_s = 2.0
 [diagnosis]
-enabled = false
+{diagnosis}
 [clock]
 scale = {scale}
 epoch = {EPOCH}
@@ -221,8 +223,8 @@ def sim_trace(days: float = 1.0, start: str = "2009-11-01") -> dict[str, np.ndar
 
 
 def store_trace(store, trace: dict[str, np.ndarray], minutes: range, device: int = 7,
-                change_after: int | None = None, boot: int = 0) -> None:
-    """Records of ``trace`` (``sim_trace``'s columns), one per minute from EPOCH, stamped
+                change_after: int | None = None, boot: int = 0, start: float = EPOCH) -> None:
+    """Records of ``trace`` (``sim_trace``'s columns), one per minute from ``start``, stamped
     mid-minute, written to the gateway store ``store`` and aggregated into minutes; with
     ``change_after``, t_out and i_glob are +5 after that minute (another future, same past)."""
     from gateway.store.aggregate import aggregate
@@ -238,7 +240,23 @@ def store_trace(store, trace: dict[str, np.ndarray], minutes: range, device: int
             vals.append(v if ok else None)
             st.append(p.ST_OK if ok else p.ST_TIMEOUT)
         items.append((p.Record(device, boot, k, k * 60_000, 0, 60.0, tuple(vals), tuple(st)),
-                      EPOCH + 60 * k + 30))
+                      start + 60 * k + 30))
     store.write_batch(items)
     while aggregate(store.conn):
         pass
+
+
+def shifted_kit(db: Path) -> float:
+    """42 h of the simulated kit (from 06:00, the least diagnose takes) whose clock is 12 h off,
+    stored as kit 7's records in the gateway store ``db`` and aggregated; returns the end time.
+    Its daylight falls in the site's night: diagnose warns ``site_time_mismatch``."""
+    from gateway.store import Store
+
+    trace = sim_trace(days=2.0)
+    shift = 12 * 3600.0
+    store = Store(db)
+    try:
+        store_trace(store, trace, range(len(trace["t_in"])), start=EPOCH + shift)
+    finally:
+        store.close()
+    return EPOCH + shift + 60 * len(trace["t_in"])

@@ -24,7 +24,7 @@ from gateway.store import Store
 from gateway.store.aggregate import aggregate
 from gateway.store.keys import write_keys
 from gateway.store.live import findings, set_status
-from tests.gateway_harness import EPOCH, KEY, sim_trace
+from tests.gateway_harness import KEY, shifted_kit
 
 START = 1_257_033_600.0  # 2009-11-01T00:00Z
 DAYS = 6.0
@@ -57,7 +57,7 @@ def stored_kit(db: Path) -> float:
 
 
 def due_scheduler(tmp_path: Path, db: Path, end: float, days: float, min_days: float,
-                  on_findings: Callable[[], None]) -> DiagnosisScheduler:
+                  on_stored: Callable[[], None]) -> DiagnosisScheduler:
     """The scheduler of greenhouse ``north`` (kit 7, the prototype) at gateway time ``end``, a
     run due."""
     write_keys(tmp_path / "keys.txt", {7: KEY})
@@ -69,7 +69,7 @@ def due_scheduler(tmp_path: Path, db: Path, end: float, days: float, min_days: f
     store = Store(db)
     store.set_meta("diagnosis_last", repr(end - 25 * 3600))  # a run is due
     store.close()
-    return DiagnosisScheduler(cfg, prepare(cfg), lambda: end, tmp_path, on_findings)
+    return DiagnosisScheduler(cfg, prepare(cfg), lambda: end, tmp_path, on_stored)
 
 
 def one_round(sched: DiagnosisScheduler) -> DiagnosisRun:
@@ -113,25 +113,6 @@ def test_scheduled_diagnosis_runs_in_a_subprocess_and_stores_its_findings(tmp_pa
     assert (first.revision, first.published_revision) == (1, 0)  # published once, by the worker
     assert float(store.get_meta("diagnosis_last")) == end  # next run one period later
     store.close()
-
-
-def shifted_kit(db: Path) -> float:
-    """42 h of the simulated kit (from 06:00, the least diagnose takes) whose clock is 12 h off,
-    stored as its records; returns the end time."""
-    trace = sim_trace(days=2.0)
-    shift = 12 * 3600.0
-    store = Store(db)
-    items = []
-    for k in range(len(trace["t_in"])):
-        vals = [float(trace[c][k]) for c in p.CHANNELS]
-        st = tuple(p.ST_OK if math.isfinite(v) else p.ST_TIMEOUT for v in vals)
-        items.append((p.Record(7, 0, k, k * 60_000, 0, 60.0, tuple(
-            v if math.isfinite(v) else None for v in vals), st), EPOCH + shift + 60 * k + 30))
-    store.write_batch(items)
-    while aggregate(store.conn):
-        pass
-    store.close()
-    return EPOCH + shift + 60 * len(items)
 
 
 def test_what_the_diagnosis_says_of_the_data_is_kept_with_the_run(

@@ -255,6 +255,57 @@ def test_findings_keep_their_identity_and_are_published_once_per_revision(tmp_pa
     assert len(findings(s.conn, "north")) == 2
 
 
+def test_each_kept_diagnosis_run_is_published_once(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """The run the scheduler keeps (``save_run``) becomes one ``diagnosis`` message, made in the
+    transaction that moves its cursor: not again on the next pass nor by a new producer on the
+    same store (a restart), again for the next run, held while the outbox is full; a kept run
+    that cannot be read is passed over with one warning; nothing with the diagnosis off."""
+    import logging
+
+    from gateway.service.diagnosis import DiagnosisRun, save_run
+
+    s = Store(tmp_path / "g.db")
+    outbox = Outbox(s.conn, max_rows=1)
+    prod = Producers(s.conn, "f1", infos(), outbox)
+    assert prod.diagnosis_runs(10) == 0  # never run: nothing to say
+    notes = [{"code": "site_time_mismatch", "level": "warning", "message": "daylight at night"}]
+    first = DiagnosisRun("north", EPOCH, True, "diagnosis of 2.0 days in 9 s: 0 finding(s)", 0,
+                         notes)
+    save_run(s.conn, first)
+    assert prod.diagnosis_runs(10) == 1 and prod.diagnosis_runs(10) == 0
+    assert Producers(s.conn, "f1", infos(), outbox).diagnosis_runs(10) == 0  # restarted
+    (m,) = outbox.peek(10)
+    doc = json.loads(m.payload)
+    assert (m.key, m.idem) == ("serra/f1/north/diagnosis", f"f1/north/diagnosis/{int(EPOCH)}")
+    assert s.conn.execute("SELECT kind, t FROM outbox WHERE id=?", (m.id,)).fetchone() == (
+        "diagnosis", EPOCH)  # what history queries select by
+    assert validate.errors(doc) == []
+    assert (doc["succeeded"]["value"], doc["summary"]["value"], doc["runNotes"]["value"]) == (
+        True, first.note, notes)
+    failed = DiagnosisRun("north", EPOCH + 86400, False, "diagnosis abandoned after 1800 s")
+    save_run(s.conn, failed)
+    assert prod.diagnosis_runs(10) == -1  # the outbox is full: the run waits, its cursor stays
+    outbox.mark_sent([m.id])
+    assert prod.diagnosis_runs(10) == 1
+    (m2,) = outbox.peek(10)
+    assert json.loads(m2.payload)["succeeded"]["value"] is False
+    s.set_meta("diagnosis_run/north", "{not json")
+    outbox.mark_sent([m2.id])
+    with caplog.at_level(logging.WARNING, logger="serra.gateway"):
+        assert prod.diagnosis_runs(10) == 1 and prod.diagnosis_runs(10) == 0
+    assert outbox.peek(10) == []
+    (said,) = [r.getMessage() for r in caplog.records if r.name == "serra.gateway"]
+    assert said.startswith("greenhouse north: the kept diagnosis run is not published, it "
+                           "cannot be read: not JSON"), said
+    off = Store(tmp_path / "off.db")
+    save_run(off.conn, first)
+    quiet = Producers(off.conn, "f1", infos(), Outbox(off.conn), diagnosis=False)
+    assert quiet.run() == 0 and Outbox(off.conn).peek(10) == []
+    off.close()
+    s.close()
+
+
 def test_trace_is_usable() -> None:
     assert np.isfinite(TRACE["t_in"]).mean() > 0.95
 

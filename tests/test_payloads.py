@@ -12,6 +12,7 @@ import re
 import pytest
 from referencing.exceptions import NoSuchResource
 
+from gateway.cloud.store import parse
 from gateway.publish import payloads as P
 from gateway.publish import validate as V
 
@@ -41,6 +42,12 @@ def every_kind() -> dict[str, dict]:
                              effect="solar_gain_change", start=T, first_seen=T, last_seen=T,
                              revision=1, detail={"params": {"factor": 0.5, "unit": "-"},
                                                  "summary": "cover whitened", "evidence": "x"}),
+        "diagnosis": P.diagnosis_run(PLACE, "dr", when=T, ok=True, findings=1,
+                                     note="diagnosis of 2.0 days in 9 s: 1 finding(s)",
+                                     notes=[{"code": "site_time_mismatch", "level": "warning",
+                                             "message": "daylight at night"},
+                                            {"code": "short_heldout", "level": "note",
+                                             "message": "few held-out days"}]),
     }
 
 
@@ -68,6 +75,27 @@ def test_units_times_and_links_follow_the_models() -> None:
     assert k["parameters"]["c_solar"]["unitText"]["value"] == "kg K J-1"  # no UN/CEFACT code
 
 
+def test_a_diagnosis_run_says_when_how_it_went_and_what_it_noted() -> None:
+    """The run as the gateway keeps it (``DiagnosisRun``), in the entity's own attributes; a
+    note of a level the screen does not know reads as a note, never as a warning, and a failed
+    run without words still has a summary."""
+    d = every_kind()["diagnosis"]
+    assert d["id"] == "urn:ngsi-ld:GreenhouseDiagnosisRun:serra:farm1:north"
+    assert d["refAgriGreenhouse"]["object"] == every_kind()["status"]["id"]
+    assert d["dateObserved"]["value"]["@value"] == "2009-10-31T14:40:00Z"
+    assert (d["succeeded"]["value"], d["findingCount"]["value"]) == (True, 1)
+    assert [n["level"] for n in d["runNotes"]["value"]] == ["warning", "note"]
+    odd = P.diagnosis_run(PLACE, "x", when=T, ok=False, note="", findings=0,
+                          notes=[{"code": "c", "level": "info", "message": "m"}, {}])
+    assert odd["runNotes"]["value"] == [{"code": "c", "level": "note", "message": "m"},
+                                        {"code": "?", "level": "note", "message": ""}]
+    assert odd["summary"]["value"] == "diagnosis failed"
+    assert V.errors(json.loads(P.dumps(odd))) == []
+    # the cloud store keeps every kind alike, indexed by its observation time: the run's
+    got = parse("serra/farm1/north/diagnosis", P.dumps(d))
+    assert (got.kind, got.t, got.idem) == ("diagnosis", T, "dr")
+
+
 def _break(kind: str, path: list, value) -> dict:
     p = copy.deepcopy(every_kind()[kind])
     node = p
@@ -93,6 +121,11 @@ def _break(kind: str, path: list, value) -> dict:
     ("forecast", ["airTemperatureForecast", 0, "unitCode"], "KEL", "airTemperatureForecast/0/unitCode"),
     ("ventilation", ["ventilationFlow", "value"], -0.5, "ventilationFlow/value"),
     ("finding", ["idempotencyKey"], KeyError, "idempotencyKey"),
+    ("diagnosis", ["succeeded", "value"], "yes", "succeeded/value"),
+    ("diagnosis", ["findingCount", "value"], -1, "findingCount/value"),
+    ("diagnosis", ["runNotes", "value", 0, "level"], "loud", "runNotes/value/0/level"),
+    ("diagnosis", ["runNotes", "value", 1, "code"], KeyError, "'code' is a required"),
+    ("diagnosis", ["summary"], KeyError, "'summary' is a required"),
 ])
 def test_wrong_payloads_are_refused_naming_the_attribute(kind, path, value, expect) -> None:
     problems = V.errors(_break(kind, path, value))

@@ -16,7 +16,7 @@ from datetime import datetime
 
 PREFIX = "serra"
 KINDS = ("measurement/inside", "measurement/outside", "forecast", "parameters", "fluxes",
-         "ventilation", "finding", "status")
+         "ventilation", "finding", "diagnosis", "status")
 UNASSIGNED = "unassigned"
 HISTORY = "history"
 DEFAULT_LIMIT = 1000

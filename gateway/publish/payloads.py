@@ -3,10 +3,11 @@
 Inside and outside climate are two ``WeatherObserved`` entities, linked from the greenhouse's
 ``AgriGreenhouse`` (``hasWeatherObserved``, one instance per side told apart by ``datasetId``);
 kit health is a ``Device``. Our own quantities (forecast, parameters, fluxes, ventilation,
-findings) are entities of our own types in the same shape (docs/cloud.md lists every attribute).
-Units are UN/CEFACT common codes (``unitCode``); a unit that has none travels as a ``unitText``
-sub-property. Times are ISO 8601 UTC; relative humidity is a fraction 0–1 as the models define
-it. Every payload carries ``idempotencyKey``: the cloud drops repeats by it.
+findings, the diagnosis's last run) are entities of our own types in the same shape
+(docs/cloud.md lists every attribute). Units are UN/CEFACT common codes (``unitCode``); a unit
+that has none travels as a ``unitText`` sub-property. Times are ISO 8601 UTC; relative humidity
+is a fraction 0–1 as the models define it. Every payload carries ``idempotencyKey``: the cloud
+drops repeats by it.
 """
 
 from __future__ import annotations
@@ -301,6 +302,28 @@ def finding(place: Place, idem: str, *, finding_id: str, effect: str, start: flo
     if detail.get("evidence"):
         attrs["evidence"] = prop(str(detail["evidence"]))
     return entity("GreenhouseFinding", place.urn("GreenhouseFinding", finding_id), idem, attrs)
+
+
+def diagnosis_run(place: Place, idem: str, *, when: float, ok: bool, note: str, findings: int,
+                  notes: Sequence[Mapping[str, Any]]) -> dict:
+    """``diagnosis``: a greenhouse's last daily diagnosis run (gateway/service/diagnosis.py
+    ``DiagnosisRun``), one entity per greenhouse, sent again after every run. ``dateObserved``:
+    when it ran [gateway clock]; ``succeeded`` false: it failed (timed out, exited with an error,
+    output unreadable), a run skipped for too little data succeeded and its ``summary`` says so;
+    ``findingCount``: the findings it traced (each also a ``finding`` message when new or
+    changed); ``runNotes``: what it said of the data beside them, ``{code, level, message}``
+    records, ``level`` ``warning`` (the figures are likely wrong) or ``note``."""
+    kept = [{"code": str(n.get("code") or "?"),
+             "level": "warning" if n.get("level") == "warning" else "note",
+             "message": str(n.get("message") or "")} for n in notes]
+    return entity("GreenhouseDiagnosisRun", place.urn("GreenhouseDiagnosisRun"), idem, {
+        "refAgriGreenhouse": rel(place.agri_greenhouse),
+        "dateObserved": date_time(when),
+        "succeeded": prop(bool(ok)),
+        "summary": prop(note or ("diagnosis ran" if ok else "diagnosis failed")),
+        "findingCount": prop(int(findings)),
+        "runNotes": prop(kept),
+    })
 
 
 def _num(v: float) -> float:

@@ -29,7 +29,7 @@ FIWARE_TYPES = {
     "Device": SDM + "dataModel.Device/Device/schema.json",
 }
 OWN_TYPES = ("GreenhouseForecast", "GreenhouseModelParameters", "GreenhouseHeatFluxes",
-             "GreenhouseVentilation", "GreenhouseFinding")
+             "GreenhouseVentilation", "GreenhouseFinding", "GreenhouseDiagnosisRun")
 NGSI_LD = "https://serra.invalid/schemas/ngsi-ld-entity.schema.json"
 ENTITIES = "https://serra.invalid/schemas/entities.schema.json"
 _DEVICE_ALIAS = SDM + "dataModel.Device/device-schema.json"

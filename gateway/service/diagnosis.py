@@ -10,7 +10,9 @@ greenhouse whose start is within ``MATCH_S`` of a known one *is* that one (a dai
 the estimated start a little); it is published again only when it changed (start moved by more
 than ``MOVE_S`` or amplitude by more than ``CHANGE_REL``), as a new revision, never re-announced
 daily. Each greenhouse's last run (time, outcome, summary, notes) is kept in the store's ``meta``
-(:data:`RUN_META`), so the status shows it again right after a restart.
+(:data:`RUN_META`), so the status shows it again right after a restart, and published once as a
+``diagnosis`` message (gateway/service/producers.py), so a screen reading the gateway over Zenoh
+shows it too.
 """
 
 from __future__ import annotations
@@ -200,7 +202,7 @@ def save_run(conn: sqlite3.Connection, run: DiagnosisRun) -> None:
                  (RUN_META + run.greenhouse, json.dumps(run.row())))
 
 
-def _run_of(greenhouse: str, value: str) -> DiagnosisRun:
+def read_run(greenhouse: str, value: str) -> DiagnosisRun:
     """A stored run back; ValueError saying what is wrong with it. A note kept before the
     status row named the greenhouse itself ("greenhouse north: diagnosis of …") loses that
     prefix, so the row does not say the name twice."""
@@ -241,7 +243,7 @@ def load_runs(conn: sqlite3.Connection, greenhouses: list[str], where: str = "st
         if r is None:
             continue
         try:
-            out[name] = _run_of(name, r[0])
+            out[name] = read_run(name, r[0])
         except ValueError as e:
             log.warning("%s: meta %s%s: not a diagnosis run, ignored: %s", where, RUN_META, name, e)
     return out
@@ -250,12 +252,15 @@ def load_runs(conn: sqlite3.Connection, greenhouses: list[str], where: str = "st
 class DiagnosisScheduler:
     """The asyncio task that runs the diagnosis on schedule (``run_forever``). Each run is kept
     in the store as its greenhouse's last (:func:`save_run`) and read back when the scheduler is
-    made, so the status has each greenhouse's last run from the start (``last``)."""
+    made, so the status has each greenhouse's last run from the start (``last``); the worker
+    publishes each kept run once (kind ``diagnosis``)."""
 
     def __init__(self, cfg: GatewayConfig, resources: list[GreenhouseResources],
-                 clock: Callable[[], float], workdir: Path, on_findings: Callable[[], None]) -> None:
+                 clock: Callable[[], float], workdir: Path, on_stored: Callable[[], None]) -> None:
+        """``on_stored``: called after each run is kept (with its findings), so the worker makes
+        their messages (``finding``, ``diagnosis``: gateway/service/producers.py)."""
         self.cfg, self.resources, self.clock = cfg, resources, clock
-        self.workdir, self.on_findings = workdir, on_findings
+        self.workdir, self.on_stored = workdir, on_stored
         self.last: dict[str, DiagnosisRun] = self._kept()
         self.proc: asyncio.subprocess.Process | None = None
 
@@ -287,6 +292,7 @@ class DiagnosisScheduler:
                         run = await self.run_one(conn, r, now)
                         await _settled(save_run, conn, run)
                         self.last[r.settings.name] = run
+                        self.on_stored()  # its findings and the run itself: messages to make
                     last = now
                     await _settled(_save_last, conn, last)
                 await asyncio.sleep(tick)
@@ -338,8 +344,6 @@ class DiagnosisScheduler:
         notes = await _settled(store_findings, conn, name, result["findings"], now)
         for n in notes:
             log.info(n)
-        if notes:
-            self.on_findings()
         note = (f"diagnosis of {rows / 1440:.1f} days in {time.monotonic() - t0:.0f} s: "
                 f"{len(result['findings'])} finding(s)")
         log.info("greenhouse %s: %s", name, note)

@@ -11,6 +11,8 @@ the publisher has drained, nothing is dropped (the rows wait in their own tables
 - estimates: each greenhouse-minute's rows → ``forecast``, ``parameters``, ``fluxes``,
   ``ventilation``;
 - findings: a new revision of a finding → ``finding`` (once per revision);
+- diagnosis runs: a greenhouse's last run as the scheduler keeps it (gateway/service/diagnosis.py,
+  ``meta`` ``diagnosis_run/<greenhouse>``) → ``diagnosis`` (once per run);
 - snapshots (every ``status_every_s``, skipped when the outbox has no room: they are state, not
   events): ``status`` (AgriGreenhouse) per greenhouse, ``device/<id>`` per kit.
 """
@@ -28,6 +30,7 @@ from gateway.model.model import Model
 from gateway.protocol import CHANNELS
 from gateway.publish import keyspace as K
 from gateway.publish import payloads as P
+from gateway.service.diagnosis import RUN_META, read_run
 from gateway.store.db import transaction
 from gateway.store.live import device_health, findings
 from gateway.store.outbox import Message, Outbox, OutboxFull
@@ -35,6 +38,9 @@ from gateway.store.outbox import Message, Outbox, OutboxFull
 log = logging.getLogger("serra.gateway")
 SILENT_S = 300.0
 """A kit whose last record is older than this [s, gateway clock] is reported ``silent``."""
+PUB_RUN = "pub_diagnosis_run/"
+"""``meta`` name prefix of the cursor of a greenhouse's ``diagnosis`` messages: the kept run
+(its ``diagnosis_run/<greenhouse>`` value) last made into a message."""
 
 
 @dataclass(frozen=True)
@@ -56,8 +62,11 @@ class ProducerCounts:
 
 class Producers:
     def __init__(self, conn: sqlite3.Connection, farm: str, greenhouses: Mapping[str, GreenhouseInfo],
-                 outbox: Outbox) -> None:
+                 outbox: Outbox, diagnosis: bool = True) -> None:
+        """``diagnosis``: publish the diagnosis runs (False: the diagnosis is switched off, and
+        a run kept from before is not news)."""
         self.conn, self.farm, self.gh, self.outbox = conn, farm, dict(greenhouses), outbox
+        self.publish_runs = diagnosis
         self.counts = ProducerCounts()
         self.roles: dict[int, list[tuple[str, str]]] = {}  # device → [(greenhouse, side)]
         for name, g in self.gh.items():
@@ -101,7 +110,7 @@ class Producers:
     def run(self, limit: int = 500) -> int:
         """All event producers until caught up or the outbox is full; messages made."""
         total = 0
-        for produce in (self.measurements, self.estimates, self.findings):
+        for produce in (self.measurements, self.estimates, self.findings, self.diagnosis_runs):
             while (n := produce(limit)) > 0:
                 total += n
             if n < 0:
@@ -223,6 +232,38 @@ class Producers:
                     start=f.start, first_seen=f.first_seen, last_seen=f.last_seen,
                     revision=f.revision, detail=f.detail)))
             extra.append(("UPDATE findings SET published_revision=? WHERE id=?", (f.revision, f.id)))
+        return self._commit(msgs, {}, extra)
+
+    # -- diagnosis runs -------------------------------------------------------------------------
+    def diagnosis_runs(self, limit: int) -> int:
+        """Each greenhouse's last diagnosis run not yet published → ``diagnosis``, made in the
+        transaction that moves its cursor (:data:`PUB_RUN`). A kept run that cannot be read is
+        passed over (a warning, once: the cursor moves past it)."""
+        if not self.publish_runs:
+            return 0
+        kept = dict(self.conn.execute("SELECT name, value FROM meta WHERE name GLOB ?",
+                                      (RUN_META + "*",)).fetchall())
+        done = dict(self.conn.execute("SELECT name, value FROM meta WHERE name GLOB ?",
+                                      (PUB_RUN + "*",)).fetchall())
+        msgs, extra = [], []
+        for name, info in list(self.gh.items())[:limit]:
+            value = kept.get(RUN_META + name)
+            if value is None or done.get(PUB_RUN + name) == value:
+                continue
+            extra.append(("INSERT OR REPLACE INTO meta (name, value) VALUES (?, ?)",
+                          (PUB_RUN + name, value)))
+            try:
+                run = read_run(name, value)
+            except ValueError as e:
+                log.warning("greenhouse %s: the kept diagnosis run is not published, it cannot "
+                            "be read: %s", name, e)
+                continue
+            idem = f"{self.farm}/{name}/diagnosis/{int(run.when)}"
+            msgs.append(self._msg(name, "diagnosis", run.when, idem, P.diagnosis_run(
+                info.place, idem, when=run.when, ok=run.ok, note=run.note,
+                findings=run.findings, notes=run.notes)))
+        if not extra:
+            return 0
         return self._commit(msgs, {}, extra)
 
     # -- snapshots ------------------------------------------------------------------------------

@@ -81,7 +81,8 @@ class Worker:
             infos[s.name] = GreenhouseInfo(Place(self.cfg.farm, s.name, s.latitude, s.longitude),
                                            s.inside, s.outside, r.model, lo.tolist(), hi.tolist())
         self.outbox = Outbox(conn, self.cfg.outbox_max, self.cfg.outbox_alarm)
-        self.producers = Producers(conn, self.cfg.farm, infos, self.outbox)
+        self.producers = Producers(conn, self.cfg.farm, infos, self.outbox,
+                                   diagnosis=self.cfg.diagnosis.enabled)
 
     def _run(self) -> None:
         conn = open_db(self.cfg.db)
@@ -148,7 +149,7 @@ class Worker:
     def _service_state(self) -> dict[str, Any]:
         """What the status screen shows of the gateway itself, for one that reads it over Zenoh
         (docs/cloud.md, ``status``): uptime [s], store and disk [bytes], Zenoh peers, ingest
-        counters."""
+        counters, whether the daily diagnosis is on (off: the screen shows no last run)."""
         db = self.cfg.db
         size = sum(os.path.getsize(f) for f in (db, f"{db}-wal") if os.path.exists(f))
         try:
@@ -160,7 +161,8 @@ class Worker:
         z = extra.get("zenoh", {})
         return {"gatewayUptime": round(time.time() - self.started, 1), "storeSize": size, **disk,
                 "zenohPeers": z.get("peers", 0), "zenohRouters": z.get("routers", 0),
-                "ingestCounters": extra.get("ingest", {})}
+                "ingestCounters": extra.get("ingest", {}),
+                "diagnosisEnabled": self.cfg.diagnosis.enabled}
 
     def _report_unassigned(self, conn) -> None:
         known = self.cfg.devices()

@@ -1,6 +1,6 @@
 """A :class:`Snapshot` from the gateway's own messages (the payloads of docs/cloud.md), as the
 history queryable returns them: ``status``, ``device/<id>``, ``measurement/*``, ``forecast``,
-``parameters``, ``ventilation``, ``finding``. :class:`Messages` accumulates them (each once, by
+``parameters``, ``ventilation``, ``finding``, ``diagnosis``. :class:`Messages` accumulates them (each once, by
 idempotency key) and builds the snapshot; it knows nothing of Zenoh, so it is tested alone.
 """
 
@@ -245,7 +245,19 @@ class Messages:
             outbox=S.Outbox(pending, alarm=bool(_value(doc, "outboxAlarm", False))),
             disk=S.Disk(_value(doc, "storeSize"), _value(doc, "diskFree"), _value(doc, "diskTotal"),
                         f"(as of {_hhmm(when)}, gateway clock)" if doc else ""),
-            ingest={str(k): int(v) for k, v in ingest.items()})
+            ingest={str(k): int(v) for k, v in ingest.items()}, diagnosis=self._diagnosis())
+
+    def _diagnosis(self) -> dict[str, S.Diagnosis]:
+        """Each greenhouse's newest ``diagnosis`` message as the run it tells of (the store's
+        status row read the same way: ``S.diagnosis_of``), unless the greenhouse's newest
+        ``status`` says the gateway's diagnosis is switched off: its last run stays in the
+        history, and its failure or warnings would ask for attention for ever."""
+        out = {}
+        for (gh, kind), (t, doc) in self.latest.items():
+            status = self.latest.get((gh, "status"), (0.0, {}))[1]
+            if kind == "diagnosis" and _value(status, "diagnosisEnabled") is not False:
+                out[gh] = S.diagnosis_of(_run_row(t, doc))
+        return out
 
 
 def _roles(roles: set[str]) -> tuple[str, ...]:
@@ -278,6 +290,13 @@ def _parameters(doc: dict[str, Any]) -> tuple[S.Parameter, ...]:
 def _ventilation(t: float, doc: dict[str, Any]) -> S.Ventilation:
     return S.Ventilation(True, t, _value(doc, "ventilationFlow"), _value(doc, "ventilationHeatLoss"),
                          bool(_value(doc, "outOfTrainingRange", False)))
+
+
+def _run_row(t: float, doc: dict[str, Any]) -> dict[str, Any]:
+    """A ``diagnosis`` message (payloads.diagnosis_run) → the run's row as the gateway keeps it
+    (gateway/service/diagnosis.py ``DiagnosisRun.row``)."""
+    return {"when": t, "ok": _value(doc, "succeeded"), "note": _value(doc, "summary", ""),
+            "findings": _value(doc, "findingCount"), "notes": _value(doc, "runNotes")}
 
 
 def _finding(doc: dict[str, Any]) -> S.Finding:

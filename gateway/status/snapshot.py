@@ -8,8 +8,10 @@ it. All times are unix seconds on the gateway clock (a scaled clock in tests and
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 SILENT_S = 300.0
 """A kit whose last record is older than this [s, gateway clock] is silent (as the gateway's
@@ -224,6 +226,32 @@ class Diagnosis:
     words: str
     warnings: tuple[tuple[str, str], ...] = ()
     ok: bool = True  # False: the run failed (timed out, exited with an error)
+
+
+def diagnosis_of(d: dict[str, Any]) -> Diagnosis:
+    """A greenhouse's last run as the gateway keeps it (gateway/service/diagnosis.py
+    ``DiagnosisRun.row``: the store's ``diagnosis`` status row, or a ``diagnosis`` message read
+    back, gateway/status/messages.py) → its words and warnings, the same whichever source.
+    A row left incomplete reads as far as it goes: a time that is no time (text, NaN, out of
+    range) is "?", an outcome neither true nor false is "outcome unknown" (not a failure: nobody
+    is called for it), notes not in a list are none."""
+    when = d.get("when")
+    stamp = "?"
+    if isinstance(when, int | float) and not isinstance(when, bool):  # gmtime(None) is now
+        try:
+            stamp = time.strftime("%Y-%m-%d %H:%M", time.gmtime(when))
+        except (ValueError, OverflowError, OSError):  # NaN, out of range
+            pass
+    ok = d.get("ok")
+    outcome = "ok" if ok is True else "failed" if ok is False else "outcome unknown"
+    note = f" ({d['note']})" if d.get("note") else ""
+    n = d.get("findings")
+    found = f", {n} finding{'s' * (n != 1)}" if isinstance(n, int) else ""
+    notes = d.get("notes")
+    warnings = tuple((str(x.get("code", "?")), str(x.get("message", "")))
+                     for x in (notes if isinstance(notes, list) else ())
+                     if isinstance(x, dict) and x.get("level") == "warning")
+    return Diagnosis(f"last run {stamp} {outcome}{found}{note}", warnings, ok is not False)
 
 
 @dataclass(frozen=True)

@@ -88,7 +88,7 @@ class StoreSource:
         alarm_at = ob.get("alarm_at")
         outbox = S.Outbox(pending, ob.get("max"), alarm_at,
                           bool(alarm_at is not None and pending >= alarm_at), oldest)
-        diag = {name: _diagnosis(d) for name, d in
+        diag = {name: S.diagnosis_of(d) for name, d in
                 status.get("diagnosis", ({}, 0.0))[0].items() if isinstance(d, dict)}
         refused = status.get("refused", ({}, 0.0))[0]
         gw = S.Gateway(
@@ -298,30 +298,6 @@ def _finding(f) -> S.Finding:
     d = f.detail if isinstance(f.detail, dict) else {}
     return S.Finding(f.id, f.effect, str(d.get("summary") or f.effect), f.start, f.first_seen,
                      f.last_seen, f.revision)
-
-
-def _diagnosis(d: dict[str, Any]) -> S.Diagnosis:
-    """A greenhouse's ``diagnosis`` status row (gateway/service/diagnosis.py ``DiagnosisRun``)
-    → its words and warnings. A row left incomplete reads as far as it goes: a time that is no
-    time (text, NaN, out of range) is "?", an outcome neither true nor false is "outcome
-    unknown" (not a failure: nobody is called for it), notes not in a list are none."""
-    when = d.get("when")
-    stamp = "?"
-    if isinstance(when, int | float) and not isinstance(when, bool):  # gmtime(None) is now
-        try:
-            stamp = time.strftime("%Y-%m-%d %H:%M", time.gmtime(when))
-        except (ValueError, OverflowError, OSError):  # NaN, out of range
-            pass
-    ok = d.get("ok")
-    outcome = "ok" if ok is True else "failed" if ok is False else "outcome unknown"
-    note = f" ({d['note']})" if d.get("note") else ""
-    n = d.get("findings")
-    found = f", {n} finding{'s' * (n != 1)}" if isinstance(n, int) else ""
-    notes = d.get("notes")
-    warnings = tuple((str(x.get("code", "?")), str(x.get("message", "")))
-                     for x in (notes if isinstance(notes, list) else ())
-                     if isinstance(x, dict) and x.get("level") == "warning")
-    return S.Diagnosis(f"last run {stamp} {outcome}{found}{note}", warnings, ok is not False)
 
 
 def _ago(s: float | None) -> str:

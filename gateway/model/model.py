@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from functools import cached_property, partial
+from functools import partial
 from typing import Self, TypeVar
 
 import numpy as np
@@ -76,12 +76,9 @@ class Model:
     the re-linearised slope by default; ``step.FROZEN`` is the step before issue 10."""
 
     # -- the parameter vector -------------------------------------------------------------
-    @cached_property
+    @property
     def parameters(self) -> tuple[Parameter, ...]:
-        """All parameters in vector order: terms' first, then the radiation sub-model's.
-
-        Built once per model: a Model is frozen and its terms, sensors and sub-model set their
-        parameters when constructed (``dataclasses.replace`` makes a new model, with its own)."""
+        """All parameters in vector order: terms' first, then the radiation sub-model's."""
         seen: dict[str, Parameter] = {}
         for term in self.terms:
             for p in term.parameters:

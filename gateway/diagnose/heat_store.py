@@ -33,7 +33,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from gateway.diagnose.structure import INDEX, gaps_bridged, on
+from gateway.diagnose.store_observer import gaps_bridged
+from gateway.diagnose.structure import INDEX, on
 from gateway.model.terms import ALWAYS, Index, Parameter
 
 if TYPE_CHECKING:
@@ -52,7 +53,7 @@ length over 0.63 m² at 3–8 W m-2 K-1, 7–19 h) to days (200 L barrels: 0.9 M
 MAX_RATE = 5.0
 """Largest dt / t_w the store observer resolves (λ ≥ e^-5; with t_w ≥ 600 s it binds only for
 steps over 50 min): a faster store follows the air within 1 % per step; the observer's block
-sums need λ^-L ≤ e^30 (structure.Structured.observer)."""
+sums need λ^-L ≤ e^30 (store_observer.observe)."""
 
 
 @dataclass(frozen=True)

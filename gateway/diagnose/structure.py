@@ -16,7 +16,8 @@ a slightly richer *base* on the calibration part first (docs/effects.md, "Base s
 
   It is a second state. T_s is never measured, so wherever a run starts from a measured air
   temperature the store starts from an observer: the same store equation driven by the
-  *measured* air temperature before that time (causal: it uses no later reading);
+  *measured* air temperature before that time (causal: it uses no later reading;
+  store_observer.py);
 - ``c_lw_sky`` [W m-2 K-1]: long-wave loss to the sky (as III.21) for models without one;
   for models with their own (the prototype's III.21 scales it by the wind-driven h_o) the search
   tries it as an optional part (search.calibrate_base): a night-time deficit carried by a flux
@@ -39,8 +40,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from gateway.diagnose import recomputed
+from gateway.diagnose import recomputed, store_observer
 from gateway.diagnose.night_sky import LEVEL, NightSky
+from gateway.diagnose.store_observer import gaps_bridged
 from gateway.greenhouse import Greenhouse
 from gateway.model import psychrometrics as psy
 from gateway.model import step as stepping
@@ -128,15 +130,6 @@ class Modulation:
 
     def factor(self, p, x, t: Index) -> np.ndarray:
         return 1.0 + (p[self.amp.name] - self.neutral) * on(p, x, t, self.tau.name)
-
-
-def gaps_bridged(v: np.ndarray) -> np.ndarray:
-    """Gaps bridged linearly (only to drive the store observer, never scored)."""
-    ok = np.isfinite(v)
-    if ok.all() or not ok.any():
-        return np.nan_to_num(v)
-    idx = np.arange(len(v))
-    return np.interp(idx, idx[ok], v[ok])
 
 
 @dataclass(frozen=True)
@@ -236,43 +229,10 @@ class Structured(Model):
     def observer(self, p: Mapping[str, np.ndarray], x, dt: float) -> np.ndarray:
         """Store temperature (P, T) driven by the measured air temperature: T_s[t] uses
         readings up to t only (the same exact step as ``advance``, with the reading in place
-        of the simulated air). Exact for the zero-order-hold inputs, vectorised over
-        candidates; a Python loop over blocks of samples, not over samples."""
-        n = len(x["t_in"])
-        n_p = next(iter(p.values())).shape[0]
-        idx = slice(0, n)
-        q = self._at(p, x, idx)
+        of the simulated air; store_observer.py)."""
+        idx = slice(0, len(x["t_in"]))
         ta = self.true_state(p, x, gaps_bridged(x["t_in"])[None, :], idx)
-        ta = np.broadcast_to(ta, (n_p, n))
-        # the store's step from t to t+1 sees the air at t+1 (as in ``advance``)
-        ta = np.concatenate([ta[:, 1:], ta[:, -1:]], axis=1)
-        h, k, cs = q["h_store"], q["k_store"], q["c_store"]
-        s = np.maximum(h + k, 1e-9)
-        u = (q["a_store"] * gaps_bridged(x["i_glob"])[None, :] + h * ta
-             + k * gaps_bridged(x["t_out"])[None, :]) / s
-        u = np.broadcast_to(u, (n_p, n))
-        rate = s * dt / cs  # -ln λ per sample (P, 1)
-        lam = np.exp(-rate)
-        # blocks of L samples with λ^-L ≤ e^30, so the scaled cumulative sums stay exact
-        L = int(max(1, min(n, np.floor(30.0 / float(np.max(rate))))))
-        nb = -(-n // L)
-        pad = nb * L - n
-        up = np.concatenate([u, np.repeat(u[:, -1:], pad, axis=1)], axis=1).reshape(n_p, nb, L)
-        j = np.arange(L)[None, :]
-        scale = np.exp(rate * j)  # λ^-j (P, L)
-        # y[b+i] = λ^i y[b] + (1-λ) λ^(i-1) Σ_{j<i} λ^-j u[b+j]
-        cs_ = np.cumsum(up * scale[:, None, :], axis=2)  # Σ_{j<=i}
-        part = np.concatenate([np.zeros((n_p, nb, 1)), cs_[:, :, :-1]], axis=2)  # Σ_{j<i}
-        lam_i = np.exp(-rate * j)  # λ^i
-        forced = (1.0 - lam)[:, :, None] * (lam_i / lam)[:, None, :] * part
-        y_end = (1.0 - lam) * np.exp(-rate * (L - 1)) * cs_[:, :, -1]  # forced part at b+L
-        out = np.empty((n_p, nb, L))
-        y = u[:, 0].copy()  # start at equilibrium with the first inputs
-        lam_l = np.exp(-rate * L)[:, 0]
-        for b in range(nb):
-            out[:, b, :] = lam_i * y[:, None] + forced[:, b, :]
-            y = lam_l * y + y_end[:, b]
-        return out.reshape(n_p, nb * L)[:, :n]
+        return store_observer.observe(self._at(p, x, idx), x, ta, dt)
 
     # -- evaluation modes ---------------------------------------------------------------------
     def shoot(self, theta: np.ndarray, x, gh: Greenhouse, dt: float, starts: np.ndarray,

@@ -9,6 +9,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -42,9 +43,10 @@ def write_result(name: str, result: dict[str, Any]) -> Path:
     return path
 
 
-def against(script: str, ref: str, rounds: int) -> tuple[list, list]:
-    """Interleaved rounds of ``script --round`` (its last stdout line is JSON): one process on
-    git ``ref``'s tree (``git archive`` into a temporary folder), one on this tree, ``rounds``
+def against(script: str, ref: str, rounds: int,
+            extra: Sequence[str] = ()) -> tuple[list, list]:
+    """Interleaved rounds of ``script --round *extra`` (its last stdout line is JSON): one process
+    on git ``ref``'s tree (``git archive`` into a temporary folder), one on this tree, ``rounds``
     times; (ref's results, this tree's)."""
     with tempfile.TemporaryDirectory(prefix="serra-bench-base-") as base:
         archive = subprocess.run(["git", "-C", str(ROOT), "archive", ref], check=True,
@@ -54,7 +56,7 @@ def against(script: str, ref: str, rounds: int) -> tuple[list, list]:
         for _ in range(rounds):
             for label, path in (("base", base), ("this", str(ROOT))):
                 env = {**os.environ, "PYTHONPATH": path, "SERRA_TREE": path}
-                out = subprocess.run([sys.executable, script, "--round"], env=env, cwd=path,
+                out = subprocess.run([sys.executable, script, "--round", *extra], env=env, cwd=path,
                                      check=True, capture_output=True, text=True).stdout
                 trees[label].append(json.loads(out.splitlines()[-1]))
     return trees["base"], trees["this"]

@@ -105,6 +105,13 @@ def model_hint_notes(running: str, result: dict[str, Any]) -> list[dict[str, str
     return [{"code": "model_hint", "level": "note", "message": hint}]
 
 
+def named_data(notes: list[dict[str, Any]], path: Path, label: str) -> list[dict[str, Any]]:
+    """The diagnosis's notes with the exported CSV's path (a file in the gateway's work folder,
+    gone after the run) replaced by ``label``, what the data is to a grower and the cloud."""
+    return [{**n, "message": n["message"].replace(str(path), label)}
+            if isinstance(n, dict) and isinstance(n.get("message"), str) else n for n in notes]
+
+
 def _parse(start: str | None) -> float | None:
     if not start:
         return None
@@ -336,7 +343,8 @@ class DiagnosisScheduler:
             note = f"diagnosis output unreadable: {e}"
             log.warning("greenhouse %s: %s", name, note)
             return DiagnosisRun(name, now, False, note)
-        data_notes = list(result.get("notes", [])) + model_hint_notes(r.settings.model, result)
+        data_notes = (named_data(result.get("notes", []), path, f"{name}'s last {rows / 1440:.1f} days")
+                      + model_hint_notes(r.settings.model, result))
         for said in data_notes:  # each once per run; a warning: the figures are likely wrong
             log.log(logging.WARNING if said.get("level") == "warning" else logging.INFO,
                     "greenhouse %s: diagnosis %s: %s [%s]", name, said.get("level", "note"),

@@ -8,8 +8,11 @@ import asyncio
 import json
 import logging
 import math
+import sqlite3
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import closing
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -56,16 +59,21 @@ def stored_kit(db: Path) -> float:
     return START + 60 * len(sim.time)
 
 
-def due_scheduler(tmp_path: Path, db: Path, end: float, days: float, min_days: float,
-                  on_stored: Callable[[], None]) -> DiagnosisScheduler:
-    """The scheduler of greenhouse ``north`` (kit 7, the prototype) at gateway time ``end``, a
-    run due."""
+def north_config(tmp_path: Path, db: Path, days: float, min_days: float):
+    """The configuration of greenhouse ``north`` (kit 7, the prototype) in ``tmp_path``."""
     write_keys(tmp_path / "keys.txt", {7: KEY})
-    cfg = parse_config({
+    return parse_config({
         "gateway": {"farm": "f1", "db": db.name, "keys": "keys.txt"},
         "diagnosis": {"every_hours": 24, "days": days, "min_days": min_days},
         "greenhouse": [{"name": "north", "greenhouse": "biskra-prototype", "model": "prototype",
                         "inside": 7}]}, "test.toml", tmp_path)
+
+
+def due_scheduler(tmp_path: Path, db: Path, end: float, days: float, min_days: float,
+                  on_stored: Callable[[], None]) -> DiagnosisScheduler:
+    """The scheduler of greenhouse ``north`` (kit 7, the prototype) at gateway time ``end``, a
+    run due."""
+    cfg = north_config(tmp_path, db, days, min_days)
     store = Store(db)
     store.set_meta("diagnosis_last", repr(end - 25 * 3600))  # a run is due
     store.close()
@@ -115,25 +123,80 @@ def test_scheduled_diagnosis_runs_in_a_subprocess_and_stores_its_findings(tmp_pa
     store.close()
 
 
-def test_what_the_diagnosis_says_of_the_data_is_kept_with_the_run(
-        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+def copy_store(src: Path, dst: Path) -> Path:
+    """A copy of the gateway store ``src`` at ``dst`` (SQLite's backup: whole, WAL or not)."""
+    with closing(sqlite3.connect(src)) as a, closing(sqlite3.connect(dst)) as b:
+        a.backup(b)
+    return dst
+
+
+@pytest.fixture(scope="module")
+def shifted_store(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, float]:
+    """``shifted_kit``'s store, made once for the tests below, each of which works on its own
+    copy (``copy_store``); and its end time."""
+    db = tmp_path_factory.mktemp("shifted") / "kit.db"
+    return db, shifted_kit(db)
+
+
+class _Records(logging.Handler):
+    """Every record it is handed, as caplog keeps them (caplog is per test)."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.INFO)
+        self.records: list[logging.LogRecord] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append(record)
+
+
+@dataclass
+class ShiftedRun:
+    """The scheduler's one real run on ``shifted_kit`` (2 days, at least 1.5), which the two
+    tests below read: its folder and store, the scheduler, the run and the records logged
+    during it at INFO and above (serra.gateway at INFO, as ``caplog.at_level`` set it)."""
+
+    folder: Path
+    db: Path
+    end: float
+    sched: DiagnosisScheduler
+    run: DiagnosisRun
+    records: list[logging.LogRecord]
+
+
+@pytest.fixture(scope="module")
+def shifted_run(tmp_path_factory: pytest.TempPathFactory,
+                shifted_store: tuple[Path, float]) -> Iterator[ShiftedRun]:
+    """One ``diagnose`` subprocess for both tests that ran the same one on the same data."""
+    folder = tmp_path_factory.mktemp("shifted-run")
+    db = copy_store(shifted_store[0], folder / "gw.db")
+    end = shifted_store[1]
+    sched = due_scheduler(folder, db, end, 2.0, 1.5, lambda: None)
+    handler, root, gw_log = _Records(), logging.getLogger(), logging.getLogger("serra.gateway")
+    level = gw_log.level
+    root.addHandler(handler)
+    gw_log.setLevel(logging.INFO)
+    try:
+        run = one_round(sched)
+    finally:
+        gw_log.setLevel(level)
+        root.removeHandler(handler)
+    yield ShiftedRun(folder, db, end, sched, run, handler.records)
+
+
+def test_what_the_diagnosis_says_of_the_data_is_kept_with_the_run(shifted_run: ShiftedRun) -> None:
     """``diagnose --json`` says what is unusual in the data beside its findings ("notes",
     gateway/cli/notes.py); the scheduler kept the findings only, and a warning that the figures
     are likely wrong was lost. Here the kit's clock is 12 h off (its daylight falls in the site's
     night: site_time_mismatch, a warning) and 1.75 days hold too few out to judge a change
     (short_heldout, a note): the run keeps both, in the gateway's status, and logs each once."""
-    db = tmp_path / "gw.db"
-    end = shifted_kit(db)
-    sched = due_scheduler(tmp_path, db, end, 2.0, 1.5, lambda: None)
-    with caplog.at_level(logging.INFO, logger="serra.gateway"):
-        run = one_round(sched)
+    sched, run = shifted_run.sched, shifted_run.run
     assert run.ok and run.findings == 0, run.note
     levels = {n["code"]: n["level"] for n in run.notes}
     assert levels == {"site_time_mismatch": "warning", "short_heldout": "note"}
     assert all(n["message"] for n in run.notes)
     assert sched.status()["north"]["notes"] == run.notes  # the status row the service writes
-    said = [(r.levelno, r.getMessage()) for r in caplog.records if "[site_time_mismatch]" in
-            r.getMessage() or "[short_heldout]" in r.getMessage()]
+    said = [(r.levelno, r.getMessage()) for r in shifted_run.records if "[site_time_mismatch]"
+            in r.getMessage() or "[short_heldout]" in r.getMessage()]
     text = {n["code"]: n["message"] for n in run.notes}
     assert said == [
         (logging.WARNING, f"greenhouse north: diagnosis warning: {text['site_time_mismatch']} "
@@ -141,19 +204,19 @@ def test_what_the_diagnosis_says_of_the_data_is_kept_with_the_run(
         (logging.INFO, f"greenhouse north: diagnosis note: {text['short_heldout']} [short_heldout]")]
 
 
-def test_the_last_run_is_shown_again_after_a_restart(tmp_path: Path) -> None:
+def test_the_last_run_is_shown_again_after_a_restart(tmp_path: Path,
+                                                     shifted_run: ShiftedRun) -> None:
     """The scheduler held its last run in memory only: after a restart the status had no
     diagnosis row until the next run, a day later. Now each run is kept in the store, and a new
-    scheduler on the same file (a restart) has it, notes and all, before any run of its own; the
-    status screen shows it from the status row the service writes."""
-    db = tmp_path / "gw.db"
-    end = shifted_kit(db)
-    sched = due_scheduler(tmp_path, db, end, 2.0, 1.5, lambda: None)
-    run = one_round(sched)
+    scheduler on the same file (a restart; here a copy of it, the run being shared) has it, notes
+    and all, before any run of its own; the status screen shows it from the status row the
+    service writes."""
+    sched, run, end = shifted_run.sched, shifted_run.run, shifted_run.end
     assert run.ok and {n["code"] for n in run.notes} == {"site_time_mismatch", "short_heldout"}
+    db = copy_store(shifted_run.db, tmp_path / "gw.db")
+    cfg = north_config(tmp_path, db, 2.0, 1.5)  # sched.cfg's, on the copy
     later = end + 3600.0  # an hour on: the next run is 23 h away
-    restarted = DiagnosisScheduler(sched.cfg, sched.resources, lambda: later, tmp_path,
-                                   lambda: None)
+    restarted = DiagnosisScheduler(cfg, prepare(cfg), lambda: later, tmp_path, lambda: None)
     assert restarted.last == {"north": run}
     assert restarted.status() == sched.status() == {"north": run.row()}
     store = Store(db)
@@ -223,7 +286,7 @@ def test_a_run_kept_before_the_note_lost_the_greenhouse_name_reads_without_it(
     ('[1, 2]', "a JSON object expected, got list")])
 def test_output_the_scheduler_cannot_read_is_a_failed_run_not_a_stopped_gateway(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture,
-        stdout: str, why: str) -> None:
+        shifted_store: tuple[Path, float], stdout: str, why: str) -> None:
     """``json.loads`` of diagnose's stdout raised in the scheduler's task, which the service
     supervises: anything else on stdout stopped the whole gateway. Now it is a failed run,
     logged, kept and shown as the others (``status --once`` names it)."""
@@ -231,8 +294,8 @@ def test_output_the_scheduler_cannot_read_is_a_failed_run_not_a_stopped_gateway(
 
     import gateway.service.diagnosis as sd
 
-    db = tmp_path / "gw.db"
-    end = shifted_kit(db)
+    db = copy_store(shifted_store[0], tmp_path / "gw.db")
+    end = shifted_store[1]
     monkeypatch.setattr(sd, "diagnose_command",
                         lambda g, path: [sys.executable, "-c", f"print({stdout!r})"])
     sched = due_scheduler(tmp_path, db, end, 2.0, 1.5, lambda: None)

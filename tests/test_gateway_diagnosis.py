@@ -195,6 +195,9 @@ def test_what_the_diagnosis_says_of_the_data_is_kept_with_the_run(shifted_run: S
     assert levels == {"site_time_mismatch": "warning", "short_heldout": "note"}
     assert all(n["message"] for n in run.notes)
     assert sched.status()["north"]["notes"] == run.notes  # the status row the service writes
+    # the data is named as the greenhouse's days, not as the CSV in the scheduler's work folder
+    assert str(shifted_run.folder) not in json.dumps(run.notes)
+    assert run.notes[0]["message"].startswith("north's last 1.")
     said = [(r.levelno, r.getMessage()) for r in shifted_run.records if "[site_time_mismatch]"
             in r.getMessage() or "[short_heldout]" in r.getMessage()]
     text = {n["code"]: n["message"] for n in run.notes}

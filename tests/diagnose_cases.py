@@ -28,6 +28,7 @@ from gateway.greenhouse import load_greenhouse
 from gateway.model import build_model
 from gateway.series import load_series
 from training.simulate import simulate
+from training.simulate.weather import DEFAULT_START, load_weather, parse_start
 
 STEP = 300.0
 DAYS = 6
@@ -75,9 +76,18 @@ the best-fitting one, 3.2 h early on Almería)."""
 
 @functools.cache
 def clean(plant: str, days: int):
-    """The clean record: one simulation per plant and length per worker, whose first time every
-    case reads and which the effect-free cases take (a copy each: ``post`` may change it)."""
+    """The clean record: one simulation per plant and length per worker, which the effect-free
+    cases take (a copy each: ``post`` may change it)."""
     return simulate(plant=plant, weather="almeria", days=days, seed=2, step=60)
+
+
+@functools.cache
+def first_time(days: int) -> np.datetime64:
+    """The records' first time: the first row of the synthetic Almería weather ``simulate``
+    runs on (its default start; the plant does not enter), without simulating a clean record
+    only to read it (``data`` checks it against the clean record wherever one is made)."""
+    t0 = parse_start(DEFAULT_START.get("almeria", "2009-11-01"))
+    return load_weather("almeria", t0, days, 60.0, 2).time[0]
 
 
 def data(tmp_path, plant: str, effect: str | None, post=None, at: float = 3.6,
@@ -85,9 +95,10 @@ def data(tmp_path, plant: str, effect: str | None, post=None, at: float = 3.6,
     """(series at ``STEP``, greenhouse, model, effect start) of the ``days``-day record of
     ``plant`` with ``effect`` (``SPECS``) from day ``at``, or clean (None); ``post`` changes
     the record before it is written to ``tmp_path``."""
-    t0 = str(clean(plant, days).time[0] + np.timedelta64(int(at * 86400), "s"))
+    t0 = str(first_time(days) + np.timedelta64(int(at * 86400), "s"))
     if effect is None:  # the clean record, simulated once (the same call without effects)
         r = copy.deepcopy(clean(plant, days))
+        assert r.time[0] == first_time(days), (r.time[0], first_time(days))
     else:
         r = simulate(plant=plant, weather="almeria", days=days, seed=2, step=60,
                      effects=[f"{effect}@{t0}:{SPECS[effect][plant]}"])

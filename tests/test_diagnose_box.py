@@ -24,14 +24,15 @@ from tests.diagnose_cases import SPECS, piece_judge, shared_calibration_in_modul
 
 @pytest.fixture(scope="module")
 def whitened_prototype(tmp_path_factory):
-    """(series, gh, model, t0, diagnosis) of the 6-day prototype record whitened at day 3.6,
-    diagnosed with the piece judge: computed once for the two tests that only read it (its
-    first-finding case and the public-entry round, which compares its search with it)."""
+    """(series, gh, model, t0, diagnosis, the kit CSV it was read from) of the 6-day prototype
+    record whitened at day 3.6, diagnosed with the piece judge: computed once for the tests
+    that only read it (its first-finding case, the public-entry round, which compares its search
+    with it, and the command line's plumbing, which reads its CSV)."""
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(jd, "DAY_TEST", False)  # as ``piece_judge``
-        series, gh, model, t0 = cases.data(tmp_path_factory.mktemp("whitened"), "prototype",
-                                           "cover_transmission")
-        return series, gh, model, t0, diagnose(series, gh, model)
+        folder = tmp_path_factory.mktemp("whitened")
+        series, gh, model, t0 = cases.data(folder, "prototype", "cover_transmission")
+        return series, gh, model, t0, diagnose(series, gh, model), folder / "prototype.csv"
 
 
 @pytest.mark.slow
@@ -42,7 +43,7 @@ def test_injected_effect_is_first_finding(tmp_path, plant, effect, request):
     if (plant, effect) in cases.KNOWN_MISSES:
         request.applymarker(pytest.mark.xfail(reason="known miss, see docs/effects.md", strict=False))
     if effect == "cover_transmission":  # the record the public-entry round uses
-        series, gh, model, t0, d = request.getfixturevalue("whitened_prototype")
+        series, gh, model, t0, d, _ = request.getfixturevalue("whitened_prototype")
     else:
         series, gh, model, t0 = cases.data(tmp_path, plant, effect)
         d = diagnose(series, gh, model)
@@ -66,7 +67,7 @@ def test_a_round_through_the_public_entry_is_the_diagnosis_first(whitened_protot
     ``at`` holds the start there."""
     from gateway.diagnose import search
 
-    series, gh, model, _, d = whitened_prototype
+    series, gh, model, _, d, _ = whitened_prototype
     st = search.prepare(series, gh, model).state
     r = search.search_round(st, LIBRARY)
     assert [(t.effect.name, t.verdict.ok, t.verdict.delta_bic) for t in r.tried] == [
@@ -97,8 +98,9 @@ def _same_inputs(series, gh, model, fixture) -> bool:
 @pytest.mark.usefixtures("piece_judge")  # as the fixture's diagnosis
 def test_cli_json_and_report(tmp_path, capsys, monkeypatch, whitened_prototype):
     """``gateway diagnose --json --report`` on the whitened prototype record written as the kit's
-    CSV: the diagnosis it runs is ``whitened_prototype``'s (the same call on the same data,
-    checked bit for bit, so that one is reused: the test is about the command's plumbing)."""
+    CSV (``whitened_prototype``'s file, not simulated again): the diagnosis it runs is
+    ``whitened_prototype``'s (the same call on the same data, checked bit for bit, so that one
+    is reused: the test is about the command's plumbing)."""
     import gateway.diagnose
     from gateway.cli import main
 
@@ -115,8 +117,7 @@ def test_cli_json_and_report(tmp_path, capsys, monkeypatch, whitened_prototype):
     # tests the detector itself)
     floor = heated.HeatedFloor(True, 10, 5, 0.1, 12.0, 4.0, 1.0, "held (set by the test)")
     monkeypatch.setattr(heated, "heated_floor", lambda series: floor)
-    cases.data(tmp_path, "prototype", "cover_transmission")
-    rc = main(["diagnose", "--data", str(tmp_path / "prototype.csv"), "--greenhouse",
+    rc = main(["diagnose", "--data", str(whitened_prototype[5]), "--greenhouse",
                "biskra-prototype", "--model", "prototype", "--step", "300", "--json",
                "--report", str(tmp_path / "rep")])
     assert rc == 0 and calls == [(0.5, 0)]  # diagnose's defaults, as the fixture's call

@@ -245,12 +245,16 @@ def test_free_run_is_stable_for_15_days_at_every_corner_of_the_box(weather_minut
     x = prepare_drivers(series, almeria_gh)
     lo, hi = model.bounds(almeria_gh)
     corners = np.array(list(itertools.product(*zip(lo, hi, strict=True))))
-    run = model.free_run(corners, x, almeria_gh, 60.0)
+    # the calibrated (table 8) parameters as a 1025th row of the same run: one pass of the
+    # 21600 steps, not two (a row's run is the single-row run: checked by
+    # test_population_evaluation_equals_one_candidate_at_a_time; here bit for bit, 2026-11-29)
+    both = model.free_run(np.vstack([corners, model.defaults(almeria_gh)[None, :]]), x,
+                          almeria_gh, 60.0)
+    run, typical = both[:1024], both[1024]
     assert run.shape == (1024, 15 * 1440)
     assert np.isfinite(run).all()
     assert run.min() > -50.0 and run.max() < 100.0
     # Calibrated (table 8) parameters stay near the weather that drives them.
-    typical = model.free_run(model.defaults(almeria_gh)[None, :], x, almeria_gh, 60.0)[0]
     assert series["t_out"].min() - 5 < typical.min() and typical.max() < series["t_out"].max() + 25
     # The explicit Euler step is unstable at the stiff corner: the reason for the exact step.
     assert model.capacity(almeria_gh) / hi[model.index("c_cnd_cnv")] < 60.0

@@ -96,6 +96,10 @@ def test_a_night_the_record_cuts_is_left_out():
     lost = series(held=True)
     lost.columns["i_glob"][b - 30:] = np.nan  # the sunrise not seen: its end unknown
     assert night_runs(lost["i_glob"], lost.step) == runs[:-1]
+    dawn = series(held=True)
+    a2, b2 = runs[-2]
+    dawn.columns["i_glob"][b2 - 2:b2 + 3] = np.nan  # 25 min lost at sunrise: the readings resume
+    assert night_runs(dawn["i_glob"], dawn.step)[-2] == (a2, b2 - 2)
 
 
 def test_no_light_or_no_inside_reading_is_no_crash():

@@ -91,17 +91,21 @@ def night_runs(i_glob: np.ndarray, step: float) -> list[tuple[int, int]]:
     """(start, stop) index ranges of nights on a grid of ``step`` seconds: dark runs (i_glob ≤
     DARK_W_M2) at least MIN_NIGHT_H long whose end (the sunrise) is in the data.
 
-    A gap of unknown radiation (NaN) up to MAX_GAP_H long with dark on both sides is dark (one
-    lost reading does not split a night); a longer gap is not. A run that the record's end or a
-    gap cuts short is left out: what it has is the early night, not the late part read.
+    A gap of unknown radiation (NaN) up to MAX_GAP_H long is short: with dark on both sides it
+    is dark (one lost reading does not split a night), and at the night's end it still shows the
+    sunrise within it (the readings resume). A run that the record's end or a longer gap cuts
+    short is left out: what it has is the early night, not the late part read.
     """
     known = np.isfinite(i_glob)
     dark = known & (np.nan_to_num(i_glob, nan=np.inf) <= DARK_W_M2)
-    for a, b in _runs(~known):
-        if 0 < a and b < len(dark) and dark[a - 1] and dark[b] and (b - a) * step <= MAX_GAP_H * 3600:
+    short = {a: b for a, b in _runs(~known)
+             if 0 < a and b < len(dark) and (b - a) * step <= MAX_GAP_H * 3600}
+    for a, b in short.items():
+        if dark[a - 1] and dark[b]:
             dark[a:b] = True
     need = MIN_NIGHT_H * 3600.0 / step
-    return [(a, b) for a, b in _runs(dark) if b - a >= need and b < len(dark) and known[b]]
+    return [(a, b) for a, b in _runs(dark)
+            if b - a >= need and b < len(dark) and (known[b] or b in short)]
 
 
 def _runs(flags: np.ndarray) -> list[tuple[int, int]]:

@@ -58,8 +58,9 @@ def test_the_running_gateway_diagnoses_keeps_and_publishes_the_run(tmp_path: Pat
         assert run["note"].startswith("diagnosis of 1.8 days in ") and run["findings"] == 0
         assert [n["code"] for n in run["notes"] if n["level"] == "warning"] == [
             "site_time_mismatch"]
-        assert float(read(db, "SELECT value FROM meta WHERE name='diagnosis_last'")[0][0]) == (
-            run["when"])  # the next run one period on
+        # the round's time is recorded after every greenhouse's run is kept: wait for it
+        wait_for(lambda: float(read(db, "SELECT value FROM meta WHERE name='diagnosis_last'")[0][0])
+                 == run["when"], 60, "the scheduler to record its round (the next run one period on)")
         # published: one message of the run, through the outbox (its store-and-forward)
         (payload,) = wait_for(lambda: read(db, "SELECT payload FROM outbox WHERE "
                                                "key='serra/f1/north/diagnosis'"),

@@ -73,12 +73,19 @@ def mean_solar_offset_min(longitude: ArrayLike) -> np.ndarray:
     return 4.0 * np.asarray(longitude, dtype=float)
 
 
+CLOCK_STEP_S = 1800
+"""The clock of the time-of-day features keeps whole half-hours from UTC [s]: a grower's
+controller runs on civil time, whole (in a few zones half) hours from UTC, so its scheduled
+actions stay on the diagnosis's half-hour bins."""
+
+
 @dataclass(frozen=True)
 class SolarClock:
     """The clock of the time-of-day features (docs/effects.md, "The clock of the time-of-day
-    features"): local mean solar time at the site, so that noon is noon and a day starts at
-    local midnight wherever the greenhouse stands; UTC when no site is known. ``offset_s``
-    [s] is added to UTC; ``name`` is what labels say ("local solar time", "UTC (no site)")."""
+    features"): local mean solar time at the site to the nearest half hour, so that noon is noon
+    (within 15 min) and a day starts at local midnight wherever the greenhouse stands; UTC when
+    no site is known. ``offset_s`` [s] is added to UTC; ``name`` is what labels say ("local
+    solar time", "UTC (no site)")."""
 
     offset_s: int
     name: str
@@ -90,11 +97,13 @@ class SolarClock:
 
 
 def solar_clock(longitude: float | None) -> SolarClock:
-    """The ``SolarClock`` of a site at ``longitude`` [deg, east positive], rounded to whole
-    seconds; None (no ``[site]``): UTC, named so."""
+    """The ``SolarClock`` of a site at ``longitude`` [deg, east positive]: its mean solar
+    offset rounded to whole ``CLOCK_STEP_S`` (Almería, −2.7°: UTC; Bleiswijk, 4.5°: UTC + 30
+    min; −90°: UTC − 6 h); None (no ``[site]``): UTC, named so."""
     if longitude is None:
         return SolarClock(0, "UTC (no site)")
-    return SolarClock(int(round(60.0 * float(mean_solar_offset_min(longitude)))), "local solar time")
+    offset_s = 60.0 * float(mean_solar_offset_min(longitude))
+    return SolarClock(int(round(offset_s / CLOCK_STEP_S)) * CLOCK_STEP_S, "local solar time")
 
 
 UTC_CLOCK = solar_clock(None)

@@ -2,10 +2,12 @@
 
 Days are the units. Each day's residual is summarised twice: by half-hour of the clock (a
 scheduled action) and by bins of the plant's own state (a controller acting on what it
-measures, e.g. vents opening above a temperature, whatever the hour). Per column, Welch t of
-the held-out days against the calibration days; the statistic is the largest |t| over both
-families, and its null comes from swapping whole days between the parts, so one null covers
-both families and the family-wise false-flag rate stays α when days are exchangeable.
+measures, e.g. vents opening above a temperature, whatever the hour). Days and clock are the
+site's local mean solar time (gateway/model/solar.py ``SolarClock``): a day starts at local
+midnight wherever the house stands. Per column, Welch t of the held-out days against the
+calibration days; the statistic is the largest |t| over both families, and its null comes from
+swapping whole days between the parts, so one null covers both families and the family-wise
+false-flag rate stays α when days are exchangeable.
 """
 
 from __future__ import annotations
@@ -16,6 +18,8 @@ from itertools import combinations
 from math import comb
 
 import numpy as np
+
+from gateway.model.solar import DAY_S, UTC_CLOCK, SolarClock
 
 BIN_S = 1800.0
 """Width of the clock bins [s]."""
@@ -49,8 +53,9 @@ class StateBin:
 @dataclass
 class DayTest:
     """``day_test``'s result: family-wise p, the largest |Welch t|, the clock bins (half-hours
-    after midnight UTC) whose |t| exceeds the null's 1 − α quantile with the held-out minus
-    calibration mean sharp residual there [K], the state bins likewise; days in each part."""
+    after midnight of the test's clock, local solar time at the site) whose |t| exceeds the
+    null's 1 − α quantile with the held-out minus calibration mean sharp residual there [K],
+    the state bins likewise; days in each part."""
     p: float
     t_max: float
     bins: list[int]
@@ -103,15 +108,16 @@ def sharp_part(m: np.ndarray) -> np.ndarray:
 
 
 def clock_label(j: int) -> str:
-    """Clock bin ``j`` (half-hours after midnight UTC) as HH:MM."""
+    """Clock bin ``j`` (half-hours after midnight of its clock) as HH:MM; the caller names the
+    clock (``SolarClock.name``)."""
     return f"{j // 2:02d}:{30 * (j % 2):02d}"
 
 
 def _clock_units(day: np.ndarray, sec: np.ndarray, r: np.ndarray) -> np.ndarray:
     """Per day, the half-hour means minus their own circular running median over ±2 h
-    (``sharp_part``); (days, bins)."""
-    nb = int(86400 // BIN_S)
-    return sharp_part(_cells(day, (sec % 86400) // int(BIN_S), r, nb))
+    (``sharp_part``); (days, bins). ``sec``: seconds of the clock (``SolarClock.seconds``)."""
+    nb = int(DAY_S // BIN_S)
+    return sharp_part(_cells(day, (sec % DAY_S) // int(BIN_S), r, nb))
 
 
 def _state_units(day: np.ndarray, v: np.ndarray, edges: np.ndarray, r: np.ndarray,
@@ -135,10 +141,10 @@ def _edges(parts: list[np.ndarray]) -> np.ndarray:
 
 
 def _units(times: list[np.ndarray], rs: list[np.ndarray],
-           states: list[dict[str, np.ndarray]] | None,
+           states: list[dict[str, np.ndarray]] | None, clock: SolarClock,
            ) -> tuple[list[np.ndarray], list[tuple[str, float, float]]]:
-    """Day units of each part, clock columns then state columns; days with less than half the
-    clock bins are left out. Also (variable, lo, hi) per state column."""
+    """Day units of each part (days of ``clock``), clock columns then state columns; days with
+    less than half the clock bins are left out. Also (variable, lo, hi) per state column."""
     cols: list[tuple[str, float, float]] = []
     out = []
     edges = {}
@@ -147,8 +153,8 @@ def _units(times: list[np.ndarray], rs: list[np.ndarray],
         for k, e in edges.items():
             cols += [(k, float(e[j]), float(e[j + 1])) for j in range(len(e) - 1)]
     for i, (time, r) in enumerate(zip(times, rs, strict=True)):
-        sec = time.astype("datetime64[s]").astype(np.int64)
-        _, day = np.unique(sec // 86400, return_inverse=True)
+        sec = clock.seconds(time)
+        _, day = np.unique(sec // DAY_S, return_inverse=True)
         u = _clock_units(day, sec, r)
         keep = np.isfinite(u).sum(axis=1) >= u.shape[1] // 2
         if states and edges:  # edges only come with states
@@ -190,17 +196,19 @@ def _splits(nd: int, nh: int) -> np.ndarray:
 
 def day_test(time_h: np.ndarray, r_h: np.ndarray, time_c: np.ndarray, r_c: np.ndarray,
              alpha: float | None = None, state_h: dict[str, np.ndarray] | None = None,
-             state_c: dict[str, np.ndarray] | None = None) -> DayTest:
+             state_c: dict[str, np.ndarray] | None = None,
+             clock: SolarClock = UTC_CLOCK) -> DayTest:
     """Has the held-out residual ``r_h`` a feature the calibration part's ``r_c`` has not,
     beyond what days differ by: at a time of day (each day's half-hour profile minus its ±2 h
     running median) or, given ``state_h``/``state_c`` (``controller_state`` of each part), in a
     band of the plant's state (each day's state-bin means minus their median)? Welch t per
     column between the two parts' days, max |t| over all columns against its null from swapping
     whole days (all splits or ``PERM_MAX``; the observed split counts once more in the
-    drawn case). Nothing in it scales with the size of the residual."""
+    drawn case). Nothing in it scales with the size of the residual. Days and time of day are
+    those of ``clock`` (the site's local solar time, ``drivers.clock_of``; UTC without one)."""
     alpha = UNEXPLAINED_ALPHA if alpha is None else alpha
     states = [state_h, state_c] if state_h is not None and state_c is not None else None
-    (uh, uc), cols = _units([time_h, time_c], [r_h, r_c], states)
+    (uh, uc), cols = _units([time_h, time_c], [r_h, r_c], states, clock)
     nh, nc = len(uh), len(uc)
     if nh < 2 or nc < 2:
         return DayTest(1.0, 0.0, [], [], nh, nc)
@@ -218,7 +226,7 @@ def day_test(time_h: np.ndarray, r_h: np.ndarray, time_c: np.ndarray, r_c: np.nd
         warnings.simplefilter("ignore", RuntimeWarning)  # an empty column: NaN, never named
         d = np.nanmean(uh, axis=0) - np.nanmean(uc, axis=0)
     hit = np.flatnonzero(np.abs(t_obs) > crit)
-    nb = int(86400 // BIN_S)
-    clock = [int(j) for j in hit if j < nb]
+    nb = int(DAY_S // BIN_S)
+    bins = [int(j) for j in hit if j < nb]
     state = [StateBin(*cols[j - nb], float(d[j])) for j in hit if j >= nb]
-    return DayTest(p, t_max, clock, [float(d[j]) for j in clock], nh, nc, state)
+    return DayTest(p, t_max, bins, [float(d[j]) for j in bins], nh, nc, state)

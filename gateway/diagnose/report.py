@@ -119,7 +119,7 @@ def _plot_hours(d: Diagnosis, path: Path) -> None:
     ax.plot(h, d.analysis_before["hour_profile"], "o-", label="before")
     ax.plot(h, d.analysis_after["hour_profile"], "o-", label="after")
     ax.axhline(0, color="grey", lw=0.5)
-    ax.set_xlabel("hour of day [UTC]")
+    ax.set_xlabel(f"hour of day [{d.analysis_after.get('clock', 'UTC')}]")
     ax.set_ylabel("mean residual [K]")
     ax.set_title("Held-out free-run residual by hour of day")
     ax.legend()

@@ -1,7 +1,8 @@
 """Residual analysis (issue 4, step 2), all vectorised numpy.
 
 The residual is measured minus predicted inside temperature [K]. What is computed:
-hour-of-day profile, correlation with candidate regressors (radiation, radiation lagged 30, 60
+hour-of-day profile (the site's local mean solar time, gateway/model/solar.py ``SolarClock``;
+UTC without a site), correlation with candidate regressors (radiation, radiation lagged 30, 60
 and 120 min, wind × ΔT, ΔT, VPD, time), autocorrelation, and change-points in the
 coefficients of a rolling least-squares fit of the residual on (1, I_glob, ΔT).
 """
@@ -20,6 +21,7 @@ from gateway.diagnose.day_test import (
     sharp_part,
 )
 from gateway.model import psychrometrics as psy
+from gateway.model.solar import DAY_S, UTC_CLOCK, SolarClock
 
 LAGS_MIN = (30, 60, 120)
 ROLL_S = 6 * 3600.0
@@ -48,20 +50,21 @@ its one controller flag was a radiation band the effect-free window shows too (d
 same section)."""
 
 
-def hour_profile(time: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """Mean residual by UTC hour of day (24,), NaN for hours without data."""
-    hours = (time.astype("datetime64[h]").astype(np.int64) % 24).astype(int)
+def hour_profile(time: np.ndarray, r: np.ndarray, clock: SolarClock = UTC_CLOCK) -> np.ndarray:
+    """Mean residual by hour of day of ``clock`` (24,), NaN for hours without data."""
+    hours = ((clock.seconds(time) % DAY_S) // 3600).astype(int)
     ok = np.isfinite(r)
     total = np.bincount(hours[ok], weights=r[ok], minlength=24)
     count = np.bincount(hours[ok], minlength=24)
     return np.where(count > 0, total / np.maximum(count, 1), np.nan)
 
 
-def day_profile(time: np.ndarray, r: np.ndarray, bin_s: float = BIN_S) -> np.ndarray:
-    """Mean residual by time-of-day bin of ``bin_s`` (UTC), NaN for bins without data."""
-    sec = time.astype("datetime64[s]").astype(np.int64) % 86400
+def day_profile(time: np.ndarray, r: np.ndarray, bin_s: float = BIN_S,
+                clock: SolarClock = UTC_CLOCK) -> np.ndarray:
+    """Mean residual by time-of-day bin of ``bin_s`` of ``clock``, NaN for bins without data."""
+    sec = clock.seconds(time) % DAY_S
     bins = (sec // int(bin_s)).astype(int)
-    nb = int(86400 // bin_s)
+    nb = int(DAY_S // bin_s)
     ok = np.isfinite(r)
     total = np.bincount(bins[ok], weights=r[ok], minlength=nb)
     count = np.bincount(bins[ok], minlength=nb)
@@ -69,12 +72,12 @@ def day_profile(time: np.ndarray, r: np.ndarray, bin_s: float = BIN_S) -> np.nda
 
 
 def sharp_hours(time_h: np.ndarray, r_h: np.ndarray, time_c: np.ndarray,
-                r_c: np.ndarray) -> tuple[float, int]:
+                r_c: np.ndarray, clock: SolarClock = UTC_CLOCK) -> tuple[float, int]:
     """The largest sharp time-of-day feature of the held-out residual ``r_h`` against the
     calibration part's ``r_c``: the half-hourly difference of their day profiles minus its own
     running median over ±2 h (the smooth daily course a weather regime gives). Returns the
-    feature [K] and its bin (half-hours after midnight UTC)."""
-    sharp = sharp_part(day_profile(time_h, r_h) - day_profile(time_c, r_c))
+    feature [K] and its bin (half-hours after midnight of ``clock``)."""
+    sharp = sharp_part(day_profile(time_h, r_h, clock=clock) - day_profile(time_c, r_c, clock=clock))
     if not np.isfinite(sharp).any():
         return 0.0, 0
     j = int(np.nanargmax(np.abs(sharp)))
@@ -168,8 +171,10 @@ def change_point(v: np.ndarray) -> tuple[int, float]:
     return int(k[j]), float(t[j])
 
 
-def analyse(time: np.ndarray, r: np.ndarray, x: dict[str, np.ndarray], a: int, dt: float) -> dict:
-    """Everything above for the residual ``r`` over rows [a, a + len(r))."""
+def analyse(time: np.ndarray, r: np.ndarray, x: dict[str, np.ndarray], a: int, dt: float,
+            clock: SolarClock = UTC_CLOCK) -> dict:
+    """Everything above for the residual ``r`` over rows [a, a + len(r)); the hour-of-day
+    profile on ``clock`` (its name under "clock")."""
     b = a + len(r)
     regs = regressors(x, a, b, dt)
     hour_lag = int(round(3600.0 / dt))
@@ -182,7 +187,8 @@ def analyse(time: np.ndarray, r: np.ndarray, x: dict[str, np.ndarray], a: int, d
     return {
         "mae": float(np.nanmean(np.abs(r))) if np.isfinite(r).any() else float("nan"),
         "mean": float(np.nanmean(r)) if np.isfinite(r).any() else float("nan"),
-        "hour_profile": hour_profile(time, r),
+        "hour_profile": hour_profile(time, r, clock),
+        "clock": clock.name,
         "correlations": correlations(r, regs),
         "acf_1h": float(autocorrelation(r, np.array([hour_lag]))[0]),
         "acf_1d": float(autocorrelation(r, np.array([24 * hour_lag]))[0]),
@@ -191,9 +197,11 @@ def analyse(time: np.ndarray, r: np.ndarray, x: dict[str, np.ndarray], a: int, d
     }
 
 
-def short_signature(time: np.ndarray, r: np.ndarray, x: dict[str, np.ndarray], a: int, dt: float) -> str:
-    """One line: mean, strongest regressor correlation, hour-of-day peak, change-points."""
-    an = analyse(time, r, x, a, dt)
+def short_signature(time: np.ndarray, r: np.ndarray, x: dict[str, np.ndarray], a: int, dt: float,
+                    clock: SolarClock = UTC_CLOCK) -> str:
+    """One line: mean, strongest regressor correlation, hour-of-day peak (on ``clock``),
+    change-points."""
+    an = analyse(time, r, x, a, dt, clock)
     return describe(an, time, a)
 
 
@@ -206,21 +214,23 @@ def describe(an: dict, time: np.ndarray, a: int) -> str:
     prof = an["hour_profile"]
     if np.isfinite(prof).any():
         h = int(np.nanargmax(np.abs(prof)))
-        parts.append(f"largest hour-of-day mean {prof[h]:+.2f} K at {h:02d} h UTC")
+        clock = an.get("clock", UTC_CLOCK.name)
+        parts.append(f"largest hour-of-day mean {prof[h]:+.2f} K at {h:02d} h {clock}")
     # a lag longer than the held-out part has no autocorrelation: say nothing, not "nan"
     acf = [f"{an[k]:.2f} at {lag}" for k, lag in (("acf_1h", "1 h"), ("acf_1d", "1 d")) if np.isfinite(an[k])]
     if acf:
         parts.append("autocorrelation " + ", ".join(acf))
     shifts = [(k, v) for k, v in an["change_points"].items() if v["t"] >= CHANGE_T]
     for k, v in shifts:
-        when = str(time[min(max(v["row"] - a, 0), len(time) - 1)])[:16].replace("T", " ")
+        when = str(time[min(max(v["row"] - a, 0), len(time) - 1)])[:16].replace("T", " ") + " UTC"
         parts.append(f"rolling-fit {k} coefficient shifts near {when} (t = {v['t']:.1f})")
     return "; ".join(parts)
 
 
 def unexplained(an_after: dict, calib_r: np.ndarray, time: np.ndarray, a: int,
                 r_after: np.ndarray | None = None,
-                x: dict[str, np.ndarray] | None = None) -> tuple[bool, str]:
+                x: dict[str, np.ndarray] | None = None,
+                clock: SolarClock = UTC_CLOCK) -> tuple[bool, str]:
     """Does the held-out residual still carry structure the model lacks?
 
     Yes when its free-run MAE exceeds ``UNEXPLAINED_RATIO`` × the in-sample one on the
@@ -229,24 +239,25 @@ def unexplained(an_after: dict, calib_r: np.ndarray, time: np.ndarray, a: int,
     held-out residual ``r_after``). Under ``UNEXPLAINED_TEST`` the flag is ``day_test``
     instead (with ``UNEXPLAINED_STATE`` also over the state bins of the drivers ``x``).
     Rolling-fit coefficient shifts (t ≥ ``CHANGE_T``) are part of the signature, not of the
-    flag: the weather moves them too. The signature says what it looks like.
+    flag: the weather moves them too. The signature says what it looks like; times of day are
+    those of ``clock`` (the site's local solar time), instants are UTC.
     """
     calib_mae = float(np.nanmean(np.abs(calib_r)))
     ratio = an_after["mae"] / calib_mae if calib_mae > 0 else float("inf")
     sig = describe(an_after, time[a:], a) + f"; held-out/in-sample MAE ratio {ratio:.2f}"
     if UNEXPLAINED_TEST and r_after is not None:
-        return _tested(sig, time, a, calib_r, r_after, x if UNEXPLAINED_STATE else None)
+        return _tested(sig, time, a, calib_r, r_after, x if UNEXPLAINED_STATE else None, clock)
     sharp, j = (0.0, 0) if r_after is None else sharp_hours(time[a:], r_after,
-                                                          time[: len(calib_r)], calib_r)
+                                                          time[: len(calib_r)], calib_r, clock)
     flagged = abs(sharp) > HOUR_SHIFT_K
     if flagged:
         sig += (f"; a sharp time-of-day feature {sharp:+.2f} K at {clock_label(j)} "
-                f"UTC that the calibration part has not (a scheduled action?)")
+                f"{clock.name} that the calibration part has not (a scheduled action?)")
     return bool(ratio > UNEXPLAINED_RATIO or flagged), sig
 
 
 def _tested(sig: str, time: np.ndarray, a: int, calib_r: np.ndarray, r_after: np.ndarray,
-            x: dict[str, np.ndarray] | None) -> tuple[bool, str]:
+            x: dict[str, np.ndarray] | None, clock: SolarClock) -> tuple[bool, str]:
     """``unexplained`` under ``UNEXPLAINED_TEST``: the flag is ``day_test`` at
     ``UNEXPLAINED_ALPHA`` (state bins too when ``x`` is given); the MAE ratio stays in the
     signature only."""
@@ -254,7 +265,7 @@ def _tested(sig: str, time: np.ndarray, a: int, calib_r: np.ndarray, r_after: np
     states = ({}, {}) if x is None else (controller_state(x, a, r_after),
                                         controller_state(x, 0, calib_r))
     dt_ = day_test(time[a:], r_after, time[:nc], calib_r,
-                   state_h=states[0] or None, state_c=states[1] or None)
+                   state_h=states[0] or None, state_c=states[1] or None, clock=clock)
     flagged = dt_.p < UNEXPLAINED_ALPHA
     what = "time-of-day" if x is None else "time-of-day or plant-state"
     if not flagged:
@@ -263,7 +274,7 @@ def _tested(sig: str, time: np.ndarray, a: int, calib_r: np.ndarray, r_after: np
     found = []
     if dt_.bins:
         found.append("at " + ", ".join(f"{clock_label(j)} ({d:+.2f} K)"
-                                       for j, d in zip(dt_.bins, dt_.diff, strict=True)) + " UTC")
+                                       for j, d in zip(dt_.bins, dt_.diff, strict=True)) + f" {clock.name}")
     if dt_.state:
         found.append("in " + ", ".join(f"{STATE_LABEL[b.name][0]} {b.lo:.3g}–{b.hi:.3g} "
                                        f"{STATE_LABEL[b.name][1]} ({b.diff:+.2f} K)"

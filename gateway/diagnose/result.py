@@ -12,6 +12,7 @@ from gateway.diagnose.heat_store import AddedStore
 from gateway.diagnose.judge import Verdict
 from gateway.diagnose.structure import INDEX, Modulation, Structured, model_unit, physical_capacity
 from gateway.greenhouse import Greenhouse
+from gateway.model.drivers import clock_of
 from gateway.model.model import Model
 from gateway.model.terms import SensorTerm
 from gateway.series import Series
@@ -109,7 +110,8 @@ def make_finding(e: Effect, model: Model, theta: np.ndarray, series: Series, pre
                     f"fitted heat capacity, {rate[1]:.2f} x the air's)")
     r = x["t_in"][s:] - pred_before["free_run"]
     t_c = series.time[0] + x["_index"].astype("timedelta64[s]")
-    sig = res.short_signature(t_c[s:], r, x, s, float(x["_index"][1] - x["_index"][0]))
+    sig = res.short_signature(t_c[s:], r, x, s, float(x["_index"][1] - x["_index"][0]),
+                              clock_of(gh))
     evidence = (f"{verdict.why}; ΔBIC {dbic:.0f} on all data; residual before it: {sig}; "
                 f"expected signature: {e.signature}")
     return Finding(e, tau, start, amp, summary, evidence, verdict.mae_before,

@@ -37,6 +37,7 @@ from gateway.diagnose.fit import HORIZON_S, Scan, coarsen, drivers
 from gateway.diagnose.result import Diagnosis, Finding, make_finding, to_json, traces
 from gateway.diagnose.structure import Structured
 from gateway.greenhouse import Greenhouse
+from gateway.model.drivers import clock_of
 from gateway.model.model import Model
 from gateway.series import Series
 
@@ -345,11 +346,12 @@ def _report(series: Series, k: int, base: _Fit, st: State) -> Diagnosis:
     after_f = jd.heldout(final.model, final.thetas, xf, gh, dtf, ffolds, sf, nf)
     meas = xf["t_in"]
     traces(st.findings, final.model, final.theta_all, xf, gh, ctx.duration)
-    an_before = res.analyse(series.time[sf:], meas[sf:] - before_f["free_run"], xf, sf, dtf)
-    an_after = res.analyse(series.time[sf:], meas[sf:] - after_f["free_run"], xf, sf, dtf)
+    clock = clock_of(gh)  # time of day at the site (local solar time), not UTC's
+    an_before = res.analyse(series.time[sf:], meas[sf:] - before_f["free_run"], xf, sf, dtf, clock)
+    an_after = res.analyse(series.time[sf:], meas[sf:] - after_f["free_run"], xf, sf, dtf, clock)
     calib_r = jd.calibration_free_run(final.model, final.theta_all, xf, gh, dtf, sf)
     unexplained, signature = res.unexplained(an_after, calib_r, series.time, sf,
-                                             meas[sf:] - after_f["free_run"], xf)
+                                             meas[sf:] - after_f["free_run"], xf, clock)
     return Diagnosis(
         model=final.model, theta=final.theta_all, base_model=base.model,
         base_theta=base.theta_all, findings=st.findings, rejected=st.rejected,

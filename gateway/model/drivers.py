@@ -34,6 +34,12 @@ def site_of(gh: Greenhouse) -> tuple[float, float] | None:
     return None if gh.site is None else (gh.site.latitude, gh.site.longitude)
 
 
+def clock_of(gh: Greenhouse) -> solar.SolarClock:
+    """The clock of the time-of-day features at the greenhouse: local mean solar time at its
+    site's longitude, UTC when its description gives no site (solar.py ``solar_clock``)."""
+    return solar.solar_clock(None if gh.site is None else gh.site.longitude)
+
+
 def prepare_drivers(series: Series, gh: Greenhouse, cloud: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Arrays (length T) that the flux terms read.
 

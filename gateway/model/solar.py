@@ -27,6 +27,9 @@ SOLAR_CONSTANT = 1361.0
 MIN_COS_ZENITH = 0.01
 """Below this cos z (sun under ~0.6° of elevation) the clear-sky radiation is taken as 0."""
 
+DAY_S = 86400
+"""A mean solar day [s]."""
+
 
 def measured_global(i_glob: ArrayLike) -> np.ndarray:
     """Measured global radiation [W m-2] as every part of the gateway reads it: a
@@ -64,6 +67,49 @@ class SolarPosition:
         return 90.0 - self.zenith
 
 
+def mean_solar_offset_min(longitude: ArrayLike) -> np.ndarray:
+    """Local mean solar time minus UTC [min] at ``longitude`` [deg, east positive]: the Earth
+    turns 1° in 4 min (NOAA; the true solar time adds the equation of time)."""
+    return 4.0 * np.asarray(longitude, dtype=float)
+
+
+CLOCK_STEP_S = 1800
+"""The clock of the time-of-day features keeps whole half-hours from UTC [s]: a grower's
+controller runs on civil time, whole (in a few zones half) hours from UTC, so its scheduled
+actions stay on the diagnosis's half-hour bins."""
+
+
+@dataclass(frozen=True)
+class SolarClock:
+    """The clock of the time-of-day features (docs/effects.md, "The clock of the time-of-day
+    features"): local mean solar time at the site to the nearest half hour, so that noon is noon
+    (within 15 min) and a day starts at local midnight wherever the greenhouse stands; UTC when
+    no site is known. ``offset_s`` [s] is added to UTC; ``name`` is what labels say ("local
+    solar time", "UTC (no site)")."""
+
+    offset_s: int
+    name: str
+
+    def seconds(self, time: np.ndarray) -> np.ndarray:
+        """Seconds of this clock since its 1970-01-01 00:00 (int64) at UTC ``time``
+        (datetime64): ``% DAY_S`` is the time of day, ``// DAY_S`` the day."""
+        return np.asarray(time, dtype="datetime64[s]").astype(np.int64) + self.offset_s
+
+
+def solar_clock(longitude: float | None) -> SolarClock:
+    """The ``SolarClock`` of a site at ``longitude`` [deg, east positive]: its mean solar
+    offset rounded to whole ``CLOCK_STEP_S`` (Almería, −2.7°: UTC; Bleiswijk, 4.5°: UTC + 30
+    min; −90°: UTC − 6 h); None (no ``[site]``): UTC, named so."""
+    if longitude is None:
+        return SolarClock(0, "UTC (no site)")
+    offset_s = 60.0 * float(mean_solar_offset_min(longitude))
+    return SolarClock(int(round(offset_s / CLOCK_STEP_S)) * CLOCK_STEP_S, "local solar time")
+
+
+UTC_CLOCK = solar_clock(None)
+"""The clock of callers that know no site."""
+
+
 def _unix_seconds(time: np.ndarray) -> np.ndarray:
     return np.asarray(time, dtype="datetime64[s]").astype(np.int64).astype(float)
 
@@ -96,7 +142,7 @@ def solar_position(time: np.ndarray, latitude: float, longitude: float) -> Solar
         y * np.sin(2 * l0) - 2 * ecc * np.sin(m) + 4 * ecc * y * np.sin(m) * np.cos(2 * l0)
         - 0.5 * y**2 * np.sin(4 * l0) - 1.25 * ecc**2 * np.sin(2 * m))
     minutes_utc = np.mod(unix, 86400.0) / 60.0
-    true_solar_time = np.mod(minutes_utc + eot + 4.0 * longitude, 1440.0)  # [min]
+    true_solar_time = np.mod(minutes_utc + eot + mean_solar_offset_min(longitude), 1440.0)  # [min]
     hour_angle = true_solar_time / 4.0 - 180.0  # [deg]
     phi = np.radians(latitude)
     cos_z = np.sin(phi) * np.sin(decl) + np.cos(phi) * np.cos(decl) * np.cos(np.radians(hour_angle))

@@ -41,6 +41,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from gateway.diagnose import recomputed, store_observer
+from gateway.diagnose.layout import layout
 from gateway.diagnose.night_sky import LEVEL, NightSky
 from gateway.diagnose.store_observer import gaps_bridged
 from gateway.greenhouse import Greenhouse
@@ -219,9 +220,10 @@ class Structured(Model):
         return (self.observer(p, x, dt) if self.store else None,
                 self.added.observer(self, p, x, dt) if self.added is not None else None)
 
-    def _slow_at(self, obs, idx, column: bool = False):
-        """The slow states at ``idx`` as ``advance`` takes them (``column``: as (P·N, 1))."""
-        at = [None if o is None else (o[:, idx].reshape(-1, 1) if column else o[:, idx])
+    def _slow_at(self, obs, idx, shape: tuple[int, ...] | None = None):
+        """The slow states at ``idx`` as ``advance`` takes them (``shape``: reshaped to it,
+        ``shoot``'s layout)."""
+        at = [None if o is None else (o[:, idx] if shape is None else o[:, idx].reshape(shape))
               for o in obs]
         return at[0] if self.added is None else (at[0], at[1])
 
@@ -238,28 +240,30 @@ class Structured(Model):
     def shoot(self, theta: np.ndarray, x, gh: Greenhouse, dt: float, starts: np.ndarray,
               horizon: int) -> np.ndarray:
         """Readings predicted at steps 1..H of free runs from every start, for every candidate:
-        (P, N, H). One Python iteration per step serves candidates × starts."""
+        (P, N, H). One Python iteration per step serves candidates × starts (layout.py)."""
         theta = np.atleast_2d(theta)
         n_p, n = theta.shape[0], len(starts)
         p = self.columns(theta)
         c0, unit = self.capacity(gh), model_unit(self, gh)
         starts = np.asarray(starts, dtype=int)
-        rows = {k: np.repeat(v, n, axis=0) for k, v in p.items()}
-        t0 = np.tile(starts, n_p)[:, None]
-        ta = self.true_state(rows, x, x["t_in"][t0], t0)
-        ts = self._slow_at(self._observed(p, x, dt), starts, column=True)
-        pre = recomputed.windows(self.night_sky, self.sensors, self.modulations, p, x, starts,
-                                 horizon)
-        out = np.empty((n_p * n, horizon))
-        air_dt = self._air_dt(rows, c0, dt)
+        q0, t0, shape = layout(p, starts)
+        ta = self.true_state(q0, x, x["t_in"][t0], t0)
+        ts = self._slow_at(self._observed(p, x, dt), starts, shape)
+        grid = shape != (n_p * n, 1)  # else rows: windows() repeats ``p`` per start itself
+        pre = {name: v.reshape(-1, shape[1], horizon) for name, v in recomputed.windows(
+            self.night_sky, self.sensors, self.modulations, q0 if grid else p, x, starts,
+            horizon).items()}
+        out = np.empty((n_p, n, horizon))
+        dest = out.reshape(shape + (horizon,))  # a view: out in the state's layout
+        air_dt = self._air_dt(q0, c0, dt)
         for k in range(horizon):
             t = t0 + k
-            q = self._at(rows, x, t)
+            q = self._at(q0, x, t)
             ta, ts = self.advance(q, x, ta, ts, t, c0, unit, dt,
-                                  {name: v[:, k : k + 1] for name, v in pre.items()} if pre
+                                  {name: v[:, :, k] for name, v in pre.items()} if pre
                                   else None, air_dt)
-            out[:, k] = (self.reading(rows, x, ta, t + 1) if self.sensors else ta)[:, 0]
-        return out.reshape(n_p, n, horizon)
+            dest[:, :, k] = self.reading(q0, x, ta, t + 1) if self.sensors else ta
+        return out
 
     def _air_dt(self, p: Mapping[str, np.ndarray], c0: float, dt: float) -> np.ndarray | None:
         """Δ / (c0 m_cap) for every step of a run (``advance``'s ``air_dt``), or None when a

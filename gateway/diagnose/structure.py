@@ -34,9 +34,10 @@ All methods are vectorised over candidate parameter sets (rows) as in :mod:`gate
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -256,7 +257,7 @@ class Structured(Model):
         dest = out.reshape(shape + (horizon,))  # a view: out in the state's layout
         air_dt = self._air_dt(q0, c0, dt)
         steps = self._steps(q0, x, np.arange(horizon)[:, None, None] + t0[None],
-                            {name: v.transpose(2, 0, 1) for name, v in pre.items()})
+                            {name: v.transpose(2, 0, 1) for name, v in pre.items()}, not grid)
         for k, (plan, j, off) in zip(range(horizon), steps, strict=True):
             t = t0 + k
             q = self._at(q0, x, t)
@@ -267,14 +268,21 @@ class Structured(Model):
         return out
 
     def _steps(self, p, x, block: np.ndarray, given: Mapping[str, np.ndarray],
-               ) -> Iterator[tuple[hoisted.Plan, int, np.ndarray | None]]:
+               planned: bool = True) -> Iterator[tuple[hoisted.Plan | None, int, Any]]:
         """For each step of a run, from the time indices of all of them ``block`` (steps, ...)
         and the parameters ``p`` as the run's state broadcasts them: the plan of the
-        state-independent coefficients (hoisted.py), the step's index in it, and the sensor
-        offset at the step's end (None without sensor terms). ``given``: ``_inputs``'s, as
-        blocks (steps, ...). Planned a chunk of steps at a time, whose temporaries of about
-        step.BLOCK_ELEMENTS elements stay in cache and on the heap."""
-        size = max(1, stepping.BLOCK_ELEMENTS // max(len(v) for v in p.values()))
+        state-independent coefficients (hoisted.py; None when not ``planned``: a shooting
+        grid, whose state-independent terms mostly read shared parameters, layout.py, ran
+        faster without), the step's index in it, and the sensor offset at the step's end (None
+        without sensor terms). ``given``: ``_inputs``'s, as blocks (steps, ...). Planned a
+        chunk of steps at a time, whose temporaries of about step.BLOCK_ELEMENTS elements stay
+        in cache and on the heap."""
+        if not planned:
+            for t in block:
+                yield None, 0, self.sensor_offset(p, x, t + 1) if self.sensors else None
+            return
+        state = np.broadcast_shapes(block.shape[1:], *(v.shape for v in p.values()))
+        size = max(1, stepping.BLOCK_ELEMENTS // math.prod(state))
         for a in range(0, len(block), size):
             t = block[a : a + size]
             q = self._at(p, x, t)

@@ -52,6 +52,7 @@ class ExtraVentilation(FluxTerm):
     equation = "ρ c_p V N (T_out - T_in) / A (III.32 form)"
     description = "added air exchange from τ"
     requires = ("t_out",)
+    state_dependent = False
 
     def __init__(self, capacity: float, amp: Parameter, tau: Parameter) -> None:
         self.capacity, self.amp, self.tau = capacity, amp.name, tau.name
@@ -69,6 +70,7 @@ class HeatSource(FluxTerm):
 
     equation = "P (W m-2 of floor)"
     requires = ("i_glob",)
+    state_dependent = False
 
     def __init__(self, unit: float, amp: Parameter, tau: Parameter, night_only: bool) -> None:
         self.unit, self.amp, self.tau, self.night_only = unit, amp.name, tau.name, night_only

@@ -120,7 +120,8 @@ def per_distinct(modulations: Sequence[Modulation], p, names: list[str], horizon
     """``f`` of the parameters ``names`` (P, 1) evaluated once per distinct row: ``f``
     takes them as (U, 1, 1) and gives (U, N, H); returned as (P·N, H)."""
     check_unmodulated(modulations, names)
-    rows, which = np.unique(np.column_stack([p[nm][:, 0] for nm in names]), axis=0,
+    cols = np.broadcast_arrays(*[p[nm][:, 0] for nm in names])  # a shared one is (1,)
+    rows, which = np.unique(np.column_stack(cols), axis=0,
                             return_inverse=True)
     got = f({nm: rows[:, j, None, None] for j, nm in enumerate(names)})  # (U, N, H)
     return got[which.ravel()].reshape(-1, horizon)

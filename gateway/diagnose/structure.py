@@ -34,13 +34,15 @@ All methods are vectorised over candidate parameter sets (rows) as in :mod:`gate
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import math
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from gateway.diagnose import recomputed, store_observer
+from gateway.diagnose import hoisted, recomputed, store_observer
+from gateway.diagnose.layout import layout
 from gateway.diagnose.night_sky import LEVEL, NightSky
 from gateway.diagnose.store_observer import gaps_bridged
 from gateway.greenhouse import Greenhouse
@@ -100,6 +102,7 @@ class SkyLoss(FluxTerm):
     requires = ("t_out",)
     optional = ("rh_out",)  # T_sky's clear-sky emissivity (gateway/model/sky.py)
     parameters = (SKY,)
+    state_dependent = False
 
     def __init__(self, unit: float) -> None:
         self.unit = unit
@@ -180,19 +183,17 @@ class Structured(Model):
 
     def advance(self, q, x, ta, ts, t: Index, c0: float, unit: float, dt: float,
                 given: Mapping[str, np.ndarray] | None = None,
-                air_dt: np.ndarray | None = None):
+                air_dt: np.ndarray | None = None, plan: hoisted.Plan | None = None, k: int = 0):
         """Air (exponential step, stores frozen), then the store(s) (exponential steps, new
         air; ``ts`` is the pair (base store, added store) when there is an added one): the
         model layer's step (gateway/model/step.py) with the zero-order hold that the coarsened
         inputs are built for (fit.coarsen: block means of the inputs over each step).
         ``given``: drivers at ``t`` the caller already computed (``_inputs``); ``air_dt``:
-        Δ / (c0 m_cap) [s m2 K J-1] when the caller holds it (``m_cap`` not modulated)."""
+        Δ / (c0 m_cap) [s m2 K J-1] when the caller holds it (``m_cap`` not modulated);
+        ``plan``: the run's state-independent coefficients (hoisted.py), ``k`` its step."""
         x = self._inputs(q, x, t, given)
-        g_sum: np.ndarray | float = 0.0
-        s_sum: np.ndarray | float = 0.0
-        for term in self.terms:
-            g, s = term.coefficients(q, x, ta, t)
-            g_sum, s_sum = _add(g_sum, g), _add(s_sum, s)
+        g_sum, s_sum = (hoisted.unplanned(self.terms) if plan is None else plan).sums(
+            k, q, x, ta, t)
         tw = None
         if self.added is not None:  # states (base store, added store)
             ts, tw = ts
@@ -219,9 +220,10 @@ class Structured(Model):
         return (self.observer(p, x, dt) if self.store else None,
                 self.added.observer(self, p, x, dt) if self.added is not None else None)
 
-    def _slow_at(self, obs, idx, column: bool = False):
-        """The slow states at ``idx`` as ``advance`` takes them (``column``: as (P·N, 1))."""
-        at = [None if o is None else (o[:, idx].reshape(-1, 1) if column else o[:, idx])
+    def _slow_at(self, obs, idx, shape: tuple[int, ...] | None = None):
+        """The slow states at ``idx`` as ``advance`` takes them (``shape``: reshaped to it,
+        ``shoot``'s layout)."""
+        at = [None if o is None else (o[:, idx] if shape is None else o[:, idx].reshape(shape))
               for o in obs]
         return at[0] if self.added is None else (at[0], at[1])
 
@@ -238,28 +240,57 @@ class Structured(Model):
     def shoot(self, theta: np.ndarray, x, gh: Greenhouse, dt: float, starts: np.ndarray,
               horizon: int) -> np.ndarray:
         """Readings predicted at steps 1..H of free runs from every start, for every candidate:
-        (P, N, H). One Python iteration per step serves candidates × starts."""
+        (P, N, H). One Python iteration per step serves candidates × starts (layout.py)."""
         theta = np.atleast_2d(theta)
         n_p, n = theta.shape[0], len(starts)
         p = self.columns(theta)
         c0, unit = self.capacity(gh), model_unit(self, gh)
         starts = np.asarray(starts, dtype=int)
-        rows = {k: np.repeat(v, n, axis=0) for k, v in p.items()}
-        t0 = np.tile(starts, n_p)[:, None]
-        ta = self.true_state(rows, x, x["t_in"][t0], t0)
-        ts = self._slow_at(self._observed(p, x, dt), starts, column=True)
-        pre = recomputed.windows(self.night_sky, self.sensors, self.modulations, p, x, starts,
-                                 horizon)
-        out = np.empty((n_p * n, horizon))
-        air_dt = self._air_dt(rows, c0, dt)
-        for k in range(horizon):
+        q0, t0, shape = layout(p, starts)
+        ta = self.true_state(q0, x, x["t_in"][t0], t0)
+        ts = self._slow_at(self._observed(p, x, dt), starts, shape)
+        grid = shape != (n_p * n, 1)  # else rows: windows() repeats ``p`` per start itself
+        pre = {name: v.reshape(-1, shape[1], horizon) for name, v in recomputed.windows(
+            self.night_sky, self.sensors, self.modulations, q0 if grid else p, x, starts,
+            horizon).items()}
+        out = np.empty((n_p, n, horizon))
+        dest = out.reshape(shape + (horizon,))  # a view: out in the state's layout
+        air_dt = self._air_dt(q0, c0, dt)
+        steps = self._steps(q0, x, np.arange(horizon)[:, None, None] + t0[None],
+                            {name: v.transpose(2, 0, 1) for name, v in pre.items()}, not grid)
+        for k, (plan, j, off) in zip(range(horizon), steps, strict=True):
             t = t0 + k
-            q = self._at(rows, x, t)
+            q = self._at(q0, x, t)
             ta, ts = self.advance(q, x, ta, ts, t, c0, unit, dt,
-                                  {name: v[:, k : k + 1] for name, v in pre.items()} if pre
-                                  else None, air_dt)
-            out[:, k] = (self.reading(rows, x, ta, t + 1) if self.sensors else ta)[:, 0]
-        return out.reshape(n_p, n, horizon)
+                                  {name: v[:, :, k] for name, v in pre.items()} if pre
+                                  else None, air_dt, plan, j)
+            dest[:, :, k] = ta if off is None else ta + off
+        return out
+
+    def _steps(self, p, x, block: np.ndarray, given: Mapping[str, np.ndarray],
+               planned: bool = True) -> Iterator[tuple[hoisted.Plan | None, int, Any]]:
+        """For each step of a run, from the time indices of all of them ``block`` (steps, ...)
+        and the parameters ``p`` as the run's state broadcasts them: the plan of the
+        state-independent coefficients (hoisted.py; None when not ``planned``: a shooting
+        grid, whose state-independent terms mostly read shared parameters, layout.py, ran
+        faster without), the step's index in it, and the sensor offset at the step's end (None
+        without sensor terms). ``given``: ``_inputs``'s, as blocks (steps, ...). Planned a
+        chunk of steps at a time, whose temporaries of about step.BLOCK_ELEMENTS elements stay
+        in cache and on the heap."""
+        if not planned:
+            for t in block:
+                yield None, 0, self.sensor_offset(p, x, t + 1) if self.sensors else None
+            return
+        state = np.broadcast_shapes(block.shape[1:], *(v.shape for v in p.values()))
+        size = max(1, stepping.BLOCK_ELEMENTS // math.prod(state))
+        for a in range(0, len(block), size):
+            t = block[a : a + size]
+            q = self._at(p, x, t)
+            plan = hoisted.plan(self.terms, q, self._inputs(
+                q, x, t, {name: v[a : a + size] for name, v in given.items()}), t)
+            off = hoisted.columns(self.sensor_offset(p, x, t + 1)) if self.sensors else None
+            for j in range(len(t)):
+                yield plan, j, None if off is None else off[j]
 
     def _air_dt(self, p: Mapping[str, np.ndarray], c0: float, dt: float) -> np.ndarray | None:
         """Δ / (c0 m_cap) for every step of a run (``advance``'s ``air_dt``), or None when a
@@ -309,10 +340,14 @@ class Structured(Model):
         if self.night_sky is not None:
             recomputed.check_unmodulated(self.modulations, [LEVEL.name])
             sky = self.night_sky.t_sky(p, x, slice(start, stop - 1))  # (P, stop-1-start)
-        for k, t in enumerate(range(start, stop - 1), start=1):
+        steps = self._steps(p, x, np.arange(start, stop - 1)[:, None, None],
+                            {} if sky is None else {"t_sky": sky.T[:, :, None]})
+        for k, (t, (plan, j, off)) in enumerate(zip(range(start, stop - 1), steps, strict=True),
+                                                start=1):
             ta, ts = self.advance(self._at(p, x, t), x, ta, ts, t, c0, unit, dt,
-                                  None if sky is None else {"t_sky": sky[:, k - 1 : k]})
-            out[:, k] = self.reading(p, x, ta, t + 1)[:, 0]
+                                  None if sky is None else {"t_sky": sky[:, k - 1 : k]},
+                                  None, plan, j)
+            out[:, k] = (ta if off is None else ta + off)[:, 0]
             if restart_after_gaps and np.isnan(ta[0, 0]):
                 ta, ts = restart(t + 1)
         return out
@@ -324,17 +359,6 @@ class Structured(Model):
         for i, (row, s0) in enumerate(zip(np.atleast_2d(theta_rows), starts, strict=True)):
             out[i] = self.shoot(row[None, :], x, gh, dt, np.array([s0]), horizon)[0, 0, -1]
         return out
-
-
-def _add(total: np.ndarray | float, v: np.ndarray | float) -> np.ndarray | float:
-    """``total + v`` of a sum of coefficients, where a float 0.0 on either side adds nothing
-    and costs no array operation: the same numbers (x + 0 = x; only a zero's sign could
-    differ, and neither sum is divided by)."""
-    if isinstance(v, float) and v == 0.0:
-        return total
-    if isinstance(total, float) and total == 0.0:
-        return v
-    return total + v
 
 
 def structure(base: Model, gh: Greenhouse, store: bool) -> Structured:

@@ -242,8 +242,8 @@ class Corrector:
         for h in self.horizons:
             key = str(h)
             if key in snap.get("r_mat", {}):
-                self.r_mat[h] = np.asarray(snap["r_mat"][key], dtype=float)
-                self.r_vec[h] = np.asarray(snap["r_vec"][key], dtype=float)
+                self.r_mat[h] = np.array(snap["r_mat"][key], dtype=float)  # a copy: updated in place
+                self.r_vec[h] = np.array(snap["r_vec"][key], dtype=float)
             last = snap.get("last", {}).get(key)
             self.last[h] = math.nan if last is None else float(last)
             self.learnt[h] = int(snap.get("learnt", {}).get(key, 0))

@@ -268,13 +268,9 @@ def test_a_snapshot_resumes_the_closed_loop_exactly(gh, model_path, novent, tmp_
     assert json.dumps(other.snapshot()) == json.dumps(before)
 
 
-def test_cli_json_scores_against_the_explicit_flow_beside_the_baselines(tmp_path, model_path, capsys):
-    out = tmp_path / "flows.csv"
-    code = gateway_main(["vsensor", "--model", str(model_path), "--data", str(vd.test_file()),
-                         "--greenhouse", vd.GREENHOUSE, "--model-kind", "almeria", "--json",
-                         "--out", str(out)])
+def test_cli_json_scores_against_the_explicit_flow_beside_the_baselines(model_path):
+    code, rep, out = vd.cli_run(model_path)  # the CLI's own run, shared with test_vsensor_train
     assert code == 0
-    rep = json.loads(capsys.readouterr().out)
     for block in (rep, *rep["baselines"].values()):
         for key in ("flow", "q_vent"):
             assert set(block[key]) >= {"mae", "rmse", "maxae", "r2", "mae_pct_range"}

@@ -15,16 +15,18 @@ from training.vsensor.dataset import build_segment
 
 
 def test_held_out_score_is_what_the_gateway_cli_reports():
-    """``train --test`` scores from the cached replays exactly as ``python -m gateway vsensor``."""
-    from gateway.series import load_series
-    from gateway.vsensor.batch import baseline_paths, run_series, score
+    """``train --test`` scores from the cached replays exactly as ``python -m gateway vsensor``
+    (its JSON report: the main sensor's figures, the baselines' beside them)."""
+    from gateway.vsensor.batch import baseline_paths
     from training.vsensor.heldout import score_segment, table
 
     gh = load_greenhouse(vd.GREENHOUSE)
     model = vd.tiny_model()
     seg = build_segment(vd.test_file(), gh, "almeria", vd.workdir() / "cache", vd.TINY)
     ours = score_segment(seg, {"pca_narx": model, **baseline_paths(model)}, gh, "almeria")
-    cli = score(run_series(model, load_series(str(vd.test_file()), step=60.0), gh, "almeria"))
+    code, report, _ = vd.cli_run(model)  # the CLI's run, shared with test_vsensor_runtime
+    assert code == 0
+    cli = {"pca_narx": report, **report["baselines"]}
     assert set(ours) == set(cli) == {"pca_narx", "narx_no_pca", "linear_arx"}
     for name in cli:
         assert ours[name]["flow"]["mae"] == pytest.approx(cli[name]["flow"]["mae"], rel=1e-9)
@@ -157,7 +159,7 @@ def test_tune_prints_the_pca_narx_train_would_fit(tmp_path, capsys):
     paths = [str(p) for p in vd.train_files()]
     log = tmp_path / "tune.jsonl"
     args = ["--data", *paths, "--greenhouse", vd.GREENHOUSE, "--model", "almeria",
-            "--cache", str(vd.workdir() / "cache"), "--set", "t_in.iterations=2",
+            "--cache", str(vd.workdir() / "cache"), "--set", "t_in.iterations=2", "--set", "t_in.every=15",
             "--set", "t_in.bats=4", "--set", "i_in.iterations=2", "--set", "i_in.bats=4",
             "--hidden", "8,8", "--epochs", "8", "--rounds", "1"]
     assert main(["tune", *args, "--subset", "train-grower", "--log", str(log)]) == 0

@@ -24,7 +24,11 @@ from pathlib import Path
 from training.simulate import PRESETS, simulate
 from training.simulate.control import GrowerVents
 
-TINY = {"t_in": {"iterations": 2, "bats": 4}, "i_in": {"iterations": 2, "bats": 4}}
+TINY = {"t_in": {"iterations": 2, "bats": 4, "every": 15}, "i_in": {"iterations": 2, "bats": 4}}
+"""The estimator budget of every replay the tiny sensors are trained on and fed with: the air's
+search every 15th sample (as the demo test's replay, tests/test_demo.py QUICK) cuts a replay's
+time by ~3 (1.80 -> 0.58 s CPU for a simulated day); what the tests check (live equals batch,
+CLI equals training, reproducible, refusals) holds at any budget."""
 GREENHOUSE = "almeria-palmerillas"
 
 
@@ -92,6 +96,30 @@ def tiny_model(tag: str = "a", ensemble: int = 1, kind: str = "almeria", **optio
                   workdir() / "cache", TINY, seed=0, hidden=(8, 8), epochs=8, rounds=1,
                   ensemble=ensemble, **options)
     return out
+
+
+@functools.cache
+def cli_run(model: Path) -> tuple[int, dict, Path]:
+    """``python -m gateway vsensor --json --out`` of ``model`` on the test file (the default
+    almeria kind): (its exit code, its JSON report, its CSV). Run once for every file and worker
+    of a run: test_vsensor_runtime checks the CLI's output on it and test_vsensor_train holds
+    training's held-out scores equal to its figures (each ran the same two replays again)."""
+    import io
+
+    from gateway.cli import main
+
+    folder = workdir() / f"cli-{model.parent.name}"
+    code_file, report, out = folder / "code", folder / "report.json", folder / "flows.csv"
+    with _build_once(f"cli-{model.parent.name}", repr(str(model))) as build:
+        if build:
+            folder.mkdir(exist_ok=True)
+            with contextlib.redirect_stdout(io.StringIO()) as stdout:
+                code = main(["vsensor", "--model", str(model), "--data", str(test_file()),
+                             "--greenhouse", GREENHOUSE, "--model-kind", "almeria", "--json",
+                             "--out", str(out)])
+            report.write_text(stdout.getvalue())
+            code_file.write_text(str(code))
+    return int(code_file.read_text()), json.loads(report.read_text()), out
 
 
 def rewrite_metadata(src: Path, dst: Path, **changes) -> Path:

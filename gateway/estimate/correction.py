@@ -69,6 +69,17 @@ MAX_CORRECTION_K = 3.0
 """[K] bound on |ê|: a correction larger than that is a fit gone wrong, not a forecast."""
 
 
+_EXACT_UNIT = 1 << 1074
+"""Every finite float64 is a whole multiple of 2^-1074: the day's readings are summed exactly as
+integers of that unit (``_exact``)."""
+
+
+def _exact(value: float) -> int:
+    """A finite float as an integer count of 2^-1074 (exact: its denominator is a power of 2)."""
+    num, den = value.as_integer_ratio()
+    return num * (_EXACT_UNIT // den)
+
+
 AHEAD = ("i_glob", "wind", "t_out")
 """Drivers whose change over the horizon φ carries (the row keys ``d_i_glob`` …)."""
 
@@ -121,6 +132,7 @@ class Corrector:
         self.horizons, self.lam, self.ridge = tuple(horizons), forgetting(dt, memory_s), ridge
         self.warmup = int(math.ceil(warmup_s / dt))  # learnt starts before the first correction
         self.day = max(int(round(DAY_MEAN_S / dt)), 1)  # readings in the day mean
+        self._ridge = ridge * np.eye(len(FEATURES))  # ρ I of ``beta``, the same bits each step
         self.reset()
 
     def reset(self) -> None:
@@ -133,6 +145,7 @@ class Corrector:
         self._made: dict[int, list[float]] = {}
         self.readings: deque = deque(maxlen=self.day)  # the last day's readings (NaN kept)
         self._finite = 0  # how many of them are finite
+        self._sum = 0  # their exact sum, in units of 2^-1074 (``_exact``)
         self.day_mean = math.nan
 
     def drop_pending(self) -> None:
@@ -146,12 +159,16 @@ class Corrector:
         value = math.nan if reading is None else float(reading)
         if len(self.readings) == self.day and math.isfinite(self.readings[0]):
             self._finite -= 1  # the oldest reading leaves the day
+            self._sum -= _exact(self.readings[0])
         self.readings.append(value)
-        self._finite += math.isfinite(value)
-        # the same fsum of the same values as a list of them would give, without the list
-        # (a day of 1-minute readings, every step)
+        if math.isfinite(value):
+            self._finite += 1
+            self._sum += _exact(value)
+        # The sum is exact and an int / int division is correctly rounded: the same float as
+        # math.fsum of the finite readings (also correctly rounded), without a pass over the
+        # day's readings (a day of 1-minute readings, every step).
         got = self._finite
-        self.day_mean = math.fsum(filter(math.isfinite, self.readings)) / got if got else math.nan
+        self.day_mean = self._sum / _EXACT_UNIT / got if got else math.nan
 
     def observe(self, reading: float) -> None:
         """The reading now matures the forecasts made h steps ago: forget, then learn each;
@@ -165,18 +182,22 @@ class Corrector:
             if old is None:
                 self.last[h] = math.nan
                 continue
-            phi, f = np.asarray(old[:-1]), old[-1]
+            f = old[-1]
             e = reading - f
             self.last[h] = e
-            if not (math.isfinite(e) and np.all(np.isfinite(phi))):
+            if not (math.isfinite(e) and all(map(math.isfinite, old))):
                 continue
-            self.r_mat[h] = self.lam * self.r_mat[h] + np.outer(phi, phi)
-            self.r_vec[h] = self.lam * self.r_vec[h] + phi * e
+            phi = np.array(old[:-1], dtype=float)
+            # in place: the same operations as λ R + φ φᵀ and λ r + φ e, no new arrays
+            r_mat, r_vec = self.r_mat[h], self.r_vec[h]
+            r_mat *= self.lam
+            r_mat += np.multiply.outer(phi, phi)
+            r_vec *= self.lam
+            r_vec += phi * e
             self.learnt[h] += 1
 
     def beta(self, h: int) -> np.ndarray:
-        k = len(FEATURES)
-        return np.linalg.solve(self.r_mat[h] + self.ridge * np.eye(k), self.r_vec[h])
+        return np.linalg.solve(self.r_mat[h] + self._ridge, self.r_vec[h])
 
     def correct(self, h: int, f: float, t_in: float, row: Mapping[str, float],
                 arx: float = math.nan) -> float:
@@ -184,13 +205,14 @@ class Corrector:
         drivers ``row`` (``features``) and the ARX's forecast of the same target; ``f``
         unchanged where φ cannot be formed. Remembered for ``add``."""
         phi = features(f, t_in, self.last[h], row, arx, self.day_mean)
-        if not (math.isfinite(f) and np.all(np.isfinite(phi))):
+        values = phi.tolist()
+        if not (math.isfinite(f) and all(map(math.isfinite, values))):
             return f
-        self._made[h] = [*phi.tolist(), f]
+        self._made[h] = [*values, f]
         if self.learnt[h] < self.warmup:
             return f
-        e_hat = float(np.clip(self.beta(h) @ phi, -MAX_CORRECTION_K, MAX_CORRECTION_K))
-        return f + e_hat
+        e_hat = float(self.beta(h) @ phi)  # bounded as np.clip would (NaN stays NaN)
+        return f + min(max(e_hat, -MAX_CORRECTION_K), MAX_CORRECTION_K)
 
     def add(self) -> None:
         """Close the step: the forecasts ``correct`` saw now wait h steps for their target."""
@@ -220,8 +242,8 @@ class Corrector:
         for h in self.horizons:
             key = str(h)
             if key in snap.get("r_mat", {}):
-                self.r_mat[h] = np.asarray(snap["r_mat"][key], dtype=float)
-                self.r_vec[h] = np.asarray(snap["r_vec"][key], dtype=float)
+                self.r_mat[h] = np.array(snap["r_mat"][key], dtype=float)  # a copy: updated in place
+                self.r_vec[h] = np.array(snap["r_vec"][key], dtype=float)
             last = snap.get("last", {}).get(key)
             self.last[h] = math.nan if last is None else float(last)
             self.learnt[h] = int(snap.get("learnt", {}).get(key, 0))
@@ -242,14 +264,21 @@ def correct_series(forecasts: Mapping[int, np.ndarray], measured: np.ndarray,
     corr = Corrector(list(forecasts), dt, memory_s, ridge, warmup_s)
     out = {h: np.full(n, np.nan) for h in forecasts}
     nan = np.full(n, np.nan)
-    g = {h: np.asarray((arx or {}).get(h, nan), dtype=float) for h in forecasts}
+    # Python floats of every column once (.tolist() gives the values float() of each gives)
+    g = {h: np.asarray((arx or {}).get(h, nan), dtype=float).tolist() for h in forecasts}
+    f_of = {h: np.asarray(f, dtype=float).tolist() for h, f in forecasts.items()}
     cols = {"i_glob": x["i_glob"], "t_out": x["t_out"], "hour": hour_of_day(time)}
+    col_of = {k: np.asarray(v).tolist() for k, v in cols.items()}
+    ahead_of = {h: {k: np.asarray(v).tolist() for k, v in (ahead or {}).get(h, {}).items()}
+                for h in forecasts}
+    readings = np.asarray(measured, dtype=float).tolist()
     for t in range(n):
-        corr.observe(float(measured[t]))
-        row = {k: float(v[t]) for k, v in cols.items()}
-        for h, f in forecasts.items():
+        reading = readings[t]
+        corr.observe(reading)
+        row = {k: v[t] for k, v in col_of.items()}
+        for h, f in f_of.items():
             if math.isfinite(f[t]):
-                row_h = row | {k: float(v[t]) for k, v in (ahead or {}).get(h, {}).items()}
-                out[h][t] = corr.correct(h, float(f[t]), float(measured[t]), row_h, float(g[h][t]))
+                row_h = row | {k: v[t] for k, v in ahead_of[h].items()}
+                out[h][t] = corr.correct(h, f[t], reading, row_h, g[h][t])
         corr.add()
     return out

@@ -26,7 +26,7 @@ dataset. docs/online-estimator.md, "Forecasts", has the figures.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -175,6 +175,16 @@ def forecast(model: Model, theta_rows: np.ndarray, x: Mapping[str, np.ndarray], 
     ``b_hat`` (N,) of each start, with ``theta_rows`` (N, k) and the drivers of ``x`` from row
     ``rows`` on (the series' own rows, or an outlook's blocks): the model's steps plus
     Δ ρ^k b̂ (vectorised over the starts, as ``Model.forecast``)."""
+    return forecast_each(model, theta_rows, x, gh, dt, rows, [horizon], t_hat, b_hat,
+                         settings)[horizon]
+
+
+def forecast_each(model: Model, theta_rows: np.ndarray, x: Mapping[str, np.ndarray],
+                  gh: Greenhouse, dt: float, rows: np.ndarray, horizons: Sequence[int],
+                  t_hat: np.ndarray, b_hat: np.ndarray,
+                  settings: DisturbanceSettings | None = None) -> dict[int, np.ndarray]:
+    """{h: ``forecast`` of horizon h} for each of ``horizons``: one run to the longest, read at
+    each on the way (the shorter runs are its first steps: the same numbers)."""
     s = settings or DisturbanceSettings()
     rho = s.per_step(dt)[0]
     p = model.columns(theta_rows)
@@ -182,9 +192,13 @@ def forecast(model: Model, theta_rows: np.ndarray, x: Mapping[str, np.ndarray], 
     state = np.asarray(t_hat, dtype=float)[:, None]
     b = np.asarray(b_hat, dtype=float)[:, None]
     step = model.stepper(p, x, model.capacity(gh), dt)
-    for k in range(horizon):
-        state = step(state, t + k) + dt * b * rho**k
-    return model.reading(p, x, state, t + horizon)[:, 0]
+    out, done = {}, 0  # done: the steps taken
+    for h in sorted(set(horizons)):
+        for k in range(done, h):
+            state = step(state, t + k) + dt * b * rho**k
+        done = max(done, h)
+        out[h] = model.reading(p, x, state, t + h)[:, 0]
+    return out
 
 
 class LiveFilter:

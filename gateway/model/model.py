@@ -310,14 +310,23 @@ class Model:
         predictions of T_in[start + horizon] from the measured T_in[start]. Vectorised over the
         starts: one Python iteration per step of the horizon, not per start.
         """
+        return self.forecast_each(theta_rows, x, gh, dt, starts, [horizon])[horizon]
+
+    def forecast_each(self, theta_rows: np.ndarray, x: Mapping[str, np.ndarray], gh: Greenhouse,
+                      dt: float, starts: np.ndarray, horizons: Sequence[int]) -> dict[int, np.ndarray]:
+        """{h: ``forecast`` of horizon h} for each of ``horizons``: one run to the longest, read
+        at each on the way (the shorter runs are its first steps: the same numbers)."""
         p = self.columns(theta_rows)
-        c = self.capacity(gh)
         t = np.asarray(starts)[:, None]
         state = self.true_state(p, x, x["t_in"][t], t)
-        step = self.stepper(p, x, c, dt)
-        for k in range(horizon):
-            state = step(state, t + k)
-        return self.reading(p, x, state, t + horizon)[:, 0]
+        step = self.stepper(p, x, self.capacity(gh), dt)
+        out, done = {}, 0  # done: the steps taken
+        for h in sorted(set(horizons)):
+            for k in range(done, h):
+                state = step(state, t + k)
+            done = max(done, h)
+            out[h] = self.reading(p, x, state, t + h)[:, 0]
+        return out
 
     def fluxes(
         self, theta: np.ndarray, x: Mapping[str, np.ndarray], t_in: np.ndarray

@@ -93,13 +93,18 @@ class LiveForecaster:
         rows, out = np.array([0]), {}
         start = self.kf.estimate() if self.kf is not None else None
         made: dict[int, dict[str, float]] = {}
+        # one run to the longest horizon, read at each (the same numbers as a run per horizon)
+        if start is None or self.kf is None:  # start is None without a filter
+            runs = self.model.forecast_each(theta[None, :], x, self.gh, self.dt, rows, horizons)
+        else:
+            runs = disturbance.forecast_each(self.model, theta[None, :], x, self.gh, self.dt,
+                                             rows, horizons, np.array([start[0]]),
+                                             np.array([start[1]]), self.kf.settings)
         for h in horizons:
-            if start is None or self.kf is None:  # start is None without a filter
-                out[h] = float(self.model.forecast(theta[None, :], x, self.gh, self.dt, rows, h)[0])
+            if start is None or self.kf is None:
+                out[h] = float(runs[h][0])
                 continue
-            kf = float(disturbance.forecast(self.model, theta[None, :], x, self.gh, self.dt, rows,
-                                            h, np.array([start[0]]), np.array([start[1]]),
-                                            self.kf.settings)[0])
+            kf = float(runs[h][0])
             out[h] = kf
             if self.arx is not None and self.comb is not None:
                 lin = arx_baseline.ArxResult(self.arx.theta[None, :], np.zeros(0), self.arx.updates)

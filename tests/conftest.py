@@ -6,6 +6,7 @@ import logging
 import shutil
 import signal
 import threading
+import uuid
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -28,6 +29,19 @@ def pytest_configure(config: pytest.Config) -> None:
     # unwinds the tests' with-blocks and fixture teardowns, which stop them.
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, _terminate_as_interrupt)
+    # The controller of an xdist run names the run itself (xdist would draw the same kind of
+    # id), so that it can remove the folder its workers share (tests/vsensor_data.py) at the end.
+    if (not hasattr(config, "workerinput") and config.pluginmanager.hasplugin("xdist")
+            and config.getoption("testrunuid", None) is None):
+        config.option.testrunuid = uuid.uuid4().hex
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    run = getattr(config.option, "testrunuid", None)
+    if run and not hasattr(config, "workerinput"):
+        from tests.vsensor_data import run_folder
+
+        shutil.rmtree(run_folder(run), ignore_errors=True)
 
 
 @pytest.fixture(autouse=True)

@@ -12,11 +12,13 @@ lock, and reuse what another worker has finished (a marker written after it, wit
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import fcntl
 import functools
 import json
 import os
+import shutil
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -33,14 +35,28 @@ GREENHOUSE = "almeria-palmerillas"
 
 
 @functools.lru_cache(maxsize=1)
+def run_folder(run: str) -> Path:
+    """The folder the xdist workers of run ``run`` share (tests/conftest.py removes it when the
+    run ends)."""
+    return Path(tempfile.gettempdir()) / f"serra-vsensor-{run}"
+
+
 def workdir() -> Path:
-    """One folder for every xdist worker of this run, else a fresh temporary folder."""
+    """One folder for every xdist worker of this run, else one for this process, removed when
+    it exits."""
     run = os.environ.get("PYTEST_XDIST_TESTRUNUID")
     if run:
-        path = Path(tempfile.gettempdir()) / f"serra-vsensor-{run}"
+        path = run_folder(run)
         path.mkdir(exist_ok=True)
         return path
-    return Path(tempfile.mkdtemp(prefix="serra-vsensor-"))
+    return _own_folder()
+
+
+@functools.cache
+def _own_folder() -> Path:
+    path = Path(tempfile.mkdtemp(prefix="serra-vsensor-"))
+    atexit.register(shutil.rmtree, path, ignore_errors=True)
+    return path
 
 
 @contextlib.contextmanager

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tests.generality.generators import EXPECTED, ROW_S, generate
+from tests.generality.generators import EXPECTED, HELD_OUT, ROW_S, generate
 from tests.generality.windows import Window, bleiswijk_window, load_window, summer
 
 MODEL = "prototype"
@@ -90,6 +90,20 @@ def case_series(case: Case, tmp: Path) -> tuple:
     path = tmp / "kit.csv"
     data.write_csv(path)
     return data, gh, model, load_series(str(path), step=ROW_S, required=model.requires)
+
+
+def diagnose_dev(label: str) -> tuple:
+    """(data, greenhouse, diagnosis) of a dev case ``label`` = generator/window/kind (the
+    suite's seed 1) diagnosed as the suite does; the held-out generator is refused (the dev
+    studies' scripts, dev_cases.py and clock_flags.py)."""
+    from gateway.diagnose import diagnose
+
+    g, w, k = label.split("/")
+    if g in HELD_OUT:
+        raise SystemExit(f"{g} is held out: not a dev generator")
+    with tempfile.TemporaryDirectory() as tmp:
+        data, gh, model, series = case_series(Case("diagnose", g, w, k), Path(tmp))
+        return data, gh, diagnose(series, gh, model)
 
 
 def run(case: Case, keep: str | None = None) -> dict:

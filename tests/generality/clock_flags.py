@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -17,21 +16,13 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from tests.generality.cases import Case, case_series  # noqa: E402
-from tests.generality.generators import HELD_OUT  # noqa: E402
+from tests.generality.cases import diagnose_dev  # noqa: E402
 
 
 def flags(label: str) -> dict:
     """``label`` = generator/window/kind (the suite's seed 1) diagnosed as the suite does."""
-    from gateway.diagnose import diagnose
-
-    g, w, k = label.split("/")
-    if g in HELD_OUT:
-        raise SystemExit(f"{g} is held out: not a dev generator")
     t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory() as tmp:
-        _, gh, model, series = case_series(Case("diagnose", g, w, k), Path(tmp))
-        d = diagnose(series, gh, model)
+    _, gh, d = diagnose_dev(label)
     return {"case": label, "lon": gh.site.longitude if gh.site else None,
             "unexplained": d.unexplained, "findings": [f.effect.name for f in d.findings],
             "mae_after": d.after["free_run"]["mae"], "signature": d.signature,

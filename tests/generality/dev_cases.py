@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -20,8 +19,8 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from tests.generality.cases import START_TOLERANCE_H, Case, case_series, own_significance  # noqa: E402
-from tests.generality.generators import CHANGE_DAY, EXPECTED, HELD_OUT  # noqa: E402
+from tests.generality.cases import START_TOLERANCE_H, diagnose_dev, own_significance  # noqa: E402
+from tests.generality.generators import CHANGE_DAY, EXPECTED  # noqa: E402
 
 KINDS = ("transmission", "ventilation", "thermal_mass", "sun_sensor", "drift")
 DEV = [f"{g}/{w}/{k}" for g in ("refsim", "twonode") for w in ("autumn", "winter") for k in KINDS]
@@ -30,15 +29,8 @@ DEV = [f"{g}/{w}/{k}" for g in ("refsim", "twonode") for w in ("autumn", "winter
 def run_case(label: str) -> dict:
     import numpy as np
 
-    from gateway.diagnose import diagnose
-
-    g, w, k = label.split("/")
-    if g in HELD_OUT:
-        raise SystemExit(f"{g} is held out: not a dev generator")
     t0 = time.process_time()
-    with tempfile.TemporaryDirectory() as tmp:
-        data, gh, model, series = case_series(Case("diagnose", g, w, k), Path(tmp))
-        d = diagnose(series, gh, model)
+    data, _, d = diagnose_dev(label)
     f = d.findings[0] if d.findings else None
     err = None
     if f is not None and data.start is not None and f.start is not None:

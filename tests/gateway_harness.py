@@ -5,6 +5,7 @@ and waiting on conditions with generous deadlines (never sleeping to synchronise
 from __future__ import annotations
 
 import math
+import os
 import queue
 import select
 import signal
@@ -87,8 +88,11 @@ class GatewayProcess:
 
     def start(self, timeout: float = 90.0) -> None:
         log = open(self.config.parent / "gateway.log", "a")  # noqa: SIM115 - kept by the child
+        # its temporary folders in the test's folder: a gateway the test kills leaves its
+        # work folder behind (systemd's PrivateTmp clears it on a farm)
+        env = {**os.environ, "TMPDIR": str(self.config.parent)}
         self.proc = subprocess.Popen(self.argv, cwd=self.config.parent, stdout=subprocess.PIPE,
-                                     stderr=log, text=True)
+                                     stderr=log, text=True, env=env)
         self.starts += 1
         lines: queue.Queue[str] = queue.Queue()
         threading.Thread(target=self._read, args=(self.proc, lines), daemon=True).start()

@@ -2,10 +2,11 @@
 "Logger row intervals"). The generators read the kit's sensors every 60 s; a logger logging
 every ``row_s`` keeps every k-th reading (instantaneous samples, the suite's own way at 300 s:
 the same noise and 0.1 quantisation). The kit CSV is written and read back at ``row_s`` as a
-user's would be. Never the held-out generator.
+user's would be (``--mean``: block means of the 1-minute readings instead). Never the
+held-out generator.
 
     PYTHONPATH=<tree> python tests/generality/row_interval.py refsim/autumn/heater ... \\
-        [--rows 60,300,600,900] > out.jsonl
+        [--rows 60,300,600,900] [--mean] > out.jsonl
     python tests/generality/row_interval.py --table out.jsonl   # the rule, against 300 s
 
 The rule (written before measuring): against the 300-s run of the same case, every other
@@ -36,8 +37,10 @@ MAE_TOLERANCE = 0.10
 """Relative difference of the held-out free-run MAE after to the 300-s run's."""
 
 
-def diagnose_at(label: str, row_s: float) -> dict:
-    """``label`` = generator/window/kind (seed 1) logged every ``row_s`` and diagnosed."""
+def diagnose_at(label: str, row_s: float, mean: bool = False) -> dict:
+    """``label`` = generator/window/kind (seed 1) logged every ``row_s`` and diagnosed;
+    ``mean``: rows are block means of the 1-minute readings over ``row_s`` (a logger averaging
+    over its interval: the 60-s CSV read back at ``row_s``, ``load_series`` averages)."""
     from gateway.diagnose import diagnose
     from gateway.model import build_model
     from gateway.series import load_series
@@ -45,10 +48,10 @@ def diagnose_at(label: str, row_s: float) -> dict:
     g, w, k = label.split("/")
     if g in HELD_OUT:
         raise SystemExit(f"{g} is held out: not a dev generator")
-    out: dict = {"case": label, "row_s": row_s}
+    out: dict = {"case": label, "row_s": row_s, "rows": "mean" if mean else "point"}
     t0 = time.perf_counter()
     try:
-        data = generate(g, window(w), k, 1, row_s=row_s)
+        data = generate(g, window(w), k, 1, row_s=60.0 if mean else row_s)
         gh = data.greenhouse()
         model = build_model("prototype", gh)
         with tempfile.TemporaryDirectory() as tmp:
@@ -105,10 +108,13 @@ if __name__ == "__main__":
         table(args[1])
         raise SystemExit(0)
     rows_s = ROWS_S
+    mean = "--mean" in args
+    if mean:
+        args.remove("--mean")
     if "--rows" in args:
         i = args.index("--rows")
         rows_s = tuple(float(x) for x in args[i + 1].split(","))
         del args[i:i + 2]
     for case in args:
         for row_s in rows_s:
-            print(json.dumps(diagnose_at(case, row_s)), flush=True)
+            print(json.dumps(diagnose_at(case, row_s, mean)), flush=True)

@@ -20,18 +20,20 @@ START_TOLERANCE_H = 12.0
 MAE_TOLERANCE = 0.10
 
 
-def _both(tmp_path, effect: str | None) -> tuple:
-    """The diagnoses of one 6-day record (diagnose_cases.data, the simulator's 60-s rows)
-    logged as 5-minute and as 15-minute block means (a logger averaging over its interval)."""
+def _records(tmp_path, effect: str | None) -> tuple:
+    """One 6-day record (diagnose_cases.data, the simulator's 60-s rows) logged as 5-minute and
+    as 15-minute block means (a logger averaging over its interval), its greenhouse, model and
+    the change's start."""
     series, gh, model, t0 = cases.data(tmp_path, "almeria", effect)
     coarse = load_series(str(tmp_path / "almeria.csv"), step=COARSE_S, required=model.requires)
     assert coarse.step == COARSE_S and len(coarse) * 3 in range(len(series) - 2, len(series) + 3)
-    return diagnose(series, gh, model), diagnose(coarse, gh, model), t0
+    return series, coarse, gh, model, t0
 
 
 @pytest.mark.usefixtures("piece_judge")
 def test_heater_named_alike_at_5_and_15_minute_rows(tmp_path):
-    fine, coarse, t0 = _both(tmp_path, "heater")
+    series, rows_900, gh, model, t0 = _records(tmp_path, "heater")
+    fine, coarse = diagnose(series, gh, model), diagnose(rows_900, gh, model)
     for d in (fine, coarse):
         cases.check_first_finding(d, "heater", t0)
     assert fine.findings[0].effect.name == coarse.findings[0].effect.name
@@ -44,6 +46,7 @@ def test_heater_named_alike_at_5_and_15_minute_rows(tmp_path):
 
 @pytest.mark.usefixtures("piece_judge")
 def test_effect_free_stays_quiet_at_15_minute_rows(tmp_path):
-    _, coarse, _ = _both(tmp_path, None)
+    _, rows_900, gh, model, _ = _records(tmp_path, None)
+    coarse = diagnose(rows_900, gh, model)
     assert not coarse.findings, [f.effect.name for f in coarse.findings]
     cases.check_no_effect(coarse)

@@ -33,6 +33,23 @@ def test_kit_columns_at_five_minutes(window, generator):
     assert (gh.site.latitude, gh.site.longitude) == (window.latitude, window.longitude)
 
 
+def test_row_interval_keeps_every_kth_reading(window):
+    """A logger's row interval (tests/generality/row_interval.py): point samples of the same
+    1-minute readings, so 900-s rows are every third 300-s row and 60-s rows hold the 300-s
+    ones; intervals that are not whole minutes are refused."""
+    five = generate("refsim", window, "none")
+    fifteen = generate("refsim", window, "none", row_s=900.0)
+    np.testing.assert_array_equal(fifteen.time, five.time[::3])
+    for c in KIT:
+        np.testing.assert_array_equal(fifteen.columns[c], five.columns[c][::3])
+    one = generate("refsim", window, "none", row_s=60.0)
+    assert np.all(np.diff(one.time).astype(int) == 60)
+    np.testing.assert_array_equal(one.columns["t_in"][::5], five.columns["t_in"])
+    for bad in (450.0, 90.0):
+        with pytest.raises(ValueError, match="row interval"):
+            generate("refsim", window, "none", row_s=bad)
+
+
 def test_reference_simulator_misting_cools_at_midday(window):
     mist = generate("refsim", window, "misting", change_day=1.0)
     base = generate("refsim", window, "none", change_day=1.0)

@@ -87,11 +87,14 @@ class KitData:
 
 
 def generate(generator: str, window: Window, kind: str = "none", seed: int = 1,
-             change_day: float = CHANGE_DAY, amount: float | None = None) -> KitData:
+             change_day: float = CHANGE_DAY, amount: float | None = None,
+             row_s: float = ROW_S) -> KitData:
     """Kit data of ``generator`` on ``window`` with the change ``kind`` from ``change_day`` [d]
     (0: from the first sample). ``amount``: the two-node house's size of the change in its own
     unit instead of TWONODE_SPECS' (the ``thermostat`` setpoint [°C]); the other generators
-    take their sizes as they are."""
+    take their sizes as they are. ``row_s``: the logger's row interval [s], a multiple of the
+    simulators' 60-s readings (every k-th reading: the kit's instantaneous samples; the
+    held-out generator has its 5-minute rows only)."""
     if generator not in GENERATORS:
         raise ValueError(f"unknown generator {generator!r} (known: {', '.join(GENERATORS)})")
     known = KINDS + OUTSIDE + (TWONODE_ONLY if generator == "twonode" else ())
@@ -99,12 +102,16 @@ def generate(generator: str, window: Window, kind: str = "none", seed: int = 1,
         raise ValueError(f"unknown change {kind!r} for {generator} (known: {', '.join(known)})")
     if amount is not None and (generator != "twonode" or kind == "none"):
         raise ValueError("amount sizes a two-node house's change only")
+    every = int(round(row_s / 60.0))
+    if every < 1 or every * 60.0 != row_s or (generator == "vanthoor" and row_s != ROW_S):
+        raise ValueError(f"row interval {row_s:g} s: not a multiple of 60 s (vanthoor: {ROW_S:g} s)")
     start = None if kind == "none" else window.at_day(change_day)
     if generator == "twonode":
-        time, cols, size = _twonode(window, kind, start, seed, amount)
+        time, cols, size = _twonode(window, kind, start, seed, amount, every)
+    elif generator == "refsim":
+        time, cols, size = _refsim(window, kind, start, seed, every)
     else:
-        make = {"refsim": _refsim, "vanthoor": _vanthoor}[generator]
-        time, cols, size = make(window, kind, start, seed)
+        time, cols, size = _vanthoor(window, kind, start, seed)
     return KitData(time, cols, generator, window, kind, start, size)
 
 
@@ -145,7 +152,7 @@ class CappedVents(VentController):
         return out
 
 
-def _refsim(window: Window, kind: str, start, seed: int):
+def _refsim(window: Window, kind: str, start, seed: int, every: int = int(ROW_S // 60)):
     plant = get_plant("almeria").with_(measured=KIT_COLUMNS)
     weather = window.sim_weather()
     effects: list = []
@@ -163,7 +170,7 @@ def _refsim(window: Window, kind: str, start, seed: int):
             wind_cap=10.0))
         size = "vents capped at 10 % (roof and side)"
     r = simulate(plant=plant, weather=weather, effects=effects, seed=seed)
-    rows = np.arange(0, len(r.time), int(ROW_S // 60))
+    rows = np.arange(0, len(r.time), every)
     return r.time[rows], {c: r.columns[c][rows] for c in KIT}, size
 
 
@@ -185,7 +192,8 @@ TWONODE_SPECS = {"transmission": ("whitening", 0.7), "ventilation": ("door", 4.0
 """Change kind → (tests/twonode.py's effect, its size): the thermostat's is a setpoint [°C]."""
 
 
-def _twonode(window: Window, kind: str, start, seed: int, amount: float | None = None):
+def _twonode(window: Window, kind: str, start, seed: int, amount: float | None = None,
+             every: int = int(ROW_S // 60)):
     from tests import twonode
 
     effect, amp = TWONODE_SPECS.get(kind, (None, None))
@@ -197,7 +205,7 @@ def _twonode(window: Window, kind: str, start, seed: int, amount: float | None =
                                               site=(window.latitude, window.longitude))
     tau_at = None if at is None else float((start - w["time"][0]).astype("timedelta64[s]").astype(float))
     cols = twonode.sensors("house", w, rec, on, tsec, effect, amp, tau_at, seed)
-    rows = np.arange(0, len(tsec), int(ROW_S // 60))
+    rows = np.arange(0, len(tsec), every)
     size = "" if effect is None else f"{effect} amp={amp:g}"
     return w["time"][rows], {c: np.asarray(cols[c], float)[rows] for c in KIT}, size
 

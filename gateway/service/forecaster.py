@@ -101,11 +101,9 @@ class LiveForecaster:
                                              rows, horizons, np.array([start[0]]),
                                              np.array([start[1]]), self.kf.settings)
         for h in horizons:
+            out[h] = kf = float(runs[h][0])
             if start is None or self.kf is None:
-                out[h] = float(runs[h][0])
                 continue
-            kf = float(runs[h][0])
-            out[h] = kf
             if self.arx is not None and self.comb is not None:
                 lin = arx_baseline.ArxResult(self.arx.theta[None, :], np.zeros(0), self.arx.updates)
                 arx = float(lin.forecast(x, rows, h)[0])

@@ -159,8 +159,9 @@ def test_tune_prints_the_pca_narx_train_would_fit(tmp_path, capsys):
     paths = [str(p) for p in vd.train_files()]
     log = tmp_path / "tune.jsonl"
     args = ["--data", *paths, "--greenhouse", vd.GREENHOUSE, "--model", "almeria",
-            "--cache", str(vd.workdir() / "cache"), "--set", "t_in.iterations=2", "--set", "t_in.every=15",
-            "--set", "t_in.bats=4", "--set", "i_in.iterations=2", "--set", "i_in.bats=4",
+            "--cache", str(vd.workdir() / "cache"),
+            *[a for part, opts in vd.TINY.items() for k, v in opts.items()
+              for a in ("--set", f"{part}.{k}={v}")],  # the budget of the tiny sensors' replays
             "--hidden", "8,8", "--epochs", "8", "--rounds", "1"]
     assert main(["tune", *args, "--subset", "train-grower", "--log", str(log)]) == 0
     got = json.loads(log.read_text())

@@ -34,7 +34,6 @@ CLI equals training, reproducible, refusals) holds at any budget."""
 GREENHOUSE = "almeria-palmerillas"
 
 
-@functools.lru_cache(maxsize=1)
 def run_folder(run: str) -> Path:
     """The folder the xdist workers of run ``run`` share (tests/conftest.py removes it when the
     run ends)."""

@@ -92,15 +92,22 @@ def case_series(case: Case, tmp: Path) -> tuple:
     return data, gh, model, load_series(str(path), step=ROW_S, required=model.requires)
 
 
+def dev_label(label: str) -> tuple[str, str, str]:
+    """(generator, window, kind) of a dev case ``label`` = generator/window/kind; the held-out
+    generator is refused (the dev studies' scripts never run it)."""
+    g, w, k = label.split("/")
+    if g in HELD_OUT:
+        raise SystemExit(f"{g} is held out: not a dev generator")
+    return g, w, k
+
+
 def diagnose_dev(label: str) -> tuple:
     """(data, greenhouse, diagnosis) of a dev case ``label`` = generator/window/kind (the
     suite's seed 1) diagnosed as the suite does; the held-out generator is refused (the dev
     studies' scripts, dev_cases.py and clock_flags.py)."""
     from gateway.diagnose import diagnose
 
-    g, w, k = label.split("/")
-    if g in HELD_OUT:
-        raise SystemExit(f"{g} is held out: not a dev generator")
+    g, w, k = dev_label(label)
     with tempfile.TemporaryDirectory() as tmp:
         data, gh, model, series = case_series(Case("diagnose", g, w, k), Path(tmp))
         return data, gh, diagnose(series, gh, model)

@@ -28,8 +28,8 @@ if str(ROOT) not in sys.path:
 
 import numpy as np  # noqa: E402
 
-from tests.generality.cases import START_TOLERANCE_H, window  # noqa: E402
-from tests.generality.generators import HELD_OUT, generate  # noqa: E402
+from tests.generality.cases import START_TOLERANCE_H, dev_label, window  # noqa: E402
+from tests.generality.generators import generate  # noqa: E402
 
 ROWS_S = (60.0, 300.0, 600.0, 900.0)
 REFERENCE_S = 300.0
@@ -45,9 +45,7 @@ def diagnose_at(label: str, row_s: float, mean: bool = False) -> dict:
     from gateway.model import build_model
     from gateway.series import load_series
 
-    g, w, k = label.split("/")
-    if g in HELD_OUT:
-        raise SystemExit(f"{g} is held out: not a dev generator")
+    g, w, k = dev_label(label)
     out: dict = {"case": label, "row_s": row_s, "rows": "mean" if mean else "point"}
     t0 = time.perf_counter()
     try:

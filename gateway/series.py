@@ -142,12 +142,29 @@ def _interp_with_gaps(grid: np.ndarray, t: np.ndarray, v: np.ndarray, max_gap: f
     return out
 
 
+DEFAULT_STEP = 60.0
+"""[s] The model step of the tools when none is given and the rows allow it."""
+
+
+def data_step(data: KitData, default: float = DEFAULT_STEP) -> float:
+    """The model step [s] that suits the rows: ``default``, unless the rows are further apart
+    than the tools interpolate across (``CLOCK_SLACK`` × ``MAX_GAP_S``): then their median
+    spacing, to the whole minute (10- and 15-minute loggers; 601 s of jitter is 600 s)."""
+    t = data.seconds()
+    native = float(np.median(np.diff(t))) if len(t) > 1 else default
+    if native <= CLOCK_SLACK * max(MAX_GAP_S, default):
+        return default
+    return max(60.0, 60.0 * round(native / 60.0))
+
+
 def load_series(
-    path: str, step: float = 60.0, required: Iterable[str] = (), sampling: str = "instant"
+    path: str, step: float | None = 60.0, required: Iterable[str] = (), sampling: str = "instant"
 ) -> Series:
-    """Read a kit CSV and resample it to ``step`` seconds; ``sampling`` says whether its rows
-    are instantaneous values or means over the step (SAMPLINGS)."""
-    series = resample(read_kit_csv(path, required=required), step)
+    """Read a kit CSV and resample it to ``step`` seconds (None: :func:`data_step`, the rows'
+    own spacing when they are coarser than the tools interpolate across); ``sampling`` says
+    whether its rows are instantaneous values or means over the step (SAMPLINGS)."""
+    data = read_kit_csv(path, required=required)
+    series = resample(data, data_step(data) if step is None else step)
     series.sampling = sampling
     series.__post_init__()
     return series

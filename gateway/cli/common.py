@@ -21,7 +21,7 @@ from gateway.greenhouse import Greenhouse, GreenhouseError, Site, list_presets, 
 from gateway.kitcsv import KitCsvError, parse_time
 from gateway.model import MODEL_NAMES, build_model, check_parameters
 from gateway.model.model import Model, check_columns
-from gateway.series import SAMPLINGS, Series, load_series
+from gateway.series import DEFAULT_STEP, SAMPLINGS, Series, load_series
 
 
 def add_sampling_argument(p: argparse.ArgumentParser) -> None:
@@ -43,7 +43,9 @@ def add_data_arguments(p: argparse.ArgumentParser) -> None:
         help=f"greenhouse description: a preset ({', '.join(list_presets())}) or a TOML file",
     )
     p.add_argument("--model", required=True, choices=MODEL_NAMES, help="climate model")
-    p.add_argument("--step", type=positive_number, default=60.0, metavar="S", help="model step [s] (60)")
+    p.add_argument("--step", type=positive_number, metavar="S",
+                   help=f"model step [s] (default {DEFAULT_STEP:g}, or the rows' own spacing when "
+                   "they are more than 5 minutes apart: 10- and 15-minute loggers)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     add_site_argument(p)
 
@@ -134,23 +136,31 @@ def load_run(args: argparse.Namespace) -> Inputs:
         raise CliError(str(exc)) from None
     if len(series) < 2:
         raise CliError(
-            f"{args.data}: {len(series)} sample(s) on the {args.step:g} s grid; every tool needs "
+            f"{args.data}: {len(series)} sample(s) on the {series.step:g} s grid; every tool needs "
             f"at least two (one step to predict)"
         )
     empty = [c for c in model.requires if c in series.columns and c not in series]
     if empty:
         raise CliError(
-            f"{args.data}: column(s) {', '.join(empty)} hold no value on the {args.step:g} s grid "
+            f"{args.data}: column(s) {', '.join(empty)} hold no value on the {series.step:g} s grid "
             f"(every cell empty or in gaps), and the '{model.name}' model needs them"
         )
     try:
         check_columns(model, [c for c in series.columns if c in series], args.data)
     except ValueError as exc:
         raise CliError(str(exc)) from None
-    notes = input_notes(series, gh, model, args.data, args.greenhouse,
-                        getattr(args, "command", None))
+    notes = _step_note(series, args) + input_notes(series, gh, model, args.data, args.greenhouse,
+                                                   getattr(args, "command", None))
     echo(notes)
     return Inputs(series, gh, model, notes)
+
+
+def _step_note(series: Series, args: argparse.Namespace) -> list[Note]:
+    """Say so when the model step was taken from the rows rather than the default."""
+    if args.step is not None or series.step == DEFAULT_STEP:
+        return []
+    return [Note("step_from_rows", f"{args.data}: rows are {series.native_step:g} s apart "
+                 f"(median), so the model runs at a {series.step:g} s step (--step S for another)")]
 
 
 def parse_span(text: str | None, series: Series) -> tuple[int, int] | None:

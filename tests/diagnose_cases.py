@@ -204,7 +204,7 @@ def shared_calibration_in_module() -> Iterator[None]:
 @pytest.fixture
 def piece_judge(monkeypatch: pytest.MonkeyPatch) -> None:
     """The judge on 6-hour pieces (``judge.DAY_TEST`` off) for the 6-day records: they test the
-    library's naming and starts, and the shipped day test needs ``judge.MIN_DAYS`` held-out
+    library's naming and starts, and the shipped day test needs ``significance.MIN_DAYS`` held-out
     days after a change where these leave 2 (docs/effects.md, "What switching it on costs on
     short records")."""
     monkeypatch.setattr(judge, "DAY_TEST", False)

@@ -11,7 +11,7 @@ calibration part (``shared_calibration``: the effects start after it).
 
 The 6-day cases test the library's naming and start times, not the judge's level, and run with
 the piece judge (``piece_judge``): a change at day 3.6 leaves 2 held-out days, on which the
-shipped day test cannot judge anything (``judge.MIN_DAYS``). The day test itself is checked on
+shipped day test cannot judge anything (``significance.MIN_DAYS``). The day test itself is checked on
 10-day records with the change at day 5.6 (tests/test_diagnose_day_test.py).
 """
 

@@ -1,4 +1,4 @@
-"""The day test's matched-filter form (``judge.day_p`` with ``weights``, ``judge.DAY_WEIGHTS``;
+"""The day test's matched-filter form (``significance.day_p`` with ``weights``, ``judge.DAY_WEIGHTS``;
 rule wd, docs/effects.md "A day test weighted by the candidate's own change"): its size under
 the declared day correlation with weights that do not see the errors, its identity with the
 plain day test at equal weights, its power on a cut that follows the weights, and the weights
@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from gateway.diagnose import judge as jd
+from gateway.diagnose import significance as sig
 
 
 def _ar1(rng: np.random.Generator, n: int, phi: float) -> np.ndarray:
@@ -36,14 +37,14 @@ def _weights(rng: np.random.Generator, days: int, zeros: bool) -> np.ndarray:
 
 
 @pytest.mark.parametrize("days", [7, 4])
-@pytest.mark.parametrize("phi_d", [0.0, 0.3, jd.DAY_RHO])
+@pytest.mark.parametrize("phi_d", [0.0, 0.3, sig.DAY_RHO])
 @pytest.mark.parametrize("zeros", [False, True])
 def test_weighted_day_p_holds_its_size(days, phi_d, zeros):
     """Up to the declared day correlation, with weights that do not see the errors: p ≤ 0.05
     in at most 6 % of 2000 draws (the plain day test's bar), and not degenerate."""
     rng = np.random.default_rng(21 + days + int(10 * phi_d) + 100 * zeros)
     lab = np.repeat(np.arange(days), 4)
-    p = np.array([jd.day_p(_day_null(rng, days, phi_d), lab, weights=_weights(rng, days, zeros))
+    p = np.array([sig.day_p(_day_null(rng, days, phi_d), lab, weights=_weights(rng, days, zeros))
                   for _ in range(2000)])
     assert np.mean(p <= 0.05) <= 0.06, np.mean(p <= 0.05)
     assert 0.35 <= np.mean(p <= 0.5) <= 0.65, np.mean(p <= 0.5)
@@ -54,17 +55,17 @@ def test_equal_weights_are_the_plain_day_test():
     lab = np.repeat(np.arange(7), 4)
     for _ in range(50):
         d = 0.1 + _day_null(rng, 7, 0.3)
-        assert jd.day_p(d, lab, weights=np.full(7, 2.5)) == pytest.approx(jd.day_p(d, lab),
+        assert sig.day_p(d, lab, weights=np.full(7, 2.5)) == pytest.approx(sig.day_p(d, lab),
                                                                            abs=1e-12)
     gap = lab + (lab >= 3)  # a gap counts as a day in the correlation, as in the plain test
-    assert jd.day_p(d, gap, weights=np.ones(7)) == pytest.approx(jd.day_p(d, gap), abs=1e-12)
+    assert sig.day_p(d, gap, weights=np.ones(7)) == pytest.approx(sig.day_p(d, gap), abs=1e-12)
 
 
 def test_too_few_weighted_days_give_no_evidence():
     lab = np.repeat(np.arange(7), 4)
     d = np.full(28, 0.5) + 0.01 * np.arange(28)
-    assert jd.day_p(d, lab, weights=np.array([0, 0, 1.0, 0, 0, 2.0, 0])) == 1.0
-    assert jd.day_p(d, lab, weights=np.zeros(7)) == 1.0
+    assert sig.day_p(d, lab, weights=np.array([0, 0, 1.0, 0, 0, 2.0, 0])) == 1.0
+    assert sig.day_p(d, lab, weights=np.zeros(7)) == 1.0
 
 
 def test_a_cut_that_follows_the_weights_is_found_more_often():
@@ -75,8 +76,8 @@ def test_a_cut_that_follows_the_weights_is_found_more_often():
     hits = np.zeros(2)
     for _ in range(500):
         w = _weights(rng, 7, zeros=False)
-        d = 0.25 * np.repeat(w / w.mean(), 4) + 0.3 * _day_null(rng, 7, jd.DAY_RHO)
-        hits += [jd.day_p(d, lab) <= 0.05, jd.day_p(d, lab, weights=w) <= 0.05]
+        d = 0.25 * np.repeat(w / w.mean(), 4) + 0.3 * _day_null(rng, 7, sig.DAY_RHO)
+        hits += [sig.day_p(d, lab) <= 0.05, sig.day_p(d, lab, weights=w) <= 0.05]
     plain, weighted = hits / 500
     assert weighted >= plain + 0.05, (plain, weighted)
 

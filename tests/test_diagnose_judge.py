@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from gateway.diagnose import judge as jd
+from gateway.diagnose import significance as sig
 from gateway.diagnose.bic import delta_bic, effective_samples
 
 
@@ -25,7 +26,7 @@ def test_paired_p_has_its_nominal_size_under_the_null(phi):
     piece to piece as the weather makes them: p ≤ α in about α of the draws; at the per-
     candidate level of the rule (5 % / 7) within a factor 3."""
     rng = np.random.default_rng(1)
-    p = np.array([jd.paired_p(_ar1(rng, 28, phi)) for _ in range(2000)])
+    p = np.array([sig.paired_p(_ar1(rng, 28, phi)) for _ in range(2000)])
     assert np.mean(p <= 0.05) <= 0.065, np.mean(p <= 0.05)
     assert np.mean(p <= 0.2) <= 0.22, np.mean(p <= 0.2)
     assert np.mean(p <= jd.ALPHA / 7) <= 3 * jd.ALPHA / 7, np.mean(p <= jd.ALPHA / 7)
@@ -39,7 +40,7 @@ def _mean_only_p(d: np.ndarray) -> float:
     r = float(z[1:] @ z[:-1]) / float(z @ z)
     r = min(max(r + (1.0 + 4.0 * r) / n, 0.0), 0.9)
     n_eff = n * (1.0 - r) / (1.0 + r)
-    return jd.student_t_sf(float(d.mean() / (np.std(d, ddof=1) / np.sqrt(n_eff))),
+    return sig.student_t_sf(float(d.mean() / (np.std(d, ddof=1) / np.sqrt(n_eff))),
                            max(n_eff - 1.0, 1.0))
 
 
@@ -47,10 +48,10 @@ def _mean_only_p(d: np.ndarray) -> float:
 def test_detrended_autocorrelation_is_no_less_conservative(n, phi):
     """From ``DETREND_MIN_PIECES`` pieces r is read about a line in time: on null differences
     its size is not above the mean-only estimate's (same draws; 0.5 % of slack for the draws)."""
-    assert n >= jd.DETREND_MIN_PIECES
+    assert n >= sig.DETREND_MIN_PIECES
     rng = np.random.default_rng(7)
     draws = [_ar1(rng, n, phi) for _ in range(2000)]
-    new = np.mean([jd.paired_p(d) <= 0.05 for d in draws])
+    new = np.mean([sig.paired_p(d) <= 0.05 for d in draws])
     old = np.mean([_mean_only_p(d) <= 0.05 for d in draws])
     assert new <= old + 0.005, (new, old)
     assert new <= 0.08, new
@@ -61,15 +62,15 @@ def test_a_gain_growing_in_time_is_significant():
     autocorrelation the trend made it insignificant; about a line it is not."""
     rng = np.random.default_rng(8)
     draws = [0.1 + 0.05 * np.arange(28) + 0.3 * _ar1(rng, 28, 0.5) for _ in range(400)]
-    new = np.mean([jd.paired_p(d) <= 0.05 for d in draws])
+    new = np.mean([sig.paired_p(d) <= 0.05 for d in draws])
     old = np.mean([_mean_only_p(d) <= 0.05 for d in draws])
     assert new >= 0.75 and old <= 0.5, (new, old)
 
 
 def test_few_pieces_keep_the_mean_only_estimate():
     rng = np.random.default_rng(9)
-    d = 0.3 + _ar1(rng, jd.DETREND_MIN_PIECES - 1, 0.5)
-    assert jd.paired_p(d) == pytest.approx(_mean_only_p(d))
+    d = 0.3 + _ar1(rng, sig.DETREND_MIN_PIECES - 1, 0.5)
+    assert sig.paired_p(d) == pytest.approx(_mean_only_p(d))
 
 
 def test_student_t_tail_matches_published_quantiles():
@@ -77,15 +78,15 @@ def test_student_t_tail_matches_published_quantiles():
     # 3.707 (0.5 %); df 1 → 6.314 (5 %); df 30 → 1.697 (5 %)
     for t, df, p in ((1.943, 6, 0.05), (3.143, 6, 0.01), (3.707, 6, 0.005), (6.314, 1, 0.05),
                      (1.697, 30, 0.05)):
-        assert jd.student_t_sf(t, df) == pytest.approx(p, rel=2e-3)
-    assert jd.student_t_sf(0.0, 5) == pytest.approx(0.5)
-    assert jd.student_t_sf(-1.943, 6) == pytest.approx(0.95, rel=1e-3)
+        assert sig.student_t_sf(t, df) == pytest.approx(p, rel=2e-3)
+    assert sig.student_t_sf(0.0, 5) == pytest.approx(0.5)
+    assert sig.student_t_sf(-1.943, 6) == pytest.approx(0.95, rel=1e-3)
 
 
 def test_paired_p_sees_a_real_improvement():
     rng = np.random.default_rng(2)
     d = 0.8 + _ar1(rng, 28, 0.5) * 0.5
-    assert jd.paired_p(d) < 0.001
+    assert sig.paired_p(d) < 0.001
 
 
 END = 14 * 86400.0
@@ -190,17 +191,17 @@ def test_the_piece_test_is_anti_conservative_under_day_scale_dependence():
     lasts whole days and spells of days (measured: 14-16 % at a nominal 5 % for day-to-day
     correlation 0.5, docs/effects.md "False alarms")."""
     rng = np.random.default_rng(11)
-    p = np.array([jd.paired_p(_day_null(rng, 7, 0.5, 0.6)) for _ in range(2000)])
+    p = np.array([sig.paired_p(_day_null(rng, 7, 0.5, 0.6)) for _ in range(2000)])
     assert np.mean(p <= 0.05) >= 0.10, np.mean(p <= 0.05)
 
 
-@pytest.mark.parametrize(("phi_d", "share"), [(0.0, 0.9), (0.3, 0.6), (jd.DAY_RHO, 0.6),
-                                              (jd.DAY_RHO, 0.9)])
+@pytest.mark.parametrize(("phi_d", "share"), [(0.0, 0.9), (0.3, 0.6), (sig.DAY_RHO, 0.6),
+                                              (sig.DAY_RHO, 0.9)])
 def test_day_p_holds_its_size_on_day_correlated_nulls(phi_d, share):
     """7 held-out days x 4 pieces, day-to-day correlation up to the one it is built for
     (``DAY_RHO``): p ≤ 0.05 in at most ~6 % of the draws, and not degenerate."""
     rng = np.random.default_rng(12)
-    p = np.array([jd.day_p(_day_null(rng, 7, phi_d, share), DAYS7, jd.DAY_RHO)
+    p = np.array([sig.day_p(_day_null(rng, 7, phi_d, share), DAYS7, sig.DAY_RHO)
                   for _ in range(2000)])
     assert np.mean(p <= 0.05) <= 0.06, np.mean(p <= 0.05)
     assert np.mean(p <= 0.5) == pytest.approx(0.5, abs=0.05)
@@ -212,7 +213,7 @@ def test_day_p_finds_a_consistent_daily_cut():
     rng = np.random.default_rng(13)
     for days in (7, 4):
         lab = np.repeat(np.arange(days), 4)
-        p = np.array([jd.day_p(0.3 + 0.1 * _day_null(rng, days, jd.DAY_RHO, 0.6), lab)
+        p = np.array([sig.day_p(0.3 + 0.1 * _day_null(rng, days, sig.DAY_RHO, 0.6), lab)
                       for _ in range(400)])
         assert np.mean(p <= 0.05) >= 0.9, (days, np.mean(p <= 0.05))
 
@@ -223,10 +224,10 @@ def test_day_p_units_are_days():
     rng = np.random.default_rng(14)
     d = 0.2 + 0.3 * rng.normal(size=28)
     shuffled = np.concatenate([rng.permutation(d[4 * k : 4 * k + 4]) for k in range(7)])
-    assert jd.day_p(d, DAYS7) == pytest.approx(jd.day_p(shuffled, DAYS7))
-    assert jd.day_p(d[:8], DAYS7[:8]) == 1.0
+    assert sig.day_p(d, DAYS7) == pytest.approx(sig.day_p(shuffled, DAYS7))
+    assert sig.day_p(d[:8], DAYS7[:8]) == 1.0
     gap = DAYS7 + (DAYS7 >= 3)  # no day 3
-    assert jd.day_p(d, gap) != pytest.approx(jd.day_p(d, DAYS7))
+    assert sig.day_p(d, gap) != pytest.approx(sig.day_p(d, DAYS7))
 
 
 def test_the_switch_judges_on_days(monkeypatch):

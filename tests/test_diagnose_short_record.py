@@ -8,7 +8,7 @@ import numpy as np
 
 from gateway.cli import main
 from gateway.cli.notes import short_heldout_note
-from gateway.diagnose import judge
+from gateway.diagnose import significance
 from gateway.kitcsv import write_kit_csv
 
 PROTO = ["--greenhouse", "biskra-prototype", "--model", "prototype"]
@@ -39,7 +39,7 @@ def test_the_note_counts_the_held_out_days():
     assert short_heldout_note(t, len(t) // 2) is None  # 5 held-out days
     note = short_heldout_note(t, len(t) - int(2.5 * 86400 / 300))
     assert note is not None
-    assert "only 2.5 days are held out" in note and f"{judge.MIN_DAYS} held-out days" in note
+    assert "only 2.5 days are held out" in note and f"{significance.MIN_DAYS} held-out days" in note
 
 
 def test_diagnose_of_three_days_says_no_finding_can_come_out(capsys, tmp_path):

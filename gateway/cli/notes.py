@@ -168,18 +168,18 @@ def gap_note(series: Series, names: tuple[str, ...] | list[str], who: str = "the
 
 def short_heldout_note(time: np.ndarray, split_index: int) -> str | None:
     """What to say when the held-out part (rows ``split_index``.. of ``time``, UTC) is shorter
-    than the ``judge.MIN_DAYS`` days the day test needs after a change: no finding can come
-    out, and "no library effect improved the held-out error" would read as a clean bill of
+    than the ``significance.MIN_DAYS`` days the day test needs after a change: no finding can
+    come out, and "no library effect improved the held-out error" would read as a clean bill of
     health. None when it is long enough, or without the day test (``judge.DAY_TEST``)."""
-    from gateway.diagnose import judge
+    from gateway.diagnose import judge, significance
 
     if not judge.DAY_TEST or len(time) < 2 or split_index >= len(time):
         return None
     step = float((time[1] - time[0]) / np.timedelta64(1, "s"))
     held = float((time[-1] - time[split_index]) / np.timedelta64(1, "s")) + step
-    if held >= judge.MIN_DAYS * 86400.0:
+    if held >= significance.MIN_DAYS * 86400.0:
         return None
     return (f"only {held / 86400.0:.1f} days are held out, and a change is judged once "
-            f"{judge.MIN_DAYS} held-out days follow its start: no finding can be reported from this "
-            f"record (give at least {2 * judge.MIN_DAYS} days with the default --split 0.5; "
+            f"{significance.MIN_DAYS} held-out days follow its start: no finding can be reported "
+            f"from this record (give at least {2 * significance.MIN_DAYS} days with the default --split 0.5; "
             "docs/effects.md, \"Known limits\")")

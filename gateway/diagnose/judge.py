@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from gateway.diagnose.bic import EFFECTIVE_S
-from gateway.diagnose.student_t import student_t_sf
+from gateway.diagnose.significance import MIN_DAYS, day_p, paired_p
 from gateway.metrics import metrics
 from gateway.model.model import Model
 
@@ -32,9 +32,6 @@ effect): what a refit alone gives is weather, not the effect."""
 ALPHA = 0.05
 """Level of the one-sided test of each judged candidate's held-out cut (``day_p``; ``paired_p``
 without ``DAY_TEST``)."""
-DETREND_MIN_PIECES = 16
-"""From this many pieces (4 days of 6 h) ``paired_p`` reads their autocorrelation about a line
-in time, not about their mean."""
 DAY_TEST = True
 """Judge significance on held-out *days* (``day_p``) instead of 6-h pieces (``paired_p``); on
 since 2026-11-27. Why: issue 10 asks for a rule whose false-alarm rate is fixed by construction,
@@ -48,9 +45,6 @@ freedom are 1.9, 2.6, 3.2 for 3, 4, 5 days at ρ = 0.5), so the live diagnosis l
 (``[diagnosis] days``) and a change shows 4–5 days after it starts. Weather-dependent effects
 that show on a few days only are lost (the dev suite's two ventilation passes). Both p-values
 are logged in the trials either way (``p_pieces``, ``p_days``)."""
-DAY_RHO = 0.5
-"""Day-to-day correlation of the held-out error that ``day_p`` is built for (AR(1) across days;
-not estimated per candidate: from 3 to 7 day means an estimate is noise, biased low)."""
 DAY_WEIGHTS = False
 """Weight ``day_p``'s days by the change the candidate itself predicts on each (the mean
 |after − reference| of its held-out free runs over the day's judged samples [K]): a matched
@@ -70,10 +64,6 @@ week's weather), an offset starting at the split takes that up (twonode winter, 
 with ``base.NIGHT_SKY_IN_BASE``: a ``heat_source`` with p 0.027 / 0.047 against the model
 before, 0.075 / 0.125 against the reference on seeds 2 / 3; docs/effects.md, "Why the freer
 base gives twonode winter a heater"). Off: main's rule; a measurement."""
-MIN_DAYS = 3
-"""Held-out days after a candidate's start that ``day_p`` needs: its pieces after the start must
-fall on at least this many days (counted from the data's first row; a part day counts). With
-fewer, under ``DAY_TEST``, the candidate cannot be judged yet and its verdict says so."""
 MIN_AFTER_S = 3 * 86400.0
 """An effect must leave at least this much data after its start [s] (at most half the held-out
 part, ``last_start``): a change on the data's last days cannot be told from a passing spell of
@@ -168,97 +158,6 @@ def pieces(blocks: Blocks, dt: float) -> list[tuple[int, int]]:
     """The held-out blocks cut into pieces of ``JUDGE_PIECE_S``, in time order."""
     piece = max(int(round(JUDGE_PIECE_S / dt)), 1)
     return [(a, min(a + piece, b0)) for a0, b0 in blocks for a in range(a0, b0, piece)]
-
-
-def paired_p(d: np.ndarray) -> float:
-    """One-sided p-value of mean(d) > 0 for held-out pieces whose differences are
-    autocorrelated (one weather spell spans several pieces): a Student t test on the effective
-    number of pieces n (1 − r)/(1 + r), r the lag-1 autocorrelation of the pieces (AR(1)),
-    clipped to [0, 0.9]. 1 with fewer than 4 pieces.
-
-    With at least ``DETREND_MIN_PIECES`` pieces, r is estimated from the pieces' deviations
-    from a straight line in time, with the small-sample correction (4 + 8r)/n: an effect whose
-    gain grows in time (a drift) puts a trend in d, and a trend read as autocorrelation left a
-    75 % cut over seven days at p = 0.1 (r at its 0.9 limit). With fewer pieces (the line costs
-    too much of them) r is estimated about the mean with Kendall's correction (1 + 4r)/n. On
-    AR(1) differences of mean zero (r 0 to 0.8, 16 to 28 pieces) the detrended test's size is
-    at or below the mean-only one's; both are checked in tests/test_diagnose_judge.py. The
-    variance of the mean is taken about the mean either way (a trend widens it: conservative).
-    """
-    n = len(d)
-    if n < 4:
-        return 1.0
-    z = d - d.mean()
-    ss = float(z @ z)
-    if ss == 0.0:
-        return 0.0 if d.mean() > 0 else 1.0
-    if n >= DETREND_MIN_PIECES:
-        t_c = np.arange(n) - 0.5 * (n - 1)
-        w = z - (z @ t_c) / (t_c @ t_c) * t_c
-        sw = float(w @ w)
-        r = float(w[1:] @ w[:-1]) / sw if sw > 0 else 0.0
-        r = r + (4.0 + 8.0 * r) / n
-    else:
-        r = float(z[1:] @ z[:-1]) / ss
-        r = r + (1.0 + 4.0 * r) / n
-    r = min(max(r, 0.0), 0.9)
-    n_eff = n * (1.0 - r) / (1.0 + r)
-    t = float(d.mean() / (np.std(d, ddof=1) / np.sqrt(n_eff)))
-    return student_t_sf(t, max(n_eff - 1.0, 1.0))
-
-
-def day_p(d: np.ndarray, day: np.ndarray, rho: float | None = None,
-          weights: np.ndarray | None = None) -> float:
-    """One-sided p-value of mean(d) > 0 with whole days as the units: the pieces' differences
-    ``d`` averaged per ``day`` label (any correlation within a day is then inside one unit),
-    and the day means taken as AR(1) across days with correlation ``rho`` (``DAY_RHO``).
-
-    A Student t on the day means whose variance is matched to that correlation (R_ij =
-    rho^|i-j|, M the centring matrix, K days): Var(mean) = sigma² 1'R1/K², and the sample sum
-    of squares has E[z'z] = sigma² tr(MR), so sigma² is read as z'z / tr(MR); degrees of
-    freedom tr(MR)²/tr(MRMR) (Satterthwaite). Exact in the first two moments on Gaussian day
-    means of that correlation, conservative for less. 1 with fewer than ``MIN_DAYS`` days.
-
-    ``weights`` (one per day label, sorted, ≥ 0; ``DAY_WEIGHTS``): the matched-filter form, the
-    test of β > 0 in m = β w + e with e ~ AR(1) as above: t = w'm / √(σ² w'Rw), σ² = z'z/tr(PR)
-    with z = Pm, P = I − ww'/w'w, df tr(PR)²/tr(PRPR). w = 1 is the form above (P = M); fewer
-    than ``MIN_DAYS`` days with w > 0 give 1."""
-    rho = DAY_RHO if rho is None else rho
-    labels = np.unique(day)
-    if len(labels) < MIN_DAYS:
-        return 1.0
-    m = np.array([d[day == k].mean() for k in labels])
-    k = len(m)
-    lag = np.abs(np.subtract.outer(labels, labels)).astype(float)  # gaps count as days
-    R = rho**lag
-    if weights is not None:
-        return _weighted_day_p(m, np.asarray(weights, dtype=float), R)
-    MR = R - R.mean(axis=0, keepdims=True)
-    a = float(np.trace(MR))
-    z = m - m.mean()
-    ss = float(z @ z)
-    if ss == 0.0:
-        return 0.0 if m.mean() > 0 else 1.0
-    var_mean = ss / a * float(R.sum()) / k**2
-    df = a * a / float(np.sum(MR * MR.T))
-    return student_t_sf(float(m.mean() / np.sqrt(var_mean)), max(df, 1.0))
-
-
-def _weighted_day_p(m: np.ndarray, w: np.ndarray, R: np.ndarray) -> float:
-    """``day_p``'s matched-filter form on the day means ``m`` with weights ``w`` and the
-    declared day correlation matrix ``R``."""
-    if np.count_nonzero(w > 0) < MIN_DAYS:
-        return 1.0
-    P = np.eye(len(w)) - np.outer(w, w) / float(w @ w)
-    PR = P @ R
-    a = float(np.trace(PR))
-    z = P @ m
-    ss, num = float(z @ z), float(w @ m)
-    if ss == 0.0:
-        return 0.0 if num > 0 else 1.0
-    var = ss / a * float(w @ R @ w)
-    df = a * a / float(np.sum(PR * PR.T))
-    return student_t_sf(num / np.sqrt(var), max(df, 1.0))
 
 
 def _piece_diffs(x: np.ndarray, y: np.ndarray, ok: np.ndarray, cut: list[tuple[int, int]],

@@ -1,4 +1,4 @@
-"""Student's t upper tail for the judge's one-sided tests (``judge.paired_p``, ``judge.day_p``):
+"""Student's t upper tail for the judge's one-sided tests (``significance.paired_p``, ``significance.day_p``):
 the regularised incomplete beta by its continued fraction (Numerical Recipes §6.4), so that the
 gateway needs no SciPy."""
 

@@ -8,7 +8,7 @@ dependence: the piece test's real size, and a test on days").
     python tests/generality/day_test_study.py rho out/generality/jd/null_trials.jsonl
     python tests/generality/day_test_study.py short [--days 6 --at 3.6]   # ~10 min
 
-``size``/``power``: ``judge.paired_p`` or ``judge.day_p`` on synthetic piece differences (a
+``size``/``power``: ``significance.paired_p`` or ``significance.day_p`` on synthetic piece differences (a
 day effect, AR(1) across days, plus piece noise; seeded). ``null``: the dev suite's 20
 effect-free windows (refsim, twonode), every judged candidate with both p-values and its day
 means, and the base's held-out day means (one JSON line per window, then a summary). ``cases``:
@@ -34,6 +34,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from gateway.diagnose import judge as jd  # noqa: E402
+from gateway.diagnose import significance as sig  # noqa: E402
 
 RHOS = (0.0, 0.2, 0.3, 0.4, 0.5)
 
@@ -50,7 +51,7 @@ def day_null(rng: np.random.Generator, days: int, phi_d: float, share: float,
 
 
 def p_of(test: str, d: np.ndarray) -> float:
-    return jd.paired_p(d) if test == "paired_p" else jd.day_p(d, np.arange(len(d)) // 4)
+    return sig.paired_p(d) if test == "paired_p" else sig.day_p(d, np.arange(len(d)) // 4)
 
 
 def size(test: str, draws: int) -> None:
@@ -155,7 +156,7 @@ def rho(path: str) -> None:
         for t in x["trials"]:
             if t["p_pieces"] <= 0.05 or t["ok"]:
                 m = np.asarray(t["day_means"])
-                ps = [jd.day_p(m, np.arange(len(m)), r) for r in RHOS]
+                ps = [sig.day_p(m, np.arange(len(m)), r) for r in RHOS]
                 name = f"{x['case']} {t['effect']} ({len(m)})"
                 print(f"{name:56s} " + " ".join(f"{p:8.3f}" for p in ps))
 

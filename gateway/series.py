@@ -26,6 +26,16 @@ SAMPLINGS = ("instant", "mean")
 aggregates); the model reads the two differently (gateway/model/drivers.py, docs/model.md)."""
 
 
+class TooCoarseError(KitCsvError):
+    """Rows further apart than the tools interpolate across on the asked step: ``native`` [s]
+    (their median spacing) and ``step`` [s] let a command that cannot change its step (the
+    virtual sensor reads minutes) say so in its own words."""
+
+    def __init__(self, message: str, native: float, step: float) -> None:
+        super().__init__(message)
+        self.native, self.step = native, step
+
+
 @dataclass
 class Series:
     """Samples on a regular grid of ``step`` seconds; NaN marks a gap or a missing value."""
@@ -93,11 +103,10 @@ def resample(data: KitData, step: float = 60.0, max_gap: float = MAX_GAP_S) -> S
     native = float(np.median(np.diff(t))) if len(t) > 1 else step
     max_gap = max(max_gap, step)
     if native > CLOCK_SLACK * max_gap:
-        raise KitCsvError(
+        raise TooCoarseError(
             f"{data.source}: samples are {native:g} s apart (median), more than the {max_gap:g} s "
             f"the tools interpolate across: on a {step:g} s grid almost every value would be a "
-            f"gap; use a model step of at least {native:g} s (--step {native:g})"
-        )
+            f"gap; use a model step of at least {native:g} s (--step {native:g})", native, step)
     max_gap = max(max_gap, JITTER * native)
     columns = {}
     for name, values in data.columns.items():

@@ -77,3 +77,12 @@ def test_the_step_taken_from_the_rows(spacing, step):
          + (np.arange(50) * spacing).astype("timedelta64[s]"))
     data = KitData(time=t, columns={"t_in": np.zeros(50)}, source="x.csv")
     assert data_step(data) == step
+
+
+def test_the_virtual_sensor_says_it_needs_minutes(tmp_path, capsys):
+    data = _rows(tmp_path, 900)
+    code = main(["vsensor", "--data", str(data), "--greenhouse", str(_greenhouse(tmp_path)),
+                 "--model-kind", "prototype"])
+    err = capsys.readouterr().err
+    # not the data commands' "--step 900": vsensor has no step to choose
+    assert code == 2 and "rows_900.csv" in err and "60 s grid" in err and "--step" not in err

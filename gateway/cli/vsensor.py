@@ -20,7 +20,7 @@ from gateway.cli.notes import as_json, echo, input_notes, text_block, vsensor_no
 from gateway.greenhouse import GreenhouseError, list_presets, load_greenhouse
 from gateway.kitcsv import KitCsvError
 from gateway.model import MODEL_NAMES, build_model
-from gateway.series import Series, load_series
+from gateway.series import Series, TooCoarseError, load_series
 from gateway.vsensor.features import MODEL_KINDS, columns_read
 
 SHIPPED = "the model shipped for the kind (gateway/vsensor/models/<kind>.onnx)"
@@ -76,6 +76,10 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from None
     try:
         series = load_series(args.data, step=60.0, required=model.requires)
+    except TooCoarseError as exc:
+        raise CliError(f"{args.data}: rows are {exc.native:g} s apart (median), and the "
+                       f"virtual sensor runs on a {exc.step:g} s grid (it reads the minutes its "
+                       "network was trained on): give rows at most 5 minutes apart") from None
     except KitCsvError as exc:
         raise CliError(str(exc)) from None
     try:

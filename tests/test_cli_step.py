@@ -45,8 +45,11 @@ def test_coarse_rows_run_at_their_own_step(tmp_path, capsys, row_s):
     assert result["samples"] == DAYS * 86400 // row_s
     (message,) = _step_notes(result)
     assert f"rows_{row_s}.csv" in message and f"a {row_s} s step" in message
-    # a horizon the step cannot reach is left out, the others kept
+    # a horizon the step cannot reach is left out, and said to be; the others kept
     assert set(result["horizons"]) == ({"30", "60"} if row_s == 600 else {"15", "30", "60"})
+    left = [n["message"] for n in result["notes"] if n["code"] == "horizon_left_out"]
+    assert left == (["the 15-minute forecast is left out: not a whole number of 600 s model "
+                     "steps"] if row_s == 600 else [])
 
 
 def test_five_minute_rows_keep_the_default_step(tmp_path, capsys):

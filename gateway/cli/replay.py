@@ -15,10 +15,10 @@ from gateway.cli.common import (
     read_params_file,
     writing,
 )
-from gateway.cli.notes import as_json, echo, params_notes, text_block
+from gateway.cli.notes import Note, as_json, echo, params_notes, text_block
 from gateway.estimate.online import online_settings
 from gateway.estimate.outlook import OUTLOOKS, make_outlook
-from gateway.estimate.replay import replay, report, write_predictions
+from gateway.estimate.replay import HORIZONS, replay, report, steps_of, write_predictions
 from gateway.model.params_file import outside_box
 
 _KEYS = ("window", "every", "iterations", "bats", "prior")
@@ -97,6 +97,9 @@ def run(args: argparse.Namespace) -> int:
         settings = online_settings(model, gh, _overrides(args.set))
     except ValueError as exc:
         raise CliError(str(exc)) from None
+    made = _horizon_notes(series.step)
+    echo(made)
+    notes = notes + made
     if not args.warmup >= 0:  # also NaN
         raise CliError("--warmup must be >= 0 minutes")
     warmup = int(round(args.warmup * 60.0 / series.step))
@@ -130,6 +133,15 @@ def run(args: argparse.Namespace) -> int:
         with writing("--plot", args.plot):
             plot_replay(result, args.plot, title=f"{model.name} on {args.data}")
     return 0
+
+
+def _horizon_notes(step: float) -> list[Note]:
+    """Say which of the report's horizons the model step cannot reach in whole steps."""
+    left = [h for h in HORIZONS if h not in steps_of(HORIZONS, step)]
+    if not left:
+        return []
+    return [Note("horizon_left_out", f"the {', '.join(map(str, left))}-minute forecast is left out: "
+                 f"not a whole number of {step:g} s model steps")]
 
 
 def _line(name: str, m: dict | None, unit: str = "°C") -> str:

@@ -4,7 +4,9 @@ gateway/estimate/replay.py describes each forecast).
 Every kind of forecast is one run from every start to the longest horizon, read at each horizon
 on the way (``Model.forecast_each``, ``disturbance.forecast_each``, ``ArxResult.forecast_each``):
 the run to a shorter horizon is the longer run's first steps, so the numbers are the same as a
-run per horizon, bit for bit (the steps are element-wise over the starts). The starts are the
+run per horizon, bit for bit. A start's numbers do not depend on the other starts run beside it:
+the steps are element-wise over the starts (the one reduction, the step's check for non-finite
+rates, only decides whether to mask them, start by start). The starts are the
 shortest horizon's (every start with a finite reading and parameters, and a target in the
 series); a longer horizon's are their first ones (those whose target is in the series), so each
 horizon reads the first of the run's values. The runs of the last starts go on past the end of

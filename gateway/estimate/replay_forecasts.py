@@ -5,8 +5,10 @@ Every kind of forecast is one run from every start to the longest horizon, read 
 on the way (``Model.forecast_each``, ``disturbance.forecast_each``, ``ArxResult.forecast_each``):
 the run to a shorter horizon is the longer run's first steps, so the numbers are the same as a
 run per horizon, bit for bit. A start's numbers do not depend on the other starts run beside it:
-the steps are element-wise over the starts (the one reduction, the step's check for non-finite
-rates, only decides whether to mask them, start by start). The starts are the
+the steps are element-wise over the starts, and their reductions over the starts only choose
+between paths that give the same numbers (the step's check for non-finite rates masks start by
+start; the vent controller's skip when no start is sunlit leaves out a flux that is 0 for each
+start anyway). The starts are the
 shortest horizon's (every start with a finite reading and parameters, and a target in the
 series); a longer horizon's are their first ones (those whose target is in the series), so each
 horizon reads the first of the run's values. The runs of the last starts go on past the end of

@@ -12,7 +12,8 @@ from test_online import ALMERIA, FAST, GH, model_data
 from gateway.cli import main
 from gateway.cli.common import write_params_file
 from gateway.estimate.online import online_settings
-from gateway.estimate.replay import forecasts, replay, report
+from gateway.estimate.replay import replay, report
+from gateway.estimate.replay_forecasts import forecasts, forecasts_each
 from gateway.kitcsv import write_kit_csv
 
 METRIC_KEYS = {"mae", "rmse", "maxae", "r2", "ef", "n"}
@@ -87,6 +88,19 @@ def test_forecasts_match_a_free_run_with_the_parameters_of_the_start(result):
         leaky = ALMERIA.free_run(result.theta[start][None, :], result.x, GH, 60.0, start,
                                  start + h + 1)
         assert abs(leaky[0, -1] - run[0, -1]) > 1e-6
+
+
+def test_one_run_to_the_longest_horizon_reads_each_horizon_bit_for_bit(result):
+    """Each kind run once to the longest horizon and read at the shorter ones on the way gives
+    every horizon's own run exactly: the same keys in order, starts and values to the bit (90
+    steps is past the outlook's 60: no outlook forecasts there, as alone)."""
+    each = forecasts_each(result, [60, 15, 90, 30])
+    for h in (15, 30, 60, 90):
+        alone = forecasts(result, h)
+        assert list(each[h]) == list(alone), h
+        assert ("adaptive_outlook" in alone) == (h <= 60) and len(alone["target"]) > 1000
+        for name, v in alone.items():
+            np.testing.assert_array_equal(each[h][name], v, err_msg=f"{h} {name}", strict=True)
 
 
 def test_replay_matches_the_sample_by_sample_estimator(drifting, result):

@@ -18,7 +18,7 @@ The parameters in force at t (``ArxResult.theta[t]``) were fitted on the pairs u
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -66,14 +66,23 @@ class ArxResult:
         each start and the drivers of ``x`` from row ``rows`` on (default: the starts; driver
         blocks of gateway/estimate/horizon.py have rows of their own), vectorised over starts;
         each step is ``forecast_step`` (the coefficient on T_in held in its physical range)."""
+        return self.forecast_each(x, starts, [horizon], rows)[horizon]
+
+    def forecast_each(self, x: Mapping[str, np.ndarray], starts: np.ndarray,
+                      horizons: Sequence[int], rows: np.ndarray | None = None) -> dict[int, np.ndarray]:
+        """{h: ``forecast`` of horizon h} for each of ``horizons``: one run to the longest, read
+        at each on the way (the shorter runs are its first steps: the same numbers)."""
         starts = np.asarray(starts, dtype=int)
         rows = starts if rows is None else np.asarray(rows, dtype=int)
         theta = self.theta[starts]
         start = np.asarray(x["t_in"], dtype=float)[rows]
-        state = start
-        for k in range(horizon):
-            state = forecast_step(x, state, start, theta, rows + k)
-        return state
+        state, out, done = start, {}, 0  # done: the steps taken
+        for h in sorted(set(horizons)):
+            for k in range(done, h):
+                state = forecast_step(x, state, start, theta, rows + k)
+            done = max(done, h)
+            out[h] = state
+        return out
 
 
 def exchange(theta: np.ndarray, wind: np.ndarray) -> np.ndarray:

@@ -12,7 +12,8 @@ gateway does, records what it predicted, then computes, after the loop and vecto
   (gateway/estimate/disturbance.py): the start state filtered of the sensor's noise and an
   estimated heating rate the model lacks, decaying over the horizon;
 - forecasts h = 15, 30, 60 min ahead from every start t with the parameters in force at t
-  (``Model.forecast``), against persistence T_in[t + h] = T_in[t] and the ARX baseline, twice:
+  (``Model.forecast``; gateway/estimate/replay_forecasts.py, each kind one run to the longest
+  horizon, read at each), against persistence T_in[t + h] = T_in[t] and the ARX baseline, twice:
   with the weather that was later measured (model skill: ``adaptive``, ``adaptive_kf``,
   ``constant``, ``arx``; the inside readings a model reads besides its state, such as the
   transpiration's vapour pressure, held at the start: horizon.measured_weather_blocks) and
@@ -33,11 +34,12 @@ from pathlib import Path
 import numpy as np
 
 from gateway.estimate import arx as arx_baseline
-from gateway.estimate import combination, correction, disturbance
-from gateway.estimate.horizon import INSIDE_READINGS, HorizonDrivers, measured_weather_blocks, outlook_drivers
+from gateway.estimate import disturbance
+from gateway.estimate.horizon import HorizonDrivers, outlook_drivers
 from gateway.estimate.online import GroupSettings, OnlineEstimator
 from gateway.estimate.online_output import Counters
 from gateway.estimate.outlook import Outlook, default_outlook, make_outlook
+from gateway.estimate.replay_forecasts import score_forecasts
 from gateway.estimate.sample_check import stuck_limit
 from gateway.greenhouse import Greenhouse
 from gateway.metrics import metrics
@@ -166,125 +168,6 @@ def steps_of(horizons: Sequence[int], dt: float) -> dict[int, int]:
     """Horizon [min] → model steps of ``dt`` [s]; a horizon the step cannot reach is left out."""
     return {int(m): int(m * 60.0 / dt) for m in horizons
             if m * 60.0 / dt >= 1 and float(m * 60.0 / dt).is_integer()}
-
-
-def score_forecasts(result: ReplayResult, reach: Mapping[int, int]) -> None:
-    """After the estimator's loop: the ARX baseline, the disturbance filter and the forecasts
-    (``reach``: horizon [min] → model steps) of ``result``, all from what the loop recorded (and
-    ``result.ahead``, the outlook's blocks). A saved replay can be scored again with new code."""
-    result.arx = arx_baseline.fit(result.x)
-    result.filtered = disturbance.filter_series(result.model, result.theta, result.x, result.gh,
-                                                result.dt)
-    result.horizons = {minutes: forecasts(result, steps) for minutes, steps in reach.items()}
-    for suffix in ("", "_outlook"):
-        _corrected(result, reach, suffix)
-
-
-def forecasts(result: ReplayResult, horizon: int) -> dict[str, np.ndarray]:
-    """Forecasts of T_in[t + h] from every start t, h = ``horizon`` model steps (vectorised over
-    the starts).
-
-    Returns ``target`` (index t + h), ``measured``, ``persistence`` (T_in[t]) and forecasts
-    over the starts: with the measured weather ``adaptive`` (parameters in force at t),
-    ``constant`` (theta0), ``arx``, ``adaptive_kf`` (with the disturbance filter, when
-    ``result.filtered`` is set); with the outlook (when ``result.ahead`` is set)
-    ``adaptive_outlook``, ``adaptive_kf_outlook`` and ``arx_outlook``.
-    """
-    n = len(result.measured)
-    starts = np.arange(0, max(n - horizon, 0))
-    ok = np.isfinite(result.measured[starts]) & np.all(np.isfinite(result.theta[starts]), axis=1)
-    starts = starts[ok]
-    model, x, gh, dt = result.model, result.x, result.gh, result.dt
-    theta = result.theta[starts]
-    # the model's drivers over the horizon: the weather later measured; the inside readings it
-    # reads besides its state (the Almería transpiration's p_w,in, the soil) held at the start
-    wx, w_rows = x, starts
-    if any(c in INSIDE_READINGS for c in model.requires if c != "t_in"):
-        blocks = measured_weather_blocks(x, starts, horizon)
-        wx, w_rows = blocks.x, blocks.rows
-    out = {
-        "target": starts + horizon,
-        "measured": result.measured[starts + horizon],
-        "adaptive": model.forecast(theta, wx, gh, dt, w_rows, horizon),
-        "constant": model.forecast(np.repeat(result.theta0[None, :], len(starts), axis=0),
-                                   wx, gh, dt, w_rows, horizon),
-        "persistence": result.measured[starts],
-    }
-    if result.arx is not None:
-        out["arx"] = result.arx.forecast(x, starts, horizon)  # reads T_in at the start only
-    kf = result.filtered
-    if kf is not None:
-        kf_start = (kf.t_hat[starts], kf.b_hat[starts], kf.settings)
-        out["adaptive_kf"] = disturbance.forecast(model, theta, wx, gh, dt, w_rows, horizon,
-                                                  *kf_start)
-    ahead = result.ahead
-    if ahead is not None and horizon <= ahead.horizon:
-        rows = ahead.rows[np.searchsorted(ahead.starts, starts)]
-        out["adaptive_outlook"] = model.forecast(theta, ahead.x, gh, dt, rows, horizon)
-        if kf is not None:
-            out["adaptive_kf_outlook"] = disturbance.forecast(model, theta, ahead.x, gh, dt, rows,
-                                                              horizon, *kf_start)
-        if result.arx is not None:
-            out["arx_outlook"] = result.arx.forecast(ahead.x, starts, horizon, rows)
-    for suffix in ("", "_outlook"):
-        parts = (f"adaptive_kf{suffix}", f"arx{suffix}")
-        if all(p in out for p in parts):
-            out[f"combined{suffix}"] = _combined(result, starts, horizon, [out[p] for p in parts])
-    return out
-
-
-def _combined(result: ReplayResult, starts: np.ndarray, horizon: int,
-              parts: Sequence[np.ndarray]) -> np.ndarray:
-    """gateway/estimate/combination.py over the starts (mapped onto the series' time grid, where
-    its causal window lives)."""
-    n = len(result.measured)
-    full = []
-    for f in parts:
-        a = np.full(n, np.nan)
-        a[starts] = f
-        full.append(a)
-    window = max(int(round(combination.WINDOW_S / result.dt)), 1)
-    named = {str(k): a for k, a in enumerate(full)}
-    return combination.combine(named, result.measured, horizon, window)[starts]
-
-
-def _corrected(result: ReplayResult, reach: Mapping[int, int], suffix: str) -> None:
-    """``corrected{suffix}``: ``combined{suffix}`` with its online error correction
-    (gateway/estimate/correction.py, the ARX stacked), on the series' grid, every horizon."""
-    n = len(result.measured)
-    combined: dict[int, np.ndarray] = {}
-    arx: dict[int, np.ndarray] = {}
-    starts: dict[int, np.ndarray] = {}
-    ahead: dict[int, dict[str, np.ndarray]] = {}
-    for minutes, steps in reach.items():
-        f = result.horizons[minutes]
-        if f"combined{suffix}" not in f:
-            return
-        starts[minutes] = f["target"] - steps
-        for into, name in ((combined, "combined"), (arx, "arx")):
-            into[steps] = np.full(n, np.nan)
-            into[steps][starts[minutes]] = f[f"{name}{suffix}"]
-        ahead[steps] = _ahead_change(result, starts[minutes], steps, suffix)
-    out = correction.correct_series(combined, result.measured, result.x, result.time, result.dt,
-                                    arx, ahead=ahead)
-    for minutes, steps in reach.items():
-        result.horizons[minutes][f"corrected{suffix}"] = out[steps][starts[minutes]]
-
-
-def _ahead_change(result: ReplayResult, starts: np.ndarray, steps: int,
-                  suffix: str) -> dict[str, np.ndarray]:
-    """correction.ahead_change of each start's drivers (the measured weather, or the outlook's
-    block for ``_outlook``), on the series' grid (NaN where no forecast starts)."""
-    n = len(result.measured)
-    if suffix and result.ahead is not None:
-        x, rows = result.ahead.x, result.ahead.rows[np.searchsorted(result.ahead.starts, starts)]
-    else:
-        x, rows = result.x, starts
-    out = {}
-    for key, v in correction.ahead_change(x, rows, steps).items():
-        out[key] = np.full(n, np.nan)
-        out[key][starts] = v
-    return out
 
 
 def _common(measured: np.ndarray, preds: Mapping[str, np.ndarray], keep: np.ndarray) -> dict:

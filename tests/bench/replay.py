@@ -9,7 +9,9 @@ rows, the generality suite's greenhouse file for it), replayed with ``prototype`
 tree, alternately, and the summary adds the median of the rounds' ratios this tree / REF. Each
 round also gives a digest of everything the replay wrote (the predictions CSV and the report
 without its wall-clock ``step_ms``), so the JSON says whether the two trees' results are the same
-bit for bit. Run it under ``nice`` on a shared machine (docs/online-estimator.md, "Replay speed").
+bit for bit. ``score_cpu_s`` is the scoring after the estimator's loop alone (``score_forecasts``,
+run again on the replay's record), with its own ratio in the summary. Run it under ``nice`` on a
+shared machine (docs/online-estimator.md, "Replay speed").
 """
 
 from __future__ import annotations
@@ -70,8 +72,23 @@ def _one(name: str, series, gh, folder: str) -> dict:
     c2 = time.process_time()
     rep.pop("step_ms")  # wall clock: the one field that differs from run to run
     digest = hashlib.sha256(path.read_bytes() + json.dumps(rep, sort_keys=True).encode())
-    return {"cpu_s": c2 - c0, "replay_cpu_s": c1 - c0, "rows": len(series),
-            "ms_per_row": 1e3 * (c2 - c0) / len(series), "digest": digest.hexdigest()[:16]}
+    return {"cpu_s": c2 - c0, "replay_cpu_s": c1 - c0, "score_cpu_s": _score_cpu(result),
+            "rows": len(series), "ms_per_row": 1e3 * (c2 - c0) / len(series),
+            "digest": digest.hexdigest()[:16]}
+
+
+def _score_cpu(result) -> float:
+    """CPU seconds of the scoring after the loop alone (``score_forecasts``: the ARX, the
+    disturbance filter, the forecasts, their combination and correction), run again on a copy
+    of the replay's record (not counted in ``cpu_s``)."""
+    from dataclasses import replace
+
+    from gateway.estimate.replay import HORIZONS, score_forecasts, steps_of
+
+    again = replace(result, horizons={})
+    c0 = time.process_time()
+    score_forecasts(again, steps_of(HORIZONS, result.dt))
+    return time.process_time() - c0
 
 
 def _round() -> dict:
@@ -93,6 +110,10 @@ def run(against: str | None = None, rounds: int = ROUNDS) -> dict:
             m: float(np.median([r[m]["cpu_s"] for r in base])) for m in MODELS}
         summary[f"this_over_{against}_median_of_rounds"] = {
             m: float(np.median([t[m]["cpu_s"] / b[m]["cpu_s"] for t, b in zip(this, base, strict=True)]))
+            for m in MODELS}
+        summary[f"score_this_over_{against}_median_of_rounds"] = {
+            m: float(np.median([t[m]["score_cpu_s"] / b[m]["score_cpu_s"]
+                                for t, b in zip(this, base, strict=True)]))
             for m in MODELS}
         summary["same_results_as_base"] = all(
             t[m]["digest"] == b[m]["digest"] for t, b in zip(this, base, strict=True) for m in MODELS)

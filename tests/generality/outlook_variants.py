@@ -292,12 +292,12 @@ def forecasts_by_steps(res, suffix: str) -> tuple[dict[int, np.ndarray], dict[in
 def ahead_by_steps(res, suffix: str, starts: Mapping[int, np.ndarray]) -> dict[int, dict[str, np.ndarray]]:
     """The correction's change of the forecast's own drivers over each horizon (replay's, by lead
     time in steps, on the replay's time axis), for ``correction.correct_series``'s ``ahead``."""
-    from gateway.estimate import replay as rp
+    from gateway.estimate import replay_forecasts as rf
 
     out = {}
     for minutes, s in starts.items():
         steps = int(round(minutes * 60.0 / res.dt))
-        out[steps] = rp._ahead_change(res, s, steps, suffix)
+        out[steps] = rf._ahead_change(res, s, steps, suffix)
     return out
 
 

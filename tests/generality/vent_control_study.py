@@ -41,6 +41,7 @@ if str(ROOT) not in sys.path:
 
 from gateway.estimate import correction  # noqa: E402
 from gateway.estimate import replay as rp  # noqa: E402
+from gateway.estimate import replay_forecasts as rf  # noqa: E402
 from gateway.model.vent_control import soft_excess  # noqa: E402
 from tests.generality.outlook_variants import tuning_replays  # noqa: E402
 
@@ -112,8 +113,8 @@ def _rescored(res, reach, gain: float, t_set: float, kf0: dict) -> dict:
         starts = f["target"] - steps
         f["adaptive_kf"] = (_kf_with_controller(res, starts, steps, gain, t_set) if gain > 0
                             else kf0[minutes])
-        f["combined"] = rp._combined(res, starts, steps, [f["adaptive_kf"], f["arx"]])
-    rp._corrected(res, reach, "")
+        f["combined"] = rf._combined(res, starts, steps, [f["adaptive_kf"], f["arx"]])
+    rf._corrected(res, reach, "")
     return rp.report(res, warmup=int(round(WARMUP / res.dt)))["horizons"]
 
 

@@ -100,13 +100,16 @@ class LiveForecaster:
             runs = disturbance.forecast_each(self.model, theta[None, :], x, self.gh, self.dt,
                                              rows, horizons, np.array([start[0]]),
                                              np.array([start[1]]), self.kf.settings)
+        linear: dict[int, np.ndarray] = {}
+        if start is not None and self.kf is not None and self.arx is not None and self.comb is not None:
+            lin = arx_baseline.ArxResult(self.arx.theta[None, :], np.zeros(0), self.arx.updates)
+            linear = lin.forecast_each(x, rows, horizons)  # one run, read at each horizon
         for h in horizons:
             out[h] = kf = float(runs[h][0])
             if start is None or self.kf is None:
                 continue
             if self.arx is not None and self.comb is not None:
-                lin = arx_baseline.ArxResult(self.arx.theta[None, :], np.zeros(0), self.arx.updates)
-                arx = float(lin.forecast(x, rows, h)[0])
+                arx = float(linear[h][0])
                 made[h] = {"adaptive_kf": kf, "arx": arx}
                 mixed = combination.mix({"adaptive_kf": kf, "arx": arx}, self.comb.weights(h))
                 if math.isfinite(mixed):

@@ -160,3 +160,18 @@ def test_iterations_and_population_must_be_at_least_one(capsys, arg):
               "--model", "prototype", arg])
     assert exc.value.code == 2
     assert "must be at least 1" in capsys.readouterr().err
+
+
+
+@pytest.mark.parametrize("command", ["calibrate", "replay", "diagnose", "vsensor"])
+@pytest.mark.parametrize(("seed", "why"), [("-1", "must be 0 or more, got '-1'"),
+                                           ("1.5", "not a whole number: '1.5'")])
+def test_a_seed_numpy_would_refuse_is_a_usage_error_not_a_traceback(capsys, command, seed, why):
+    kind = ["--model-kind", "prototype"] if command == "vsensor" else ["--model", "prototype"]
+    with pytest.raises(SystemExit) as exc:  # before the data is read: argparse's exit 2
+        main([command, "--data", str(DATASET), "--greenhouse", "biskra-prototype", *kind,
+              f"--seed={seed}"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    assert err.splitlines()[-1].endswith(f"error: argument --seed: {why}")

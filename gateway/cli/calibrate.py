@@ -9,6 +9,7 @@ from gateway.cli import CliError
 from gateway.cli.common import (
     add_data_arguments,
     add_sampling_argument,
+    add_seed_argument,
     check_output,
     dump_json,
     load_run,
@@ -34,7 +35,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_data_arguments(p)
     add_sampling_argument(p)
     p.add_argument("--algorithm", choices=ALGORITHMS, default="rsba", help="search algorithm (rsba)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (0)")
+    add_seed_argument(p, "the search")
     p.add_argument(
         "--calibrate-on",
         metavar="START/END",

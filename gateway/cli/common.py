@@ -102,6 +102,24 @@ def positive_int(text: str) -> int:
     return value
 
 
+def seed_int(text: str) -> int:
+    """argparse type: a whole number >= 0 (numpy's generators refuse a negative seed, which
+    would be a traceback after the data was read)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be 0 or more, got {text!r}")
+    return value
+
+
+def add_seed_argument(p: argparse.ArgumentParser, what: str) -> None:
+    """``--seed N``: the one wording for every command that draws random numbers."""
+    p.add_argument("--seed", type=seed_int, default=0, metavar="N",
+                   help=f"random seed of {what}, 0 or more (default 0)")
+
+
 @dataclass(frozen=True)
 class Inputs:
     """What a data command runs on: the resampled data, the greenhouse, the model, and the

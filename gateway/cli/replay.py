@@ -8,6 +8,7 @@ import sys
 from gateway.cli import CliError
 from gateway.cli.common import (
     add_data_arguments,
+    add_seed_argument,
     check_output,
     dump_json,
     load_run,
@@ -55,7 +56,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="leave the first MIN minutes out of every metric, e.g. 1440 to score days 2.. "
         "(default 0)",
     )
-    p.add_argument("--seed", type=int, default=0, help="random seed of the bats (0)")
+    add_seed_argument(p, "the bats")
     p.add_argument("--outlook", choices=sorted(OUTLOOKS),
                    help="weather outlook of the live-style forecasts (default: clear-sky-trend when "
                    "the greenhouse has a [site], else hold-latest)")

@@ -126,3 +126,13 @@ def test_export_over_its_own_store_is_refused(capsys, tmp_path):
     assert main(["export", "--db", str(db), "--out", str(db)]) == 2
     assert f"--out {db}: is the store --db" in one_error_line(capsys)
     assert db.read_bytes() == before
+
+
+def test_a_plot_name_matplotlib_cannot_write_is_refused_before_the_replay(capsys, tmp_path):
+    data, plot = kit_csv(tmp_path), tmp_path / "replay.txt"
+    assert main(["replay", "--data", str(data), *PROTO, "--plot", str(plot)]) == 2
+    captured = capsys.readouterr()
+    line = captured.err.strip().splitlines()[-1]
+    assert line.startswith(f"error: --plot {plot}: cannot draw a '.txt' file") and "png" in line
+    assert "Traceback" not in captured.err
+    assert captured.out == "" and not plot.exists()  # refused before the replay, not after it

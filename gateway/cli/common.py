@@ -261,6 +261,20 @@ def check_output(path: str | Path | None, option: str, folder: bool = False,
         raise CliError(f"{option} {path}: folder {parent} is not writable by this user")
 
 
+def check_figure(path: str | None, option: str) -> None:
+    """Refuse a figure name matplotlib cannot write (``replay.txt``) before the run it would
+    draw: the error would otherwise come after all the work. No ending: matplotlib writes PNG."""
+    if not path:
+        return
+    from gateway.plots import figure_formats
+
+    ending = Path(path).suffix.lower().removeprefix(".")
+    formats = figure_formats()
+    if ending and ending not in formats:
+        raise CliError(f"{option} {path}: cannot draw a '.{ending}' file; give a figure name "
+                       f"ending in .png, .svg or .pdf (all: {', '.join(formats)})")
+
+
 @contextmanager
 def writing(option: str, path: str | Path) -> Iterator[None]:
     """Turn an OSError while writing an output (disk full, permissions changed since

@@ -9,6 +9,7 @@ from gateway.cli import CliError
 from gateway.cli.common import (
     add_data_arguments,
     add_seed_argument,
+    check_figure,
     check_output,
     dump_json,
     load_run,
@@ -85,6 +86,7 @@ def run(args: argparse.Namespace) -> int:
     sources = {"--data": args.data, "--greenhouse": args.greenhouse, "--params": args.params}
     check_output(args.out, "--out", inputs=sources)
     check_output(args.plot, "--plot", inputs=sources)
+    check_figure(args.plot, "--plot")
     run_inputs = load_run(args)
     series, gh, model = run_inputs.series, run_inputs.gh, run_inputs.model
     theta0 = read_params_file(args.params, model, gh) if args.params else None

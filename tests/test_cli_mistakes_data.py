@@ -269,3 +269,19 @@ def test_replay_says_when_a_starting_parameter_is_outside_its_hard_box(capsys, t
     assert (f"note: {params}: params.c_solar = 1e+09 is outside its hard box "
             f"[{lo[j]:g}, {hi[j]:g}]") in err and f"use {hi[j]:g}" in err
     assert err.count("outside its hard box") == 1  # the others are inside
+
+
+@pytest.mark.parametrize(("floor_area", "volume", "height"), [
+    (6800.0, 0.76, "0.000112 m"),  # the floor area in cm2
+    (0.68, 760.0, "1.12e+03 m"),  # the volume in litres
+])
+def test_a_floor_area_and_volume_in_units_that_disagree_are_refused(capsys, tmp_path, floor_area,
+                                                                    volume, height):
+    gh = tmp_path / "mine.toml"  # each key alone is inside its range
+    gh.write_text(f'name = "mine"\n[geometry]\nfloor_area = {floor_area}\nvolume = {volume}\n')
+    data = kit_csv(tmp_path)
+    assert main(["calibrate", "--data", str(data), "--greenhouse", str(gh), "--model",
+                 "prototype", "--iterations", "1", "--population", "2"]) == 2
+    line = one_error_line(capsys)
+    assert line.startswith(f"error: {gh}: 'geometry.volume' / 'geometry.floor_area' = {height}")
+    assert "mean height is impossible" in line and "floor_area in m2, volume in m3" in line

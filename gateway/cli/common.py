@@ -192,7 +192,7 @@ def parse_span(text: str | None, series: Series) -> tuple[int, int] | None:
     stamps = []
     for name, part in zip(("START", "END"), parts, strict=True):
         try:
-            stamps.append(_stamp(part))
+            stamps.append(parse_when(part))
         except ValueError as exc:  # the parser's own words only when they say more
             why = "" if str(exc).startswith("Invalid isoformat") else f" ({exc})"
             raise CliError(f"--calibrate-on {text!r}: {name} {part!r} is not an ISO 8601 date or "
@@ -208,7 +208,10 @@ def parse_span(text: str | None, series: Series) -> tuple[int, int] | None:
     return a, b
 
 
-def _stamp(text: str) -> np.datetime64:
+def parse_when(text: str) -> np.datetime64:
+    """A time given on the command line (``--calibrate-on``, ``export --from/--to``): ISO 8601
+    date or date and time, UTC unless an offset is given (``2026-03-01``, ``2026-03-01T06:00``,
+    ``2026-03-01T06:00+01:00``). The kit CSV itself wants the offset written (kitcsv.parse_time)."""
     text = text.strip()
     if "T" not in text and len(text) == 10:
         text += "T00:00:00"

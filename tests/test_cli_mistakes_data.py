@@ -285,3 +285,25 @@ def test_a_floor_area_and_volume_in_units_that_disagree_are_refused(capsys, tmp_
     line = one_error_line(capsys)
     assert line.startswith(f"error: {gh}: 'geometry.volume' / 'geometry.floor_area' = {height}")
     assert "mean height is impossible" in line and "floor_area in m2, volume in m3" in line
+
+
+def test_vsensor_says_what_it_clamped_in_words_not_as_its_clamp_inputs_option(capsys, tmp_path):
+    """'300 clamped' read as if the inputs had been clamped though --clamp-inputs was off: the
+    count is of flows held to [0, the physical maximum], and says so; the inputs fed at their
+    bound are counted only with the option."""
+    data = kit_csv(tmp_path)
+    assert _vsensor_on(data, "prototype", "biskra-prototype", "--json") == 0
+    counts = json.loads(capsys.readouterr().out)
+    assert counts["inputs_clamped"] == 0  # the kit rows are inside the training ranges
+    for more in ((), ("--clamp-inputs",)):
+        assert _vsensor_on(data, "prototype", "biskra-prototype", *more) == 0
+        head = capsys.readouterr().out.splitlines()[0]
+        assert head.endswith(f", {counts['clamped']} with the flow held to [0, its physical "
+                             "maximum]")  # nothing about inputs: none was fed at its bound
+    rows = data.read_text().splitlines()  # a storm: wind far above the training range
+    storm = tmp_path / "storm.csv"
+    storm.write_text("\n".join([rows[0], *(r.rsplit(",", 1)[0] + ",35" for r in rows[1:])]) + "\n")
+    assert rows[0].endswith(",wind")
+    assert _vsensor_on(storm, "prototype", "biskra-prototype", "--clamp-inputs") == 0
+    head = capsys.readouterr().out.splitlines()[0]
+    assert head.endswith(f", {len(rows) - 1} with inputs fed at their bound (--clamp-inputs)")

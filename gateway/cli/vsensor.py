@@ -172,7 +172,9 @@ def _print_human(rep: dict, main: str) -> None:
     out.write(f"{main} on {rep['data']} ({rep['greenhouse']}, {rep['model_kind']} fluxes): "
               f"{rep['steps']} steps, {rep['flagged']} flagged, {rep['out_of_range']} with inputs "
               f"outside the training ranges, {rep['missing']} with missing inputs, "
-              f"{rep['clamped']} clamped\n")
+              f"{rep['clamped']} with the flow held to [0, its physical maximum]"
+              + (f", {rep['inputs_clamped']} with inputs fed at their bound (--clamp-inputs)"
+                 if rep.get("inputs_clamped") else "") + "\n")
     if rep["out_of_range_by_input"]:
         out.write("  outside the training range: "
                   + ", ".join(f"{k} {v}" for k, v in rep["out_of_range_by_input"].items()) + "\n")

@@ -165,3 +165,22 @@ def test_bench_runner_lists_its_benches_and_refuses_an_unknown_one():
                        timeout=60)
     assert r.returncode == 2 and "no bench named calibratoin (benches: " in r.stderr
     assert "== bench" not in r.stdout  # nothing was started
+
+
+def test_verbose_is_taken_after_the_command_too(capsys, tmp_path):
+    """'calibrate ... -v' was 'unrecognized arguments: -v' (only 'python -m gateway -v
+    calibrate ...' worked), and '-v ingest ...' did not reach the ingest service's parser."""
+    from gateway.cli import build_parser
+
+    parser = build_parser()
+    base = ["calibrate", "--data", "k.csv", "--greenhouse", "biskra-prototype", "--model",
+            "prototype"]
+    assert parser.parse_args([*base, "-v"]).verbose and parser.parse_args(["-v", *base]).verbose
+    assert not parser.parse_args(base).verbose
+    assert parser.parse_args(["keys", "list", "--keys", "k.txt", "--verbose"]).verbose
+    keys = tmp_path / "keys.txt"
+    assert main(["keys", "add", "7", "--keys", str(keys), "-v"]) == 0
+    assert '"device_id": 7' in capsys.readouterr().out
+    missing = tmp_path / "none.txt"  # refused before the service listens
+    assert main(["-v", "ingest", "--db", str(tmp_path / "s.db"), "--keys", str(missing)]) == 2
+    assert f"{missing}: cannot read the keys file" in one_error_line(capsys)

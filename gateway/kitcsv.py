@@ -234,6 +234,10 @@ def _refuse_rh_fractions(path: Path, values: dict[str, list[float]]) -> None:
             )
 
 
+_MISSING_MARKS = {"na", "n/a", "#n/a", "null", "none", "-", "--", "?", "missing"}
+"""What spreadsheets, R and loggers write for a missing value; the kit CSV leaves the cell empty."""
+
+
 def _parse_cell(path: Path, line: int, name: str, cell: str) -> float:
     cell = cell.strip()
     if not cell:
@@ -241,7 +245,8 @@ def _parse_cell(path: Path, line: int, name: str, cell: str) -> float:
     try:
         value = float(cell)
     except ValueError:
-        raise KitCsvError(f"{path}:{line}: column {name}: not a number: {cell!r}") from None
+        hint = " (a missing value is an empty cell)" if cell.lower() in _MISSING_MARKS else ""
+        raise KitCsvError(f"{path}:{line}: column {name}: not a number: {cell!r}{hint}") from None
     if not math.isfinite(value):
         raise KitCsvError(f"{path}:{line}: column {name}: {cell!r} (leave the cell empty)")
     col = COLUMNS[name]

@@ -307,3 +307,19 @@ def test_vsensor_says_what_it_clamped_in_words_not_as_its_clamp_inputs_option(ca
     assert _vsensor_on(storm, "prototype", "biskra-prototype", "--clamp-inputs") == 0
     head = capsys.readouterr().out.splitlines()[0]
     assert head.endswith(f", {len(rows) - 1} with inputs fed at their bound (--clamp-inputs)")
+
+
+@pytest.mark.parametrize(("cell", "hint"), [
+    ("NA", " (a missing value is an empty cell)"),  # R, pandas
+    ("#N/A", " (a missing value is an empty cell)"),  # a spreadsheet
+    ("1.5 m/s", ""),  # not a missing mark: no hint that would mislead
+])
+def test_a_missing_value_written_as_a_word_says_to_leave_the_cell_empty(capsys, tmp_path, cell,
+                                                                         hint):
+    data = kit_csv(tmp_path)
+    lines = data.read_text().splitlines()
+    assert lines[0].endswith(",wind")
+    lines[7] = lines[7].rsplit(",", 1)[0] + f",{cell}"  # line 8 of the file
+    data.write_text("\n".join(lines) + "\n")
+    assert main(["calibrate", "--data", str(data), *PROTO]) == 2
+    assert one_error_line(capsys) == f"error: {data}:8: column wind: not a number: {cell!r}{hint}"

@@ -127,10 +127,14 @@ def _read_header(path: Path, reader, required: Iterable[str], notices: list[str]
     except StopIteration:
         raise KitCsvError(f"{path}: empty file, expected a header row") from None
     if not header or header[0] != "time":
-        sep = next((c for c in ";\t|" if header and c in header[0]), None)
-        hint = f" (the separator must be a comma, not {sep!r})" if sep else ""
+        first = header[0] if header else ""
+        sep = next((c for c in ";\t|" if c in first), None)
+        hint = (f" (the separator must be a comma, not {sep!r})" if sep
+                else " (column names are lower case: time, t_in, ...)" if first.lower() == "time"
+                else "")
         raise KitCsvError(
-            f"{path}:1: the first column must be 'time', found {header[:1]}{hint}"
+            f"{path}:1: the first column must be 'time', found "
+            f"{repr(first) if header else 'an empty line'}{hint}"
         )
     if len(set(header)) != len(header):
         dup = sorted({h for h in header if header.count(h) > 1})

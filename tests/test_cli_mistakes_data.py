@@ -323,3 +323,16 @@ def test_a_missing_value_written_as_a_word_says_to_leave_the_cell_empty(capsys, 
     data.write_text("\n".join(lines) + "\n")
     assert main(["calibrate", "--data", str(data), *PROTO]) == 2
     assert one_error_line(capsys) == f"error: {data}:8: column wind: not a number: {cell!r}{hint}"
+
+
+@pytest.mark.parametrize(("header", "found"), [
+    ("Time,T_in,rh_in,t_out,rh_out,i_glob,wind",
+     "found 'Time' (column names are lower case: time, t_in, ...)"),
+    ("time;t_in;rh_in", "found 'time;t_in;rh_in' (the separator must be a comma, not ';')"),
+    ("", "found an empty line"),
+])
+def test_a_header_without_time_first_says_what_it_found_as_text(capsys, tmp_path, header, found):
+    data = kit_csv(tmp_path)  # was: found ['Time'], a Python list, and no word on the case
+    data.write_text(header + "\n" + data.read_text().split("\n", 1)[1])
+    assert main(["calibrate", "--data", str(data), *PROTO]) == 2
+    assert one_error_line(capsys) == f"error: {data}:1: the first column must be 'time', {found}"

@@ -184,3 +184,21 @@ def test_verbose_is_taken_after_the_command_too(capsys, tmp_path):
     missing = tmp_path / "none.txt"  # refused before the service listens
     assert main(["-v", "ingest", "--db", str(tmp_path / "s.db"), "--keys", str(missing)]) == 2
     assert f"{missing}: cannot read the keys file" in one_error_line(capsys)
+
+
+def _defaults_not_called_default(parser: argparse.ArgumentParser, prefix: str = ""):
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield from _defaults_not_called_default(sub, f"{prefix}{name} ")
+        elif (action.option_strings and action.default not in (None, argparse.SUPPRESS, False, [])
+              and "default" not in (action.help or "")):
+            yield f"{prefix}{action.option_strings[0]}"
+
+
+def test_every_gateway_option_with_a_default_says_default_in_one_wording():
+    """'(rsba)', '(0.5)', '(825)' beside '(default 60)', '(default 0)': one wording, so a
+    reader of two commands' help never wonders whether '(2)' is a default or an example."""
+    from gateway.cli import build_parser
+
+    assert list(_defaults_not_called_default(build_parser())) == []

@@ -34,7 +34,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     add_data_arguments(p)
     add_sampling_argument(p)
-    p.add_argument("--algorithm", choices=ALGORITHMS, default="rsba", help="search algorithm (rsba)")
+    p.add_argument("--algorithm", choices=ALGORITHMS, default="rsba", help="search algorithm (default rsba)")
     add_seed_argument(p, "the search")
     p.add_argument(
         "--calibrate-on",

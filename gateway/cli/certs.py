@@ -38,9 +38,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="sign a request made on the device (its key never leaves it); ROLE is "
                    "gateway, client or router; the CN comes from the request")
     p.add_argument("--days", type=float, default=825, metavar="N",
-                   help="validity of the certificates made now, in days (825)")
+                   help="validity of the certificates made now [days] (default 825)")
     p.add_argument("--ca-name", default="serra-fleet-ca", metavar="CN",
-                   help="common name of a new CA (serra-fleet-ca)")
+                   help="common name of a new CA (default serra-fleet-ca)")
     p.add_argument("--force", action="store_true",
                    help="replace certificates that exist (never the CA: remove it by hand)")
     p.set_defaults(func=run)

@@ -33,7 +33,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_data_arguments(p)
     p.add_argument("--split", type=float, default=0.5, metavar="FRACTION",
                    help="fraction of the data used to calibrate the base model, 0.1 to 0.9; the "
-                   "rest is held out (0.5)")
+                   "rest is held out (default 0.5)")
     p.add_argument("--report", metavar="DIR", help="write report.md and PNG plots into DIR")
     add_seed_argument(p, "the swarm")
     p.set_defaults(func=run)

@@ -45,14 +45,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "in client mode the routers to fail over between)")
     p.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
                    help="also listen for gateways on this endpoint (peer mode)")
-    p.add_argument("--mode", choices=("peer", "client"), help="Zenoh mode (peer)")
+    p.add_argument("--mode", choices=("peer", "client"), help="Zenoh mode (default peer)")
     p.add_argument("--key", action="append", default=[], metavar="KEYEXPR",
                    help="key expression to subscribe to (repeatable; default serra/**, or one per --farm)")
     p.add_argument("--farm", action="append", default=[], metavar="FARM",
                    help="subscribe to serra/FARM/** (repeatable); also the farms --history answers for")
-    p.add_argument("--db", type=Path, help="SQLite cloud store (created if absent)")
+    p.add_argument("--db", type=Path, metavar="cloud.db",
+                   help="SQLite cloud store (created if absent)")
     p.add_argument("--dsn", metavar="DSN", help="PostgreSQL cloud store instead (needs serra[cloud])")
-    p.add_argument("--schema", metavar="NAME", help="PostgreSQL schema (serra)")
+    p.add_argument("--schema", metavar="NAME", help="PostgreSQL schema (default serra)")
     p.add_argument("--history", action="store_true",
                    help="answer history queries for the farms from the store")
     p.add_argument("--tls-ca", type=Path, metavar="PEM", help="the fleet CA (tls/ endpoints)")
@@ -60,7 +61,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tls-key", type=Path, metavar="KEY", help="its private key (mode 0600)")
     p.add_argument("--export", type=Path, metavar="DIR",
                    help="write <farm>-<greenhouse>.csv kit CSVs here (at exit when subscribed)")
-    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (> 0)")
+    p.add_argument("--duration", type=float, metavar="S",
+                   help="stop after this long [s], > 0 (default: run until stopped)")
     p.set_defaults(func=run)
 
 

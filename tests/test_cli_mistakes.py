@@ -202,3 +202,23 @@ def test_every_gateway_option_with_a_default_says_default_in_one_wording():
     from gateway.cli import build_parser
 
     assert list(_defaults_not_called_default(build_parser())) == []
+
+
+def test_every_help_page_fits_a_terminal(monkeypatch):
+    """The subscribe description came out as one 400-character line (its raw formatter, kept
+    for the epilog's examples, does not wrap), and the four model names made the data commands'
+    usage and option lines overrun; no line of any page is now over 100 characters at 80."""
+    from gateway.cli import build_parser
+
+    monkeypatch.setenv("COLUMNS", "80")  # what argparse wraps to
+
+    def pages(parser: argparse.ArgumentParser, name: str):
+        yield name, parser.format_help()
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for sub, child in action.choices.items():
+                    yield from pages(child, f"{name} {sub}")
+
+    long = [(name, line) for name, text in pages(build_parser(), "gateway")
+            for line in text.splitlines() if len(line) > 100]
+    assert long == []

@@ -42,7 +42,8 @@ def add_data_arguments(p: argparse.ArgumentParser) -> None:
         metavar="PRESET|FILE.toml",
         help=f"greenhouse description: a preset ({', '.join(list_presets())}) or a TOML file",
     )
-    p.add_argument("--model", required=True, choices=MODEL_NAMES, help="climate model")
+    p.add_argument("--model", required=True, choices=MODEL_NAMES, metavar="MODEL",
+                   help=f"climate model: {', '.join(MODEL_NAMES)} (README.md, 'Models')")
     p.add_argument("--step", type=positive_number, metavar="S",
                    help=f"model step [s] (default {DEFAULT_STEP:g}, or the rows' own spacing when "
                    "they are more than 5 minutes apart: 10- and 15-minute loggers)")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+import textwrap
 import threading
 import time
 from pathlib import Path
@@ -32,11 +33,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "subscribe",
         help="play the cloud: store what the gateways publish (dropping repeats), export kit CSVs",
-        description="Subscribe to Serra messages over Zenoh and store each one once, in SQLite "
-        "(the default) or PostgreSQL (--dsn); repeats are dropped by idempotency key, and what "
-        "was missed is recovered from the publishers' caches. With --history, answer history "
-        "queries for the farms from the store. With --export, write a kit CSV per greenhouse "
-        "from the stored measurements (without an endpoint: export only).",
+        description=textwrap.fill(  # the raw formatter (for the epilog) does not wrap it
+            "Subscribe to Serra messages over Zenoh and store each one once, in SQLite "
+            "(the default) or PostgreSQL (--dsn); repeats are dropped by idempotency key, and what "
+            "was missed is recovered from the publishers' caches. With --history, answer history "
+            "queries for the farms from the store. With --export, write a kit CSV per greenhouse "
+            "from the stored measurements (without an endpoint: export only).", 95),
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--config", type=Path, metavar="SUBSCRIBER.toml",
                    help="settings file ([subscribe], [tls]; docs/examples/subscriber.toml)")

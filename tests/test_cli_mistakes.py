@@ -222,3 +222,14 @@ def test_every_help_page_fits_a_terminal(monkeypatch):
     long = [(name, line) for name, text in pages(build_parser(), "gateway")
             for line in text.splitlines() if len(line) > 100]
     assert long == []
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--dsn", "dbname=x"], "give db (SQLite) or dsn (PostgreSQL), not both (--db or --dsn)"),
+    (["--mode", "client"], "client mode needs a router in connect (--connect ENDPOINT)"),
+])
+def test_subscribe_conflicts_on_the_command_line_name_its_options(capsys, tmp_path, args,
+                                                                  message):
+    assert main(["subscribe", "--db", str(tmp_path / "c.db"), *args]) == 2
+    assert one_error_line(capsys) == f"error: command line: {message}"
+    assert list(tmp_path.iterdir()) == []  # no store made

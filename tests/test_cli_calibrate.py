@@ -175,3 +175,27 @@ def test_a_seed_numpy_would_refuse_is_a_usage_error_not_a_traceback(capsys, comm
     err = capsys.readouterr().err
     assert "Traceback" not in err
     assert err.splitlines()[-1].endswith(f"error: argument --seed: {why}")
+
+
+def test_the_params_files_header_is_the_whole_command_and_makes_the_same_file(capsys, tmp_path):
+    """The header said only '--algorithm rsba --seed 0 on FILE': the greenhouse, model, span and
+    search size that made the numbers were lost with the terminal."""
+    import shlex
+
+    from tests.cli_mistakes_common import kit_csv
+
+    data, first, again = kit_csv(tmp_path, rows=90), tmp_path / "p.toml", tmp_path / "again.toml"
+    assert main(["calibrate", "--data", str(data), "--greenhouse", "biskra-prototype", "--model",
+                 "prototype", "--calibrate-on", "2020-03-27T10:00/2020-03-27T11:00",
+                 "--iterations", "2", "--population", "3", "--site", "52,4.5", "--seed", "3",
+                 "--out", str(first)]) == 0
+    header = first.read_text().splitlines()[0]
+    words = shlex.split(header.removeprefix("# "))
+    assert words[:4] == ["python", "-m", "gateway", "calibrate"]
+    for option, value in (("--greenhouse", "biskra-prototype"), ("--seed", "3"),
+                          ("--calibrate-on", "2020-03-27T10:00/2020-03-27T11:00"),
+                          ("--iterations", "2"), ("--population", "3"), ("--site", "52,4.5")):
+        assert words[words.index(option) + 1] == value, header
+    assert main([*words[3:], "--out", str(again)]) == 0
+    capsys.readouterr()
+    assert again.read_text() == first.read_text()

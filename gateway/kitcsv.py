@@ -187,26 +187,31 @@ def _read_rows(path: Path, reader, width: int, known: list[tuple[int, str]],
     previous = None
     previous_cells: list[str] = []
     repeats: list[int] = []  # lines of exact repeats of the row before (logger re-sends)
+    bad = _BadCells()
     for row in reader:
         line = reader.line_num
         if not row or (len(row) == 1 and not row[0].strip()):
             continue
         if len(row) != width:
+            bad.raise_first()
             raise KitCsvError(f"{path}:{line}: {len(row)} cells, the header has {width}")
         try:
             stamp = parse_time(row[0])
         except ValueError as exc:
+            bad.raise_first()  # an earlier bad cell is the first error
             raise KitCsvError(f"{path}:{line}: column time: bad time {row[0]!r}: {exc}") from None
         cells = [row[i].strip() for i, _ in known]
         if stamp == previous and cells == previous_cells:
             repeats.append(line)  # the same sample twice: keeping one loses nothing
             continue
         if stamp == previous:
+            bad.raise_first()  # an earlier bad cell is the first error
             raise KitCsvError(
                 f"{path}:{line}: column time: {row[0]} repeats the previous row's time with "
                 f"other values; which one is the measurement?"
             )
         if previous is not None and stamp < previous:
+            bad.raise_first()  # an earlier bad cell is the first error
             raise KitCsvError(
                 f"{path}:{line}: column time: {row[0]} is not after the previous row "
                 f"({previous}Z); rows must be in time order"
@@ -214,7 +219,8 @@ def _read_rows(path: Path, reader, width: int, known: list[tuple[int, str]],
         previous, previous_cells = stamp, cells
         times.append(stamp)
         for i, name in known:
-            values[name].append(_parse_cell(path, line, name, row[i]))
+            values[name].append(bad.parse(path, line, name, row[i]))
+    bad.raise_first()
     if not times:
         raise KitCsvError(f"{path}: no data rows")
     if repeats:
@@ -236,6 +242,35 @@ def _refuse_rh_fractions(path: Path, values: dict[str, list[float]]) -> None:
                 f"{path}: column {name}: every value is between 0 and 1 (max {rh.max():g}): "
                 f"looks like a fraction, the kit CSV wants % (0-100)"
             )
+
+
+class _BadCells:
+    """The first bad cell is the error, and how many more follow is said with it: a logger whose
+    humidity reads 100.4 % in fog has hundreds, and one line at a time would hide that."""
+
+    def __init__(self) -> None:
+        self.first: KitCsvError | None = None
+        self.more = 0
+        self.next_line = 0
+
+    def parse(self, path: Path, line: int, name: str, cell: str) -> float:
+        try:
+            return _parse_cell(path, line, name, cell)
+        except KitCsvError as exc:
+            if self.first is None:
+                self.first = exc
+            else:
+                self.more += 1
+                self.next_line = self.next_line or line
+            return math.nan
+
+    def raise_first(self) -> None:
+        """Raise the first bad cell's error, with the count of those after it (so far)."""
+        if self.first is None:
+            return
+        more = (f" (and {self.more} more bad cell(s) after it, the next on line {self.next_line})"
+                if self.more else "")
+        raise KitCsvError(f"{self.first}{more}")
 
 
 _MISSING_MARKS = {"na", "n/a", "#n/a", "null", "none", "-", "--", "?", "missing"}

@@ -336,3 +336,24 @@ def test_a_header_without_time_first_says_what_it_found_as_text(capsys, tmp_path
     data.write_text(header + "\n" + data.read_text().split("\n", 1)[1])
     assert main(["calibrate", "--data", str(data), *PROTO]) == 2
     assert one_error_line(capsys) == f"error: {data}:1: the first column must be 'time', {found}"
+
+
+def test_a_bad_cell_says_how_many_more_follow_and_where_the_next_is(capsys, tmp_path):
+    """A humidity sensor reading 100.4 % in fog does so for hours: one line at a time, a user
+    would fix the file line by line without knowing how many are left."""
+    data = kit_csv(tmp_path, rows=40)
+    lines = data.read_text().splitlines()
+    col = lines[0].split(",").index("rh_in")
+    for k in (5, 9, 17, 30):  # lines 6, 10, 18, 31 of the file
+        cells = lines[k].split(",")
+        cells[col] = "100.4"
+        lines[k] = ",".join(cells)
+    data.write_text("\n".join(lines) + "\n")
+    assert main(["calibrate", "--data", str(data), *PROTO]) == 2
+    assert one_error_line(capsys) == (
+        f"error: {data}:6: column rh_in: 100.4 % outside the physical range [0, 100] (relative "
+        "humidity cannot exceed 100 %) (and 3 more bad cell(s) after it, the next on line 10)")
+    lines[20] = lines[11]  # a row out of order after the first bad cell: the bad cell is first
+    data.write_text("\n".join(lines) + "\n")
+    assert main(["calibrate", "--data", str(data), *PROTO]) == 2
+    assert one_error_line(capsys).startswith(f"error: {data}:6: column rh_in: 100.4 %")

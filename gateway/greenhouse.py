@@ -235,9 +235,15 @@ def _parse_online(table: Any, source: str) -> dict[str, dict[str, Any]]:
                     f"{source}: unknown key 'online.{output}.{key}' "
                     f"(allowed: {', '.join(_ONLINE_KEYS)})"
                 )
-            kind, lo, hi = _ONLINE_KEYS[key]
-            out[output][key] = _check_number(source, f"online.{output}.{key}", value, kind, lo, hi)
+            out[output][key] = check_online_value(source, output, key, value)
     return out
+
+
+def check_online_value(source: str, output: str, key: str, value: Any) -> Any:
+    """One ``[online.<output>]`` setting checked against its bounds, as the greenhouse file's
+    are (``replay --set`` too: a window of 1e9 would otherwise be a memory error)."""
+    kind, lo, hi = _ONLINE_KEYS[key]
+    return _check_number(source, f"online.{output}.{key}", value, kind, lo, hi)
 
 
 def _check_number(source: str, where: str, value: Any, kind: type, lo: float, hi: float) -> Any:

@@ -357,3 +357,17 @@ def test_a_bad_cell_says_how_many_more_follow_and_where_the_next_is(capsys, tmp_
     data.write_text("\n".join(lines) + "\n")
     assert main(["calibrate", "--data", str(data), *PROTO]) == 2
     assert one_error_line(capsys).startswith(f"error: {data}:6: column rh_in: 100.4 %")
+
+
+@pytest.mark.parametrize(("setting", "said"), [
+    ("t_in.window=1e9", "'online.t_in.window' = 1000000000 is impossible (expected 1..10000)"),
+    ("t_in.bats=1", "'online.t_in.bats' = 1 is impossible (expected 2..10000)"),  # was "must be
+    ("t_in.prior=nan", "'online.t_in.prior' = nan is impossible (expected 0..1e+06)"),  # positive"
+])
+def test_replay_set_takes_the_bounds_of_a_greenhouse_files_online_table(capsys, tmp_path, setting,
+                                                                        said):
+    """'--set t_in.window=1e9' bypassed the bounds [online.t_in] has in a greenhouse file and
+    died allocating 30 GB (a traceback); '--set t_in.bats=1' said 'must be positive, got 1'."""
+    missing = tmp_path / "not-made-yet.csv"  # said before the data is read
+    assert main(["replay", "--data", str(missing), *PROTO, "--set", setting]) == 2
+    assert one_error_line(capsys) == f"error: --set {setting!r}: {said}"

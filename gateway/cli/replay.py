@@ -21,6 +21,7 @@ from gateway.cli.notes import as_json, echo, params_notes, text_block
 from gateway.estimate.online import online_settings
 from gateway.estimate.outlook import OUTLOOKS, make_outlook
 from gateway.estimate.replay import replay, report, write_predictions
+from gateway.greenhouse import GreenhouseError, check_online_value
 from gateway.model.params_file import outside_box
 
 _KEYS = ("window", "every", "iterations", "bats", "prior")
@@ -78,6 +79,11 @@ def _overrides(items: list[str]) -> dict[str, dict[str, float]]:
             raise CliError(f"--set {item!r}: expected OUTPUT.KEY=NUMBER, e.g. t_in.window=30") from None
         if name not in _KEYS:
             raise CliError(f"--set {item!r}: unknown key '{name}' (keys: {', '.join(_KEYS)})")
+        try:  # the bounds a greenhouse file's [online.<output>] has
+            number = check_online_value(f"--set {item!r}", output, name,
+                                        int(number) if number.is_integer() else number)
+        except GreenhouseError as exc:
+            raise CliError(str(exc)) from None
         out.setdefault(output, {})[name] = number
     return out
 
@@ -87,6 +93,7 @@ def run(args: argparse.Namespace) -> int:
     check_output(args.out, "--out", inputs=sources)
     check_output(args.plot, "--plot", inputs=sources)
     check_figure(args.plot, "--plot")
+    overrides = _overrides(args.set)  # a typo here is said before the data is read
     run_inputs = load_run(args)
     series, gh, model = run_inputs.series, run_inputs.gh, run_inputs.model
     theta0 = read_params_file(args.params, model, gh) if args.params else None
@@ -97,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
         echo(made)
         notes = notes + made
     try:
-        settings = online_settings(model, gh, _overrides(args.set))
+        settings = online_settings(model, gh, overrides)
     except ValueError as exc:
         raise CliError(str(exc)) from None
     if not args.warmup >= 0:  # also NaN

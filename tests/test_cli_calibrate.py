@@ -199,3 +199,16 @@ def test_the_params_files_header_is_the_whole_command_and_makes_the_same_file(ca
     assert main([*words[3:], "--out", str(again)]) == 0
     capsys.readouterr()
     assert again.read_text() == first.read_text()
+
+
+def test_a_population_no_machine_holds_is_one_line_not_numpys_traceback(capsys, tmp_path):
+    from tests.cli_mistakes_common import kit_csv
+
+    data = kit_csv(tmp_path)  # 10^12 particles: ~29 TiB, refused at once by the allocator
+    assert main(["calibrate", "--data", str(data), "--greenhouse", "biskra-prototype", "--model",
+                 "prototype", "--iterations", "1", "--population", "1000000000000"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    line = err.strip().splitlines()[-1]
+    assert line.startswith("error: calibrate: out of memory (Unable to allocate")
+    assert line.endswith("a smaller --population, window or span)")

@@ -87,5 +87,10 @@ def main(argv: list[str] | None = None) -> int:
     except CliError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except MemoryError as exc:  # e.g. --population 10000000: say it, not numpy's traceback
+        print(f"error: {args.command}: out of memory ({exc}): the options or the data ask for "
+              "more than this machine has (a smaller --population, window or span)",
+              file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         return 130

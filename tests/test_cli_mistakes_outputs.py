@@ -65,6 +65,12 @@ def test_subscribe_export_from_a_mistyped_store_creates_nothing(capsys, tmp_path
     (["--gateway", "bad farm!"], "gateway name 'bad farm!': use 1-63 letters"),
     (["--router", "r 1=10.0.0.5"], "router name 'r 1': use 1-63 letters"),
     (["--sign", "farm-d.csr"], "--sign 'farm-d.csr': expected ROLE:FILE.csr"),
+    # a router's hosts as endpoints: signed as DNS names no client matches, TLS failing far away
+    (["--router", "r1=10.0.0.5:7447"],
+     "--router 'r1=10.0.0.5:7447': host '10.0.0.5:7447': give the host without the port"),
+    (["--router", "r1=cloud.example.org,tls/cloud.example.org:7447"],
+     "host 'tls/cloud.example.org:7447': give the host alone, without the protocol"),
+    (["--router", "r1=cloud example"], "host 'cloud example': not an IP address or a host name"),
 ])
 def test_certs_mistakes_leave_no_ca_behind(capsys, tmp_path, args, message):
     out = tmp_path / "certs"

@@ -120,6 +120,18 @@ def test_export_span_without_an_offset_is_utc_as_in_calibrate_on(tmp_path, kit, 
                                       "time, e.g. 2026-03-01 or 2026-03-01T06:00Z")
 
 
+def test_export_says_its_rows_are_minute_means_and_how_calibrate_reads_them(tmp_path, kit, capsys):
+    """calibrate reads rows as instants unless told (--sampling mean); the export, whose rows are
+    minute means, said nothing of it (docs/data-format.md, docs/model.md)."""
+    time, cols = kit
+    db, out = tmp_path / "g.db", tmp_path / "kit.csv"
+    store_records(db, time[:30], {c: v[:30] for c, v in cols.items()})
+    assert main(["export", "--db", str(db), "--out", str(out)]) == 0
+    captured = capsys.readouterr()
+    assert captured.out.startswith(f"wrote {out}: device 7, 30 minutes")
+    assert "each row is the mean over its minute: calibrate reads such rows with --sampling mean" \
+        in captured.err
+
 def test_export_of_a_partly_aggregated_store_equals_the_fully_aggregated_one(tmp_path, kit):
     """The read-only export computes the minutes the service has not aggregated yet in memory,
     with the same QC, across the boundary (here inside the frozen-sensor run)."""

@@ -79,6 +79,8 @@ def run(args: argparse.Namespace) -> int:
                    "out": str(args.out)})
         return 0
     print(f"wrote {args.out}: device {done.device_id}, {done.rows} minutes, {done.start} → {done.end}")
+    print("  each row is the mean over its minute: calibrate reads such rows with --sampling mean "
+          "(docs/data-format.md)", file=sys.stderr)
     for name, reasons in done.dropped.items():
         text = ", ".join(f"{n} {why}" for why, n in reasons.items())
         print(f"  {name}: left empty: {text}", file=sys.stderr)

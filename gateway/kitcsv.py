@@ -199,7 +199,10 @@ def _read_rows(path: Path, reader, width: int, known: list[tuple[int, str]],
             stamp = parse_time(row[0])
         except ValueError as exc:
             bad.raise_first()  # an earlier bad cell is the first error
-            raise KitCsvError(f"{path}:{line}: column time: bad time {row[0]!r}: {exc}") from None
+            why = ("not an ISO 8601 time with its UTC offset (write e.g. 2020-03-27T00:01:00Z; "
+                   "day/month/year and Unix seconds are not read)"
+                   if str(exc).startswith("Invalid isoformat") else str(exc))
+            raise KitCsvError(f"{path}:{line}: column time: bad time {row[0]!r}: {why}") from None
         cells = [row[i].strip() for i, _ in known]
         if stamp == previous and cells == previous_cells:
             repeats.append(line)  # the same sample twice: keeping one loses nothing

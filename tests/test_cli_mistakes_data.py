@@ -371,3 +371,15 @@ def test_replay_set_takes_the_bounds_of_a_greenhouse_files_online_table(capsys, 
     missing = tmp_path / "not-made-yet.csv"  # said before the data is read
     assert main(["replay", "--data", str(missing), *PROTO, "--set", setting]) == 2
     assert one_error_line(capsys) == f"error: --set {setting!r}: {said}"
+
+
+@pytest.mark.parametrize("stamp", ["27/03/2020 10:00", "1585303200"])
+def test_a_time_in_another_format_is_said_in_words_not_pythons(capsys, tmp_path, stamp):
+    data = kit_csv(tmp_path)  # a European spreadsheet's dates, a logger's Unix seconds
+    lines = data.read_text().splitlines()
+    lines[1] = stamp + "," + lines[1].split(",", 1)[1]
+    data.write_text("\n".join(lines) + "\n")
+    assert main(["calibrate", "--data", str(data), *PROTO]) == 2
+    assert one_error_line(capsys) == (
+        f"error: {data}:2: column time: bad time {stamp!r}: not an ISO 8601 time with its UTC "
+        "offset (write e.g. 2020-03-27T00:01:00Z; day/month/year and Unix seconds are not read)")

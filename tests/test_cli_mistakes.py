@@ -233,3 +233,20 @@ def test_subscribe_conflicts_on_the_command_line_name_its_options(capsys, tmp_pa
     assert main(["subscribe", "--db", str(tmp_path / "c.db"), *args]) == 2
     assert one_error_line(capsys) == f"error: command line: {message}"
     assert list(tmp_path.iterdir()) == []  # no store made
+
+
+@pytest.mark.parametrize(("in_gateway", "tables", "said"), [
+    ("status_every_s = 0\n", "", "gateway.status_every_s: 0 is below its minimum 1"),
+    ("", "[outbox]\nalarm_fraction = 1.5\n", "outbox.alarm_fraction: 1.5 is outside 0.05..1"),
+])
+def test_run_check_says_a_number_out_of_range_without_inf(capsys, tmp_path, in_gateway, tables,
+                                                          said):
+    """'0.0 is outside 1.0..inf' for a whole number of seconds: the bound is now said as one."""
+    assert main(["keys", "add", "7", "--keys", str(tmp_path / "keys.txt")]) == 0
+    config = tmp_path / "gateway.toml"
+    config.write_text(f'[gateway]\nfarm = "f1"\ndb = "serra.db"\nkeys = "keys.txt"\n{in_gateway}'
+                      f'{tables}[[greenhouse]]\nname = "north"\ngreenhouse = "biskra-prototype"\n'
+                      'model = "prototype"\ninside = 7\n')
+    capsys.readouterr()
+    assert main(["run", "--config", str(config), "--check"]) == 2
+    assert one_error_line(capsys) == f"error: {config}: {said}"

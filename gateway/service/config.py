@@ -64,8 +64,9 @@ class _Table:
         if kind is float and not math.isfinite(v):
             self.fail(key, f"must be a finite number, got {v!r}")
         if (lo is not None and v < lo) or (hi is not None and v > hi):
-            self.fail(key, f"{v!r} is outside {lo if lo is not None else '-inf'}.."
-                           f"{hi if hi is not None else 'inf'}")
+            self.fail(key, f"{v:g} is outside {lo:g}..{hi:g}" if lo is not None and hi is not None
+                      else f"{v:g} is below its minimum {lo:g}" if lo is not None
+                      else f"{v:g} is above its maximum {hi:g}")
         if choices is not None and v not in choices:
             self.fail(key, f"{v!r} is not one of {', '.join(map(str, choices))}")
         return v

@@ -56,6 +56,7 @@ def test_run_check_refuses_a_store_it_could_not_create(capsys, tmp_path, db, mes
     ("--max-db-mb", "0", "must be at least 1, got '0'"),
     ("--batch-delay", "-1", "must be at least 0, got '-1'"),
     ("--baudrate", "9600.5", "expected a whole number, got '9600.5'"),
+    ("--listen", "127.0.0.1:568300", "port 568300 of '127.0.0.1:568300' is outside 0..65535"),
 ])
 def test_ingest_refuses_numbers_outside_the_configs_bounds(capsys, tmp_path, option, value,
                                                            message):
@@ -250,3 +251,20 @@ def test_run_check_says_a_number_out_of_range_without_inf(capsys, tmp_path, in_g
     capsys.readouterr()
     assert main(["run", "--config", str(config), "--check"]) == 2
     assert one_error_line(capsys) == f"error: {config}: {said}"
+
+
+@pytest.mark.parametrize(("listen", "said"), [
+    ("0.0.0.0:70000", "port 70000 of '0.0.0.0:70000' is outside 0..65535"),
+    ("gateway-pi:5683", "'gateway-pi' is not an IP address: give the address to listen on"),
+])
+def test_run_check_reads_ingest_listen_as_ingest_listen_does(capsys, tmp_path, listen, said):
+    """The config's [ingest] listen had a reader of its own: a port out of range was 'expected
+    HOST:PORT', and a host name passed --check (ingest --listen refuses it: never resolved)."""
+    assert main(["keys", "add", "7", "--keys", str(tmp_path / "keys.txt")]) == 0
+    config = tmp_path / "gateway.toml"
+    config.write_text(f'[gateway]\nfarm = "f1"\ndb = "serra.db"\nkeys = "keys.txt"\n[ingest]\n'
+                      f'listen = "{listen}"\n[[greenhouse]]\nname = "north"\ngreenhouse = '
+                      '"biskra-prototype"\nmodel = "prototype"\ninside = 7\n')
+    capsys.readouterr()
+    assert main(["run", "--config", str(config), "--check"]) == 2
+    assert one_error_line(capsys).startswith(f"error: {config}: ingest.listen: {said}")

@@ -7,12 +7,14 @@ device 9 has no key in /etc/serra/keys.txt``). The documented example is
 
 from __future__ import annotations
 
+import argparse
 import math
 import re
 from dataclasses import MISSING, fields
 from pathlib import Path
 from typing import Any
 
+from gateway.ingest.service import parse_hostport
 from gateway.net.tomlcheck import ConfigError
 from gateway.net.zenohcfg import Retry, TlsFiles
 from gateway.service.settings import (
@@ -111,10 +113,11 @@ def _hostport(t: _Table, key: str,
         return default
     if not text:
         return None
-    host, sep, port = text.rpartition(":")
-    if not sep or not port.isdigit() or not 0 <= int(port) <= 65535:
-        t.fail(key, f"expected HOST:PORT (an IP address), got {text!r}")
-    return host.strip("[]") or "0.0.0.0", int(port)
+    try:  # the ingest command's own reading of --listen, one place
+        return parse_hostport(text)
+    except argparse.ArgumentTypeError as exc:
+        t.fail(key, str(exc))  # raises ConfigError
+    return None  # not reached
 
 
 def _endpoints(t: _Table, key: str, default: tuple[str, ...]) -> tuple[str, ...]:

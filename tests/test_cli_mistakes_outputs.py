@@ -142,3 +142,20 @@ def test_a_plot_name_matplotlib_cannot_write_is_refused_before_the_replay(capsys
     assert line.startswith(f"error: --plot {plot}: cannot draw a '.txt' file") and "png" in line
     assert "Traceback" not in captured.err
     assert captured.out == "" and not plot.exists()  # refused before the replay, not after it
+
+
+@pytest.mark.parametrize("subscribing", [False, True])
+def test_subscribe_export_into_a_file_is_refused_before_subscribing(capsys, tmp_path, subscribing):
+    """'--export notes.txt' (a file where the CSVs' folder goes) was a FileExistsError traceback,
+    when subscribed at the end of the whole run."""
+    from gateway.cloud.store import open_store
+
+    db, export = tmp_path / "cloud.db", tmp_path / "notes.txt"
+    export.write_text("keep me")
+    if not subscribing:
+        open_store(db, None, "serra").close()  # export only reads an existing store
+    before = sorted(tmp_path.iterdir())
+    link = ["--connect", "tcp/127.0.0.1:1", "--duration", "0.3"] if subscribing else []
+    assert main(["subscribe", *link, "--db", str(db), "--export", str(export)]) == 2
+    assert one_error_line(capsys) == f"error: --export {export}: exists and is not a folder"
+    assert sorted(tmp_path.iterdir()) == before and export.read_text() == "keep me"

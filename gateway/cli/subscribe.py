@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 from gateway.cli import CliError
+from gateway.cli.common import check_output, writing
 
 EPILOG = """\
 examples:
@@ -94,13 +95,15 @@ def settings(args: argparse.Namespace):
 def _export(store, folder: Path) -> None:
     from gateway.cloud.subscriber import export_kit_csv
 
-    folder.mkdir(parents=True, exist_ok=True)
+    with writing("--export", folder):
+        folder.mkdir(parents=True, exist_ok=True)
     ghs = store.greenhouses()
     if not ghs:
         print(f"{store.path}: no measurement stored yet: nothing to export", file=sys.stderr)
     for farm, gh in ghs:
         out = folder / f"{farm}-{gh}.csv"
-        n = export_kit_csv(store, farm, gh, out)
+        with writing("--export", out):
+            n = export_kit_csv(store, farm, gh, out)
         print(f"wrote {out}: {n} minutes")
 
 
@@ -111,6 +114,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.duration is not None and not args.duration > 0:  # also NaN
         raise CliError(f"--duration {args.duration:g}: must be a positive number of seconds")
+    check_output(args.export, "--export", folder=True)  # before a run whose end it is
     s = settings(args)
     if not s.connect and not s.listen and not args.export:
         raise CliError("give --connect ENDPOINT (or --listen) to subscribe, or --export DIR")

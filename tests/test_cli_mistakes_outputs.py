@@ -159,3 +159,21 @@ def test_subscribe_export_into_a_file_is_refused_before_subscribing(capsys, tmp_
     assert main(["subscribe", *link, "--db", str(db), "--export", str(export)]) == 2
     assert one_error_line(capsys) == f"error: --export {export}: exists and is not a folder"
     assert sorted(tmp_path.iterdir()) == before and export.read_text() == "keep me"
+
+
+@pytest.mark.parametrize("subscribing", [False, True])
+def test_subscribe_on_the_gateways_own_store_is_refused_and_leaves_it_unchanged(capsys, tmp_path,
+                                                                                subscribing):
+    """'--db serra.db' (the gateway's store) for the cloud store: the subscriber added its table
+    to it and said 'no measurement stored yet'; subscribed, it would have stored into it."""
+    from gateway.store import Store
+
+    db = tmp_path / "serra.db"
+    Store(db).close()
+    before = db.read_bytes()
+    link = ["--connect", "tcp/127.0.0.1:1", "--duration", "0.3"] if subscribing else []
+    assert main(["subscribe", *link, "--db", str(db), "--export", str(tmp_path / "csv")]) == 2
+    line = one_error_line(capsys)
+    assert line.startswith(f"error: {db}: not a cloud store: it holds other tables (devices, ")
+    assert "(the gateway's own store? 'python -m gateway export' reads that)" in line
+    assert db.read_bytes() == before and not (tmp_path / "csv").exists()

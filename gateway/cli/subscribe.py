@@ -130,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(f"{s.db}: cannot open the cloud store: {e}") from None
     except ImportError as e:
         raise CliError(str(e)) from None
-    except RuntimeError as e:  # CloudStoreError: one line, no password
+    except RuntimeError as e:  # CloudStoreError (one line, no password), NotACloudStore
         raise CliError(str(e)) from None
     try:
         if s.connect or s.listen:

@@ -177,3 +177,18 @@ def test_subscribe_on_the_gateways_own_store_is_refused_and_leaves_it_unchanged(
     assert line.startswith(f"error: {db}: not a cloud store: it holds other tables (devices, ")
     assert "(the gateway's own store? 'python -m gateway export' reads that)" in line
     assert db.read_bytes() == before and not (tmp_path / "csv").exists()
+
+
+@pytest.mark.parametrize("command", [["export", "--out", "x.csv"], ["status", "--once"]])
+def test_the_cloud_store_given_to_a_gateway_store_reader_says_what_reads_it(capsys, tmp_path,
+                                                                          command):
+    from gateway.cloud.store import open_store
+
+    db = tmp_path / "cloud.db"
+    open_store(db, None, "serra").close()
+    before = db.read_bytes()
+    assert main([command[0], "--db", str(db), *command[1:]]) == 2
+    assert one_error_line(capsys).endswith(
+        "missing tables devices, meta, minute, samples) (a cloud store, which 'python -m gateway "
+        "subscribe --db ... --export DIR' reads)")
+    assert db.read_bytes() == before

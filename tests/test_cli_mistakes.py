@@ -268,3 +268,30 @@ def test_run_check_reads_ingest_listen_as_ingest_listen_does(capsys, tmp_path, l
     capsys.readouterr()
     assert main(["run", "--config", str(config), "--check"]) == 2
     assert one_error_line(capsys).startswith(f"error: {config}: ingest.listen: {said}")
+
+
+@pytest.mark.parametrize(("content", "said"), [
+    ("time,t_in\n", "not an SQLite database, not a Serra store"),
+    (None, "not a Serra store (schema version 0; missing tables devices, meta, minute, samples) "
+           "(a cloud store"),
+])
+def test_run_check_refuses_a_gateway_db_that_is_another_file(capsys, tmp_path, content, said):
+    """--check said 'ok' of a gateway.db naming a CSV or the cloud store's file; only the start
+    refused it (or, for the cloud store, a gateway store would have been made inside it)."""
+    from gateway.cloud.store import open_store
+
+    assert main(["keys", "add", "7", "--keys", str(tmp_path / "keys.txt")]) == 0
+    db = tmp_path / "other.db"
+    if content is None:
+        open_store(db, None, "serra").close()
+    else:
+        db.write_text(content)
+    before = db.read_bytes()
+    config = tmp_path / "gateway.toml"
+    config.write_text('[gateway]\nfarm = "f1"\ndb = "other.db"\nkeys = "keys.txt"\n[[greenhouse]]\n'
+                      'name = "north"\ngreenhouse = "biskra-prototype"\nmodel = "prototype"\n'
+                      'inside = 7\n')
+    capsys.readouterr()
+    assert main(["run", "--config", str(config), "--check"]) == 2
+    assert one_error_line(capsys).startswith(f"error: {config}: gateway.db: {db}: {said}")
+    assert db.read_bytes() == before

@@ -295,3 +295,12 @@ def test_run_check_refuses_a_gateway_db_that_is_another_file(capsys, tmp_path, c
     assert main(["run", "--config", str(config), "--check"]) == 2
     assert one_error_line(capsys).startswith(f"error: {config}: gateway.db: {db}: {said}")
     assert db.read_bytes() == before
+
+
+def test_version_is_printed_for_a_bug_report(capsys):
+    from importlib.metadata import version
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out.strip() == f"python -m gateway {version('serra')}"

@@ -40,6 +40,8 @@ def build_parser() -> argparse.ArgumentParser:
         "Zenoh; certificates and routers for a fleet.",
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log details to stderr")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}",
+                        help="print the installed serra version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for module in COMMANDS.values():
         try:
@@ -52,6 +54,16 @@ def build_parser() -> argparse.ArgumentParser:
     for command in sub.choices.values():
         _verbose_anywhere(command)
     return parser
+
+
+def _version() -> str:
+    """The installed package's version (what a bug report needs), or why there is none."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("serra")
+    except PackageNotFoundError:
+        return "(not installed: run from a source tree)"
 
 
 def _verbose_anywhere(parser: argparse.ArgumentParser) -> None:

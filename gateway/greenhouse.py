@@ -102,6 +102,9 @@ _SCHEMA: dict[str, dict[str, tuple[type, float, float]]] = {
         "elevation": (float, -500.0, 9000.0),
     },
 }
+MEAN_HEIGHT = (0.1, 50.0)
+"""[m] volume over floor area a greenhouse can have: a cold frame to a botanical garden's dome.
+Each key alone may be in range while the two disagree by a unit (0.68 m2 written 6800, cm2)."""
 _TOP = {"name", "description", "sensors", "parameters", "online", *_SCHEMA}
 _PARAM_KEYS = {"value", "bounds", "variation"}
 ONLINE_OUTPUTS = ("t_in", "i_in")
@@ -155,6 +158,12 @@ def parse_greenhouse(raw: dict[str, Any], source: str = "<memory>") -> Greenhous
     for key in ("floor_area", "volume"):
         if key not in geometry:
             raise GreenhouseError(f"{source}: missing 'geometry.{key}'")
+    height = geometry["volume"] / geometry["floor_area"]
+    if not MEAN_HEIGHT[0] <= height <= MEAN_HEIGHT[1]:  # a unit slip: cm2, litres, ...
+        raise GreenhouseError(
+            f"{source}: 'geometry.volume' / 'geometry.floor_area' = {height:.3g} m mean height is "
+            f"impossible (expected {MEAN_HEIGHT[0]:g}..{MEAN_HEIGHT[1]:g} m: floor_area in m2, "
+            f"volume in m3)")
     sensors = raw.get("sensors", [])
     if not isinstance(sensors, list) or not all(isinstance(s, str) for s in sensors):
         raise GreenhouseError(f"{source}: 'sensors' must be a list of kit column names")
@@ -226,9 +235,15 @@ def _parse_online(table: Any, source: str) -> dict[str, dict[str, Any]]:
                     f"{source}: unknown key 'online.{output}.{key}' "
                     f"(allowed: {', '.join(_ONLINE_KEYS)})"
                 )
-            kind, lo, hi = _ONLINE_KEYS[key]
-            out[output][key] = _check_number(source, f"online.{output}.{key}", value, kind, lo, hi)
+            out[output][key] = check_online_value(source, output, key, value)
     return out
+
+
+def check_online_value(source: str, output: str, key: str, value: Any) -> Any:
+    """One ``[online.<output>]`` setting checked against its bounds, as the greenhouse file's
+    are (``replay --set`` too: a window of 1e9 would otherwise be a memory error)."""
+    kind, lo, hi = _ONLINE_KEYS[key]
+    return _check_number(source, f"online.{output}.{key}", value, kind, lo, hi)
 
 
 def _check_number(source: str, where: str, value: Any, kind: type, lo: float, hi: float) -> Any:

@@ -127,10 +127,14 @@ def _read_header(path: Path, reader, required: Iterable[str], notices: list[str]
     except StopIteration:
         raise KitCsvError(f"{path}: empty file, expected a header row") from None
     if not header or header[0] != "time":
-        sep = next((c for c in ";\t|" if header and c in header[0]), None)
-        hint = f" (the separator must be a comma, not {sep!r})" if sep else ""
+        first = header[0] if header else ""
+        sep = next((c for c in ";\t|" if c in first), None)
+        hint = (f" (the separator must be a comma, not {sep!r})" if sep
+                else " (column names are lower case: time, t_in, ...)" if first.lower() == "time"
+                else "")
         raise KitCsvError(
-            f"{path}:1: the first column must be 'time', found {header[:1]}{hint}"
+            f"{path}:1: the first column must be 'time', found "
+            f"{repr(first) if header else 'an empty line'}{hint}"
         )
     if len(set(header)) != len(header):
         dup = sorted({h for h in header if header.count(h) > 1})
@@ -183,26 +187,34 @@ def _read_rows(path: Path, reader, width: int, known: list[tuple[int, str]],
     previous = None
     previous_cells: list[str] = []
     repeats: list[int] = []  # lines of exact repeats of the row before (logger re-sends)
+    bad = _BadCells()
     for row in reader:
         line = reader.line_num
         if not row or (len(row) == 1 and not row[0].strip()):
             continue
         if len(row) != width:
+            bad.raise_first()
             raise KitCsvError(f"{path}:{line}: {len(row)} cells, the header has {width}")
         try:
             stamp = parse_time(row[0])
         except ValueError as exc:
-            raise KitCsvError(f"{path}:{line}: column time: bad time {row[0]!r}: {exc}") from None
+            bad.raise_first()  # an earlier bad cell is the first error
+            why = ("not an ISO 8601 time with its UTC offset (write e.g. 2020-03-27T00:01:00Z; "
+                   "day/month/year and Unix seconds are not read)"
+                   if str(exc).startswith("Invalid isoformat") else str(exc))
+            raise KitCsvError(f"{path}:{line}: column time: bad time {row[0]!r}: {why}") from None
         cells = [row[i].strip() for i, _ in known]
         if stamp == previous and cells == previous_cells:
             repeats.append(line)  # the same sample twice: keeping one loses nothing
             continue
         if stamp == previous:
+            bad.raise_first()  # an earlier bad cell is the first error
             raise KitCsvError(
                 f"{path}:{line}: column time: {row[0]} repeats the previous row's time with "
                 f"other values; which one is the measurement?"
             )
         if previous is not None and stamp < previous:
+            bad.raise_first()  # an earlier bad cell is the first error
             raise KitCsvError(
                 f"{path}:{line}: column time: {row[0]} is not after the previous row "
                 f"({previous}Z); rows must be in time order"
@@ -210,7 +222,8 @@ def _read_rows(path: Path, reader, width: int, known: list[tuple[int, str]],
         previous, previous_cells = stamp, cells
         times.append(stamp)
         for i, name in known:
-            values[name].append(_parse_cell(path, line, name, row[i]))
+            values[name].append(bad.parse(path, line, name, row[i]))
+    bad.raise_first()
     if not times:
         raise KitCsvError(f"{path}: no data rows")
     if repeats:
@@ -234,6 +247,39 @@ def _refuse_rh_fractions(path: Path, values: dict[str, list[float]]) -> None:
             )
 
 
+class _BadCells:
+    """The first bad cell is the error, and how many more follow is said with it: a logger whose
+    humidity reads 100.4 % in fog has hundreds, and one line at a time would hide that."""
+
+    def __init__(self) -> None:
+        self.first: KitCsvError | None = None
+        self.more = 0
+        self.next_line = 0
+
+    def parse(self, path: Path, line: int, name: str, cell: str) -> float:
+        try:
+            return _parse_cell(path, line, name, cell)
+        except KitCsvError as exc:
+            if self.first is None:
+                self.first = exc
+            else:
+                self.more += 1
+                self.next_line = self.next_line or line
+            return math.nan
+
+    def raise_first(self) -> None:
+        """Raise the first bad cell's error, with the count of those after it (so far)."""
+        if self.first is None:
+            return
+        more = (f" (and {self.more} more bad cell(s) after it, the next on line {self.next_line})"
+                if self.more else "")
+        raise KitCsvError(f"{self.first}{more}")
+
+
+_MISSING_MARKS = {"na", "n/a", "#n/a", "null", "none", "-", "--", "?", "missing"}
+"""What spreadsheets, R and loggers write for a missing value; the kit CSV leaves the cell empty."""
+
+
 def _parse_cell(path: Path, line: int, name: str, cell: str) -> float:
     cell = cell.strip()
     if not cell:
@@ -241,7 +287,8 @@ def _parse_cell(path: Path, line: int, name: str, cell: str) -> float:
     try:
         value = float(cell)
     except ValueError:
-        raise KitCsvError(f"{path}:{line}: column {name}: not a number: {cell!r}") from None
+        hint = " (a missing value is an empty cell)" if cell.lower() in _MISSING_MARKS else ""
+        raise KitCsvError(f"{path}:{line}: column {name}: not a number: {cell!r}{hint}") from None
     if not math.isfinite(value):
         raise KitCsvError(f"{path}:{line}: column {name}: {cell!r} (leave the cell empty)")
     col = COLUMNS[name]

@@ -20,6 +20,13 @@ def _pyplot():
     return plt
 
 
+def figure_formats() -> list[str]:
+    """The file name endings (without the dot) a figure can be saved as: matplotlib's own list."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    return sorted(FigureCanvasBase.get_supported_filetypes())
+
+
 def plot_replay(result: ReplayResult, path: str | Path, title: str = "") -> None:
     """Measured vs predicted T_in, the one-step residual, and each parameter inside its hard box."""
     plt = _pyplot()

@@ -160,3 +160,55 @@ def test_iterations_and_population_must_be_at_least_one(capsys, arg):
               "--model", "prototype", arg])
     assert exc.value.code == 2
     assert "must be at least 1" in capsys.readouterr().err
+
+
+
+@pytest.mark.parametrize("command", ["calibrate", "replay", "diagnose", "vsensor"])
+@pytest.mark.parametrize(("seed", "why"), [("-1", "must be 0 or more, got '-1'"),
+                                           ("1.5", "not a whole number: '1.5'")])
+def test_a_seed_numpy_would_refuse_is_a_usage_error_not_a_traceback(capsys, command, seed, why):
+    kind = ["--model-kind", "prototype"] if command == "vsensor" else ["--model", "prototype"]
+    with pytest.raises(SystemExit) as exc:  # before the data is read: argparse's exit 2
+        main([command, "--data", str(DATASET), "--greenhouse", "biskra-prototype", *kind,
+              f"--seed={seed}"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    assert err.splitlines()[-1].endswith(f"error: argument --seed: {why}")
+
+
+def test_the_params_files_header_is_the_whole_command_and_makes_the_same_file(capsys, tmp_path):
+    """The header said only '--algorithm rsba --seed 0 on FILE': the greenhouse, model, span and
+    search size that made the numbers were lost with the terminal."""
+    import shlex
+
+    from tests.cli_mistakes_common import kit_csv
+
+    data, first, again = kit_csv(tmp_path, rows=90), tmp_path / "p.toml", tmp_path / "again.toml"
+    assert main(["calibrate", "--data", str(data), "--greenhouse", "biskra-prototype", "--model",
+                 "prototype", "--calibrate-on", "2020-03-27T10:00/2020-03-27T11:00",
+                 "--iterations", "2", "--population", "3", "--site", "52,4.5", "--seed", "3",
+                 "--out", str(first)]) == 0
+    header = first.read_text().splitlines()[0]
+    words = shlex.split(header.removeprefix("# "))
+    assert words[:4] == ["python", "-m", "gateway", "calibrate"]
+    for option, value in (("--greenhouse", "biskra-prototype"), ("--seed", "3"),
+                          ("--calibrate-on", "2020-03-27T10:00/2020-03-27T11:00"),
+                          ("--iterations", "2"), ("--population", "3"), ("--site", "52,4.5")):
+        assert words[words.index(option) + 1] == value, header
+    assert main([*words[3:], "--out", str(again)]) == 0
+    capsys.readouterr()
+    assert again.read_text() == first.read_text()
+
+
+def test_a_population_no_machine_holds_is_one_line_not_numpys_traceback(capsys, tmp_path):
+    from tests.cli_mistakes_common import kit_csv
+
+    data = kit_csv(tmp_path)  # 10^12 particles: ~29 TiB, refused at once by the allocator
+    assert main(["calibrate", "--data", str(data), "--greenhouse", "biskra-prototype", "--model",
+                 "prototype", "--iterations", "1", "--population", "1000000000000"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    line = err.strip().splitlines()[-1]
+    assert line.startswith("error: calibrate: out of memory (Unable to allocate")
+    assert line.endswith("a smaller --population, window or span)")

@@ -117,3 +117,26 @@ def test_printed_line_is_what_the_firmware_config_takes(tmp_path: Path, capsys) 
     assert r.returncode == 0, r.stdout + r.stderr
     dev, hexkey = r.stdout.split()
     assert load_keys(keys) == {int(dev): bytes.fromhex(hexkey)}
+
+
+def test_a_keys_file_that_does_not_exist_is_said_so(tmp_path: Path, capsys) -> None:
+    keys = tmp_path / "kyes.txt"  # a typo of the file's name
+    assert main(["keys", "rotate", "7", "--keys", str(keys)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"error: {keys}: no such keys file, so no device 7 to rotate; add it with: "
+                   f"python -m gateway keys add 7 --keys {keys}")
+    assert main(["keys", "list", "--keys", str(keys)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"error: {keys}: no such keys file; make it with: python -m gateway keys add "
+                   f"DEVICE_ID --keys {keys}")
+    assert not keys.exists()
+
+
+def test_a_key_length_that_is_not_a_number_is_said_in_words(tmp_path: Path, capsys) -> None:
+    with pytest.raises(SystemExit) as exc:
+        add(tmp_path / "keys.txt", "7", "--bytes", "thirty-two")
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err.splitlines()[-1].endswith("argument --bytes: key length 'thirty-two' is not a "
+                                         "whole number of bytes (16 to 64; 32 recommended)")
+    assert "_key_bytes" not in err and not (tmp_path / "keys.txt").exists()

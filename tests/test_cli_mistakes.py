@@ -56,6 +56,7 @@ def test_run_check_refuses_a_store_it_could_not_create(capsys, tmp_path, db, mes
     ("--max-db-mb", "0", "must be at least 1, got '0'"),
     ("--batch-delay", "-1", "must be at least 0, got '-1'"),
     ("--baudrate", "9600.5", "expected a whole number, got '9600.5'"),
+    ("--listen", "127.0.0.1:568300", "port 568300 of '127.0.0.1:568300' is outside 0..65535"),
 ])
 def test_ingest_refuses_numbers_outside_the_configs_bounds(capsys, tmp_path, option, value,
                                                            message):
@@ -165,3 +166,141 @@ def test_bench_runner_lists_its_benches_and_refuses_an_unknown_one():
                        timeout=60)
     assert r.returncode == 2 and "no bench named calibratoin (benches: " in r.stderr
     assert "== bench" not in r.stdout  # nothing was started
+
+
+def test_verbose_is_taken_after_the_command_too(capsys, tmp_path):
+    """'calibrate ... -v' was 'unrecognized arguments: -v' (only 'python -m gateway -v
+    calibrate ...' worked), and '-v ingest ...' did not reach the ingest service's parser."""
+    from gateway.cli import build_parser
+
+    parser = build_parser()
+    base = ["calibrate", "--data", "k.csv", "--greenhouse", "biskra-prototype", "--model",
+            "prototype"]
+    assert parser.parse_args([*base, "-v"]).verbose and parser.parse_args(["-v", *base]).verbose
+    assert not parser.parse_args(base).verbose
+    assert parser.parse_args(["keys", "list", "--keys", "k.txt", "--verbose"]).verbose
+    keys = tmp_path / "keys.txt"
+    assert main(["keys", "add", "7", "--keys", str(keys), "-v"]) == 0
+    assert '"device_id": 7' in capsys.readouterr().out
+    missing = tmp_path / "none.txt"  # refused before the service listens
+    assert main(["-v", "ingest", "--db", str(tmp_path / "s.db"), "--keys", str(missing)]) == 2
+    assert f"{missing}: cannot read the keys file" in one_error_line(capsys)
+
+
+def _defaults_not_called_default(parser: argparse.ArgumentParser, prefix: str = ""):
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield from _defaults_not_called_default(sub, f"{prefix}{name} ")
+        elif (action.option_strings and action.default not in (None, argparse.SUPPRESS, False, [])
+              and "default" not in (action.help or "")):
+            yield f"{prefix}{action.option_strings[0]}"
+
+
+def test_every_gateway_option_with_a_default_says_default_in_one_wording():
+    """'(rsba)', '(0.5)', '(825)' beside '(default 60)', '(default 0)': one wording, so a
+    reader of two commands' help never wonders whether '(2)' is a default or an example."""
+    from gateway.cli import build_parser
+
+    assert list(_defaults_not_called_default(build_parser())) == []
+
+
+def test_every_help_page_fits_a_terminal(monkeypatch):
+    """The subscribe description came out as one 400-character line (its raw formatter, kept
+    for the epilog's examples, does not wrap), and the four model names made the data commands'
+    usage and option lines overrun; no line of any page is now over 100 characters at 80."""
+    from gateway.cli import build_parser
+
+    monkeypatch.setenv("COLUMNS", "80")  # what argparse wraps to
+
+    def pages(parser: argparse.ArgumentParser, name: str):
+        yield name, parser.format_help()
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for sub, child in action.choices.items():
+                    yield from pages(child, f"{name} {sub}")
+
+    long = [(name, line) for name, text in pages(build_parser(), "gateway")
+            for line in text.splitlines() if len(line) > 100]
+    assert long == []
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--dsn", "dbname=x"], "give db (SQLite) or dsn (PostgreSQL), not both (--db or --dsn)"),
+    (["--mode", "client"], "client mode needs a router in connect (--connect ENDPOINT)"),
+])
+def test_subscribe_conflicts_on_the_command_line_name_its_options(capsys, tmp_path, args,
+                                                                  message):
+    assert main(["subscribe", "--db", str(tmp_path / "c.db"), *args]) == 2
+    assert one_error_line(capsys) == f"error: command line: {message}"
+    assert list(tmp_path.iterdir()) == []  # no store made
+
+
+@pytest.mark.parametrize(("in_gateway", "tables", "said"), [
+    ("status_every_s = 0\n", "", "gateway.status_every_s: 0 is below its minimum 1"),
+    ("", "[outbox]\nalarm_fraction = 1.5\n", "outbox.alarm_fraction: 1.5 is outside 0.05..1"),
+])
+def test_run_check_says_a_number_out_of_range_without_inf(capsys, tmp_path, in_gateway, tables,
+                                                          said):
+    """'0.0 is outside 1.0..inf' for a whole number of seconds: the bound is now said as one."""
+    assert main(["keys", "add", "7", "--keys", str(tmp_path / "keys.txt")]) == 0
+    config = tmp_path / "gateway.toml"
+    config.write_text(f'[gateway]\nfarm = "f1"\ndb = "serra.db"\nkeys = "keys.txt"\n{in_gateway}'
+                      f'{tables}[[greenhouse]]\nname = "north"\ngreenhouse = "biskra-prototype"\n'
+                      'model = "prototype"\ninside = 7\n')
+    capsys.readouterr()
+    assert main(["run", "--config", str(config), "--check"]) == 2
+    assert one_error_line(capsys) == f"error: {config}: {said}"
+
+
+@pytest.mark.parametrize(("listen", "said"), [
+    ("0.0.0.0:70000", "port 70000 of '0.0.0.0:70000' is outside 0..65535"),
+    ("gateway-pi:5683", "'gateway-pi' is not an IP address: give the address to listen on"),
+])
+def test_run_check_reads_ingest_listen_as_ingest_listen_does(capsys, tmp_path, listen, said):
+    """The config's [ingest] listen had a reader of its own: a port out of range was 'expected
+    HOST:PORT', and a host name passed --check (ingest --listen refuses it: never resolved)."""
+    assert main(["keys", "add", "7", "--keys", str(tmp_path / "keys.txt")]) == 0
+    config = tmp_path / "gateway.toml"
+    config.write_text(f'[gateway]\nfarm = "f1"\ndb = "serra.db"\nkeys = "keys.txt"\n[ingest]\n'
+                      f'listen = "{listen}"\n[[greenhouse]]\nname = "north"\ngreenhouse = '
+                      '"biskra-prototype"\nmodel = "prototype"\ninside = 7\n')
+    capsys.readouterr()
+    assert main(["run", "--config", str(config), "--check"]) == 2
+    assert one_error_line(capsys).startswith(f"error: {config}: ingest.listen: {said}")
+
+
+@pytest.mark.parametrize(("content", "said"), [
+    ("time,t_in\n", "not an SQLite database, not a Serra store"),
+    (None, "not a Serra store (schema version 0; missing tables devices, meta, minute, samples) "
+           "(a cloud store"),
+])
+def test_run_check_refuses_a_gateway_db_that_is_another_file(capsys, tmp_path, content, said):
+    """--check said 'ok' of a gateway.db naming a CSV or the cloud store's file; only the start
+    refused it (or, for the cloud store, a gateway store would have been made inside it)."""
+    from gateway.cloud.store import open_store
+
+    assert main(["keys", "add", "7", "--keys", str(tmp_path / "keys.txt")]) == 0
+    db = tmp_path / "other.db"
+    if content is None:
+        open_store(db, None, "serra").close()
+    else:
+        db.write_text(content)
+    before = db.read_bytes()
+    config = tmp_path / "gateway.toml"
+    config.write_text('[gateway]\nfarm = "f1"\ndb = "other.db"\nkeys = "keys.txt"\n[[greenhouse]]\n'
+                      'name = "north"\ngreenhouse = "biskra-prototype"\nmodel = "prototype"\n'
+                      'inside = 7\n')
+    capsys.readouterr()
+    assert main(["run", "--config", str(config), "--check"]) == 2
+    assert one_error_line(capsys).startswith(f"error: {config}: gateway.db: {db}: {said}")
+    assert db.read_bytes() == before
+
+
+def test_version_is_printed_for_a_bug_report(capsys):
+    from importlib.metadata import version
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0
+    assert capsys.readouterr().out.strip() == f"python -m gateway {version('serra')}"

@@ -269,3 +269,117 @@ def test_replay_says_when_a_starting_parameter_is_outside_its_hard_box(capsys, t
     assert (f"note: {params}: params.c_solar = 1e+09 is outside its hard box "
             f"[{lo[j]:g}, {hi[j]:g}]") in err and f"use {hi[j]:g}" in err
     assert err.count("outside its hard box") == 1  # the others are inside
+
+
+@pytest.mark.parametrize(("floor_area", "volume", "height"), [
+    (6800.0, 0.76, "0.000112 m"),  # the floor area in cm2
+    (0.68, 760.0, "1.12e+03 m"),  # the volume in litres
+])
+def test_a_floor_area_and_volume_in_units_that_disagree_are_refused(capsys, tmp_path, floor_area,
+                                                                    volume, height):
+    gh = tmp_path / "mine.toml"  # each key alone is inside its range
+    gh.write_text(f'name = "mine"\n[geometry]\nfloor_area = {floor_area}\nvolume = {volume}\n')
+    data = kit_csv(tmp_path)
+    assert main(["calibrate", "--data", str(data), "--greenhouse", str(gh), "--model",
+                 "prototype", "--iterations", "1", "--population", "2"]) == 2
+    line = one_error_line(capsys)
+    assert line.startswith(f"error: {gh}: 'geometry.volume' / 'geometry.floor_area' = {height}")
+    assert "mean height is impossible" in line and "floor_area in m2, volume in m3" in line
+
+
+def test_vsensor_says_what_it_clamped_in_words_not_as_its_clamp_inputs_option(capsys, tmp_path):
+    """'300 clamped' read as if the inputs had been clamped though --clamp-inputs was off: the
+    count is of flows held to [0, the physical maximum], and says so; the inputs fed at their
+    bound are counted only with the option."""
+    data = kit_csv(tmp_path)
+    assert _vsensor_on(data, "prototype", "biskra-prototype", "--json") == 0
+    counts = json.loads(capsys.readouterr().out)
+    assert counts["inputs_clamped"] == 0  # the kit rows are inside the training ranges
+    for more in ((), ("--clamp-inputs",)):
+        assert _vsensor_on(data, "prototype", "biskra-prototype", *more) == 0
+        head = capsys.readouterr().out.splitlines()[0]
+        assert head.endswith(f", {counts['clamped']} with the flow held to [0, its physical "
+                             "maximum]")  # nothing about inputs: none was fed at its bound
+    rows = data.read_text().splitlines()  # a storm: wind far above the training range
+    storm = tmp_path / "storm.csv"
+    storm.write_text("\n".join([rows[0], *(r.rsplit(",", 1)[0] + ",35" for r in rows[1:])]) + "\n")
+    assert rows[0].endswith(",wind")
+    assert _vsensor_on(storm, "prototype", "biskra-prototype", "--clamp-inputs") == 0
+    head = capsys.readouterr().out.splitlines()[0]
+    assert head.endswith(f", {len(rows) - 1} with inputs fed at their bound (--clamp-inputs)")
+
+
+@pytest.mark.parametrize(("cell", "hint"), [
+    ("NA", " (a missing value is an empty cell)"),  # R, pandas
+    ("#N/A", " (a missing value is an empty cell)"),  # a spreadsheet
+    ("1.5 m/s", ""),  # not a missing mark: no hint that would mislead
+])
+def test_a_missing_value_written_as_a_word_says_to_leave_the_cell_empty(capsys, tmp_path, cell,
+                                                                         hint):
+    data = kit_csv(tmp_path)
+    lines = data.read_text().splitlines()
+    assert lines[0].endswith(",wind")
+    lines[7] = lines[7].rsplit(",", 1)[0] + f",{cell}"  # line 8 of the file
+    data.write_text("\n".join(lines) + "\n")
+    assert main(["calibrate", "--data", str(data), *PROTO]) == 2
+    assert one_error_line(capsys) == f"error: {data}:8: column wind: not a number: {cell!r}{hint}"
+
+
+@pytest.mark.parametrize(("header", "found"), [
+    ("Time,T_in,rh_in,t_out,rh_out,i_glob,wind",
+     "found 'Time' (column names are lower case: time, t_in, ...)"),
+    ("time;t_in;rh_in", "found 'time;t_in;rh_in' (the separator must be a comma, not ';')"),
+    ("", "found an empty line"),
+])
+def test_a_header_without_time_first_says_what_it_found_as_text(capsys, tmp_path, header, found):
+    data = kit_csv(tmp_path)  # was: found ['Time'], a Python list, and no word on the case
+    data.write_text(header + "\n" + data.read_text().split("\n", 1)[1])
+    assert main(["calibrate", "--data", str(data), *PROTO]) == 2
+    assert one_error_line(capsys) == f"error: {data}:1: the first column must be 'time', {found}"
+
+
+def test_a_bad_cell_says_how_many_more_follow_and_where_the_next_is(capsys, tmp_path):
+    """A humidity sensor reading 100.4 % in fog does so for hours: one line at a time, a user
+    would fix the file line by line without knowing how many are left."""
+    data = kit_csv(tmp_path, rows=40)
+    lines = data.read_text().splitlines()
+    col = lines[0].split(",").index("rh_in")
+    for k in (5, 9, 17, 30):  # lines 6, 10, 18, 31 of the file
+        cells = lines[k].split(",")
+        cells[col] = "100.4"
+        lines[k] = ",".join(cells)
+    data.write_text("\n".join(lines) + "\n")
+    assert main(["calibrate", "--data", str(data), *PROTO]) == 2
+    assert one_error_line(capsys) == (
+        f"error: {data}:6: column rh_in: 100.4 % outside the physical range [0, 100] (relative "
+        "humidity cannot exceed 100 %) (and 3 more bad cell(s) after it, the next on line 10)")
+    lines[20] = lines[11]  # a row out of order after the first bad cell: the bad cell is first
+    data.write_text("\n".join(lines) + "\n")
+    assert main(["calibrate", "--data", str(data), *PROTO]) == 2
+    assert one_error_line(capsys).startswith(f"error: {data}:6: column rh_in: 100.4 %")
+
+
+@pytest.mark.parametrize(("setting", "said"), [
+    ("t_in.window=1e9", "'online.t_in.window' = 1000000000 is impossible (expected 1..10000)"),
+    ("t_in.bats=1", "'online.t_in.bats' = 1 is impossible (expected 2..10000)"),  # was "must be
+    ("t_in.prior=nan", "'online.t_in.prior' = nan is impossible (expected 0..1e+06)"),  # positive"
+])
+def test_replay_set_takes_the_bounds_of_a_greenhouse_files_online_table(capsys, tmp_path, setting,
+                                                                        said):
+    """'--set t_in.window=1e9' bypassed the bounds [online.t_in] has in a greenhouse file and
+    died allocating 30 GB (a traceback); '--set t_in.bats=1' said 'must be positive, got 1'."""
+    missing = tmp_path / "not-made-yet.csv"  # said before the data is read
+    assert main(["replay", "--data", str(missing), *PROTO, "--set", setting]) == 2
+    assert one_error_line(capsys) == f"error: --set {setting!r}: {said}"
+
+
+@pytest.mark.parametrize("stamp", ["27/03/2020 10:00", "1585303200"])
+def test_a_time_in_another_format_is_said_in_words_not_pythons(capsys, tmp_path, stamp):
+    data = kit_csv(tmp_path)  # a European spreadsheet's dates, a logger's Unix seconds
+    lines = data.read_text().splitlines()
+    lines[1] = stamp + "," + lines[1].split(",", 1)[1]
+    data.write_text("\n".join(lines) + "\n")
+    assert main(["calibrate", "--data", str(data), *PROTO]) == 2
+    assert one_error_line(capsys) == (
+        f"error: {data}:2: column time: bad time {stamp!r}: not an ISO 8601 time with its UTC "
+        "offset (write e.g. 2020-03-27T00:01:00Z; day/month/year and Unix seconds are not read)")

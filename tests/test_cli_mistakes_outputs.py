@@ -65,6 +65,12 @@ def test_subscribe_export_from_a_mistyped_store_creates_nothing(capsys, tmp_path
     (["--gateway", "bad farm!"], "gateway name 'bad farm!': use 1-63 letters"),
     (["--router", "r 1=10.0.0.5"], "router name 'r 1': use 1-63 letters"),
     (["--sign", "farm-d.csr"], "--sign 'farm-d.csr': expected ROLE:FILE.csr"),
+    # a router's hosts as endpoints: signed as DNS names no client matches, TLS failing far away
+    (["--router", "r1=10.0.0.5:7447"],
+     "--router 'r1=10.0.0.5:7447': host '10.0.0.5:7447': give the host without the port"),
+    (["--router", "r1=cloud.example.org,tls/cloud.example.org:7447"],
+     "host 'tls/cloud.example.org:7447': give the host alone, without the protocol"),
+    (["--router", "r1=cloud example"], "host 'cloud example': not an IP address or a host name"),
 ])
 def test_certs_mistakes_leave_no_ca_behind(capsys, tmp_path, args, message):
     out = tmp_path / "certs"
@@ -125,4 +131,64 @@ def test_export_over_its_own_store_is_refused(capsys, tmp_path):
     before = db.read_bytes()
     assert main(["export", "--db", str(db), "--out", str(db)]) == 2
     assert f"--out {db}: is the store --db" in one_error_line(capsys)
+    assert db.read_bytes() == before
+
+
+def test_a_plot_name_matplotlib_cannot_write_is_refused_before_the_replay(capsys, tmp_path):
+    data, plot = kit_csv(tmp_path), tmp_path / "replay.txt"
+    assert main(["replay", "--data", str(data), *PROTO, "--plot", str(plot)]) == 2
+    captured = capsys.readouterr()
+    line = captured.err.strip().splitlines()[-1]
+    assert line.startswith(f"error: --plot {plot}: cannot draw a '.txt' file") and "png" in line
+    assert "Traceback" not in captured.err
+    assert captured.out == "" and not plot.exists()  # refused before the replay, not after it
+
+
+@pytest.mark.parametrize("subscribing", [False, True])
+def test_subscribe_export_into_a_file_is_refused_before_subscribing(capsys, tmp_path, subscribing):
+    """'--export notes.txt' (a file where the CSVs' folder goes) was a FileExistsError traceback,
+    when subscribed at the end of the whole run."""
+    from gateway.cloud.store import open_store
+
+    db, export = tmp_path / "cloud.db", tmp_path / "notes.txt"
+    export.write_text("keep me")
+    if not subscribing:
+        open_store(db, None, "serra").close()  # export only reads an existing store
+    before = sorted(tmp_path.iterdir())
+    link = ["--connect", "tcp/127.0.0.1:1", "--duration", "0.3"] if subscribing else []
+    assert main(["subscribe", *link, "--db", str(db), "--export", str(export)]) == 2
+    assert one_error_line(capsys) == f"error: --export {export}: exists and is not a folder"
+    assert sorted(tmp_path.iterdir()) == before and export.read_text() == "keep me"
+
+
+@pytest.mark.parametrize("subscribing", [False, True])
+def test_subscribe_on_the_gateways_own_store_is_refused_and_leaves_it_unchanged(capsys, tmp_path,
+                                                                                subscribing):
+    """'--db serra.db' (the gateway's store) for the cloud store: the subscriber added its table
+    to it and said 'no measurement stored yet'; subscribed, it would have stored into it."""
+    from gateway.store import Store
+
+    db = tmp_path / "serra.db"
+    Store(db).close()
+    before = db.read_bytes()
+    link = ["--connect", "tcp/127.0.0.1:1", "--duration", "0.3"] if subscribing else []
+    assert main(["subscribe", *link, "--db", str(db), "--export", str(tmp_path / "csv")]) == 2
+    line = one_error_line(capsys)
+    assert line.startswith(f"error: {db}: not a cloud store: it holds other tables (devices, ")
+    assert "(the gateway's own store? 'python -m gateway export' reads that)" in line
+    assert db.read_bytes() == before and not (tmp_path / "csv").exists()
+
+
+@pytest.mark.parametrize("command", [["export", "--out", "x.csv"], ["status", "--once"]])
+def test_the_cloud_store_given_to_a_gateway_store_reader_says_what_reads_it(capsys, tmp_path,
+                                                                          command):
+    from gateway.cloud.store import open_store
+
+    db = tmp_path / "cloud.db"
+    open_store(db, None, "serra").close()
+    before = db.read_bytes()
+    assert main([command[0], "--db", str(db), *command[1:]]) == 2
+    assert one_error_line(capsys).endswith(
+        "missing tables devices, meta, minute, samples) (a cloud store, which 'python -m gateway "
+        "subscribe --db ... --export DIR' reads)")
     assert db.read_bytes() == before

@@ -14,6 +14,7 @@ from gateway import protocol as p
 from gateway.cli import main
 from gateway.kitcsv import read_kit_csv
 from gateway.store import Store
+from tests.cli_mistakes_common import one_error_line
 from training.simulate import simulate
 
 STUCK = slice(600, 640)  # 40 minutes of a frozen inside reading
@@ -101,6 +102,35 @@ def test_export_span_and_device_choice(tmp_path, kit, capsys):
     assert main(["export", "--db", str(db), "--out", str(out), "--from", "yesterday"]) == 2
     assert "--from: bad time 'yesterday'" in capsys.readouterr().err
 
+
+
+def test_export_span_without_an_offset_is_utc_as_in_calibrate_on(tmp_path, kit, capsys):
+    time, cols = kit
+    db, out = tmp_path / "g.db", tmp_path / "kit.csv"
+    store_records(db, time[:120], {c: v[:120] for c, v in cols.items()})
+    t0, t1 = str(time[30])[:16], str(time[90])[:16]  # 2009-...T00:30, no offset, no seconds
+    assert main(["export", "--db", str(db), "--out", str(out), "--from", t0, "--to", t1]) == 0
+    assert "60 minutes" in capsys.readouterr().out
+    assert str(read_kit_csv(out).time[0]) == str(time[30])
+    day = str(time[0])[:10]  # a date alone is its midnight UTC: the whole stored span
+    assert main(["export", "--db", str(db), "--out", str(out), "--from", day]) == 0
+    assert "120 minutes" in capsys.readouterr().out
+    assert main(["export", "--db", str(db), "--out", str(out), "--to", "2009-1-5"]) == 2
+    assert one_error_line(capsys) == ("error: --to: bad time '2009-1-5': not an ISO 8601 date or "
+                                      "time, e.g. 2026-03-01 or 2026-03-01T06:00Z")
+
+
+def test_export_says_its_rows_are_minute_means_and_how_calibrate_reads_them(tmp_path, kit, capsys):
+    """calibrate reads rows as instants unless told (--sampling mean); the export, whose rows are
+    minute means, said nothing of it (docs/data-format.md, docs/model.md)."""
+    time, cols = kit
+    db, out = tmp_path / "g.db", tmp_path / "kit.csv"
+    store_records(db, time[:30], {c: v[:30] for c, v in cols.items()})
+    assert main(["export", "--db", str(db), "--out", str(out)]) == 0
+    captured = capsys.readouterr()
+    assert captured.out.startswith(f"wrote {out}: device 7, 30 minutes")
+    assert "each row is the mean over its minute: calibrate reads such rows with --sampling mean" \
+        in captured.err
 
 def test_export_of_a_partly_aggregated_store_equals_the_fully_aggregated_one(tmp_path, kit):
     """The read-only export computes the minutes the service has not aggregated yet in memory,

@@ -40,6 +40,8 @@ def build_parser() -> argparse.ArgumentParser:
         "Zenoh; certificates and routers for a fleet.",
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log details to stderr")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}",
+                        help="print the installed serra version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for module in COMMANDS.values():
         try:
@@ -49,15 +51,40 @@ def build_parser() -> argparse.ArgumentParser:
                 raise
             continue  # a command still being written is simply not offered
         mod.add_parser(sub)
+    for command in sub.choices.values():
+        _verbose_anywhere(command)
     return parser
+
+
+def _version() -> str:
+    """The installed package's version (what a bug report needs), or why there is none."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("serra")
+    except PackageNotFoundError:
+        return "(not installed: run from a source tree)"
+
+
+def _verbose_anywhere(parser: argparse.ArgumentParser) -> None:
+    """``-v`` after the command too (``calibrate ... -v``, where people add it), not only before
+    it; SUPPRESS leaves the value given before the command when it is not repeated after."""
+    if "-v" not in parser._option_string_actions:
+        parser.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS,
+                            help="log details to stderr")
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child in action.choices.values():
+                _verbose_anywhere(child)
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
-    if argv[:1] == ["ingest"]:  # the service has its own parser: hand it every argument
+    verbose = argv[:1] in (["-v"], ["--verbose"])
+    if argv[verbose:verbose + 1] == ["ingest"]:  # the service has its own parser: hand it all
         from gateway.ingest.service import main as ingest_main
 
-        return ingest_main(argv[1:], prog="python -m gateway ingest")
+        return ingest_main(argv[1 + verbose:] + ["-v"] * verbose, prog="python -m gateway ingest")
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(
@@ -71,6 +98,11 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except CliError as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except MemoryError as exc:  # e.g. --population 10000000: say it, not numpy's traceback
+        print(f"error: {args.command}: out of memory ({exc}): the options or the data ask for "
+              "more than this machine has (a smaller --population, window or span)",
+              file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130

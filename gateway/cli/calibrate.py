@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 
 from gateway.cli import CliError
 from gateway.cli.common import (
     add_data_arguments,
     add_sampling_argument,
+    add_seed_argument,
     check_output,
     dump_json,
     load_run,
@@ -33,8 +35,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     add_data_arguments(p)
     add_sampling_argument(p)
-    p.add_argument("--algorithm", choices=ALGORITHMS, default="rsba", help="search algorithm (rsba)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (0)")
+    p.add_argument("--algorithm", choices=ALGORITHMS, default="rsba", help="search algorithm (default rsba)")
+    add_seed_argument(p, "the search")
     p.add_argument(
         "--calibrate-on",
         metavar="START/END",
@@ -95,12 +97,24 @@ def run(args: argparse.Namespace) -> int:
         sys.stdout.write(text_block(inputs.notes))
     if args.out:
         with writing("--out", args.out):
-            write_params_file(
-                args.out, model, result.params,
-                f"python -m gateway calibrate --algorithm {args.algorithm} --seed {args.seed} "
-                f"on {args.data}",
-            )
+            write_params_file(args.out, model, result.params, _command(args))
     return 0
+
+
+def _command(args: argparse.Namespace) -> str:
+    """The command that made the parameters file, whole (data, greenhouse, span, search), so
+    its header can be run again to make the same file."""
+    given = [("--data", args.data), ("--greenhouse", args.greenhouse), ("--model", args.model),
+             ("--algorithm", args.algorithm), ("--seed", args.seed), ("--cost", args.cost),
+             ("--sampling", args.sampling), ("--calibrate-on", args.calibrate_on),
+             ("--step", args.step), ("--iterations", args.iterations),
+             ("--population", args.population)]
+    if args.site is not None:
+        given.append(("--site", f"{args.site[0]:g},{args.site[1]:g}"))
+    words = ["python", "-m", "gateway", "calibrate"]
+    words += [w for option, value in given if value is not None for w in (option, f"{value:g}"
+              if isinstance(value, float) else str(value))]
+    return shlex.join(words)
 
 
 def _print_human(report: dict) -> None:

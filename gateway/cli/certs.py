@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import ipaddress
+import re
 from pathlib import Path
 
 from gateway.cli import CliError
@@ -38,9 +40,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="sign a request made on the device (its key never leaves it); ROLE is "
                    "gateway, client or router; the CN comes from the request")
     p.add_argument("--days", type=float, default=825, metavar="N",
-                   help="validity of the certificates made now, in days (825)")
+                   help="validity of the certificates made now [days] (default 825)")
     p.add_argument("--ca-name", default="serra-fleet-ca", metavar="CN",
-                   help="common name of a new CA (serra-fleet-ca)")
+                   help="common name of a new CA (default serra-fleet-ca)")
     p.add_argument("--force", action="store_true",
                    help="replace certificates that exist (never the CA: remove it by hand)")
     p.set_defaults(func=run)
@@ -61,6 +63,9 @@ def run(args: argparse.Namespace) -> int:
         if not sep or role not in ("gateway", "client", "router"):
             raise CliError(f"--sign {spec!r}: expected ROLE:FILE.csr, ROLE one of gateway, "
                            "client, router")
+    for spec in args.router:
+        for host in spec.partition("=")[2].split(","):
+            _check_host(spec, host.strip())
     try:
         for option, names in (("router", [r.partition("=")[0] for r in args.router]),
                               ("gateway", args.gateway), ("client", args.client)):
@@ -96,3 +101,27 @@ def run(args: argparse.Namespace) -> int:
         key = f"  key {m.key} (0600)" if m.key is not None else "  (key stays on the device)"
         print(f"{m.role:8} CN={m.name:20} {m.cert}{key}")
     return 0
+
+
+_LABEL = re.compile(r"[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?")
+
+
+def _check_host(spec: str, host: str) -> None:
+    """A router's SAN entry: an IP address or a DNS name, as the clients' endpoints name the
+    router. '10.0.0.5:7447' or 'tls/host:7447' would be signed as a DNS name no client matches,
+    and TLS would fail on the far machine, not here."""
+    if not host:
+        return
+    try:
+        ipaddress.ip_address(host)
+        return
+    except ValueError:
+        pass
+    name = host.removeprefix("*.").removesuffix(".")  # a wildcard, a fully qualified name
+    if len(name) <= 253 and all(_LABEL.fullmatch(label) for label in name.split(".")):
+        return
+    why = ("give the host alone, without the protocol" if "/" in host
+           else "give the host without the port" if ":" in host
+           else "not an IP address or a host name (letters, digits, '-' and '.')")
+    raise CliError(f"--router {spec!r}: host {host!r}: {why}")
+

@@ -42,7 +42,8 @@ def add_data_arguments(p: argparse.ArgumentParser) -> None:
         metavar="PRESET|FILE.toml",
         help=f"greenhouse description: a preset ({', '.join(list_presets())}) or a TOML file",
     )
-    p.add_argument("--model", required=True, choices=MODEL_NAMES, help="climate model")
+    p.add_argument("--model", required=True, choices=MODEL_NAMES, metavar="MODEL",
+                   help=f"climate model: {', '.join(MODEL_NAMES)} (README.md, 'Models')")
     p.add_argument("--step", type=positive_number, metavar="S",
                    help=f"model step [s] (default {DEFAULT_STEP:g}, or the rows' own spacing when "
                    "they are more than 5 minutes apart: 10- and 15-minute loggers)")
@@ -100,6 +101,24 @@ def positive_int(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be at least 1, got {text!r}")
     return value
+
+
+def seed_int(text: str) -> int:
+    """argparse type: a whole number >= 0 (numpy's generators refuse a negative seed, which
+    would be a traceback after the data was read)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be 0 or more, got {text!r}")
+    return value
+
+
+def add_seed_argument(p: argparse.ArgumentParser, what: str) -> None:
+    """``--seed N``: the one wording for every command that draws random numbers."""
+    p.add_argument("--seed", type=seed_int, default=0, metavar="N",
+                   help=f"random seed of {what}, 0 or more (default 0)")
 
 
 @dataclass(frozen=True)
@@ -174,7 +193,7 @@ def parse_span(text: str | None, series: Series) -> tuple[int, int] | None:
     stamps = []
     for name, part in zip(("START", "END"), parts, strict=True):
         try:
-            stamps.append(_stamp(part))
+            stamps.append(parse_when(part))
         except ValueError as exc:  # the parser's own words only when they say more
             why = "" if str(exc).startswith("Invalid isoformat") else f" ({exc})"
             raise CliError(f"--calibrate-on {text!r}: {name} {part!r} is not an ISO 8601 date or "
@@ -190,7 +209,10 @@ def parse_span(text: str | None, series: Series) -> tuple[int, int] | None:
     return a, b
 
 
-def _stamp(text: str) -> np.datetime64:
+def parse_when(text: str) -> np.datetime64:
+    """A time given on the command line (``--calibrate-on``, ``export --from/--to``): ISO 8601
+    date or date and time, UTC unless an offset is given (``2026-03-01``, ``2026-03-01T06:00``,
+    ``2026-03-01T06:00+01:00``). The kit CSV itself wants the offset written (kitcsv.parse_time)."""
     text = text.strip()
     if "T" not in text and len(text) == 10:
         text += "T00:00:00"
@@ -241,6 +263,20 @@ def check_output(path: str | Path | None, option: str, folder: bool = False,
         raise CliError(f"{option} {path}: {parent} is not a folder")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise CliError(f"{option} {path}: folder {parent} is not writable by this user")
+
+
+def check_figure(path: str | None, option: str) -> None:
+    """Refuse a figure name matplotlib cannot write (``replay.txt``) before the run it would
+    draw: the error would otherwise come after all the work. No ending: matplotlib writes PNG."""
+    if not path:
+        return
+    from gateway.plots import figure_formats
+
+    ending = Path(path).suffix.lower().removeprefix(".")
+    formats = figure_formats()
+    if ending and ending not in formats:
+        raise CliError(f"{option} {path}: cannot draw a '.{ending}' file; give a figure name "
+                       f"ending in .png, .svg or .pdf (all: {', '.join(formats)})")
 
 
 @contextmanager

@@ -7,7 +7,14 @@ import sys
 from typing import TYPE_CHECKING
 
 from gateway.cli import CliError
-from gateway.cli.common import add_data_arguments, check_output, dump_json, load_run, writing
+from gateway.cli.common import (
+    add_data_arguments,
+    add_seed_argument,
+    check_output,
+    dump_json,
+    load_run,
+    writing,
+)
 from gateway.cli.notes import Note, as_json, echo, short_heldout_note, text_block
 
 if TYPE_CHECKING:
@@ -26,9 +33,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_data_arguments(p)
     p.add_argument("--split", type=float, default=0.5, metavar="FRACTION",
                    help="fraction of the data used to calibrate the base model, 0.1 to 0.9; the "
-                   "rest is held out (0.5)")
+                   "rest is held out (default 0.5)")
     p.add_argument("--report", metavar="DIR", help="write report.md and PNG plots into DIR")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the swarm (0)")
+    add_seed_argument(p, "the swarm")
     p.set_defaults(func=run)
 
 

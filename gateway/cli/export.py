@@ -8,7 +8,6 @@ import sys
 from pathlib import Path
 
 from gateway.cli import CliError
-from gateway.kitcsv import parse_time
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -27,7 +26,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, type=Path, metavar="FILE.csv", help="kit CSV to write")
     p.add_argument("--device", type=int, metavar="ID",
                    help="device id (default: the only one in the store)")
-    p.add_argument("--from", dest="start", metavar="ISO", help="first minute, e.g. 2026-03-01T00:00Z")
+    p.add_argument("--from", dest="start", metavar="ISO",
+                   help="first minute, e.g. 2026-03-01 or 2026-03-01T06:00 (UTC unless an offset "
+                   "is given, as in calibrate --calibrate-on)")
     p.add_argument("--to", dest="end", metavar="ISO", help="end of the span (excluded)")
     p.add_argument("--json", action="store_true", help="print what was written as one JSON object")
     p.set_defaults(func=run)
@@ -36,10 +37,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def _when(text: str | None, flag: str) -> float | None:
     if text is None:
         return None
+    from gateway.cli.common import parse_when
+
     try:
-        return float(parse_time(text).astype("int64"))
-    except ValueError as exc:
-        raise CliError(f"{flag}: bad time {text!r}: {exc}") from None
+        return float(parse_when(text).astype("int64"))
+    except ValueError as exc:  # the parser's own words only when they say more
+        why = ("not an ISO 8601 date or time, e.g. 2026-03-01 or 2026-03-01T06:00Z"
+               if str(exc).startswith("Invalid isoformat") else str(exc))
+        raise CliError(f"{flag}: bad time {text!r}: {why}") from None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -74,6 +79,8 @@ def run(args: argparse.Namespace) -> int:
                    "out": str(args.out)})
         return 0
     print(f"wrote {args.out}: device {done.device_id}, {done.rows} minutes, {done.start} → {done.end}")
+    print("  each row is the mean over its minute: calibrate reads such rows with --sampling mean "
+          "(docs/data-format.md)", file=sys.stderr)
     for name, reasons in done.dropped.items():
         text = ", ".join(f"{n} {why}" for why, n in reasons.items())
         print(f"  {name}: left empty: {text}", file=sys.stderr)

@@ -33,7 +33,11 @@ def _name(text: str) -> str:
 
 
 def _key_bytes(text: str) -> int:
-    n = int(text)
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"key length {text!r} is not a whole number of bytes "
+                                         "(16 to 64; 32 recommended)") from None
     if not 16 <= n <= 64:
         raise argparse.ArgumentTypeError("a key has 16 to 64 bytes (32 recommended)")
     return n
@@ -120,6 +124,9 @@ def run_list(args: argparse.Namespace) -> int:
         lines = parse_lines(read_text(args.keys), str(args.keys))
     except KeyFileError as exc:
         raise CliError(str(exc)) from None
+    except FileNotFoundError:
+        raise CliError(f"{args.keys}: no such keys file; make it with: python -m gateway keys "
+                       f"add DEVICE_ID --keys {args.keys}") from None
     except OSError as exc:
         raise CliError(f"{args.keys}: {exc.strerror or exc}") from None
     print(f"{'device':>10}  {'key id':12}  name")

@@ -8,6 +8,8 @@ import sys
 from gateway.cli import CliError
 from gateway.cli.common import (
     add_data_arguments,
+    add_seed_argument,
+    check_figure,
     check_output,
     dump_json,
     load_run,
@@ -19,6 +21,7 @@ from gateway.cli.notes import Note, as_json, echo, params_notes, text_block
 from gateway.estimate.online import online_settings
 from gateway.estimate.outlook import OUTLOOKS, make_outlook
 from gateway.estimate.replay import HORIZONS, replay, report, steps_of, write_predictions
+from gateway.greenhouse import GreenhouseError, check_online_value
 from gateway.model.params_file import outside_box
 
 _KEYS = ("window", "every", "iterations", "bats", "prior")
@@ -55,7 +58,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="leave the first MIN minutes out of every metric, e.g. 1440 to score days 2.. "
         "(default 0)",
     )
-    p.add_argument("--seed", type=int, default=0, help="random seed of the bats (0)")
+    add_seed_argument(p, "the bats")
     p.add_argument("--outlook", choices=sorted(OUTLOOKS),
                    help="weather outlook of the live-style forecasts (default: clear-sky-trend when "
                    "the greenhouse has a [site], else hold-latest)")
@@ -76,6 +79,11 @@ def _overrides(items: list[str]) -> dict[str, dict[str, float]]:
             raise CliError(f"--set {item!r}: expected OUTPUT.KEY=NUMBER, e.g. t_in.window=30") from None
         if name not in _KEYS:
             raise CliError(f"--set {item!r}: unknown key '{name}' (keys: {', '.join(_KEYS)})")
+        try:  # the bounds a greenhouse file's [online.<output>] has
+            number = check_online_value(f"--set {item!r}", output, name,
+                                        int(number) if number.is_integer() else number)
+        except GreenhouseError as exc:
+            raise CliError(str(exc)) from None
         out.setdefault(output, {})[name] = number
     return out
 
@@ -84,6 +92,8 @@ def run(args: argparse.Namespace) -> int:
     sources = {"--data": args.data, "--greenhouse": args.greenhouse, "--params": args.params}
     check_output(args.out, "--out", inputs=sources)
     check_output(args.plot, "--plot", inputs=sources)
+    check_figure(args.plot, "--plot")
+    overrides = _overrides(args.set)  # a typo here is said before the data is read
     run_inputs = load_run(args)
     series, gh, model = run_inputs.series, run_inputs.gh, run_inputs.model
     theta0 = read_params_file(args.params, model, gh) if args.params else None
@@ -94,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
         echo(made)
         notes = notes + made
     try:
-        settings = online_settings(model, gh, _overrides(args.set))
+        settings = online_settings(model, gh, overrides)
     except ValueError as exc:
         raise CliError(str(exc)) from None
     made = _horizon_notes(series.step)

@@ -44,10 +44,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="print one plain snapshot of every panel and exit (also when stdout is "
                    "not a terminal); exit status 1 when something needs attention")
     p.add_argument("--panel", choices=("greenhouse", "kits", "gateway"), default="greenhouse",
-                   help="the panel shown first")
+                   help="the panel shown first (default greenhouse)")
     p.add_argument("--greenhouse", metavar="NAME", help="the greenhouse shown first")
     p.add_argument("--interval", type=float, default=2.0, metavar="S",
-                   help="seconds between refreshes (2)")
+                   help="time between refreshes [s] (default 2)")
     p.set_defaults(func=run)
 
 

@@ -5,11 +5,13 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+import textwrap
 import threading
 import time
 from pathlib import Path
 
 from gateway.cli import CliError
+from gateway.cli.common import check_output, writing
 
 EPILOG = """\
 examples:
@@ -32,11 +34,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "subscribe",
         help="play the cloud: store what the gateways publish (dropping repeats), export kit CSVs",
-        description="Subscribe to Serra messages over Zenoh and store each one once, in SQLite "
-        "(the default) or PostgreSQL (--dsn); repeats are dropped by idempotency key, and what "
-        "was missed is recovered from the publishers' caches. With --history, answer history "
-        "queries for the farms from the store. With --export, write a kit CSV per greenhouse "
-        "from the stored measurements (without an endpoint: export only).",
+        description=textwrap.fill(  # the raw formatter (for the epilog) does not wrap it
+            "Subscribe to Serra messages over Zenoh and store each one once, in SQLite "
+            "(the default) or PostgreSQL (--dsn); repeats are dropped by idempotency key, and what "
+            "was missed is recovered from the publishers' caches. With --history, answer history "
+            "queries for the farms from the store. With --export, write a kit CSV per greenhouse "
+            "from the stored measurements (without an endpoint: export only).", 95),
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--config", type=Path, metavar="SUBSCRIBER.toml",
                    help="settings file ([subscribe], [tls]; docs/examples/subscriber.toml)")
@@ -45,14 +48,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "in client mode the routers to fail over between)")
     p.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
                    help="also listen for gateways on this endpoint (peer mode)")
-    p.add_argument("--mode", choices=("peer", "client"), help="Zenoh mode (peer)")
+    p.add_argument("--mode", choices=("peer", "client"), help="Zenoh mode (default peer)")
     p.add_argument("--key", action="append", default=[], metavar="KEYEXPR",
                    help="key expression to subscribe to (repeatable; default serra/**, or one per --farm)")
     p.add_argument("--farm", action="append", default=[], metavar="FARM",
                    help="subscribe to serra/FARM/** (repeatable); also the farms --history answers for")
-    p.add_argument("--db", type=Path, help="SQLite cloud store (created if absent)")
+    p.add_argument("--db", type=Path, metavar="cloud.db",
+                   help="SQLite cloud store (created if absent)")
     p.add_argument("--dsn", metavar="DSN", help="PostgreSQL cloud store instead (needs serra[cloud])")
-    p.add_argument("--schema", metavar="NAME", help="PostgreSQL schema (serra)")
+    p.add_argument("--schema", metavar="NAME", help="PostgreSQL schema (default serra)")
     p.add_argument("--history", action="store_true",
                    help="answer history queries for the farms from the store")
     p.add_argument("--tls-ca", type=Path, metavar="PEM", help="the fleet CA (tls/ endpoints)")
@@ -60,7 +64,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tls-key", type=Path, metavar="KEY", help="its private key (mode 0600)")
     p.add_argument("--export", type=Path, metavar="DIR",
                    help="write <farm>-<greenhouse>.csv kit CSVs here (at exit when subscribed)")
-    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (> 0)")
+    p.add_argument("--duration", type=float, metavar="S",
+                   help="stop after this long [s], > 0 (default: run until stopped)")
     p.set_defaults(func=run)
 
 
@@ -90,13 +95,15 @@ def settings(args: argparse.Namespace):
 def _export(store, folder: Path) -> None:
     from gateway.cloud.subscriber import export_kit_csv
 
-    folder.mkdir(parents=True, exist_ok=True)
+    with writing("--export", folder):
+        folder.mkdir(parents=True, exist_ok=True)
     ghs = store.greenhouses()
     if not ghs:
         print(f"{store.path}: no measurement stored yet: nothing to export", file=sys.stderr)
     for farm, gh in ghs:
         out = folder / f"{farm}-{gh}.csv"
-        n = export_kit_csv(store, farm, gh, out)
+        with writing("--export", out):
+            n = export_kit_csv(store, farm, gh, out)
         print(f"wrote {out}: {n} minutes")
 
 
@@ -107,6 +114,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.duration is not None and not args.duration > 0:  # also NaN
         raise CliError(f"--duration {args.duration:g}: must be a positive number of seconds")
+    check_output(args.export, "--export", folder=True)  # before a run whose end it is
     s = settings(args)
     if not s.connect and not s.listen and not args.export:
         raise CliError("give --connect ENDPOINT (or --listen) to subscribe, or --export DIR")
@@ -122,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(f"{s.db}: cannot open the cloud store: {e}") from None
     except ImportError as e:
         raise CliError(str(e)) from None
-    except RuntimeError as e:  # CloudStoreError: one line, no password
+    except RuntimeError as e:  # CloudStoreError (one line, no password), NotACloudStore
         raise CliError(str(e)) from None
     try:
         if s.connect or s.listen:

@@ -9,6 +9,7 @@ from collections.abc import Sequence
 from gateway.cli import CliError
 from gateway.cli.column_notes import missing
 from gateway.cli.common import (
+    add_seed_argument,
     add_site_argument,
     check_output,
     dump_json,
@@ -53,7 +54,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", metavar="flows.csv",
                    help="write time, flow, heat loss, out-of-range and valid flags per row")
     p.add_argument("--no-baselines", action="store_true", help="skip the baseline models")
-    p.add_argument("--seed", type=int, default=0, help="seed of the online estimator (0)")
+    add_seed_argument(p, "the online estimator")
     p.add_argument("--clamp-inputs", action="store_true",
                    help="feed inputs outside the padded training ranges at their bound (still "
                    "flagged; off by default, docs/vsensor.md tenth pass)")
@@ -175,7 +176,9 @@ def _print_human(rep: dict, main: str) -> None:
     out.write(f"{main} on {rep['data']} ({rep['greenhouse']}, {rep['model_kind']} fluxes): "
               f"{rep['steps']} steps, {rep['flagged']} flagged, {rep['out_of_range']} with inputs "
               f"outside the training ranges, {rep['missing']} with missing inputs, "
-              f"{rep['clamped']} clamped\n")
+              f"{rep['clamped']} with the flow held to [0, its physical maximum]"
+              + (f", {rep['inputs_clamped']} with inputs fed at their bound (--clamp-inputs)"
+                 if rep.get("inputs_clamped") else "") + "\n")
     if rep["out_of_range_by_input"]:
         out.write("  outside the training range: "
                   + ", ".join(f"{k} {v}" for k, v in rep["out_of_range_by_input"].items()) + "\n")

@@ -63,13 +63,16 @@ class SubscribeSettings:
                 if e.startswith("tls/") and self.tls is None:
                     raise ConfigError(f"{self.source}: {key}[{i}] {e!r} needs TLS files "
                                       "([tls] ca, cert, key, or --tls-ca/--tls-cert/--tls-key)")
+        # the keys are named as the file spells them, the options as the command line does
         if self.mode == "client" and not self.connect:
-            raise ConfigError(f"{self.source}: client mode needs a router in connect")
+            raise ConfigError(f"{self.source}: client mode needs a router in connect "
+                              "(--connect ENDPOINT)")
         if self.history and not self.farms:
             raise ConfigError(f"{self.source}: history needs the farms it answers for "
                               "(farms, access, or --farm)")
         if self.db is not None and self.dsn:
-            raise ConfigError(f"{self.source}: give db (SQLite) or dsn (PostgreSQL), not both")
+            raise ConfigError(f"{self.source}: give db (SQLite) or dsn (PostgreSQL), not both "
+                              "(--db or --dsn)")
         return self
 
 

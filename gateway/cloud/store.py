@@ -122,6 +122,10 @@ def kind_clause(kind: str) -> tuple[str, list[str]]:
     return "kind = %s", [kind]
 
 
+class NotACloudStore(RuntimeError):
+    """An SQLite file that is another database; the message names it."""
+
+
 class SqliteCloudStore:
     DDL = """
     CREATE TABLE IF NOT EXISTS messages (
@@ -142,9 +146,24 @@ class SqliteCloudStore:
         self.path = Path(path)
         self.conn = sqlite3.connect(str(path), isolation_level=None, check_same_thread=False,
                                     timeout=30)
+        self._refuse_other_database()
         self.conn.execute("PRAGMA journal_mode=WAL")
         self.conn.execute("PRAGMA synchronous=FULL")
         self.conn.executescript(self.DDL)
+
+    def _refuse_other_database(self) -> None:
+        """A file with tables of its own (the gateway's serra.db given for cloud.db, a mix-up
+        the two SQLite stores invite) is refused before this store adds its table to it."""
+        tables = {r[0] for r in self.conn.execute(
+            "SELECT name FROM sqlite_master WHERE type='table'")}
+        other = sorted(tables - {"messages", "sqlite_sequence"})
+        if other:
+            self.conn.close()
+            gateway = " (the gateway's own store? 'python -m gateway export' reads that)" if {
+                "samples", "minute"} <= tables else ""
+            raise NotACloudStore(f"{self.path}: not a cloud store: it holds other tables "
+                                 f"({', '.join(other[:4])}{', ...' if len(other) > 4 else ''})"
+                                 f"{gateway}; give the cloud store a file of its own")
 
     def add(self, messages: Sequence[Received]) -> int:
         if not messages:

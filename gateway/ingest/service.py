@@ -58,8 +58,10 @@ class ListenError(OSError):
 def parse_hostport(text: str) -> tuple[str, int]:
     """ADDRESS:PORT with a numeric address (IPv6 in brackets); never a DNS look-up."""
     host, sep, port = text.rpartition(":")
-    if not sep or not port.isdigit() or not 0 <= int(port) <= 65535:
+    if not sep or not port.isdigit():
         raise argparse.ArgumentTypeError(f"expected HOST:PORT, got {text!r}")
+    if not 0 <= int(port) <= 65535:
+        raise argparse.ArgumentTypeError(f"port {port} of {text!r} is outside 0..65535")
     host = host.strip("[]")
     if host == "localhost":
         host = "127.0.0.1"

@@ -7,12 +7,14 @@ device 9 has no key in /etc/serra/keys.txt``). The documented example is
 
 from __future__ import annotations
 
+import argparse
 import math
 import re
 from dataclasses import MISSING, fields
 from pathlib import Path
 from typing import Any
 
+from gateway.ingest.service import parse_hostport
 from gateway.net.tomlcheck import ConfigError
 from gateway.net.zenohcfg import Retry, TlsFiles
 from gateway.service.settings import (
@@ -64,8 +66,9 @@ class _Table:
         if kind is float and not math.isfinite(v):
             self.fail(key, f"must be a finite number, got {v!r}")
         if (lo is not None and v < lo) or (hi is not None and v > hi):
-            self.fail(key, f"{v!r} is outside {lo if lo is not None else '-inf'}.."
-                           f"{hi if hi is not None else 'inf'}")
+            self.fail(key, f"{v:g} is outside {lo:g}..{hi:g}" if lo is not None and hi is not None
+                      else f"{v:g} is below its minimum {lo:g}" if lo is not None
+                      else f"{v:g} is above its maximum {hi:g}")
         if choices is not None and v not in choices:
             self.fail(key, f"{v!r} is not one of {', '.join(map(str, choices))}")
         return v
@@ -110,10 +113,11 @@ def _hostport(t: _Table, key: str,
         return default
     if not text:
         return None
-    host, sep, port = text.rpartition(":")
-    if not sep or not port.isdigit() or not 0 <= int(port) <= 65535:
-        t.fail(key, f"expected HOST:PORT (an IP address), got {text!r}")
-    return host.strip("[]") or "0.0.0.0", int(port)
+    try:  # the ingest command's own reading of --listen, one place
+        return parse_hostport(text)
+    except argparse.ArgumentTypeError as exc:
+        t.fail(key, str(exc))  # raises ConfigError
+    return None  # not reached
 
 
 def _endpoints(t: _Table, key: str, default: tuple[str, ...]) -> tuple[str, ...]:

@@ -6,6 +6,7 @@ start with but should be told (a starting parameter outside its hard box) is a w
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -18,6 +19,7 @@ from gateway.service.config import ConfigError
 from gateway.service.minutes import KIT_COLUMNS
 from gateway.service.settings import GatewayConfig, GreenhouseSettings
 from gateway.service.ventilation import VentilationSensor, load_ventilation
+from gateway.store.db import StoreError, open_readonly
 from gateway.store.keys import KeyFileError, load_keys
 
 
@@ -41,6 +43,18 @@ def params_warnings(where: str, g: GreenhouseSettings, theta0: np.ndarray, model
                  for o in outside_box(theta0, model, gh))
 
 
+def _check_existing_store(cfg: GatewayConfig) -> None:
+    """A gateway.db that exists must be a Serra store (a CSV, the cloud store's file): --check
+    says so, not only the start. Read-only, and skipped when this user may not read it (an
+    admin checking the service's 0600 store): the service's own start decides then."""
+    if not (cfg.db.is_file() and cfg.db.stat().st_size > 0 and os.access(cfg.db, os.R_OK)):
+        return
+    try:
+        open_readonly(cfg.db).close()
+    except StoreError as e:
+        raise ConfigError(f"{cfg.source}: gateway.db: {e}") from None
+
+
 def prepare(cfg: GatewayConfig) -> list[GreenhouseResources]:
     """Load and check everything the config names (raises ConfigError naming the key)."""
     folder = cfg.db.parent  # the store is created at start, its folder is not
@@ -50,6 +64,7 @@ def prepare(cfg: GatewayConfig) -> list[GreenhouseResources]:
                           f"(the gateway creates the store {cfg.db.name}, not its folder)")
     if cfg.db.is_dir():
         raise ConfigError(f"{cfg.source}: gateway.db: {cfg.db} is a folder; name the store's file")
+    _check_existing_store(cfg)
     try:
         keys = load_keys(cfg.keys)
     except OSError as e:

@@ -85,7 +85,8 @@ def open_readonly(path: str | Path) -> sqlite3.Connection:
         raise StoreError(f"{path}: cannot open the store: {e}") from None
     try:
         version = conn.execute("PRAGMA user_version").fetchone()[0]
-        missing = SERRA_TABLES - _tables(conn)
+        tables = _tables(conn)
+        missing = SERRA_TABLES - tables
     except sqlite3.DatabaseError as e:
         conn.close()
         if "not a database" in str(e):
@@ -94,8 +95,10 @@ def open_readonly(path: str | Path) -> sqlite3.Connection:
         raise StoreError(f"{path}: cannot read the store: {e}") from None
     if version == 0 or missing:
         conn.close()
+        cloud = (" (a cloud store, which 'python -m gateway subscribe --db ... --export DIR' "
+                 "reads)" if "messages" in tables and missing == SERRA_TABLES else "")
         raise StoreError(f"{path}: not a Serra store (schema version {version}; missing tables "
-                         f"{', '.join(sorted(missing)) or 'none'})")
+                         f"{', '.join(sorted(missing)) or 'none'}){cloud}")
     if version > schema.SCHEMA_VERSION:
         conn.close()
         raise StoreError(f"{path}: store schema version {version} is newer than this gateway's "

@@ -160,7 +160,9 @@ def set_key(path: str | Path, device_id: int, key: bytes, *, name: str | None = 
             f"it a new one (a reflashed or replaced board): python -m gateway keys rotate "
             f"{device_id} --keys {path}")
     if old is None and rotate:
-        raise KeyFileError(f"{path}: no device {device_id} in the file; add it with: "
+        what = (f"no device {device_id} in the file" if exists
+                else f"no such keys file, so no device {device_id} to rotate")
+        raise KeyFileError(f"{path}: {what}; add it with: "
                            f"python -m gateway keys add {device_id} --keys {path}")
     label = old.name if old is not None and name is None else (name or "")
     entry = f"{device_id} {key.hex()}" + (f" {label}" if label else "")

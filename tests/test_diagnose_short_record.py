@@ -5,11 +5,16 @@ that reads as a clean bill of health."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from gateway.cli import main
 from gateway.cli.notes import short_heldout_note
-from gateway.diagnose import significance
+from gateway.diagnose import diagnose, significance
+from gateway.diagnose.search import split_index
+from gateway.greenhouse import load_greenhouse
 from gateway.kitcsv import write_kit_csv
+from gateway.model import build_model
+from gateway.series import load_series
 
 PROTO = ["--greenhouse", "biskra-prototype", "--model", "prototype"]
 
@@ -49,3 +54,15 @@ def test_diagnose_of_three_days_says_no_finding_can_come_out(capsys, tmp_path):
     assert "Traceback" not in err
     assert "only 1.5 days are held out" in err and "no finding can be reported" in err
     assert "no finding can be reported" in out  # also beside the human report's figures
+
+
+@pytest.mark.parametrize("step,split", [(60.0, 0.5), (300.0, 0.5), (300.0, 0.37), (900.0, 0.5)])
+def test_the_split_said_before_the_run_is_the_diagnosis_own(tmp_path, step, split):
+    """The note is made before the long run from ``search.split_index``: the row the diagnosis
+    then reports as the start of its held-out part."""
+    path = _kit_csv(tmp_path / "three_days.csv", 3)
+    gh = load_greenhouse("biskra-prototype")
+    model = build_model("prototype", gh)
+    series = load_series(str(path), step=step, required=model.requires)
+    d = diagnose(series, gh, model, split=split)
+    assert split_index(series, split) == d.split_index

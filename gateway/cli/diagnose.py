@@ -42,6 +42,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from gateway.diagnose import diagnose, to_json
     from gateway.diagnose.heated import heated_floor
+    from gateway.diagnose.search import split_index
 
     if not 0.1 <= args.split <= 0.9:
         raise CliError(f"--split {args.split}: must be between 0.1 and 0.9")
@@ -53,14 +54,15 @@ def run(args: argparse.Namespace) -> int:
         if tty:
             print(f"  {msg}", file=sys.stderr, flush=True)
 
+    # said before the long run: nothing can be found in a held-out part this short
+    short = short_heldout_note(inputs.series.time, split_index(inputs.series, args.split))
+    made = [Note("short_heldout", short)] if short else []
+    echo(made)
     try:
         d = diagnose(inputs.series, inputs.gh, inputs.model, split=args.split, seed=args.seed,
                      progress=say)
     except ValueError as exc:
         raise CliError(str(exc)) from None
-    short = short_heldout_note(d.time, d.split_index)
-    made = [Note("short_heldout", short)] if short else []
-    echo(made)
     notes = inputs.notes + made
     floor = heated_floor(inputs.series)
     hint = live_model_hint(args.model, d.structure, floor)

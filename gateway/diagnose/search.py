@@ -145,6 +145,18 @@ class Start:
     state: State
 
 
+def fit_factor(series: Series) -> int:
+    """Rows of ``series`` per step of the fit grid (``FIT_STEP_S``; 1 for coarser rows)."""
+    return max(int(FIT_STEP_S // series.step), 1)
+
+
+def split_index(series: Series, split: float) -> int:
+    """Row of ``series`` where the held-out part starts (``Diagnosis.split_index``), known
+    before the diagnosis runs: the first ``split`` of the fit grid's rows calibrate."""
+    k = fit_factor(series)
+    return int(round(split * (len(series) // k))) * k
+
+
 def prepare(series: Series, gh: Greenhouse, base: Model, split: float = 0.5, seed: int = 0,
             progress: Progress | None = None) -> Start:
     """Steps 1–3 of the module docstring, as ``diagnose`` runs them: ``series`` on the fit
@@ -153,7 +165,7 @@ def prepare(series: Series, gh: Greenhouse, base: Model, split: float = 0.5, see
     say = progress or (lambda msg: None)
     if not 0.1 <= split <= 0.9:
         raise ValueError(f"split must be within [0.1, 0.9], got {split}")
-    k = max(int(FIT_STEP_S // series.step), 1)
+    k = fit_factor(series)
     coarse = coarsen(series, k)
     n, dt = len(coarse), coarse.step
     s = int(round(split * n))

@@ -54,8 +54,12 @@ def run(args: argparse.Namespace) -> int:
         if tty:
             print(f"  {msg}", file=sys.stderr, flush=True)
 
+    try:
+        split = split_index(inputs.series, args.split)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
     # said before the long run: nothing can be found in a held-out part this short
-    short = short_heldout_note(inputs.series.time, split_index(inputs.series, args.split))
+    short = short_heldout_note(inputs.series.time, split)
     made = [Note("short_heldout", short)] if short else []
     echo(made)
     try:

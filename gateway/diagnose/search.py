@@ -152,9 +152,13 @@ def fit_factor(series: Series) -> int:
 
 def split_index(series: Series, split: float) -> int:
     """Row of ``series`` where the held-out part starts (``Diagnosis.split_index``), known
-    before the diagnosis runs: the first ``split`` of the fit grid's rows calibrate."""
+    before the diagnosis runs: the first ``split`` of the fit grid's rows calibrate. A clear
+    ValueError when the data is too short to split into the two parts."""
     k = fit_factor(series)
-    return int(round(split * (len(series) // k))) * k
+    n = len(series) // k  # the fit grid's rows (``coarsen``)
+    s = int(round(split * n))
+    _check_length(series, s, n, max(int(round(HORIZON_S / (series.step * k))), 2))
+    return s * k
 
 
 def prepare(series: Series, gh: Greenhouse, base: Model, split: float = 0.5, seed: int = 0,
@@ -166,11 +170,10 @@ def prepare(series: Series, gh: Greenhouse, base: Model, split: float = 0.5, see
     if not 0.1 <= split <= 0.9:
         raise ValueError(f"split must be within [0.1, 0.9], got {split}")
     k = fit_factor(series)
+    s = split_index(series, split) // k  # checks the length before drivers() needs a first row
     coarse = coarsen(series, k)
     n, dt = len(coarse), coarse.step
-    s = int(round(split * n))
     horizon = max(int(round(HORIZON_S / dt)), 2)
-    _check_length(series, s, n, horizon)  # before drivers(): it needs a first row
     # the base's driver-only columns (``Model.prepare``: FluxTerm.derive) once, not at every
     # step of every run: elementwise, so the same numbers as computed at each step
     x = dict(base.prepare(drivers(coarse, gh)))

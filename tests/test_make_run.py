@@ -5,6 +5,7 @@ everything. Either way no process of the run survives it."""
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import os
 import re
@@ -40,13 +41,55 @@ def group_gone(pgid: int) -> bool:
     return False
 
 
+def listening_tcp(pgid: int) -> list[ipaddress.IPv4Address | ipaddress.IPv6Address]:
+    """The addresses the processes of group ``pgid`` listen on over TCP (Linux /proc)."""
+    inodes = set()
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            if int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[2]) != pgid:
+                continue
+            for fd in os.listdir(f"/proc/{pid}/fd"):
+                link = os.readlink(f"/proc/{pid}/fd/{fd}")
+                if link.startswith("socket:["):
+                    inodes.add(link[8:-1])
+        except (FileNotFoundError, ProcessLookupError, PermissionError):
+            continue  # a process that ended meanwhile
+    addrs: list[ipaddress.IPv4Address | ipaddress.IPv6Address] = []
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        for line in Path(table).read_text().splitlines()[1:]:
+            f = line.split()
+            if f[3] == "0A" and f[9] in inodes:  # 0A: LISTEN; the address in host-order words
+                h = f[1].rsplit(":", 1)[0]
+                raw = b"".join(bytes.fromhex(h[i:i + 8])[::-1] for i in range(0, len(h), 8))
+                addrs.append(ipaddress.ip_address(raw))
+    return addrs
+
+
+def on_loopback(a: ipaddress.IPv4Address | ipaddress.IPv6Address) -> bool:
+    mapped = a.ipv4_mapped if isinstance(a, ipaddress.IPv6Address) else None
+    return a.is_loopback or bool(mapped and mapped.is_loopback)
+
+
 def test_bounded_run_without_a_terminal_prints_a_consistent_summary(tmp_path: Path) -> None:
-    out = tmp_path / "run"
-    r = subprocess.run([sys.executable, "-m", "training", "run", "--minutes", "75", "--scale", "300",
-                        "--no-calibrate", "--out", str(out)], cwd=tmp_path, capture_output=True,
-                       text=True, timeout=600, stdin=subprocess.DEVNULL)
-    assert r.returncode == 0, r.stdout + r.stderr
-    text = r.stdout
+    out, log = tmp_path / "run", tmp_path / "stdout.txt"
+    with log.open("w") as stdout:
+        proc = subprocess.Popen([sys.executable, "-m", "training", "run", "--minutes", "75", "--scale",
+                                 "300", "--no-calibrate", "--out", str(out)], cwd=tmp_path,
+                                stdout=stdout, stderr=subprocess.STDOUT, text=True,
+                                stdin=subprocess.DEVNULL)
+    try:
+        # while it runs: everything listens on loopback only, as the README says
+        started = wait_for(lambda: re.search(r"process group (\d+)", log.read_text())
+                           or proc.poll() is not None, 300, "the kit to start")
+        assert started is not True, log.read_text()
+        listening = listening_tcp(int(started[1]))
+        assert listening and all(map(on_loopback, listening)), listening
+        assert proc.wait(600) == 0, log.read_text()
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+            proc.wait(60)
+    text = log.read_text()
     assert "\x1b" not in text
     pgid = int(re.search(r"process group (\d+)", text)[1])
     assert group_gone(pgid), "a process of the run survived it"

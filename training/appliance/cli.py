@@ -191,8 +191,10 @@ class Demo:
         zen = ready[ready.index("zenoh") + 1]
         self.say(f"  gateway ready: kits on udp {udp[0]}:{udp[1]}, Zenoh on {zen} "
                  f"(log: gateway.log)")
-        g.start("subscriber", [py, "-m", "gateway", "subscribe", "--connect", zen, "--db",
-                               str(self.out / "cloud.db")], self.out / "subscribe.log", self.out)
+        # --listen on loopback: a Zenoh peer given none listens on every interface ([::])
+        g.start("subscriber", [py, "-m", "gateway", "subscribe", "--connect", zen, "--listen",
+                               "tcp/127.0.0.1:0", "--db", str(self.out / "cloud.db")],
+                self.out / "subscribe.log", self.out)
         g.wait_line("subscriber", "serra-subscribe ready", 60)
         self.say("  subscriber ready: the cloud side stores every message once in cloud.db")
         key = load_keys(self.out / "keys.txt")[DEVICE]

@@ -9,6 +9,7 @@ import ipaddress
 import json
 import os
 import re
+import shlex
 import shutil
 import sqlite3
 import subprocess
@@ -72,11 +73,15 @@ def on_loopback(a: ipaddress.IPv4Address | ipaddress.IPv6Address) -> bool:
 
 def test_bounded_run_without_a_terminal_prints_a_consistent_summary(tmp_path: Path) -> None:
     out, log = tmp_path / "run", tmp_path / "stdout.txt"
+    # a user's shell, where `python` is not the venv's (make run calls .venv/bin/python)
+    venv_bin = os.path.dirname(sys.executable)
+    env = {**os.environ, "PATH": os.pathsep.join(d for d in os.environ.get("PATH", "").split(os.pathsep)
+                                                 if os.path.abspath(d) != venv_bin)}
     with log.open("w") as stdout:
         proc = subprocess.Popen([sys.executable, "-m", "training", "run", "--minutes", "75", "--scale",
                                  "300", "--no-calibrate", "--out", str(out)], cwd=tmp_path,
                                 stdout=stdout, stderr=subprocess.STDOUT, text=True,
-                                stdin=subprocess.DEVNULL)
+                                stdin=subprocess.DEVNULL, env=env)
     try:
         # while it runs: everything listens on loopback only, as the README says
         started = wait_for(lambda: re.search(r"process group (\d+)", log.read_text())
@@ -114,6 +119,12 @@ def test_bounded_run_without_a_terminal_prints_a_consistent_summary(tmp_path: Pa
                  "forecast  MAE 15 min", "(persistence ", "findings  none"):
         assert " ".join(want.split()) in " ".join(text.split()), want
     assert "Traceback" not in (out / "gateway.log").read_text()
+    # the command it prints to look again works as printed, in the same shell and folder
+    again = shlex.split(re.search(r"look again: (.+)", text)[1])
+    assert again[1:4] == ["-m", "gateway", "status"], again
+    r = subprocess.run([*again, "--once"], cwd=tmp_path, env=env, capture_output=True, text=True,
+                       timeout=120)
+    assert "farm demo-farm · greenhouse north" in r.stdout, r.stdout + r.stderr
 
 
 @pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux not installed")

@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import re
+import shlex
 import shutil
 import signal
 import subprocess
@@ -150,15 +152,15 @@ class Demo:
         shutil.rmtree(self.out / "board", ignore_errors=True)
         days = 2.0 if self.minutes is None else self.minutes / 1440 + 0.5
         self.say(f"serra run: the whole kit on this machine, {self.scale:g}× the wall clock; "
-                 f"files in {self.out}/")
+                 f"files in {shown(self.out)}/")
         self.say(f"  simulating {days:.1f} days of weather for the kit (reference simulator) …")
         simulated_trace(self.out / "trace.txt", start="2009-11-01", days=math.ceil(days * 2) / 2 + 0.5)
         r = subprocess.run([sys.executable, "-m", "gateway", "keys", "add", str(DEVICE), "--keys",
                             str(self.out / "keys.txt")], capture_output=True, text=True, timeout=60)
         if r.returncode:
             raise ChildError(f"keys add failed: {r.stderr.strip()}")
-        self.say(f"  key for kit {DEVICE} provisioned: python -m gateway keys add {DEVICE} "
-                 f"--keys {self.out}/keys.txt")
+        self.say(f"  key for kit {DEVICE} provisioned: {python_cmd()} -m gateway keys add {DEVICE} "
+                 f"--keys {shown(self.out / 'keys.txt')}")
         params = self.calibrate() if self.calibrate_first else None
         self.clock = KitClock(self.scale, self.epoch)  # simulated time starts now, at START
         write_config(self.out, self.clock, params, self.model)
@@ -304,10 +306,26 @@ class Demo:
         s.write_json(self.out / "summary.json")
         for line in s.lines():
             self.say(line)
-        files = (f"  files     {self.out}/: serra.db (the gateway's store), cloud.db (the "
+        files = (f"  files     {shown(self.out)}/: serra.db (the gateway's store), cloud.db (the "
                  "subscriber's), gateway.log, summary.json")
         self.say("\n".join(textwrap.wrap(files, 80, subsequent_indent=" " * 12)))
-        self.say(f"  look again: python -m gateway status --db {self.out}/serra.db")
+        self.say(f"  look again: {python_cmd()} -m gateway status --db {shown(self.out / 'serra.db')}")
+
+
+def shown(path: Path) -> str:
+    """``path`` as the user would type it here: relative when under the current folder."""
+    p = Path(os.path.abspath(path))
+    return shlex.quote(str(p.relative_to(Path.cwd()) if p.is_relative_to(Path.cwd()) else p))
+
+
+def python_cmd() -> str:
+    """The interpreter to name in a command to type: ``python`` only when that is this one (an
+    activated venv); ``make run`` runs ``.venv/bin/python``, and a bare ``python`` of the user's
+    shell would lack the packages."""
+    on_path = shutil.which("python")
+    if on_path and os.path.abspath(on_path) == os.path.abspath(sys.executable):
+        return "python"
+    return shown(Path(sys.executable))
 
 
 def weather_site() -> tuple[float, float]:

@@ -125,6 +125,9 @@ def test_bounded_run_without_a_terminal_prints_a_consistent_summary(tmp_path: Pa
     r = subprocess.run([*again, "--once"], cwd=tmp_path, env=env, capture_output=True, text=True,
                        timeout=120)
     assert "farm demo-farm · greenhouse north" in r.stdout, r.stdout + r.stderr
+    # the gateway stopped cleanly: said at once, not "running" until its heartbeat goes stale
+    assert r.returncode == 1 and "ATTENTION: the gateway is not running" in r.stdout, r.stdout
+    assert "Service    NOT RUNNING" in r.stdout, r.stdout
 
 
 @pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux not installed")

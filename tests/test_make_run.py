@@ -5,12 +5,14 @@ everything. Either way no process of the run survives it."""
 
 from __future__ import annotations
 
+import contextlib
 import ipaddress
 import json
 import os
 import re
 import shlex
 import shutil
+import signal
 import sqlite3
 import subprocess
 import sys
@@ -162,5 +164,52 @@ def test_on_a_terminal_the_status_screen_shows_and_ctrl_c_stops_everything(tmp_p
     while not group_gone(pgid):
         assert time.monotonic() < deadline, "a process of the run survived Ctrl-C"
         time.sleep(0.1)
+    s = json.loads((out / "summary.json").read_text())
+    assert s["published"] == s["received"] and s["stored"] > 0
+
+
+def pids_of(command: str) -> list[int]:
+    """Processes whose command line starts with ``command`` (not a shell that runs it)."""
+    out = []
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            if Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode().startswith(command):
+                out.append(int(pid))
+        except (FileNotFoundError, ProcessLookupError, PermissionError):
+            continue
+    return out
+
+
+@pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux not installed")
+def test_a_terminal_that_hangs_up_under_a_session_leader_that_waits_stops_the_run(
+        tmp_path: Path) -> None:
+    """A dropped SSH session or a killed tmux pane with make as the session leader: the kernel
+    sends SIGHUP to the leader only, and make catches it and waits for its child. The shell here
+    plays make (it ignores SIGHUP and waits); the run must notice the terminal is gone, stop
+    everything and write its summary."""
+    out, name = tmp_path / "run", f"serra-hup-{os.getpid()}"
+    argv = f"{sys.executable} -m training run --scale 300 --no-calibrate --out {out}"
+    cmd = f"trap '' HUP; {argv}; true"  # `; true`: the shell waits, it does not exec the run
+    subprocess.run(["tmux", "new-session", "-d", "-s", name, "-x", "80", "-y", "24", "-c",
+                    str(tmp_path), cmd], check=True, timeout=60)
+    run = gw = []
+    try:
+        wait_for(lambda: "farm demo-farm" in subprocess.run(
+            ["tmux", "capture-pane", "-p", "-t", name], capture_output=True, text=True,
+            timeout=60).stdout, 180, "the status screen")
+        run = pids_of(argv)
+        gw = pids_of(f"{sys.executable} -m gateway run --config {out / 'gateway.toml'}")
+        assert len(run) == 1 and len(gw) == 1, (run, gw)
+        subprocess.run(["tmux", "kill-session", "-t", name], timeout=60)  # the terminal hangs up
+        wait_for(lambda: not pids_of(argv) and group_gone(gw[0]), 180,
+                 "the run and every process of its group to stop")
+    finally:
+        subprocess.run(["tmux", "kill-session", "-t", name], capture_output=True, timeout=60)
+        for pid in run:  # a failed test leaves nothing behind either
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        for pgid in gw:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(pgid, signal.SIGKILL)
     s = json.loads((out / "summary.json").read_text())
     assert s["published"] == s["received"] and s["stored"] > 0

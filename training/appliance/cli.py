@@ -106,7 +106,10 @@ class Demo:
         self.clock = KitClock(scale, self.epoch)  # anchored again once the set-up is done
 
     def say(self, text: str) -> None:
-        print(text, flush=True)
+        try:
+            print(text, flush=True)
+        except OSError:  # the terminal went away: summary.json still says it all
+            pass
 
     def main(self) -> int:
         old = {s: signal.signal(s, self._signal) for s in (signal.SIGTERM, signal.SIGHUP)}
@@ -256,8 +259,13 @@ class Demo:
             self.app = None
 
     def _watch_app(self) -> None:
+        # the terminal hung up (an SSH session dropped, a tmux pane killed) and the SIGHUP went to
+        # a session leader that catches it and waits for us (make, whose child we are): quit too
+        fd = sys.__stdout__.fileno() if sys.__stdout__ is not None else -1
+        tty = fd >= 0 and os.isatty(fd)
         while not self.stop.wait(0.5):
-            why = self.failed() or ("time is up" if self.clock.now() >= self.end_t() else "")
+            why = (self.failed() or ("time is up" if self.clock.now() >= self.end_t() else "")
+                   or ("the terminal went away" if tty and not os.isatty(fd) else ""))
             if why and self.app is not None:
                 self.why = why
                 self.app.call_from_thread(self.app.exit)

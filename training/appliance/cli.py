@@ -102,6 +102,8 @@ class Demo:
         self.calibrate_first = True
         self.model = MODEL
         self.why = ""  # why the run ended early
+        out = sys.__stdout__  # the terminal we started on, if any (watched while the screen runs)
+        self.tty_fd = out.fileno() if out is not None and out.isatty() else -1
         self.epoch = float(__import__("numpy").datetime64(START.rstrip("Z"), "s").astype("int64"))
         self.clock = KitClock(scale, self.epoch)  # anchored again once the set-up is done
 
@@ -261,11 +263,10 @@ class Demo:
     def _watch_app(self) -> None:
         # the terminal hung up (an SSH session dropped, a tmux pane killed) and the SIGHUP went to
         # a session leader that catches it and waits for us (make, whose child we are): quit too
-        fd = sys.__stdout__.fileno() if sys.__stdout__ is not None else -1
-        tty = fd >= 0 and os.isatty(fd)
+        fd = self.tty_fd
         while not self.stop.wait(0.5):
             why = (self.failed() or ("time is up" if self.clock.now() >= self.end_t() else "")
-                   or ("the terminal went away" if tty and not os.isatty(fd) else ""))
+                   or ("the terminal went away" if fd >= 0 and not os.isatty(fd) else ""))
             if why and self.app is not None:
                 self.why = why
                 self.app.call_from_thread(self.app.exit)

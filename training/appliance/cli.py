@@ -250,6 +250,9 @@ class Demo:
         from gateway.status.app import StatusApp
         from gateway.status.store_source import StoreSource
 
+        if self.terminal_gone():  # it hung up during the set-up: no screen to start
+            self.why = "the terminal went away"
+            return
         self.app = StatusApp(StoreSource(self.out / "serra.db"), interval=1.0)
         watcher = threading.Thread(target=self._watch_app, daemon=True)
         watcher.start()
@@ -263,14 +266,20 @@ class Demo:
     def _watch_app(self) -> None:
         # the terminal hung up (an SSH session dropped, a tmux pane killed) and the SIGHUP went to
         # a session leader that catches it and waits for us (make, whose child we are): quit too
-        fd = self.tty_fd
         while not self.stop.wait(0.5):
             why = (self.failed() or ("time is up" if self.clock.now() >= self.end_t() else "")
-                   or ("the terminal went away" if fd >= 0 and not os.isatty(fd) else ""))
+                   or ("the terminal went away" if self.terminal_gone() else ""))
             if why and self.app is not None:
                 self.why = why
-                self.app.call_from_thread(self.app.exit)
+                try:
+                    self.app.call_from_thread(self.app.exit)
+                except RuntimeError:  # the app's loop is not running yet: try again
+                    continue
                 return
+
+    def terminal_gone(self) -> bool:
+        """The run started on a terminal that is not one any more (it hung up)."""
+        return self.tty_fd >= 0 and not os.isatty(self.tty_fd)
 
     # -- the end ------------------------------------------------------------------------------
     def shutdown(self) -> bool:

@@ -71,12 +71,12 @@ def status_rows(now: float, *, heartbeat: float | None = None, peers: int = 1,
                 pending: int = 0, waiting: tuple[str, ...] = (), scale: float = 300.0,
                 alarm_at: int = 800,
                 ingest: dict[str, int] | None = None, refused: dict | None = None,
-                diagnosis: dict | None = None) -> dict[str, Any]:
+                diagnosis: dict | None = None, stopped: float | None = None) -> dict[str, Any]:
     beat = time.time() if heartbeat is None else heartbeat
     rows: dict[str, Any] = {
         "gateway": {"pid": 4242, "started": beat - 3600, "heartbeat": beat, "uptime_s": 3600.0,
                     "clock_now": now, "clock_scale": scale, "farm": "f1", "config": "gw.toml",
-                    "passes": 10},
+                    "passes": 10, "stopped": stopped},
         "zenoh": {"enabled": True, "endpoints": ["tcp/127.0.0.1:7447"], "mode": "peer", "zid": "ab",
                   "peers": peers, "routers": 0, "matched_keys": 5 if peers else 0,
                   "waiting_keys": list(waiting), "published": 1234, "last_put": now,

@@ -97,3 +97,12 @@ def test_a_diverging_part_is_left_out_and_scored_at_the_range_edge() -> None:
         live.add({h: {"good": good[t], "bad": bad[t]}})
     np.testing.assert_allclose(out[210:n - h], good[210:n - h], atol=1e-9)
     assert max(live.errors[h]["bad"]) <= (80.0 - 19.0) ** 2  # scored at the range's edge
+
+
+def test_a_record_shorter_than_the_horizon_has_nothing_matured():
+    """16 samples and h = 30 (a short kit CSV replayed): no target in the record, so every start
+    keeps the first forecast's weight, and the combination is that forecast (it raised before)."""
+    measured, f = _two(n=16)
+    w = weights(f, measured, 30, WINDOW)
+    assert np.all(w["a"] == 1.0) and np.all(w["b"] == 0.0)
+    np.testing.assert_array_equal(combine(f, measured, 30, WINDOW), f["a"])

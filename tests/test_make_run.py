@@ -5,10 +5,14 @@ everything. Either way no process of the run survives it."""
 
 from __future__ import annotations
 
+import contextlib
+import ipaddress
 import json
 import os
 import re
+import shlex
 import shutil
+import signal
 import sqlite3
 import subprocess
 import sys
@@ -40,13 +44,59 @@ def group_gone(pgid: int) -> bool:
     return False
 
 
+def listening_tcp(pgid: int) -> list[ipaddress.IPv4Address | ipaddress.IPv6Address]:
+    """The addresses the processes of group ``pgid`` listen on over TCP (Linux /proc)."""
+    inodes = set()
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            if int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[2]) != pgid:
+                continue
+            for fd in os.listdir(f"/proc/{pid}/fd"):
+                link = os.readlink(f"/proc/{pid}/fd/{fd}")
+                if link.startswith("socket:["):
+                    inodes.add(link[8:-1])
+        except (FileNotFoundError, ProcessLookupError, PermissionError):
+            continue  # a process that ended meanwhile
+    addrs: list[ipaddress.IPv4Address | ipaddress.IPv6Address] = []
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        for line in Path(table).read_text().splitlines()[1:]:
+            f = line.split()
+            if f[3] == "0A" and f[9] in inodes:  # 0A: LISTEN; the address in host-order words
+                h = f[1].rsplit(":", 1)[0]
+                raw = b"".join(bytes.fromhex(h[i:i + 8])[::-1] for i in range(0, len(h), 8))
+                addrs.append(ipaddress.ip_address(raw))
+    return addrs
+
+
+def on_loopback(a: ipaddress.IPv4Address | ipaddress.IPv6Address) -> bool:
+    mapped = a.ipv4_mapped if isinstance(a, ipaddress.IPv6Address) else None
+    return a.is_loopback or bool(mapped and mapped.is_loopback)
+
+
 def test_bounded_run_without_a_terminal_prints_a_consistent_summary(tmp_path: Path) -> None:
-    out = tmp_path / "run"
-    r = subprocess.run([sys.executable, "-m", "training", "run", "--minutes", "75", "--scale", "300",
-                        "--no-calibrate", "--out", str(out)], cwd=tmp_path, capture_output=True,
-                       text=True, timeout=600, stdin=subprocess.DEVNULL)
-    assert r.returncode == 0, r.stdout + r.stderr
-    text = r.stdout
+    out, log = tmp_path / "run", tmp_path / "stdout.txt"
+    # a user's shell, where `python` is not the venv's (make run calls .venv/bin/python)
+    venv_bin = os.path.dirname(sys.executable)
+    env = {**os.environ, "PATH": os.pathsep.join(d for d in os.environ.get("PATH", "").split(os.pathsep)
+                                                 if os.path.abspath(d) != venv_bin)}
+    with log.open("w") as stdout:
+        proc = subprocess.Popen([sys.executable, "-m", "training", "run", "--minutes", "75", "--scale",
+                                 "300", "--no-calibrate", "--out", str(out)], cwd=tmp_path,
+                                stdout=stdout, stderr=subprocess.STDOUT, text=True,
+                                stdin=subprocess.DEVNULL, env=env)
+    try:
+        # while it runs: everything listens on loopback only, as the README says
+        started = wait_for(lambda: re.search(r"process group (\d+)", log.read_text())
+                           or proc.poll() is not None, 300, "the kit to start")
+        assert started is not True, log.read_text()
+        listening = listening_tcp(int(started[1]))
+        assert listening and all(map(on_loopback, listening)), listening
+        assert proc.wait(600) == 0, log.read_text()
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+            proc.wait(60)
+    text = log.read_text()
     assert "\x1b" not in text
     pgid = int(re.search(r"process group (\d+)", text)[1])
     assert group_gone(pgid), "a process of the run survived it"
@@ -71,6 +121,15 @@ def test_bounded_run_without_a_terminal_prints_a_consistent_summary(tmp_path: Pa
                  "forecast  MAE 15 min", "(persistence ", "findings  none"):
         assert " ".join(want.split()) in " ".join(text.split()), want
     assert "Traceback" not in (out / "gateway.log").read_text()
+    # the command it prints to look again works as printed, in the same shell and folder
+    again = shlex.split(re.search(r"look again: (.+)", text)[1])
+    assert again[1:4] == ["-m", "gateway", "status"], again
+    r = subprocess.run([*again, "--once"], cwd=tmp_path, env=env, capture_output=True, text=True,
+                       timeout=120)
+    assert "farm demo-farm · greenhouse north" in r.stdout, r.stdout + r.stderr
+    # the gateway stopped cleanly: said at once, not "running" until its heartbeat goes stale
+    assert r.returncode == 1 and "ATTENTION: the gateway is not running" in r.stdout, r.stdout
+    assert "Service    NOT RUNNING" in r.stdout, r.stdout
 
 
 @pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux not installed")
@@ -105,5 +164,52 @@ def test_on_a_terminal_the_status_screen_shows_and_ctrl_c_stops_everything(tmp_p
     while not group_gone(pgid):
         assert time.monotonic() < deadline, "a process of the run survived Ctrl-C"
         time.sleep(0.1)
+    s = json.loads((out / "summary.json").read_text())
+    assert s["published"] == s["received"] and s["stored"] > 0
+
+
+def pids_of(command: str) -> list[int]:
+    """Processes whose command line starts with ``command`` (not a shell that runs it)."""
+    out = []
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            if Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode().startswith(command):
+                out.append(int(pid))
+        except (FileNotFoundError, ProcessLookupError, PermissionError):
+            continue
+    return out
+
+
+@pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux not installed")
+def test_a_terminal_that_hangs_up_under_a_session_leader_that_waits_stops_the_run(
+        tmp_path: Path) -> None:
+    """A dropped SSH session or a killed tmux pane with make as the session leader: the kernel
+    sends SIGHUP to the leader only, and make catches it and waits for its child. The shell here
+    plays make (it ignores SIGHUP and waits); the run must notice the terminal is gone, stop
+    everything and write its summary."""
+    out, name = tmp_path / "run", f"serra-hup-{os.getpid()}"
+    argv = f"{sys.executable} -m training run --scale 300 --no-calibrate --out {out}"
+    cmd = f"trap '' HUP; {argv}; true"  # `; true`: the shell waits, it does not exec the run
+    subprocess.run(["tmux", "new-session", "-d", "-s", name, "-x", "80", "-y", "24", "-c",
+                    str(tmp_path), cmd], check=True, timeout=60)
+    run = gw = []
+    try:
+        wait_for(lambda: "farm demo-farm" in subprocess.run(
+            ["tmux", "capture-pane", "-p", "-t", name], capture_output=True, text=True,
+            timeout=60).stdout, 180, "the status screen")
+        run = pids_of(argv)
+        gw = pids_of(f"{sys.executable} -m gateway run --config {out / 'gateway.toml'}")
+        assert len(run) == 1 and len(gw) == 1, (run, gw)
+        subprocess.run(["tmux", "kill-session", "-t", name], timeout=60)  # the terminal hangs up
+        wait_for(lambda: not pids_of(argv) and group_gone(gw[0]), 180,
+                 "the run and every process of its group to stop")
+    finally:
+        subprocess.run(["tmux", "kill-session", "-t", name], capture_output=True, timeout=60)
+        for pid in run:  # a failed test leaves nothing behind either
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        for pgid in gw:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(pgid, signal.SIGKILL)
     s = json.loads((out / "summary.json").read_text())
     assert s["published"] == s["received"] and s["stored"] > 0

@@ -216,6 +216,21 @@ def test_unseen_season_adaptive_beats_constant_and_persistence(tmp_path):
         assert block["adaptive"]["mae"] <= 0.7 * block["persistence"]["mae"], h
 
 
+def test_a_record_shorter_than_the_horizons_replays_and_scores_none(drifting, tmp_path, capsys):
+    """16 minutes (a short make run's export): the one-step figures, and no forecast scored at 30
+    or 60 min, where the combination of the forecasts raised a ValueError before."""
+    series, _ = drifting
+    part, data = series.slice(0, 16), tmp_path / "short.csv"
+    write_kit_csv(data, part.time, part.columns)
+    code = main(["replay", "--data", str(data), "--greenhouse", "almeria-palmerillas", "--model",
+                 "prototype", "--json", "--set", "t_in.iterations=3", "--set", "t_in.bats=8"])
+    assert code == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["samples"] == 16 and rep["metrics"]["adaptive"]["n"] > 0
+    for h in ("30", "60"):
+        assert rep["horizons"][h]["combined"] is None and rep["horizons"][h]["persistence"] is None
+
+
 def test_horizons_are_minutes_whatever_the_model_step(drifting):
     series, base = drifting
     coarse = series.slice(0, 360)

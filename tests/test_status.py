@@ -216,6 +216,12 @@ def test_gateway_down_link_down_and_outbox_alarm_are_said(store: Filled) -> None
         t.plain for t in render.gateway_lines(stale))
     assert stale.now == pytest.approx(store.now)  # a stopped test clock stands still
     assert "the gateway is not running" in attention(stale)
+    # a clean stop writes its last status with `stopped`: not running at once, its clock standing
+    beat = fresh_status(store, stopped=time.time())
+    stopped = snap_of(store, wall=beat + 0.1)
+    assert stopped.gateway.running is False and stopped.now == pytest.approx(store.now)
+    assert "NOT RUNNING · last heartbeat 0 s ago" in "\n".join(
+        t.plain for t in render.gateway_lines(stopped))
 
 
 def test_empty_store_and_ingest_only_store(tmp_path: Path) -> None:

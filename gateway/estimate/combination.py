@@ -77,12 +77,13 @@ def weights(forecasts: Mapping[str, np.ndarray], measured: np.ndarray, horizon: 
     made at t}, ``measured`` (T,) the readings; ``window`` in samples. Causal: the weight at t
     uses the errors of the starts up to t − horizon."""
     n = len(measured)
+    m = max(n - horizon, 0)  # starts whose target is in the record (none in one shorter than h)
     target = np.full(n, np.nan)
-    target[: n - horizon] = np.asarray(measured, dtype=float)[horizon:]
+    target[:m] = np.asarray(measured, dtype=float)[horizon:]
     inv = {}
     for name, f in forecasts.items():
         mse = np.full(n, np.nan)
-        mse[horizon:] = trailing_mean((scored(f) - target) ** 2, window)[: n - horizon]
+        mse[horizon:] = trailing_mean((scored(f) - target) ** 2, window)[:m]
         inv[name] = 1.0 / np.maximum(mse, 1e-12)
     total = sum(inv.values())
     names = list(forecasts)

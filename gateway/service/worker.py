@@ -99,7 +99,7 @@ class Worker:
                 more = self._pass(conn)
                 if time.monotonic() - last_status >= STATUS_EVERY or stopping:
                     last_status = time.monotonic()
-                    self._write_status(conn)
+                    self._write_status(conn, stopped=stopping)
                 if stopping:
                     return
         except BaseException as e:
@@ -173,7 +173,9 @@ class Worker:
                             "(python -m gateway export --device %d) and it is reported as "
                             "unassigned; it is not estimated", dev, dev)
 
-    def _write_status(self, conn) -> None:
+    def _write_status(self, conn, stopped: bool = False) -> None:
+        """The status rows; the last, written as the service stops, marks it ``stopped`` [unix s]
+        so the screen says so at once rather than after the heartbeat goes stale (20 s)."""
         assert self.producers is not None and self.outbox is not None
         self._report_unassigned(conn)
         pending, oldest = outbox_backlog(conn)
@@ -182,7 +184,8 @@ class Worker:
             "gateway": {"pid": os.getpid(), "started": self.started, "heartbeat": time.time(),
                         "uptime_s": time.time() - self.started, "clock_now": self.clock.now(),
                         "clock_scale": self.clock.scale, "farm": self.cfg.farm,
-                        "config": self.cfg.source, "passes": self.passes},
+                        "config": self.cfg.source, "passes": self.passes,
+                        "stopped": time.time() if stopped else None},
             "outbox": {"pending": pending, "oldest_t": oldest, "max": self.outbox.max_rows,
                        "alarm_at": self.outbox.alarm_at, "alarm": pending >= self.outbox.alarm_at,
                        "full_rounds": c.full, "made": c.made},

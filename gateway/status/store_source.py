@@ -70,7 +70,8 @@ class StoreSource:
         beat = g.get("heartbeat")
         scale = float(g.get("clock_scale", 1.0))
         age = wall - beat if beat is not None else None
-        running = None if beat is None else age is not None and age < S.HEARTBEAT_STALE_S
+        running = (None if beat is None else  # a clean stop says so; a crash goes stale
+                   not g.get("stopped") and age is not None and age < S.HEARTBEAT_STALE_S)
         if beat is None:
             notes.append("no gateway service has run on this store (no heartbeat)")
             now: float | None = self._latest_time() or wall

@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import re
+import shlex
 import shutil
 import signal
 import subprocess
@@ -100,11 +102,16 @@ class Demo:
         self.calibrate_first = True
         self.model = MODEL
         self.why = ""  # why the run ended early
+        out = sys.__stdout__  # the terminal we started on, if any (watched while the screen runs)
+        self.tty_fd = out.fileno() if out is not None and out.isatty() else -1
         self.epoch = float(__import__("numpy").datetime64(START.rstrip("Z"), "s").astype("int64"))
         self.clock = KitClock(scale, self.epoch)  # anchored again once the set-up is done
 
     def say(self, text: str) -> None:
-        print(text, flush=True)
+        try:
+            print(text, flush=True)
+        except OSError:  # the terminal went away: summary.json still says it all
+            pass
 
     def main(self) -> int:
         old = {s: signal.signal(s, self._signal) for s in (signal.SIGTERM, signal.SIGHUP)}
@@ -150,15 +157,15 @@ class Demo:
         shutil.rmtree(self.out / "board", ignore_errors=True)
         days = 2.0 if self.minutes is None else self.minutes / 1440 + 0.5
         self.say(f"serra run: the whole kit on this machine, {self.scale:g}× the wall clock; "
-                 f"files in {self.out}/")
+                 f"files in {shown(self.out)}/")
         self.say(f"  simulating {days:.1f} days of weather for the kit (reference simulator) …")
         simulated_trace(self.out / "trace.txt", start="2009-11-01", days=math.ceil(days * 2) / 2 + 0.5)
         r = subprocess.run([sys.executable, "-m", "gateway", "keys", "add", str(DEVICE), "--keys",
                             str(self.out / "keys.txt")], capture_output=True, text=True, timeout=60)
         if r.returncode:
             raise ChildError(f"keys add failed: {r.stderr.strip()}")
-        self.say(f"  key for kit {DEVICE} provisioned: python -m gateway keys add {DEVICE} "
-                 f"--keys {self.out}/keys.txt")
+        self.say(f"  key for kit {DEVICE} provisioned: {python_cmd()} -m gateway keys add {DEVICE} "
+                 f"--keys {shown(self.out / 'keys.txt')}")
         params = self.calibrate() if self.calibrate_first else None
         self.clock = KitClock(self.scale, self.epoch)  # simulated time starts now, at START
         write_config(self.out, self.clock, params, self.model)
@@ -191,8 +198,10 @@ class Demo:
         zen = ready[ready.index("zenoh") + 1]
         self.say(f"  gateway ready: kits on udp {udp[0]}:{udp[1]}, Zenoh on {zen} "
                  f"(log: gateway.log)")
-        g.start("subscriber", [py, "-m", "gateway", "subscribe", "--connect", zen, "--db",
-                               str(self.out / "cloud.db")], self.out / "subscribe.log", self.out)
+        # --listen on loopback: a Zenoh peer given none listens on every interface ([::])
+        g.start("subscriber", [py, "-m", "gateway", "subscribe", "--connect", zen, "--listen",
+                               "tcp/127.0.0.1:0", "--db", str(self.out / "cloud.db")],
+                self.out / "subscribe.log", self.out)
         g.wait_line("subscriber", "serra-subscribe ready", 60)
         self.say("  subscriber ready: the cloud side stores every message once in cloud.db")
         key = load_keys(self.out / "keys.txt")[DEVICE]
@@ -241,6 +250,9 @@ class Demo:
         from gateway.status.app import StatusApp
         from gateway.status.store_source import StoreSource
 
+        if self.terminal_gone():  # it hung up during the set-up: no screen to start
+            self.why = "the terminal went away"
+            return
         self.app = StatusApp(StoreSource(self.out / "serra.db"), interval=1.0)
         watcher = threading.Thread(target=self._watch_app, daemon=True)
         watcher.start()
@@ -252,12 +264,22 @@ class Demo:
             self.app = None
 
     def _watch_app(self) -> None:
+        # the terminal hung up (an SSH session dropped, a tmux pane killed) and the SIGHUP went to
+        # a session leader that catches it and waits for us (make, whose child we are): quit too
         while not self.stop.wait(0.5):
-            why = self.failed() or ("time is up" if self.clock.now() >= self.end_t() else "")
+            why = (self.failed() or ("time is up" if self.clock.now() >= self.end_t() else "")
+                   or ("the terminal went away" if self.terminal_gone() else ""))
             if why and self.app is not None:
                 self.why = why
-                self.app.call_from_thread(self.app.exit)
+                try:
+                    self.app.call_from_thread(self.app.exit)
+                except RuntimeError:  # the app's loop is not running yet: try again
+                    continue
                 return
+
+    def terminal_gone(self) -> bool:
+        """The run started on a terminal that is not one any more (it hung up)."""
+        return self.tty_fd >= 0 and not os.isatty(self.tty_fd)
 
     # -- the end ------------------------------------------------------------------------------
     def shutdown(self) -> bool:
@@ -302,10 +324,26 @@ class Demo:
         s.write_json(self.out / "summary.json")
         for line in s.lines():
             self.say(line)
-        files = (f"  files     {self.out}/: serra.db (the gateway's store), cloud.db (the "
+        files = (f"  files     {shown(self.out)}/: serra.db (the gateway's store), cloud.db (the "
                  "subscriber's), gateway.log, summary.json")
         self.say("\n".join(textwrap.wrap(files, 80, subsequent_indent=" " * 12)))
-        self.say(f"  look again: python -m gateway status --db {self.out}/serra.db")
+        self.say(f"  look again: {python_cmd()} -m gateway status --db {shown(self.out / 'serra.db')}")
+
+
+def shown(path: Path) -> str:
+    """``path`` as the user would type it here: relative when under the current folder."""
+    p = Path(os.path.abspath(path))
+    return shlex.quote(str(p.relative_to(Path.cwd()) if p.is_relative_to(Path.cwd()) else p))
+
+
+def python_cmd() -> str:
+    """The interpreter to name in a command to type: ``python`` only when that is this one (an
+    activated venv); ``make run`` runs ``.venv/bin/python``, and a bare ``python`` of the user's
+    shell would lack the packages."""
+    on_path = shutil.which("python")
+    if on_path and os.path.abspath(on_path) == os.path.abspath(sys.executable):
+        return "python"
+    return shown(Path(sys.executable))
 
 
 def weather_site() -> tuple[float, float]:

@@ -32,21 +32,3 @@ def prototype_bases(store: bool = False):
     m = structure(build_model("prototype", gh), gh, store)
     base = replace(build_model("prototype", gh), integration=m.integration)
     return gh, base, m
-
-
-def day_weather_series(days: int = 8, seed: int = 3) -> tuple[Series, np.random.Generator]:
-    """5-minute kit-like drivers with day-to-day weather (as tau_profile.py --synthetic): daily
-    sines of T_out and sun with each day's own offset, cloudiness and wind; the reading a
-    constant 12 °C (the tests put their own in). Also the generator, for the tests' noise."""
-    dt = 300.0
-    n = days * 288
-    rng = np.random.default_rng(seed)
-    t = np.arange(n) * dt
-    day = t / 86400.0
-    daily = np.repeat(np.arange(days + 1), 288)[:n]
-    cols = {"t_out": 10 + 5 * np.sin(2 * np.pi * (day % 1 - 0.3)) + rng.normal(0, 3, days + 1)[daily],
-            "rh_out": np.full(n, 70.0), "rh_in": np.full(n, 60.0), "t_in": np.full(n, 12.0),
-            "i_glob": np.maximum(0, 600 * np.sin(2 * np.pi * (day % 1 - 0.25)))
-            * rng.uniform(0.2, 1.0, days + 1)[daily], "wind": rng.uniform(0.5, 6.0, days + 1)[daily]}
-    t64 = np.datetime64("2020-01-01T00:00:00") + t.astype("timedelta64[s]")
-    return Series(t64, dt, cols), rng

@@ -13,11 +13,25 @@ from gateway.diagnose.structure import structure
 from gateway.greenhouse import load_greenhouse
 from gateway.model import build_model
 from gateway.series import Series
-from tests.diagnose_data import day_weather_series as _data
 
 DAY = 86400.0
 DT = 300.0
 E = HEAT_STORE
+
+
+def _data(days: int = 8, seed: int = 3) -> tuple[Series, np.random.Generator]:
+    """5-minute kit-like drivers with day-to-day weather (as tau_profile.py --synthetic)."""
+    n = days * 288
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * DT
+    day = t / DAY
+    daily = np.repeat(np.arange(days + 1), 288)[:n]
+    cols = {"t_out": 10 + 5 * np.sin(2 * np.pi * (day % 1 - 0.3)) + rng.normal(0, 3, days + 1)[daily],
+            "rh_out": np.full(n, 70.0), "rh_in": np.full(n, 60.0), "t_in": np.full(n, 12.0),
+            "i_glob": np.maximum(0, 600 * np.sin(2 * np.pi * (day % 1 - 0.25)))
+            * rng.uniform(0.2, 1.0, days + 1)[daily], "wind": rng.uniform(0.5, 6.0, days + 1)[daily]}
+    t64 = np.datetime64("2020-01-01T00:00:00") + t.astype("timedelta64[s]")
+    return Series(t64, DT, cols), rng
 
 
 def _models(store: bool):

@@ -14,7 +14,7 @@ from gateway.diagnose.structure import STORE, structure
 from gateway.greenhouse import load_greenhouse
 from gateway.model import build_model
 from gateway.model import psychrometrics as psy
-from tests.diagnose_data import day_weather_series, prototype_bases, sine_series
+from tests.diagnose_data import prototype_bases, sine_series
 
 
 def test_structured_base_at_neutral_values_is_the_thesis_model():
@@ -149,33 +149,6 @@ def test_vents_opened_above_a_setpoint_are_kept_in_the_base():
         if want:
             assert vc["validation_mse"] < 0.5 * log[0]["validation_mse"]
             assert abs(th[got.index("t_vc")] - 24.0) < 1.0
-
-
-def test_base_keeps_a_slow_heat_store_the_data_hold():
-    """8 days made by the structured prototype with a soil-like store (C_s = 3.5e5 J m-2 K-1,
-    h_s = 0.8, k_s = 0.1 W m-2 K-1, a_s = 0: C_s / (h_s + k_s) = 4.5 d) in day-to-day weather:
-    the store option's fit leaves its starts for a slow store (over a day), cuts the in-sample
-    error below a tenth of the base's, and the base keeps it. With the floor-like start and the
-    swarm alone (before base.fit_option) the fit ended in a fast store at C_s's lower bound, no
-    better than the base (C1 MSE 0.585 against 0.583), and was not kept."""
-    from gateway.diagnose.base import calibrate_base
-
-    gh, _, m = prototype_bases()
-    _, _, stored = prototype_bases(store=True)
-    s, _ = day_weather_series(days=8, seed=4)
-    x = drivers(s, gh)
-    truth = stored.defaults(gh)
-    for name, v in (("c_store", 3.5e5), ("h_store", 0.8), ("k_store", 0.1), ("a_store", 0.0)):
-        truth[stored.index(name)] = v
-    for _ in range(3):  # until the data's store starts where the observer starts it (equilibrium
-        x["t_in"] = stored.free_run(truth[None], x, gh, 300.0)[0]  # with the first readings)
-    got, th, log = calibrate_base(m, gh, x, 300.0, 1536, 72, 0, lambda msg: None)
-    i = [e["structure"] for e in log].index("heat store")
-    before = [e for e in log[:i] if e["kept"]][-1]
-    assert log[i]["kept"], log
-    assert log[i]["mse"] < 0.1 * before["mse"], log
-    slow = th[got.index("c_store")] / (th[got.index("h_store")] + th[got.index("k_store")])
-    assert slow > 86400.0, dict(zip(got.names, th, strict=True))
 
 
 def test_wide_vent_box_lets_the_base_follow_a_summer_house_vents(monkeypatch):

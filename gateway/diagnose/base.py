@@ -66,18 +66,8 @@ VENT_BOX_UPPER = 1e-2
 """[m s-1 K-1] C_vc's physical upper bound: a wide-open Mediterranean house exchanges ~40 h-1
 (Kittas et al. 1997; Boulard & Baille 1995), reached over a proportional band of ~4 K
 (Vanthoor 2011 §2.4) in a house ~3.6 m high: 40 h-1 × 3.6 m / 3600 s / 4 K = 1e-2."""
-STORE_STARTS = (
-    {"c_store": 5e4, "h_store": 3.0, "k_store": 3.0, "a_store": 0.1},
-    {"c_store": 3e5, "h_store": 1.0, "k_store": 0.5, "a_store": 0.0},
-)
-"""Where the heat store's fits start, the lowest in-sample cost kept (``fit_option``): a
-floor-like store (5 cm of wet sand, h ≈ 3 W m-2 K-1, C_s / (h_s + k_s) ≈ 2.3 h) and a soil-like
-one (15 cm of moist soil at ρc ≈ 2 MJ m-3 K-1 under a weak floor film, little loss to the
-ground, no sun: ≈ 2 days). The two are separate basins of the multiple-shooting cost: from the
-floor start alone the swarm's 40 iterations can end in a fast store at C_s's lower bound (a
-second conductance to the outside, nothing the base lacks) while a slow store cuts the error
-(refsim autumn, effect-free, 300-s rows: in-sample MSE −1.5 % from the floor start, −15 %
-from the soil start; docs/effects.md, "The heat store's two starts")."""
+STORE_START = {"c_store": 5e4, "h_store": 3.0, "k_store": 3.0, "a_store": 0.1}
+"""Where the heat store's fit starts (a floor-like store: 5 cm of wet sand, h ≈ 3 W m-2 K-1)."""
 
 Progress = Callable[[str], None]
 Resample = Callable[[np.ndarray], np.ndarray]
@@ -181,7 +171,7 @@ def calibrate_base(base: Model, gh: Greenhouse, x: dict, dt: float, s: int, hori
     starts = pick(window_starts(fit_seg, horizon, skip=horizon))
     val_starts = pick(window_starts([(s1, s)], horizon)) if inner else np.zeros(0, dtype=int)
     model = structure(base, gh, store=False)
-    start = night_start(x, s)
+    start = STORE_START | night_start(x, s)
     if NIGHT_SKY_IN_BASE:
         model = model.with_night_sky(*night_bounds(start[night_sky.LEVEL.name]))
     theta = model.defaults(gh)
@@ -198,9 +188,9 @@ def calibrate_base(base: Model, gh: Greenhouse, x: dict, dt: float, s: int, hori
     for label, build in options(model, gh):
         new = build(model)
         say(f"calibrating the base model: trying a {label}")
+        th = carry(theta, model, new, gh, start)
         sh = Shooting(new, x, gh, dt, starts, horizon)
-        th = fit_option(new, [carry(theta, model, new, gh, start | st) for st in STORE_STARTS],
-                        sh, gh, seed + 1, lm_alone=new.store and not model.store)
+        th = fit(new, th, sh, gh, OPTION_ITERATIONS, seed + 1)
         sse_new, _ = sh.sse(th[None])
         k_new = len(new.names) - len(model.names)
         dbic = delta_bic(float(sse_new[0]), float(sse[0]), effective_samples(npair, dt), k_new)
@@ -216,27 +206,6 @@ def calibrate_base(base: Model, gh: Greenhouse, x: dict, dt: float, s: int, hori
         shoot = Shooting(model, x, gh, dt, whole, horizon)
         theta = fit(model, theta, shoot, gh, 0, seed)
     return model, theta, log
-
-
-def fit_option(model: Structured, starts: list[np.ndarray], shoot: Shooting, gh: Greenhouse,
-               seed: int, lm_alone: bool = False) -> np.ndarray:
-    """An optional part fitted (``fit``, ``OPTION_ITERATIONS``) from each distinct start (the
-    heat store's ``STORE_STARTS``; one start for the other parts, whose carried vectors are
-    equal), and with ``lm_alone`` also by Levenberg–Marquardt alone from each; the lowest
-    in-sample cost kept (its own fit's objective, not the validation). ``lm_alone`` is for a
-    part whose start is not the model without it (the heat store, h_s > 0): from a start above
-    the base's cost the swarm keeps the first points that get back to it, which for the store
-    lie in a fast store at C_s's lower bound (a second conductance to the outside), and
-    Levenberg–Marquardt polishes that dead end, while from the start itself it walks into the
-    slow store (docs/effects.md, "The heat store's two starts")."""
-    distinct: list[np.ndarray] = []
-    for th in starts:
-        if not any(np.array_equal(th, d) for d in distinct):
-            distinct.append(th)
-    fits = [fit(model, th, shoot, gh, OPTION_ITERATIONS, seed) for th in distinct]
-    if lm_alone:
-        fits += [fit(model, th, shoot, gh, 0, seed) for th in distinct]
-    return fits[int(np.argmin(shoot.mse(np.array(fits))))]
 
 
 def _validated(new: float | None, old: float | None) -> bool:

@@ -89,7 +89,8 @@ class Subscriber:
 
         self._writer.start()
         self.opener = SessionOpener(
-            lambda: zconfig.build(self.mode, self.connect, self.listen, extra=self.extra),
+            lambda: zconfig.build(self.mode, self.connect, self.listen, extra=self.extra,
+                                  dial_only=bool(self.connect)),
             self._declare, self.retry, what=f"zenoh {self.mode} of {', '.join(self.connect) or '-'}")
         if self.mode != "client":  # a peer opens without anyone to talk to: an error is final
             if not self.opener.start(background=False):

@@ -17,15 +17,20 @@ import zenoh
 
 def build(mode: str = "peer", connect: Iterable[str] = (), listen: Iterable[str] = (),
           multicast_scouting: bool = False, timestamping: bool = True,
-          extra: Mapping[str, Any] | None = None) -> zenoh.Config:
+          extra: Mapping[str, Any] | None = None, dial_only: bool = False) -> zenoh.Config:
     """A ``zenoh.Config``. Timestamps are on: the advanced publisher's cache needs them, and a
-    subscriber can order samples by them."""
+    subscriber can order samples by them.
+
+    ``dial_only``: with no ``listen`` endpoint, open no listening socket at all. Zenoh's peer
+    default listens on every interface at a random port; a tool that only connects out (the
+    status screen's queries, a subscriber given ``--connect`` alone) has no use for it, and a
+    socket on every interface is one more door on a farm's network."""
     conf = zenoh.Config()
     conf.insert_json5("mode", json.dumps(mode))
     connect, listen = list(connect), list(listen)
     if connect:
         conf.insert_json5("connect/endpoints", json.dumps(connect))
-    if listen:
+    if listen or dial_only:
         conf.insert_json5("listen/endpoints", json.dumps(listen))
     conf.insert_json5("scouting/multicast/enabled", json.dumps(multicast_scouting))
     if timestamping:

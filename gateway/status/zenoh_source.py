@@ -28,7 +28,7 @@ class ZenohSource:
     def __init__(self, connect: Sequence[str], mode: str = "peer", farm: str = "*",
                  timeout: float = 10.0, bins: int = 36) -> None:
         self.connect, self.mode, self.farm, self.timeout = list(connect), mode, farm, timeout
-        self.session = zenoh.open(zconfig.build(mode, self.connect, []))
+        self.session = zenoh.open(zconfig.build(mode, self.connect, [], dial_only=True))
         self.messages = Messages(bins)
         self.since: dict[str, float] = {}  # series kind → newest gateway time asked for
         self.answered: bool | None = None

@@ -17,7 +17,7 @@ from gateway.estimate.objective import Objective
 from gateway.estimate.swarm import make_algorithm
 from gateway.model import build_model
 from gateway.model.drivers import prepare_drivers
-from training.identifiability import ASSUMED, build, load
+from training.identifiability import ASSUMED, DATASET, build, load, main
 
 
 @pytest.fixture(scope="module")
@@ -35,6 +35,15 @@ def test_shipped_dataset_is_the_documented_simulation(data):
     assert len(series) == 2880 and series.sampling == "mean"
     for name in ("t_in", "t_out", "i_glob", "wind"):
         np.testing.assert_allclose(series[name], rebuilt[name], atol=1e-9)
+
+
+def test_the_command_rebuilds_the_shipped_file_byte_for_byte(tmp_path, capsys):
+    out = tmp_path / "rebuilt.csv"
+    assert main(["--out", str(out)]) == 0
+    assert out.read_bytes() == DATASET.read_bytes()
+    with pytest.raises(SystemExit) as exit_:  # --help writes nothing, the shipped file least
+        main(["--help"])
+    assert exit_.value.code == 0 and "--out FILE.csv" in capsys.readouterr().out
 
 
 def floor_cost(series, model, gh) -> float:

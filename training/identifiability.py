@@ -12,6 +12,7 @@ rebuilds ``training/data/identifiability_prototype_2days.csv``.
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 import numpy as np
@@ -53,5 +54,16 @@ def write(path: Path = DATASET) -> Path:
     return write_kit_csv(path, s.time, s.columns, digits=12)
 
 
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m training.identifiability",
+                                 description=__doc__.split("\n")[0])
+    ap.add_argument("--out", type=Path, default=DATASET, metavar="FILE.csv",
+                    help="where to write the dataset (default: the shipped "
+                         "training/data/identifiability_prototype_2days.csv)")
+    args = ap.parse_args(argv)
+    print(write(args.out))
+    return 0
+
+
 if __name__ == "__main__":
-    print(write())
+    raise SystemExit(main())

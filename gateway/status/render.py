@@ -206,18 +206,24 @@ def kit_lines(snap: S.Snapshot) -> list[Text]:
     if not snap.kits:
         out.append(_line(("no kit has sent a record yet", WARN)))
     out.append(_line(""))
-    out += _ingest_lines(snap.gateway)
+    out += _ingest_lines(snap.gateway, snap.now)
     return out
 
 
-def _ingest_lines(gw: S.Gateway) -> list[Text]:
+def _ingest_lines(gw: S.Gateway, now: float | None) -> list[Text]:
+    """The gateway's packet counters, said as of when it wrote them: it does every 5 wall s (10
+    minutes on a 120× demo clock), so "stored" trails the records column, read from the store
+    at each refresh, by the records of that while; said, it does not read as data lost."""
     if not gw.ingest:
         return [_line("Packets    ", ("no counters (the gateway writes them while it runs)", DIM))]
     rej = gw.rejects
     head = _line(f"Packets    {gw.ingest.get('stored', 0)} stored · {gw.ingest.get('duplicate', 0)} "
-                 "duplicates · ", (f"{sum(rej.values())} rejected", WARN if rej else OK),
-                 " (since the gateway started)")
-    out = [head]
+                 "duplicates · ", (f"{sum(rej.values())} rejected", WARN if rej else OK))
+    when = ""
+    if gw.ingest_t is not None:
+        ago = f" ({duration(now - gw.ingest_t)} ago)" if now is not None else ""
+        when = f", as of its status at {hhmm(gw.ingest_t)}{ago}"
+    out = [head, _line(("           since the gateway started" + when, DIM))]
     items = [f"{k} {v}" for k, v in sorted(rej.items(), key=lambda kv: -kv[1])]
     line = "  by reason:"
     for it in items:
@@ -230,8 +236,20 @@ def _ingest_lines(gw: S.Gateway) -> list[Text]:
     return out
 
 
+def _on_the_scaled_clock(gw: S.Gateway) -> str:
+    """Under the TEST/DEMO clock line: which times are on it (every one on the screen but the
+    service's uptime and heartbeat, which are the process's, wall) and the uptime on it (a
+    linear clock: wall uptime × scale), to set beside the data's times and spans."""
+    if gw.running and gw.pid is not None and gw.uptime_s is not None:
+        return (f"           up {duration(gw.uptime_s * gw.clock_scale)} on it; every other time "
+                "on the screen is on it")
+    return "           every time on the screen but the heartbeat's is on it"
+
+
 def gateway_lines(snap: S.Snapshot) -> list[Text]:
     gw = snap.gateway
+    scaled = gw.clock_scale != 1.0
+    wall = " (wall clock)" if scaled else ""  # the process's own times, beside a scaled clock
     if gw.running is None:
         svc = _line("Service    ", ("unknown: no status from a gateway", WARN))
     elif not gw.running and gw.pid is None:
@@ -241,14 +259,15 @@ def gateway_lines(snap: S.Snapshot) -> list[Text]:
                     "status message")
     elif gw.running:
         svc = _line("Service    ", ("running", OK), f" · pid {gw.pid} · up {duration(gw.uptime_s)}"
-                    f" · heartbeat {duration(gw.heartbeat_age_s)} ago")
+                    f" · heartbeat {duration(gw.heartbeat_age_s)} ago{wall}")
     else:
         svc = _line("Service    ", ("NOT RUNNING", ALARM),
-                    f" · last heartbeat {duration(gw.heartbeat_age_s)} ago")
+                    f" · last heartbeat {duration(gw.heartbeat_age_s)} ago{wall}")
     out = [svc]
     clock = f"Clock      {stamp(snap.now, seconds=True)}"
-    if gw.clock_scale != 1.0:
+    if scaled:
         out.append(_line(clock, (f" · TEST/DEMO clock {gw.clock_scale:g}× the wall clock", WARN)))
+        out.append(_line(_on_the_scaled_clock(gw)))
     else:
         out.append(_line(clock))
     lk = gw.link

@@ -25,6 +25,7 @@ from gateway.status.snapshot import Link, attention
 from gateway.status.store_source import DROP
 from gateway.store import Store
 from gateway.store.aggregate import aggregate
+from gateway.store.live import set_status
 from tests.status_helpers import beating, fresh_status, snap_of
 from tests.status_store import MODEL, Filled, records
 
@@ -224,6 +225,34 @@ def test_gateway_down_link_down_and_outbox_alarm_are_said(store: Filled) -> None
         t.plain for t in render.gateway_lines(stopped))
 
 
+def test_a_scaled_clock_says_which_times_are_wall_and_when_the_counters_were_taken(
+        store: Filled) -> None:
+    """At 300× the gateway's uptime and heartbeat (its process's, wall) are said to be wall and
+    its uptime is given on the scaled clock too; the packet counters, written every 5 wall s,
+    are said as of when, so "stored" trailing the records column does not read as data lost."""
+    beat = fresh_status(store)  # scale 300, up 3600 wall s, every row at the trace's now
+    s = Store(store.path)
+    try:  # the counters as the gateway wrote them 10 minutes (its clock) before that
+        set_status(s.conn, {"ingest": {"stored": 120, "duplicate": 0}}, store.now - 600)
+    finally:
+        s.close()
+    snap = snap_of(store, wall=beat)
+    gw = [t.plain for t in render.gateway_lines(snap)]
+    assert gw[0] == "Service    running · pid 4242 · up 60 min · heartbeat 0 s ago (wall clock)"
+    assert gw[2] == "           up 12.5 days on it; every other time on the screen is on it"
+    kits = [t.plain for t in render.kit_lines(snap)]
+    i = next(i for i, x in enumerate(kits) if x.startswith("Packets    120 stored"))
+    when = time.strftime("%H:%MZ", time.gmtime(store.now - 600))
+    assert kits[i + 1] == f"           since the gateway started, as of its status at {when} (10 min ago)"
+    assert next(k for k in snap.kits if k.device_id == 7).records == 130  # the store, now
+    stopped = snap_of(store, wall=beat + 600)  # no heartbeat for 10 wall minutes
+    assert [t.plain for t in render.gateway_lines(stopped)][2] == \
+        "           every time on the screen but the heartbeat's is on it"
+    fresh_status(store, scale=1.0, heartbeat=beat)  # a real clock: one clock, nothing to say
+    gw = [t.plain for t in render.gateway_lines(snap_of(store, wall=beat))]
+    assert gw[0].endswith("heartbeat 0 s ago") and gw[1].startswith("Clock") and "on it" not in gw[2]
+
+
 def test_empty_store_and_ingest_only_store(tmp_path: Path) -> None:
     Store(tmp_path / "empty.db").close()
     snap = snap_of(Filled(tmp_path / "empty.db", 0, 0))
@@ -258,7 +287,7 @@ def test_the_diagnosis_warnings_are_shown_under_its_run(store: Filled) -> None:
     gw = [t.plain for t in render.gateway_lines(snap)]
     i = next(k for k, line in enumerate(gw) if line.startswith("Diagnosis  north: last run "))
     assert gw[i + 1].startswith("           warning site_time_mismatch: 96 % of the radiation ")
-    assert gw[i + 1].endswith("…") and len(gw[i + 1]) == render.WIDTH  # cut, never wrapped
+    assert gw[i + 1].endswith(" …") and len(gw[i + 1]) <= render.WIDTH  # cut, never wrapped
     assert not gw[i + 2].startswith("     ")  # one warning, one line; no line for the note
     text = render.plain(snap)
     assert "Findings   1 · diagnosis warning: site_time_mismatch (last run " in text

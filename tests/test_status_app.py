@@ -4,6 +4,7 @@ process the way the service fills it (tests/status_store.py)."""
 from __future__ import annotations
 
 import asyncio
+import re
 import sqlite3
 import time
 from pathlib import Path
@@ -134,3 +135,35 @@ def test_app_keeps_the_last_snapshot_when_a_refresh_fails(store: Filled) -> None
         src.close()
     assert "refresh failed (showing the last snapshot): OperationalError: disk I/O" in again
     assert "Inside T  measured" in again
+
+
+def test_a_wider_terminal_shows_whole_lines_and_a_narrower_one_cuts_them_at_a_word(
+        store: Filled) -> None:
+    """The panels were laid out for 78 columns whatever the terminal: at 120 a long line was
+    still cut at 78, and at 60 Rich cut where the columns ran out, inside a number
+    ("13.0..13…"). Now they are made for the width they are drawn at."""
+    said = ("96 % of the radiation above 50 W m-2 is measured while the sun is below the horizon "
+            "at latitude 34.85, longitude 5.73 (east positive)")
+    run = {"when": store.now - 3600, "ok": True, "findings": 0, "note": "diagnosis of 1.8 days",
+           "notes": [{"code": "site_time_mismatch", "level": "warning", "message": said}]}
+    beat = fresh_status(store, diagnosis={"north": run})
+    src = PinnedClock(store.path, beat + 1.0)
+    try:
+        (_, wide) = asyncio.run(_drive(src, [("3", "warning site_time_mismatch")],
+                                       "Inside T  measured", size=(120, 24)))
+        (narrow, narrow_gw) = asyncio.run(_drive(src, [("3", "warning site_time_")],
+                                                 ("Inside T", "T in "), size=(60, 24)))
+    finally:
+        src.close()
+    lines = wide.splitlines()
+    assert len(lines) == 24 and all(len(x) <= 120 for x in lines)
+    assert lines[0].rstrip().endswith("×300") and len(lines[0].rstrip()) > 100  # clock at right
+    warning = next(x.rstrip() for x in lines if "warning site_time_mismatch" in x)
+    assert 80 < len(warning) <= 120 and "is measured while the sun" in warning, warning
+    for shot in (narrow, narrow_gw):
+        lines = shot.splitlines()
+        assert len(lines) == 24 and all(len(x) <= 60 for x in lines)
+        assert not re.search(r"[\d.]…", shot), shot  # never half a number
+    t_in = next(x.rstrip() for x in narrow.splitlines() if x.startswith(" T in "))
+    assert re.search(r"( -?\d+\.\d\.\.-?\d+\.\d| …)$", t_in), t_in  # a whole range, or none
+    print("\n--- 120x24: gateway ---\n" + wide + "\n--- 60x24: greenhouse ---\n" + narrow)

@@ -4,7 +4,8 @@ in a thread every few seconds. Usable over SSH on an 80×24 terminal.
 Keys: ``1``/``g`` greenhouse, ``2``/``k`` kits, ``3``/``w`` gateway, ``tab`` next panel,
 ``←``/``→`` (or ``p``/``n``) previous/next greenhouse, ``↑``/``↓``/PgUp/PgDn scroll, ``r`` refresh
 now, ``q`` (or Ctrl-C) quit. The snapshot comes from a source (the store, read-only, or Zenoh);
-the app only draws it.
+the app only draws it, at the width the terminal gives (80 columns or more shows every line whole
+as ``--once`` does; a wider one shows what 78 columns would cut; a narrower one cuts at a word).
 """
 
 from __future__ import annotations
@@ -13,9 +14,10 @@ import asyncio
 import signal
 import threading
 import time
+from collections.abc import Callable, Iterator
 from typing import Protocol
 
-from rich.console import Group
+from rich.console import Console, ConsoleOptions
 from rich.text import Text
 from textual import work
 from textual.app import App, ComposeResult
@@ -33,6 +35,17 @@ class Source(Protocol):
     def snapshot(self) -> Snapshot: ...
 
     def close(self) -> None: ...
+
+
+class Fitted:
+    """Lines made for the width Rich draws them at (the widget's, known only then; again at each
+    resize), so no line is cut where the panels assumed another width."""
+
+    def __init__(self, make: Callable[[int], list[Text]]) -> None:
+        self.make = make
+
+    def __rich_console__(self, console: Console, options: ConsoleOptions) -> Iterator[Text]:
+        yield from self.make(options.max_width)
 
 
 class StatusApp(App[None]):
@@ -127,15 +140,17 @@ class StatusApp(App[None]):
                 f"reading {self.source.label} …"
             self.query_one("#content", Static).update(Text(msg, "bold red" if self.error else ""))
             return
-        self.query_one("#title", Static).update(render.title(self.snap, self.panel, self.gh))
-        lines = render.panel_lines(self.snap, self.panel, self.gh)
-        if self.error:
-            lines.insert(0, Text(f"refresh failed (showing the last snapshot): {self.error}",
-                                 "bold red"))
-        stale = time.time() - self.snap.wall
+        snap, panel, gh = self.snap, self.panel, self.gh
+        self.query_one("#title", Static).update(Fitted(lambda w: [render.title(snap, panel, gh, w)]))
+        head = []
+        stale = time.time() - snap.wall
         if stale > max(5 * self.interval, 10):
-            lines.insert(0, Text(f"snapshot {stale:.0f} s old", "yellow"))
-        self.query_one("#content", Static).update(Group(*lines))
+            head.append(Text(f"snapshot {stale:.0f} s old", "yellow"))
+        if self.error:
+            head.append(Text(f"refresh failed (showing the last snapshot): {self.error}",
+                             "bold red"))
+        self.query_one("#content", Static).update(
+            Fitted(lambda w: head + render.panel_lines(snap, panel, gh, w)))
 
     # -- actions --------------------------------------------------------------------------------
     def action_panel(self, name: str) -> None:

@@ -1,5 +1,6 @@
-"""The status screen's small text formats: times, durations, sizes, numbers, sparklines and
-the styled line every panel is made of (cut to ``WIDTH`` columns, never wrapped).
+"""The status screen's small text formats: times, durations, sizes, numbers, sparklines, the
+styled line every panel is made of, and ``fit``, which cuts a line to the columns there are
+(``WIDTH`` for ``--once``, the terminal's on the screen) at a word, never inside a number.
 """
 
 from __future__ import annotations
@@ -78,11 +79,11 @@ def number(v: float | None, fmt: str = "{:.2f}") -> str:
     return "—" if v is None or not math.isfinite(v) else fmt.format(v)
 
 
-def wrapped(text: str, indent: str, style: str = "") -> list[Text]:
-    """``text`` over as many lines as it needs (a command must not be cut)."""
+def wrapped(text: str, indent: str, style: str = "", width: int = WIDTH) -> list[Text]:
+    """``text`` over as many lines of ``width`` as it needs (a command must not be cut)."""
     out, row = [], indent
     for word in text.split():
-        if len(row) + len(word) + 1 > WIDTH and row.strip():
+        if len(row) + len(word) + 1 > width and row.strip():
             out.append(line((row.rstrip(), style)))
             row = indent + "  "
         row += word + " "
@@ -91,13 +92,37 @@ def wrapped(text: str, indent: str, style: str = "") -> list[Text]:
 
 
 def line(*parts: str | tuple[str, str]) -> Text:
-    """One line of styled parts (a part: text, or (text, style)), cut to ``WIDTH`` with an
-    ellipsis, never wrapped."""
+    """One line of styled parts (a part: text, or (text, style)), never wrapped; ``fit`` cuts
+    it to the width it is shown at."""
     t = Text(no_wrap=True, overflow="ellipsis")
     for p in parts:
         if isinstance(p, tuple):
             t.append(*p)
         else:
             t.append(p)
-    t.truncate(WIDTH, overflow="ellipsis")
     return t
+
+
+def fit(t: Text, width: int) -> Text:
+    """``t`` cut to ``width`` columns with an ellipsis where it is longer: after its last whole
+    " · " field when that keeps half the line, else after its last whole word (so a cut never
+    shows half a number such as "13.0..13…"), else (one long word) at the width."""
+    if t.cell_len <= width:
+        return t
+    plain, room = t.plain, width - 2  # room for " …"
+    cut = plain.rfind(" · ", 0, room + 1)
+    if cut < width // 2:
+        cut = plain.rfind(" ", 0, room + 1)
+    if cut <= 0 or not plain[:cut].strip():
+        out = t[:max(width - 1, 0)]
+        out.append("…")
+    else:
+        out = t[:cut]
+        out.rstrip()
+        out.append(" …")
+    out.no_wrap, out.overflow = True, "ellipsis"
+    return out
+
+
+def fitted(lines: list[Text], width: int) -> list[Text]:
+    return [fit(t, width) for t in lines]

@@ -245,7 +245,8 @@ class Messages:
             outbox=S.Outbox(pending, alarm=bool(_value(doc, "outboxAlarm", False))),
             disk=S.Disk(_value(doc, "storeSize"), _value(doc, "diskFree"), _value(doc, "diskTotal"),
                         f"(as of {_hhmm(when)}, gateway clock)" if doc else ""),
-            ingest={str(k): int(v) for k, v in ingest.items()}, diagnosis=self._diagnosis())
+            ingest={str(k): int(v) for k, v in ingest.items()}, ingest_t=when if ingest else None,
+            diagnosis=self._diagnosis())
 
     def _diagnosis(self) -> dict[str, S.Diagnosis]:
         """Each greenhouse's newest ``diagnosis`` message as the run it tells of (the store's

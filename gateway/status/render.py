@@ -1,7 +1,9 @@
 """A :class:`Snapshot` → lines of text, one list per panel (greenhouse, kits, gateway).
 
 Lines are rich ``Text`` (styles mark alarms and silences); ``plain()`` joins them without any
-style for ``--once``. Every line fits 78 columns, so a panel fits an 80-column terminal.
+style for ``--once``. Every line is cut to the panel's ``width`` (``formats.fit``: at a word, never
+inside a number): ``WIDTH``, 78 columns, for ``--once`` and an 80-column terminal; the screen
+gives its own, so a wider terminal shows whole lines and a narrower one cuts them cleanly.
 """
 
 from __future__ import annotations
@@ -16,6 +18,8 @@ from gateway.status.formats import (
     WARN,
     WIDTH,
     duration,
+    fit,
+    fitted,
     hhmm,
     number,
     size,
@@ -43,8 +47,8 @@ def _channel_value(ch: str, v: float | None, fmt: str) -> str:
 
 
 # -- panels --------------------------------------------------------------------------------------
-def title(snap: S.Snapshot, panel: str, gh: int = 0) -> Text:
-    """One line: farm, what is shown, the gateway clock."""
+def title(snap: S.Snapshot, panel: str, gh: int = 0, width: int = WIDTH) -> Text:
+    """One line: farm, what is shown, the gateway clock (at the right of ``width``)."""
     where = f"farm {snap.farm}" if snap.farm else "Serra"
     if panel == "greenhouse" and snap.greenhouses:
         g = snap.greenhouses[gh % len(snap.greenhouses)]
@@ -54,18 +58,25 @@ def title(snap: S.Snapshot, panel: str, gh: int = 0) -> Text:
     clock = stamp(snap.now)
     if snap.gateway.clock_scale != 1.0:
         clock += f" ×{snap.gateway.clock_scale:g}"
-    return _line(f"{where} · {what}", " " * max(1, WIDTH - len(where) - len(what) - 3 - len(clock)),
-                 (clock, DIM))
+    return fit(_line(f"{where} · {what}", " " * max(1, width - len(where) - len(what) - 3
+                                                     - len(clock)), (clock, DIM)), width)
 
 
-def greenhouse_lines(snap: S.Snapshot, index: int) -> list[Text]:
+def greenhouse_lines(snap: S.Snapshot, index: int, width: int = WIDTH) -> list[Text]:
+    return fitted(_greenhouse_lines(snap, index), width)
+
+
+def _greenhouse_lines(snap: S.Snapshot, index: int) -> list[Text]:
     if not snap.greenhouses:
         return [_line(("No greenhouse in this store yet.", WARN))] + [_line(n) for n in snap.notes]
     g = snap.greenhouses[index % len(snap.greenhouses)]
     state = g.state or "?"
-    head = _line((g.name, "bold"), f"  {g.model} model · estimator ",
-                 (state, OK if state == "running" else WARN),
-                 f" · kit {g.inside_device} in, {g.outside_device} out")
+    # worded to fit 78 columns with the default model and "waiting for data" (with the word
+    # "model" and "in, 7 out" the kits were cut off); a shared kit as the kits panel says it
+    kits = (f"kit {g.inside_device} in+out" if g.inside_device == g.outside_device else
+            f"kit {g.inside_device} in, {g.outside_device} out")
+    head = _line((g.name, "bold"), f"  {g.model} · estimator ",
+                 (state, OK if state == "running" else WARN), f" · {kits}")
     some = next(iter(g.series.values()), None)
     span = duration(some.end - some.start) if some is not None else "24 h"
     label = f"last {span}"
@@ -180,7 +191,7 @@ def _finding_lines(g: S.GreenhouseView, diagnosis: S.Diagnosis | None) -> list[T
     return out
 
 
-def kit_lines(snap: S.Snapshot) -> list[Text]:
+def kit_lines(snap: S.Snapshot, width: int = WIDTH) -> list[Text]:
     out = [_line(("kit   greenhouse        last record               records  boot  state", DIM))]
     for k in snap.kits:
         where = ", ".join(k.greenhouses) if k.greenhouses else "(unassigned)"
@@ -202,26 +213,32 @@ def kit_lines(snap: S.Snapshot) -> list[Text]:
                  if k.stored_boot is not None and k.boot is not None and k.stored_boot != k.boot else "")
         out.append(_line(chans, extra))
         if k.refused:
-            out += wrapped("refused: " + k.refused, "     ", ALARM)
+            out += wrapped("refused: " + k.refused, "     ", ALARM, width)
     if not snap.kits:
         out.append(_line(("no kit has sent a record yet", WARN)))
     out.append(_line(""))
-    out += _ingest_lines(snap.gateway)
-    return out
+    out += _ingest_lines(snap.gateway, snap.now, width)
+    return fitted(out, width)
 
 
-def _ingest_lines(gw: S.Gateway) -> list[Text]:
+def _ingest_lines(gw: S.Gateway, now: float | None, width: int) -> list[Text]:
+    """The gateway's packet counters, said as of when it wrote them: it does every 5 wall s (10
+    minutes on a 120× demo clock), so "stored" trails the records column, read from the store
+    at each refresh, by the records of that while; said, it does not read as data lost."""
     if not gw.ingest:
         return [_line("Packets    ", ("no counters (the gateway writes them while it runs)", DIM))]
     rej = gw.rejects
     head = _line(f"Packets    {gw.ingest.get('stored', 0)} stored · {gw.ingest.get('duplicate', 0)} "
-                 "duplicates · ", (f"{sum(rej.values())} rejected", WARN if rej else OK),
-                 " (since the gateway started)")
-    out = [head]
+                 "duplicates · ", (f"{sum(rej.values())} rejected", WARN if rej else OK))
+    when = ""
+    if gw.ingest_t is not None:
+        ago = f" ({duration(now - gw.ingest_t)} ago)" if now is not None else ""
+        when = f", as of its status at {hhmm(gw.ingest_t)}{ago}"
+    out = [head, _line(("           since the gateway started" + when, DIM))]
     items = [f"{k} {v}" for k, v in sorted(rej.items(), key=lambda kv: -kv[1])]
     line = "  by reason:"
     for it in items:
-        if len(line) + len(it) + 3 > WIDTH:
+        if len(line) + len(it) + 3 > width:
             out.append(_line((line, WARN)))
             line = "            "
         line += f" {it} ·"
@@ -230,8 +247,20 @@ def _ingest_lines(gw: S.Gateway) -> list[Text]:
     return out
 
 
-def gateway_lines(snap: S.Snapshot) -> list[Text]:
+def _on_the_scaled_clock(gw: S.Gateway) -> str:
+    """Under the TEST/DEMO clock line: which times are on it (every one on the screen but the
+    service's uptime and heartbeat, which are the process's, wall) and the uptime on it (a
+    linear clock: wall uptime × scale), to set beside the data's times and spans."""
+    if gw.running and gw.pid is not None and gw.uptime_s is not None:
+        return (f"           up {duration(gw.uptime_s * gw.clock_scale)} on it; every other time "
+                "on the screen is on it")
+    return "           every time on the screen but the heartbeat's is on it"
+
+
+def gateway_lines(snap: S.Snapshot, width: int = WIDTH) -> list[Text]:
     gw = snap.gateway
+    scaled = gw.clock_scale != 1.0
+    wall = " (wall clock)" if scaled else ""  # the process's own times, beside a scaled clock
     if gw.running is None:
         svc = _line("Service    ", ("unknown: no status from a gateway", WARN))
     elif not gw.running and gw.pid is None:
@@ -241,14 +270,15 @@ def gateway_lines(snap: S.Snapshot) -> list[Text]:
                     "status message")
     elif gw.running:
         svc = _line("Service    ", ("running", OK), f" · pid {gw.pid} · up {duration(gw.uptime_s)}"
-                    f" · heartbeat {duration(gw.heartbeat_age_s)} ago")
+                    f" · heartbeat {duration(gw.heartbeat_age_s)} ago{wall}")
     else:
         svc = _line("Service    ", ("NOT RUNNING", ALARM),
-                    f" · last heartbeat {duration(gw.heartbeat_age_s)} ago")
+                    f" · last heartbeat {duration(gw.heartbeat_age_s)} ago{wall}")
     out = [svc]
     clock = f"Clock      {stamp(snap.now, seconds=True)}"
-    if gw.clock_scale != 1.0:
+    if scaled:
         out.append(_line(clock, (f" · TEST/DEMO clock {gw.clock_scale:g}× the wall clock", WARN)))
+        out.append(_line(_on_the_scaled_clock(gw)))
     else:
         out.append(_line(clock))
     lk = gw.link
@@ -279,12 +309,12 @@ def gateway_lines(snap: S.Snapshot) -> list[Text]:
                 if d.free_bytes is not None and d.total_bytes else "")
         out.append(_line(f"Store      {size(d.store_bytes)}{used}"))
         if d.path:
-            out.append(_line((f"           {tail(d.path, WIDTH - 11)}", DIM)))
+            out.append(_line((f"           {tail(d.path, width - 11)}", DIM)))
     out += _diagnosis_lines(gw)
     for n in snap.notes:
         out.append(_line(("Note       " + n, WARN)))
-    out.append(_line((f"Source     {tail(snap.source, WIDTH - 11)}", DIM)))
-    return out
+    out.append(_line((f"Source     {tail(snap.source, width - 11)}", DIM)))
+    return fitted(out, width)
 
 
 SHOWN_WARNINGS = 3
@@ -310,12 +340,12 @@ def _diagnosis_lines(gw: S.Gateway) -> list[Text]:
 PANELS = ("greenhouse", "kits", "gateway")
 
 
-def panel_lines(snap: S.Snapshot, panel: str, gh: int = 0) -> list[Text]:
+def panel_lines(snap: S.Snapshot, panel: str, gh: int = 0, width: int = WIDTH) -> list[Text]:
     if panel == "greenhouse":
-        return greenhouse_lines(snap, gh)
+        return greenhouse_lines(snap, gh, width)
     if panel == "kits":
-        return kit_lines(snap)
-    return gateway_lines(snap)
+        return kit_lines(snap, width)
+    return gateway_lines(snap, width)
 
 
 def plain(snap: S.Snapshot) -> str:

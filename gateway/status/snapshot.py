@@ -258,13 +258,14 @@ def diagnosis_of(d: dict[str, Any]) -> Diagnosis:
 class Gateway:
     running: bool | None = None  # None: unknown (never seen)
     pid: int | None = None
-    uptime_s: float | None = None
+    uptime_s: float | None = None  # [wall s]
     heartbeat_age_s: float | None = None  # [wall s]
     clock_scale: float = 1.0
     link: Link = field(default_factory=Link)
     outbox: Outbox = field(default_factory=Outbox)
     disk: Disk = field(default_factory=Disk)
     ingest: dict[str, int] = field(default_factory=dict)  # packet counters by outcome
+    ingest_t: float | None = None  # when the gateway wrote them [unix s, gateway clock]
     diagnosis: dict[str, Diagnosis] = field(default_factory=dict)  # greenhouse → last run
 
     @property

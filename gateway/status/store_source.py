@@ -97,7 +97,7 @@ class StoreSource:
             uptime_s=(g.get("uptime_s", 0.0) + (age or 0.0)) if running else g.get("uptime_s"),
             heartbeat_age_s=age, clock_scale=scale, link=link_from_status(z, bool(running)),
             outbox=outbox, disk=self._disk(), ingest=dict(status.get("ingest", ({}, 0.0))[0]),
-            diagnosis=diag)
+            ingest_t=status["ingest"][1] if "ingest" in status else None, diagnosis=diag)
         self._refused = {int(k): v for k, v in refused.items()} if isinstance(refused, dict) else {}
         return gw, now, notes
 

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from training.appliance.procs import ChildError, Group
-from training.appliance.summary import count, summarise
+from training.appliance.summary import count, delivery, summarise
 
 if TYPE_CHECKING:
     from training.kitsim import KitClock
@@ -240,11 +240,10 @@ class Demo:
     def progress(self) -> None:
         db, cloud = self.out / "serra.db", self.out / "cloud.db"
         stamp = time.strftime("%H:%MZ", time.gmtime(self.clock.now()))
+        published, received = delivery(db, cloud)
         self.say(f"  {stamp}  stored {count(db, 'SELECT count(*) FROM samples')} records · "
                  f"{count(db, 'SELECT count(*) FROM estimates WHERE name=?', ('t_in_next',))} "
-                 f"minutes estimated · published "
-                 f"{count(db, 'SELECT count(*) FROM outbox WHERE sent IS NOT NULL')} · received "
-                 f"{count(cloud, 'SELECT count(*) FROM messages')}")
+                 f"minutes estimated · published {published} · received {received}")
 
     def screen(self) -> None:
         from gateway.status.app import StatusApp

@@ -87,6 +87,19 @@ def count(db: Path, sql: str, args: tuple = ()) -> int:
         return 0
 
 
+def delivery(gateway_db: Path, cloud_db: Path) -> tuple[int, int]:
+    """(published, received) messages now, for the progress line. The count that can only trail
+    is read first: every message received was published before it, so reading the received
+    count first and the published one after keeps received <= published however many move
+    meanwhile (read the other way round, the messages both published and received between the
+    two reads counted as received only: "published 421 · received 422"). One window stays: the
+    gateway marks a batch sent just after putting it (gateway/publish/publisher.py), so a
+    subscriber that commits before that mark is counted ahead of it for that moment."""
+    received = count(cloud_db, "SELECT count(*) FROM messages")
+    published = count(gateway_db, "SELECT count(*) FROM outbox WHERE sent IS NOT NULL")
+    return published, received
+
+
 def summarise(gateway_db: Path, cloud_db: Path, kit_records: int, start: float, end: float,
               scale: float, greenhouse: str, device: int) -> Summary:
     s = Summary(start, end, scale, kit_records=kit_records)

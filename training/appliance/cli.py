@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import re
 import shlex
 import shutil
 import signal
@@ -27,21 +26,12 @@ import textwrap
 import threading
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
 
+from training.appliance.files import DEVICE, GREENHOUSE, MODEL, calibrate_command, write_config
 from training.appliance.procs import ChildError, Group
 from training.appliance.summary import count, delivery, summarise
 
-if TYPE_CHECKING:
-    from training.kitsim import KitClock
-
-DEVICE = 7
-GREENHOUSE = "north"
 START = "2009-11-01T08:00:00Z"  # the simulated weather's morning (Bleiswijk, real)
-PRESET = "biskra-prototype"  # the kit's greenhouse: the thesis's prototype (table 2)
-MODEL = "prototype+vent_control"  # the shipped example's (images/gateway/gateway.toml); on this
-# house's minutes, each model with its own calibration, its forecasts beat the plain prototype's
-# (docs/effects.md, "Forecasts: the vent controller", the demo house)
 FILES = ("serra.db", "serra.db-wal", "serra.db-shm", "cloud.db", "cloud.db-wal", "cloud.db-shm",
          "keys.txt", "gateway.toml", "greenhouse.toml", "trace.txt", "gateway.log", "subscribe.log",
          "summary.json", "calibration.csv", "calibration.truth.json", "calibration.truth.npz", "params.toml")
@@ -343,77 +333,3 @@ def python_cmd() -> str:
     if on_path and os.path.abspath(on_path) == os.path.abspath(sys.executable):
         return "python"
     return shown(Path(sys.executable))
-
-
-def weather_site() -> tuple[float, float]:
-    """Where the run's weather was measured (Bleiswijk) [deg N, deg E]: the sun the model's
-    cloudiness (sky temperature) and the clear-sky outlook are computed for must be the sun of
-    that weather, not the preset's Biskra sun (as ``make demo`` passes ``--site``)."""
-    from training.simulate.weather import BLEISWIJK_LATITUDE, BLEISWIJK_LONGITUDE
-
-    return BLEISWIJK_LATITUDE, BLEISWIJK_LONGITUDE
-
-
-def calibrate_command(data: Path, params: Path, model: str = MODEL) -> list[str]:
-    """``gateway calibrate`` on the two earlier days, at the weather's site."""
-    lat, lon = weather_site()
-    return [sys.executable, "-m", "gateway", "calibrate", "--data", str(data), "--greenhouse",
-            PRESET, "--model", model, "--algorithm", "riwpso", "--seed", "1",
-            "--site", f"{lat},{lon}", "--out", str(params)]
-
-
-def greenhouse_toml() -> str:
-    """The preset's description with its ``[site]`` moved to where the weather was measured."""
-    from gateway.greenhouse import PRESET_DIR
-
-    lat, lon = weather_site()
-    text = (PRESET_DIR / f"{PRESET}.toml").read_text(encoding="utf-8")
-    site = (f"[site]              # where the run's weather was measured (Bleiswijk), written by "
-            f"python -m training run\nlatitude = {lat}\nlongitude = {lon}\n")
-    new, n = re.subn(r"^\[site\][^\n]*\n(?:(?:latitude|longitude)\s*=[^\n]*\n){2}", site, text,
-                     flags=re.M)
-    if n != 1:
-        raise ChildError(f"{PRESET}.toml: no [site] table with latitude and longitude to replace")
-    return new
-
-
-def write_config(out: Path, clock: KitClock, params: Path | None, model: str = MODEL) -> None:
-    """``gateway.toml`` and the ``greenhouse.toml`` it names, under ``out``."""
-    (out / "greenhouse.toml").write_text(greenhouse_toml(), encoding="utf-8")
-    (out / "gateway.toml").write_text(CONFIG.format(
-        scale=clock.scale, epoch=clock.epoch, anchor=clock.anchor, device=DEVICE,
-        greenhouse=GREENHOUSE, model=model) + (f'params = "{params.name}"\n' if params else ""))
-
-
-CONFIG = """# Written by python -m training run (make run): the shipped defaults
-# (images/gateway/gateway.toml) on loopback, with the TEST/DEMO clock; the greenhouse is the
-# biskra-prototype preset at the site of the kit's weather (greenhouse.toml: Bleiswijk).
-[gateway]
-farm = "demo-farm"
-db = "serra.db"
-keys = "keys.txt"
-status_every_s = 300
-
-[ingest]
-listen = "127.0.0.1:0"
-maintenance_s = 1
-
-[zenoh]
-listen = ["tcp/127.0.0.1:0"]
-
-[diagnosis]
-every_hours = 6
-days = 1
-min_days = 0.5
-
-[clock]
-scale = {scale!r}
-epoch = {epoch!r}
-anchor = {anchor!r}
-
-[[greenhouse]]
-name = "{greenhouse}"
-greenhouse = "greenhouse.toml"
-model = "{model}"
-inside = {device}
-"""

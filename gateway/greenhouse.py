@@ -155,15 +155,7 @@ def parse_greenhouse(raw: dict[str, Any], source: str = "<memory>") -> Greenhous
             out[key] = _check_number(source, f"{section}.{key}", value, kind, lo, hi)
         sections[section] = out
     geometry = sections["geometry"]
-    for key in ("floor_area", "volume"):
-        if key not in geometry:
-            raise GreenhouseError(f"{source}: missing 'geometry.{key}'")
-    height = geometry["volume"] / geometry["floor_area"]
-    if not MEAN_HEIGHT[0] <= height <= MEAN_HEIGHT[1]:  # a unit slip: cm2, litres, ...
-        raise GreenhouseError(
-            f"{source}: 'geometry.volume' / 'geometry.floor_area' = {height:.3g} m mean height is "
-            f"impossible (expected {MEAN_HEIGHT[0]:g}..{MEAN_HEIGHT[1]:g} m: floor_area in m2, "
-            f"volume in m3)")
+    _check_geometry(geometry, source)
     sensors = raw.get("sensors", [])
     if not isinstance(sensors, list) or not all(isinstance(s, str) for s in sensors):
         raise GreenhouseError(f"{source}: 'sensors' must be a list of kit column names")
@@ -237,6 +229,19 @@ def _parse_online(table: Any, source: str) -> dict[str, dict[str, Any]]:
                 )
             out[output][key] = check_online_value(source, output, key, value)
     return out
+
+
+def _check_geometry(geometry: dict[str, Any], source: str) -> None:
+    """Both sizes given, and a mean height (volume / floor area) a greenhouse can have."""
+    for key in ("floor_area", "volume"):
+        if key not in geometry:
+            raise GreenhouseError(f"{source}: missing 'geometry.{key}'")
+    height = geometry["volume"] / geometry["floor_area"]
+    if not MEAN_HEIGHT[0] <= height <= MEAN_HEIGHT[1]:  # a unit slip: cm2, litres, ...
+        raise GreenhouseError(
+            f"{source}: 'geometry.volume' / 'geometry.floor_area' = {height:.3g} m mean height is "
+            f"impossible (expected {MEAN_HEIGHT[0]:g}..{MEAN_HEIGHT[1]:g} m: floor_area in m2, "
+            f"volume in m3)")
 
 
 def check_online_value(source: str, output: str, key: str, value: Any) -> Any:

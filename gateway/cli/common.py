@@ -92,27 +92,25 @@ def _site(text: str) -> tuple[float, float]:
     return lat, lon
 
 
-def positive_int(text: str) -> int:
-    """argparse type: a whole number >= 1 (0 iterations would "calibrate" to the start point)."""
+def _whole_number(text: str, least: int, said: str) -> int:
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {text!r}")
+    if value < least:
+        raise argparse.ArgumentTypeError(f"must be {said}, got {text!r}")
     return value
+
+
+def positive_int(text: str) -> int:
+    """argparse type: a whole number >= 1 (0 iterations would "calibrate" to the start point)."""
+    return _whole_number(text, 1, "at least 1")
 
 
 def seed_int(text: str) -> int:
     """argparse type: a whole number >= 0 (numpy's generators refuse a negative seed, which
     would be a traceback after the data was read)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be 0 or more, got {text!r}")
-    return value
+    return _whole_number(text, 0, "0 or more")
 
 
 def add_seed_argument(p: argparse.ArgumentParser, what: str) -> None:

@@ -309,3 +309,24 @@ def test_installed_wheel_runs_the_gateway_as_client_of_the_shipped_router_unit(
                 seen = installed.run("-m", "gateway", "status", "--config",
                                      str(tmp_path / "gateway.toml"), "--once").stdout
             assert "up: 0 peers, 1 router" in seen, seen
+
+
+def test_installed_wheel_checks_a_config_with_the_shipped_ventilation_sensor(
+        installed: Installed, bundles: Path, tmp_path: Path) -> None:
+    """gateway.toml's comment names a command for the shipped sensor's path; that path, given as
+    the greenhouse's vsensor, passes the unit's check (onnxruntime loads it, from the wheel)."""
+    write_keys(tmp_path / "keys.txt", {7: secrets.token_bytes(32)})
+    install_configs(installed, bundles, tmp_path)
+    config = tmp_path / "gateway.toml"
+    text = config.read_text()
+    (command,) = re.findall(rf"(?m)^# ({re.escape(str(installed.python))} -c .*)$", text)
+    r = subprocess.run(shlex.split(command), cwd=installed.cwd, env=installed.env,
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    sensor = Path(r.stdout.strip())
+    assert sensor.is_file() and sensor.is_relative_to(installed.python.parents[1]), sensor
+    config.write_text(text.replace('# vsensor = "ventilation.onnx"', f'vsensor = "{sensor}"'))
+    (pre,) = read_unit(bundles / "gateway" / "serra-gateway.service")["ExecStartPre"]
+    check = subprocess.run(shlex.split(_map_paths(pre, installed, tmp_path)), cwd=installed.cwd,
+                           env=installed.env, capture_output=True, text=True, timeout=120)
+    assert check.returncode == 0 and "ok: farm demo-farm" in check.stdout, check.stderr

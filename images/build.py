@@ -6,7 +6,9 @@
   board refuses, so no board runs on the published key); ``README.md`` (flashing and
   provisioning with esptool and mpremote); ``MANIFEST.txt`` (mpy-cross version, file hashes).
 - ``gateway/``: the wheel (gateway/ only: pyproject.toml), the systemd units, the default
-  configs (gateway.toml, router.toml) and ``README.md`` (install steps).
+  configs (gateway.toml, router.toml), ``README.md`` (install steps) and ``docs/`` (the
+  repository's, which the configs, the units and the commands' messages name; installed into
+  /opt/serra/docs).
 - ``firmware.tar.gz`` and ``gateway.tar.gz``: the same folders, to copy to a workstation or a Pi.
 
 The wheel is built from a staging copy of pyproject.toml, README.md and gateway/, offline
@@ -116,11 +118,12 @@ def build_wheel(dest: Path) -> Path:
 
 
 def build_gateway(out: Path) -> list[Path]:
-    """The gateway bundle in ``out``: wheel, units, default configs, README."""
+    """The gateway bundle in ``out``: wheel, units, default configs, README, docs."""
     out.mkdir(parents=True, exist_ok=True)
     build_wheel(out)
     for name in GATEWAY_FILES:
         shutil.copy2(HERE / "gateway" / name, out / name)
+    shutil.copytree(ROOT / "docs", out / "docs", ignore=IGNORE)  # "Every key ... docs/gateway.md"
     return sorted(out.iterdir())
 
 

@@ -160,10 +160,13 @@ def install_configs(installed: Installed, bundles: Path, root: Path) -> None:
 
 
 @contextmanager
-def run_unit(name: str, installed: Installed, bundles: Path, root: Path) -> Iterator[Popen[str]]:
+def run_unit(name: str, installed: Installed, bundles: Path, root: Path,
+             install: bool = True) -> Iterator[Popen[str]]:
     """Start a shipped unit's ExecStart from the fresh venv, with the bundle's default configs
-    (paths mapped into ``root``); stopped with SIGTERM, as systemd does, and must exit 0."""
-    install_configs(installed, bundles, root)
+    (paths mapped into ``root``; ``install=False``: the caller put them there, edited);
+    stopped with SIGTERM, as systemd does, and must exit 0."""
+    if install:
+        install_configs(installed, bundles, root)
     (cmd,) = read_unit(bundles / "gateway" / name)["ExecStart"]
     log = root / f"{name}.stderr"
     with log.open("w") as err:
@@ -256,3 +259,74 @@ def test_installed_wheel_runs_the_shipped_gateway_unit_from_its_default_config(
         assert "   7  north in+out" in r.stdout and "\x1b" not in r.stdout
     with sqlite3.connect(tmp_path / "serra.db") as db:
         assert db.execute("SELECT count(*) FROM samples").fetchone()[0] == 1
+
+
+def _free_port() -> int:
+    """A TCP port nothing listens on now, for the router (its config names a port)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _same_host_router_configs(root: Path, port: int) -> None:
+    """The bundle README's "a Zenoh router on this Pi", on the configs in ``root``: the router
+    on ``port`` with no upstream and the farm in its access table; the gateway its TLS client
+    on 127.0.0.1, with no listener of its own and the farm's certificate."""
+    router = root / "router.toml"
+    text = (router.read_text().replace("tls/0.0.0.0:7447", f"tls/127.0.0.1:{port}")
+            .replace('"farm-a", "farm-b"', '"demo-farm"').replace('["farm-a"]', '["demo-farm"]'))
+    router.write_text(re.sub(r"(?m)^connect = \[.*\]", "connect = []", text))
+    gateway = root / "gateway.toml"
+    text = (gateway.read_text().replace('mode = "peer"', 'mode = "client"')
+            .replace("connect = []", f'connect = ["tls/127.0.0.1:{port}"]')
+            .replace('listen = ["tcp/127.0.0.1:0"]', "listen = []"))
+    gateway.write_text(re.sub(r"(?m)^# (\[zenoh\.tls\]|ca = |cert = |key = )", r"\1", text))
+
+
+def test_installed_wheel_runs_the_gateway_as_client_of_the_shipped_router_unit(
+        installed: Installed, bundles: Path, tmp_path: Path) -> None:
+    """Both shipped configs listen on TCP 7447; the bundle README's recipe for a router on the
+    gateway's host (the gateway its TLS client) runs both units side by side, linked."""
+    r = installed.run("-m", "gateway", "certs", "--out", str(tmp_path / "certs"), "--router",
+                      "region-1", "--gateway", "demo-farm")
+    assert r.returncode == 0, r.stderr
+    write_keys(tmp_path / "keys.txt", {7: secrets.token_bytes(32)})
+    install_configs(installed, bundles, tmp_path)
+    assert '"tls/0.0.0.0:7447"' in (bundles / "gateway" / "router.toml").read_text()
+    assert '"tcp/0.0.0.0:7447"' in (bundles / "gateway" / "gateway.toml").read_text()
+    _same_host_router_configs(tmp_path, _free_port())
+    (pre,) = read_unit(bundles / "gateway" / "serra-router.service")["ExecStartPre"]
+    check = subprocess.run(shlex.split(_map_paths(pre, installed, tmp_path)), cwd=installed.cwd,
+                           env=installed.env, capture_output=True, text=True, timeout=120)
+    assert check.returncode == 0, check.stderr
+    with run_unit("serra-router.service", installed, bundles, tmp_path, install=False) as router:
+        ready = _line_starting(router, "serra router ready")
+        assert ready, (tmp_path / "serra-router.service.stderr").read_text()
+        with run_unit("serra-gateway.service", installed, bundles, tmp_path, install=False) as gw:
+            assert _line_starting(gw, "serra-gateway ready udp 127.0.0.1:")
+            end, seen = time.monotonic() + 120, ""
+            while time.monotonic() < end and "up: 0 peers, 1 router" not in seen:
+                seen = installed.run("-m", "gateway", "status", "--config",
+                                     str(tmp_path / "gateway.toml"), "--once").stdout
+            assert "up: 0 peers, 1 router" in seen, seen
+
+
+def test_installed_wheel_checks_a_config_with_the_shipped_ventilation_sensor(
+        installed: Installed, bundles: Path, tmp_path: Path) -> None:
+    """gateway.toml's comment names a command for the shipped sensor's path; that path, given as
+    the greenhouse's vsensor, passes the unit's check (onnxruntime loads it, from the wheel)."""
+    write_keys(tmp_path / "keys.txt", {7: secrets.token_bytes(32)})
+    install_configs(installed, bundles, tmp_path)
+    config = tmp_path / "gateway.toml"
+    text = config.read_text()
+    (command,) = re.findall(rf"(?m)^# ({re.escape(str(installed.python))} -c .*)$", text)
+    r = subprocess.run(shlex.split(command), cwd=installed.cwd, env=installed.env,
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    sensor = Path(r.stdout.strip())
+    assert sensor.is_file() and sensor.is_relative_to(installed.python.parents[1]), sensor
+    config.write_text(text.replace('# vsensor = "ventilation.onnx"', f'vsensor = "{sensor}"'))
+    (pre,) = read_unit(bundles / "gateway" / "serra-gateway.service")["ExecStartPre"]
+    check = subprocess.run(shlex.split(_map_paths(pre, installed, tmp_path)), cwd=installed.cwd,
+                           env=installed.env, capture_output=True, text=True, timeout=120)
+    assert check.returncode == 0 and "ok: farm demo-farm" in check.stdout, check.stderr

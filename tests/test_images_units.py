@@ -74,8 +74,22 @@ def test_install_steps_create_the_keys_file_0600_and_install_every_shipped_file(
     for name in [*UNITS, "gateway.toml", "router.toml", "serra-*.whl"]:
         assert name in readme, name
     shipped = {p.name for p in (bundles / "gateway").iterdir()}
-    assert shipped == {*UNITS, "gateway.toml", "router.toml", "README.md",
+    assert shipped == {*UNITS, "gateway.toml", "router.toml", "README.md", "docs",
                        next(n for n in shipped if n.endswith(".whl"))}
+    assert "sudo cp -r docs /opt/serra/" in readme
+
+
+def test_every_document_the_gateway_bundle_names_is_in_it(bundles: Path) -> None:
+    """The configs, the units and the README name docs/*.md (and the units /opt/serra/docs/...):
+    the Pi has no checkout, so each is in the bundle's docs/, as in the repository."""
+    gw = bundles / "gateway"
+    named = set()
+    for f in [*UNITS, "gateway.toml", "router.toml", "README.md"]:
+        named |= set(re.findall(r"\bdocs/[\w./-]*\w", (gw / f).read_text(encoding="utf-8")))
+    assert {"docs/gateway.md", "docs/fleet.md", "docs/wire-format.md"} <= named, named
+    missing = sorted(n for n in named if not (gw / n).is_file())
+    assert not missing, missing
+    assert (gw / "docs/gateway.md").read_bytes() == (ROOT / "docs/gateway.md").read_bytes()
 
 
 def test_readme_deploy_commands_are_the_bundles_commands(bundles: Path) -> None:

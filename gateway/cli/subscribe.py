@@ -55,7 +55,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="subscribe to serra/FARM/** (repeatable); also the farms --history answers for")
     p.add_argument("--db", type=Path, metavar="cloud.db",
                    help="SQLite cloud store (created if absent)")
-    p.add_argument("--dsn", metavar="DSN", help="PostgreSQL cloud store instead (needs serra[cloud])")
+    p.add_argument("--dsn", metavar="DSN",
+                   help="PostgreSQL cloud store instead (needs the cloud extra, psycopg 3)")
     p.add_argument("--schema", metavar="NAME", help="PostgreSQL schema (default serra)")
     p.add_argument("--history", action="store_true",
                    help="answer history queries for the farms from the store")

@@ -32,7 +32,9 @@ try:
     import psycopg
     from psycopg import sql
 except ImportError as exc:  # an optional dependency: the gateway appliance never needs it
-    raise ImportError("the PostgreSQL cloud store needs psycopg 3: pip install 'serra[cloud]'") from exc
+    # the wheel's cloud extra, named by its content: 'serra[cloud]' by name would come from an index
+    raise ImportError("the PostgreSQL cloud store needs psycopg 3 (the cloud extra): "
+                      "pip install 'psycopg[binary]>=3.1'") from exc
 
 from gateway.cloud.store import Received, kind_clause  # noqa: E402
 

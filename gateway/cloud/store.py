@@ -103,7 +103,7 @@ class CloudStore(Protocol):
 
 
 def open_store(db: str | Path | None = None, dsn: str | None = None, schema: str = "serra") -> CloudStore:
-    """PostgreSQL when a DSN is given (needs ``serra[cloud]``), else SQLite at `db`."""
+    """PostgreSQL when a DSN is given (needs the ``cloud`` extra, psycopg 3), else SQLite at `db`."""
     if dsn:
         from gateway.cloud.postgres import PgStore
 

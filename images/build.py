@@ -100,7 +100,7 @@ def build_wheel(dest: Path) -> Path:
     with tempfile.TemporaryDirectory(prefix="serra-wheel-") as tmp:
         stage = Path(tmp) / "src"
         stage.mkdir()
-        for name in ("pyproject.toml", "README.md"):
+        for name in ("pyproject.toml", "README.md", "LICENSE"):
             shutil.copy2(ROOT / name, stage / name)
         shutil.copytree(ROOT / "gateway", stage / "gateway", ignore=IGNORE)
         wheels = Path(tmp) / "wheels"

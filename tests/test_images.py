@@ -88,6 +88,9 @@ def test_wheel_holds_the_gateway_package_and_nothing_else(bundles: Path) -> None
     missing = _repo_package_files() - package
     assert not missing, f"not in the wheel (package-data in pyproject.toml?): {sorted(missing)}"
     assert "gateway/presets/almeria-palmerillas.toml" in package
+    # the project's own licence text beside the metadata's "License-Expression: MIT"
+    (licence,) = [n for n in names if n.endswith(".dist-info/licenses/LICENSE")]
+    assert b"MIT License" in zipfile.ZipFile(wheel).read(licence)
 
 
 APPLIANCE_EXTRAS = {"cloud"}

@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from gateway.cli.common import seed_int
+
 START = "2009-10-26"  # simulator start, 00:00 UTC
 DAYS = 10.0  # the live [diagnosis] default: 5 held-out days, 4.3 of them after the change
 CHANGE_AT = 41 / 72  # the change's start as a fraction of the length (16:40 on day 6 of 10)
@@ -102,7 +104,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help=f"days to simulate from {START} ({DAYS:g}); the undeclared heater "
                    f"({POWER:g} W m-2) starts {CHANGE_AT:.3f} × D after the start "
                    f"({_when(DAYS)}Z for {DAYS:g})")
-    p.add_argument("--seed", type=int, default=1, help="simulator and swarm seed (1)")
+    p.add_argument("--seed", type=seed_int, default=1, metavar="N",
+                   help="simulator and swarm seed, 0 or more (1)")
     p.add_argument("--set", action="append", default=[], type=_setting, metavar="OUTPUT.KEY=VALUE",
                    help="an online setting of step 3, passed to replay's --set (e.g. "
                    "t_in.iterations=10 for a quicker, rougher replay); repeatable")

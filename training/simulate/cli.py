@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gateway.cli.common import positive_number
+from gateway.cli.common import positive_number, seed_int
 from training.simulate.effects import EffectSpecError, describe_effects, parse_effect
 from training.simulate.plant import PRESETS
 from training.simulate.weather import DEFAULT_START, WEATHER_SOURCES, parse_start
@@ -59,8 +59,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help="output step [s] (default: 60)")
     parser.add_argument("--effect", action="append", default=[], metavar="SPEC",
                         help="inject an effect (repeatable), see below")
-    parser.add_argument("--seed", type=int, default=0,
-                        help="seed of synthetic weather and sensor errors (default: 0)")
+    parser.add_argument("--seed", type=seed_int, default=0, metavar="N",
+                        help="seed of synthetic weather and sensor errors, 0 or more (default: 0)")
     parser.add_argument("--out", required=True, metavar="FILE.csv",
                         help="path of the kit CSV to write (its folder is created)")
     parser.set_defaults(func=run)

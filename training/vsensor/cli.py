@@ -21,6 +21,7 @@ import sys
 import time
 from pathlib import Path
 
+from gateway.cli.common import seed_int
 from gateway.greenhouse import GreenhouseError, list_presets, load_greenhouse
 from gateway.kitcsv import KitCsvError
 from gateway.vsensor.features import MODEL_KINDS
@@ -41,7 +42,8 @@ def _data_args(p: argparse.ArgumentParser, cache: bool = True) -> None:
     p.add_argument("--set", action="append", default=[], metavar="OUTPUT.KEY=VALUE",
                    help="online estimator setting, e.g. --set t_in.bats=6 (default: the "
                    "greenhouse's and the model's; recorded in the model)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the estimator and the network (0)")
+    p.add_argument("--seed", type=seed_int, default=0, metavar="N",
+                   help="seed of the estimator and the network, 0 or more (0)")
     if not cache:  # the target option reads the cached replays
         return
     p.add_argument("--target-kind", choices=MODEL_KINDS, default=None, metavar="KIND",

@@ -6,6 +6,8 @@ import argparse
 import json
 import time
 
+from gateway.cli.common import seed_int
+
 
 def add_train_parser(sub: argparse._SubParsersAction, data_args) -> None:
     p = sub.add_parser(
@@ -45,7 +47,7 @@ def add_fit_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--ensemble", type=int, default=1, metavar="K",
                    help="average K networks fitted from seeds NET_SEED … NET_SEED+K-1 inside each "
                    "NARX graph (PCA and no-PCA alike; default 1: one network)")
-    p.add_argument("--net-seed", type=int, default=None, metavar="N",
+    p.add_argument("--net-seed", type=seed_int, default=None, metavar="N",
                    help="first seed of the networks (default: --seed, which also seeds the "
                    "estimator's replays; changing only this reuses the cached replays)")
     p.add_argument("--feedback", choices=("member", "ensemble"), default="member",

@@ -1,0 +1,43 @@
+"""A demanding user's mistakes on the offline tools (python -m training, python -m training.vsensor):
+each is one line naming the option, exit status 2, no traceback, refused before any work so that
+nothing is left behind."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from training.__main__ import main as training_main
+from training.vsensor.cli import main as vsensor_main
+
+TRAIN = ["train", "--greenhouse", "almeria-palmerillas", "--model", "almeria"]
+
+
+def _refused(capsys, run, argv: list[str]) -> str:
+    """The argparse refusal of ``argv``: exit status 2, its one error line (no traceback)."""
+    with pytest.raises(SystemExit) as exc:
+        run(argv)
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and "Traceback" not in err
+    return err.strip().splitlines()[-1]
+
+
+@pytest.mark.parametrize("argv", [
+    ["simulate", "--days", "0.01"],
+    ["demo", "--days", "3"],
+])
+def test_a_negative_seed_is_named_before_the_run(capsys, tmp_path, argv):
+    out = tmp_path / "out" / ("run.csv" if argv[0] == "simulate" else "demo")
+    line = _refused(capsys, training_main, [*argv, "--seed", "-1", "--out", str(out)])
+    assert "argument --seed: must be 0 or more, got '-1'" in line
+    assert not (tmp_path / "out").exists()  # the demo made its folder, then a traceback
+
+
+@pytest.mark.parametrize("option", ["--seed", "--net-seed"])
+def test_vsensor_train_names_a_negative_seed(capsys, tmp_path, option):
+    csv = Path(tmp_path / "k.csv")
+    csv.write_text("time,t_in\n")  # never read: the option is refused first
+    line = _refused(capsys, vsensor_main, [*TRAIN, "--data", str(csv), option, "-1",
+                                           "--out", str(tmp_path / "m.onnx")])
+    assert f"argument {option}: must be 0 or more, got '-1'" in line

@@ -41,3 +41,30 @@ def test_vsensor_train_names_a_negative_seed(capsys, tmp_path, option):
     line = _refused(capsys, vsensor_main, [*TRAIN, "--data", str(csv), option, "-1",
                                            "--out", str(tmp_path / "m.onnx")])
     assert f"argument {option}: must be 0 or more, got '-1'" in line
+
+
+@pytest.mark.parametrize("option,value,says", [
+    ("--epochs", "0", "must be at least 1"),  # was sklearn's AttributeError after the replays
+    ("--ensemble", "0", "must be at least 1"),
+    ("--rounds", "-1", "must be 0 or more"),  # was silently none
+    ("--round-lr", "0", "must be a positive number"),
+    ("--high-flow-weight", "-1", "must be a positive number"),  # was a negative loss weight
+])
+def test_vsensor_train_names_a_setting_it_cannot_fit_with(capsys, tmp_path, option, value, says):
+    line = _refused(capsys, vsensor_main, [*TRAIN, "--data", str(tmp_path / "k.csv"), option, value,
+                                           "--out", str(tmp_path / "m.onnx")])
+    assert f"argument {option}: {says}, got '{value}'" in line
+
+
+def test_vsensor_train_refuses_its_outputs_before_the_training(capsys, tmp_path):
+    """Both were refused after the fit (minutes to hours), the models already written."""
+    data = tmp_path / "k.csv"
+    data.write_text("not a kit CSV\n")  # never read: the outputs are checked first
+    assert vsensor_main([*TRAIN, "--data", str(data), "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.strip() == f"error: --out {tmp_path}: is a folder; give the sensor's file name (MODEL.onnx)"
+    out = tmp_path / "models" / "m.onnx"
+    assert vsensor_main([*TRAIN, "--data", str(data), "--out", str(out), "--report", str(data)]) == 2
+    err = capsys.readouterr().err
+    assert err.strip() == f"error: --report {data}: exists and is not a folder"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["k.csv"]

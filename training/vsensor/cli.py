@@ -21,6 +21,7 @@ import sys
 import time
 from pathlib import Path
 
+from gateway.cli import CliError
 from gateway.cli.common import seed_int
 from gateway.greenhouse import GreenhouseError, list_presets, load_greenhouse
 from gateway.kitcsv import KitCsvError
@@ -207,7 +208,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         return int(args.func(args) or 0)
-    except (GreenhouseError, KitCsvError, ValueError) as exc:
+    except (CliError, GreenhouseError, KitCsvError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:  # a file named on the command line: say which, not Python's repr

@@ -68,3 +68,28 @@ def test_vsensor_train_refuses_its_outputs_before_the_training(capsys, tmp_path)
     err = capsys.readouterr().err
     assert err.strip() == f"error: --report {data}: exists and is not a folder"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["k.csv"]
+
+
+def test_vsensor_corpus_refuses_before_simulating(capsys, tmp_path):
+    """A file where the corpus folder goes was said as "<out>/test: Not a directory" (not the
+    option); a bare ``--only`` wrote nothing and said "0 runs", exit status 0."""
+    taken = tmp_path / "corpus"
+    taken.write_text("")
+    assert vsensor_main(["corpus", "--out", str(taken), "--only", "biskra-spring-grower"]) == 2
+    assert capsys.readouterr().err.strip() == f"error: --out {taken}: exists and is not a folder"
+    assert vsensor_main(["corpus", "--out", str(tmp_path / "c"), "--only"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: --only: name at least one run (runs: almeria-winter-controller, ")
+    assert len(err.splitlines()) == 1 and not (tmp_path / "c").exists()
+
+
+@pytest.mark.parametrize("command", ["score", "errors"])
+def test_vsensor_names_a_missing_sensor_before_the_replays(capsys, tmp_path, command):
+    data = tmp_path / "k.csv"
+    data.write_text("not a kit CSV\n")  # never read: the sensor is checked first
+    for sensor, says in ((tmp_path / "none.onnx", "no such file"),
+                         (tmp_path, "is a folder, not an ONNX file")):
+        assert vsensor_main([command, "--data", str(data), *TRAIN[1:], "--cache",
+                             str(tmp_path / "cache"), "--sensor", str(sensor)]) == 2
+        assert capsys.readouterr().err.strip() == f"error: --sensor {sensor}: {says}"
+    assert not (tmp_path / "cache").exists()

@@ -120,6 +120,7 @@ def _score(args: argparse.Namespace) -> int:
     from training.vsensor.dataset import build_segment
     from training.vsensor.heldout import score_segment, table
 
+    _check_sensors(args.onnx)
     gh = load_greenhouse(args.greenhouse)
     models = {str(p): Path(p) for p in args.onnx}
     scores = {Path(p).stem: score_segment(build_segment(p, gh, args.model, args.cache,
@@ -133,6 +134,14 @@ def _score(args: argparse.Namespace) -> int:
     else:
         print(table(scores), end="")
     return 0
+
+
+def _check_sensors(paths: list[str]) -> None:
+    """Name a missing sensor before the replays (minutes for a file not yet cached), not after."""
+    for path in paths:
+        if not Path(path).is_file():
+            raise ValueError(f"--sensor {path}: " + ("is a folder, not an ONNX file"
+                                                     if Path(path).is_dir() else "no such file"))
 
 
 def overrides(items: list[str]) -> dict[str, dict[str, float]]:
@@ -152,10 +161,13 @@ def _corpus(args: argparse.Namespace) -> int:
 
     every = (TRAIN + TEST + FRESH + OTHER + (HOT_DRY if args.hot_dry else ())
              + (MORE_TEST if args.more_test else ()))
+    from gateway.cli.common import check_output
+
+    check_output(args.out, "--out", folder=True)  # before a run's minutes, not after them
     unknown = sorted(set(args.only or ()) - {r.name for r in every})
-    if unknown:
-        raise ValueError(f"--only: no run named {', '.join(unknown)} (runs: "
-                         f"{', '.join(r.name for r in every)})")
+    if unknown or args.only == []:  # a bare --only wrote nothing and said "0 runs"
+        said = f"no run named {', '.join(unknown)}" if unknown else "name at least one run"
+        raise ValueError(f"--only: {said} (runs: {', '.join(r.name for r in every)})")
     runs = tuple(r for r in every if args.only is None or r.name in args.only)
     t0 = time.perf_counter()
     for path in write_corpus(Path(args.out), runs):
@@ -194,6 +206,7 @@ def _reference(args: argparse.Namespace) -> int:
 def _errors(args: argparse.Namespace) -> int:
     from training.vsensor.errors import describe, study
 
+    _check_sensors([args.onnx])
     gh = load_greenhouse(args.greenhouse)
     print(describe(study(args.onnx, args.data, gh, args.model, args.cache,
                          overrides(args.set) or None, args.seed, args.only, args.target_kind)))

@@ -93,3 +93,23 @@ def test_vsensor_names_a_missing_sensor_before_the_replays(capsys, tmp_path, com
                              str(tmp_path / "cache"), "--sensor", str(sensor)]) == 2
         assert capsys.readouterr().err.strip() == f"error: --sensor {sensor}: {says}"
     assert not (tmp_path / "cache").exists()
+
+
+def test_demo_heater_names_an_output_that_is_a_file(capsys, tmp_path):
+    """It was os.mkdir's FileExistsError traceback."""
+    from training.demo_heater import main
+
+    taken = tmp_path / "runs"
+    taken.write_text("")
+    line = _refused(capsys, main, ["--out", str(taken)])
+    assert line == (f"python -m training.demo_heater: error: argument --out: {taken} exists and "
+                    "is not a folder")
+
+
+@pytest.mark.parametrize("value", ["0", "-1", "nan"])
+def test_step_bias_refuses_a_step_it_cannot_integrate_with(capsys, value):
+    """--h 0 was a ZeroDivisionError after the reference weather was built."""
+    from training.step_bias import main
+
+    line = _refused(capsys, main, ["--h", value])
+    assert line.endswith(f"argument --h: must be a positive number, got '{value}'")

@@ -66,8 +66,9 @@ def _days(text: str) -> float:
     return value
 
 
-def _folder(text: str) -> str:
-    """argparse type of ``--out``: a folder, or a path where one can be made."""
+def output_folder(text: str) -> str:
+    """argparse type of an output folder (``--out``): a folder, or a path where one can be made
+    (also ``training.demo_heater``'s)."""
     p = Path(text)
     for parent in (p, *p.parents):
         if parent.exists():
@@ -98,7 +99,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         f" {POWER:g} W m-2 heater from {CHANGE_AT:.3f} × the length on"
         f" ({_when(DAYS)}Z for {DAYS:g} days), calibrate on the first 2 days, replay, diagnose.",
     )
-    p.add_argument("--out", type=_folder, default="out/demo", metavar="DIR",
+    p.add_argument("--out", type=output_folder, default="out/demo", metavar="DIR",
                    help="output folder, created with its parents (out/demo)")
     p.add_argument("--days", type=_days, default=DAYS, metavar="D",
                    help=f"days to simulate from {START} ({DAYS:g}); the undeclared heater "

@@ -4,6 +4,8 @@ nothing is left behind."""
 
 from __future__ import annotations
 
+import argparse
+import importlib
 from pathlib import Path
 
 import pytest
@@ -113,3 +115,38 @@ def test_step_bias_refuses_a_step_it_cannot_integrate_with(capsys, value):
 
     line = _refused(capsys, main, ["--h", value])
     assert line.endswith(f"argument --h: must be a positive number, got '{value}'")
+
+
+def _parsers() -> dict[str, argparse.ArgumentParser]:
+    """Every subcommand parser of python -m training and python -m training.vsensor."""
+    from training.__main__ import COMMANDS
+    from training.vsensor.cli import build_parser
+
+    sub = argparse.ArgumentParser().add_subparsers()
+    for module in COMMANDS:
+        importlib.import_module(module).add_parser(sub)
+    parsers = dict(sub.choices)
+    for action in build_parser()._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            parsers.update({f"vsensor {k}": v for k, v in action.choices.items()})
+    return parsers
+
+
+def test_every_option_with_a_default_says_it_as_the_gateway_does():
+    """"(default X)", as python -m gateway's commands: the tools said "(default: 14)", "(0)",
+    "(out/demo)" or nothing (simulate's --weather left seville out of its list)."""
+    parsers = _parsers()
+    assert {"simulate", "demo", "run", "vsensor corpus", "vsensor train"} <= set(parsers)
+    said = []
+    for name, parser in parsers.items():
+        for action in parser._actions:
+            default = action.default
+            if (isinstance(action, (argparse._StoreTrueAction, argparse._StoreFalseAction))
+                    or default in (None, "", [], argparse.SUPPRESS)):
+                continue
+            said.append(f"{name} {action.dest}")
+            assert "default" in action.help, (name, action.option_strings)
+            assert f"(default: {default})" not in action.help, (name, action.option_strings)
+    assert "simulate days" in said and "vsensor train epochs" in said
+    weather = next(a for a in parsers["simulate"]._actions if a.dest == "weather")
+    assert all(w in weather.help for w in weather.choices)

@@ -100,13 +100,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         f" ({_when(DAYS)}Z for {DAYS:g} days), calibrate on the first 2 days, replay, diagnose.",
     )
     p.add_argument("--out", type=output_folder, default="out/demo", metavar="DIR",
-                   help="output folder, created with its parents (out/demo)")
+                   help="output folder, created with its parents (default out/demo)")
     p.add_argument("--days", type=_days, default=DAYS, metavar="D",
-                   help=f"days to simulate from {START} ({DAYS:g}); the undeclared heater "
+                   help=f"days to simulate from {START} (default {DAYS:g}); the undeclared heater "
                    f"({POWER:g} W m-2) starts {CHANGE_AT:.3f} × D after the start "
                    f"({_when(DAYS)}Z for {DAYS:g})")
     p.add_argument("--seed", type=seed_int, default=1, metavar="N",
-                   help="simulator and swarm seed, 0 or more (1)")
+                   help="simulator and swarm seed, 0 or more (default 1)")
     p.add_argument("--set", action="append", default=[], type=_setting, metavar="OUTPUT.KEY=VALUE",
                    help="an online setting of step 3, passed to replay's --set (e.g. "
                    "t_in.iterations=10 for a quicker, rougher replay); repeatable")

@@ -47,7 +47,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "python -m training run --minutes 120 | cat  (bounded, with a summary)")
     p.add_argument("--out", type=Path, default=Path("out/run"), metavar="DIR",
                    help="where the stores, logs and summary go; the previous run's are replaced "
-                   "(out/run)")
+                   "(default out/run)")
     p.add_argument("--minutes", type=float, metavar="N",
                    help="simulated minutes to run (default: until you quit on a terminal, "
                    "120 without one)")
@@ -55,7 +55,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="simulated seconds per wall second, 1 to 1000 (default 120: two simulated "
                    "minutes a second)")
     p.add_argument("--screen", choices=("auto", "yes", "no"), default="auto",
-                   help="the status screen: auto = when stdin and stdout are a terminal")
+                   help="the status screen: auto = when stdin and stdout are a terminal "
+                   "(default auto)")
     p.add_argument("--model", default=MODEL, choices=("prototype", "prototype+vent_control"),
                    help=f"the greenhouse's model, calibrated and run live (default {MODEL}, the "
                    "shipped example's; prototype: the four-parameter model)")

@@ -44,7 +44,7 @@ def _data_args(p: argparse.ArgumentParser, cache: bool = True) -> None:
                    help="online estimator setting, e.g. --set t_in.bats=6 (default: the "
                    "greenhouse's and the model's; recorded in the model)")
     p.add_argument("--seed", type=seed_int, default=0, metavar="N",
-                   help="seed of the estimator and the network, 0 or more (0)")
+                   help="seed of the estimator and the network, 0 or more (default 0)")
     if not cache:  # the target option reads the cached replays
         return
     p.add_argument("--target-kind", choices=MODEL_KINDS, default=None, metavar="KIND",
@@ -58,7 +58,10 @@ def build_parser() -> argparse.ArgumentParser:
                                      description="The PCA-NARX virtual ventilation sensor, offline "
                                      "(thesis §IV.3). See docs/vsensor.md.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    c = sub.add_parser("corpus", help="generate the training and test kit CSVs")
+    c = sub.add_parser("corpus", help="generate the training and test kit CSVs",
+                       description="Simulate the corpus's runs (training/vsensor/corpus.py) into "
+                       "DIR/train, DIR/test, ...: each a kit CSV with its truth files. The whole "
+                       "corpus takes minutes; --only picks runs.")
     c.add_argument("--out", required=True, metavar="DIR",
                    help="folder for the kit CSVs (train/, test/, ...) and their truth files")
     c.add_argument("--only", nargs="*", default=None, metavar="NAME",

@@ -37,8 +37,10 @@ def add_fit_args(p: argparse.ArgumentParser) -> None:
     """The fit's settings, shared by ``train`` and ``tune`` (same defaults: same figure)."""
     p.add_argument("--hidden", default="30,50,20", metavar="N,N,N",
                    help="hidden layer sizes (default 30,50,20, the thesis's)")
-    p.add_argument("--epochs", type=positive_int, default=100, help="series-parallel epochs at most (100)")
-    p.add_argument("--rounds", type=non_negative_int, default=6, help="closed-loop refinement rounds (6)")
+    p.add_argument("--epochs", type=positive_int, default=100, metavar="N",
+                   help="series-parallel epochs at most (default 100)")
+    p.add_argument("--rounds", type=non_negative_int, default=6, metavar="N",
+                   help="closed-loop refinement rounds, 0 or more (default 6)")
     p.add_argument("--round-lr", type=positive_number, default=None, metavar="LR",
                    help="Adam step size in the closed-loop rounds (default: the series-parallel "
                    "one, 1e-3)")

@@ -150,3 +150,14 @@ def test_every_option_with_a_default_says_it_as_the_gateway_does():
     assert "simulate days" in said and "vsensor train epochs" in said
     weather = next(a for a in parsers["simulate"]._actions if a.dest == "weather")
     assert all(w in weather.help for w in weather.choices)
+
+
+@pytest.mark.parametrize("value", ["0.5", "1.5"])
+def test_simulate_refuses_a_step_of_part_seconds(capsys, tmp_path, value):
+    """0.5 s was a ZeroDivisionError (the grid's times are whole seconds: a zero step), 1.5 s an
+    uneven grid simulated with a 2 s step."""
+    out = tmp_path / "out" / "run.csv"
+    line = _refused(capsys, training_main, ["simulate", "--days", "0.001", "--step", value,
+                                            "--out", str(out)])
+    assert f"argument --step: must be whole seconds (the CSV's times are), got '{value}'" in line
+    assert not (tmp_path / "out").exists()

@@ -33,6 +33,15 @@ See docs/simulator.md.
 """
 
 
+def _step_seconds(text: str) -> float:
+    """argparse type of ``--step``: whole seconds, 1 or more. The kit CSV's times are whole
+    seconds: 0.5 s rounded the grid to a zero step (a ZeroDivisionError), 1.5 s to an uneven one."""
+    value = positive_number(text)
+    if value != round(value):
+        raise argparse.ArgumentTypeError(f"must be whole seconds (the CSV's times are), got {text!r}")
+    return value
+
+
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Register the ``simulate`` subcommand."""
     parser = subparsers.add_parser(
@@ -55,8 +64,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help="first sample, UTC (default per weather, below)")
     parser.add_argument("--days", type=positive_number, default=14.0, metavar="D",
                         help="length [d] (default 14)")
-    parser.add_argument("--step", type=positive_number, default=60.0, metavar="S",
-                        help="output step [s] (default 60)")
+    parser.add_argument("--step", type=_step_seconds, default=60.0, metavar="S",
+                        help="output step [s], whole seconds (default 60)")
     parser.add_argument("--effect", action="append", default=[], metavar="SPEC",
                         help="inject an effect (repeatable), see below")
     parser.add_argument("--seed", type=seed_int, default=0, metavar="N",

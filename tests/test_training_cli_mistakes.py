@@ -161,3 +161,17 @@ def test_simulate_refuses_a_step_of_part_seconds(capsys, tmp_path, value):
                                             "--out", str(out)])
     assert f"argument --step: must be whole seconds (the CSV's times are), got '{value}'" in line
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("spec,says", [
+    ("heater@2009-13-01", "effect heater: bad start time '2009-13-01'"),  # numpy's words, no name
+    ("door", "unknown effect 'door' (known effects: cover_transmission, extra_leakage, "),
+    ("cover_transmission:factor=-1", "effect cover_transmission: "),
+])
+def test_simulate_says_a_bad_effect_in_one_line(capsys, tmp_path, spec, says):
+    """The known effects were an 8-line table after the error; now their names on its line."""
+    out = tmp_path / "run.csv"
+    assert training_main(["simulate", "--days", "0.01", "--effect", spec, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and err.startswith(f"error: {says}")
+    assert "sensor_drift" in err and not out.exists()

@@ -175,3 +175,21 @@ def test_simulate_says_a_bad_effect_in_one_line(capsys, tmp_path, spec, says):
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and err.startswith(f"error: {says}")
     assert "sensor_drift" in err and not out.exists()
+
+
+def test_vsensor_names_a_missing_test_file_or_a_file_cache_before_the_replays(capsys, tmp_path):
+    """A missing --test file was found after the fit, the models written without their card."""
+    data = tmp_path / "k.csv"
+    data.write_text("not a kit CSV\n")  # never read: the paths are checked first
+    out = ["--out", str(tmp_path / "m" / "m.onnx")]
+    for argv, says in (
+        ([*TRAIN, "--data", str(data), *out, "--test", str(tmp_path / "no.csv")],
+         f"--test {tmp_path / 'no.csv'}: no such file"),
+        ([*TRAIN, "--data", str(data), *out, "--test", str(tmp_path)],
+         f"--test {tmp_path}: is a folder, not a kit CSV"),
+        (["dataset", *TRAIN[1:], "--data", str(data), "--cache", str(data)],
+         f"--cache {data}: exists and is not a folder"),
+    ):
+        assert vsensor_main(argv) == 2
+        assert capsys.readouterr().err.strip() == f"error: {says}"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["k.csv"]

@@ -139,6 +139,19 @@ def _score(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_inputs(args: argparse.Namespace) -> None:
+    """Name a missing held-out file or a cache that is a file before the replays and the fit: a
+    missing --test file was found after the training, the models written without their card.
+    (A missing --data file is named by the first replay, at once.)"""
+    from gateway.cli.common import check_output
+
+    for path in getattr(args, "test", None) or ():
+        if not Path(path).is_file():
+            said = "is a folder, not a kit CSV" if Path(path).is_dir() else "no such file"
+            raise ValueError(f"--test {path}: {said}")
+    check_output(getattr(args, "cache", None), "--cache", folder=True)
+
+
 def _check_sensors(paths: list[str]) -> None:
     """Name a missing sensor before the replays (minutes for a file not yet cached), not after."""
     for path in paths:
@@ -223,6 +236,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
+        _check_inputs(args)
         return int(args.func(args) or 0)
     except (CliError, GreenhouseError, KitCsvError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -178,7 +178,8 @@ def test_simulate_says_a_bad_effect_in_one_line(capsys, tmp_path, spec, says):
 
 
 def test_vsensor_names_a_missing_test_file_or_a_file_cache_before_the_replays(capsys, tmp_path):
-    """A missing --test file was found after the fit, the models written without their card."""
+    """A missing --test file was found after the fit, the models written without their card; a
+    tune --log in a missing folder after the fit."""
     data = tmp_path / "k.csv"
     data.write_text("not a kit CSV\n")  # never read: the paths are checked first
     out = ["--out", str(tmp_path / "m" / "m.onnx")]
@@ -189,6 +190,8 @@ def test_vsensor_names_a_missing_test_file_or_a_file_cache_before_the_replays(ca
          f"--test {tmp_path}: is a folder, not a kit CSV"),
         (["dataset", *TRAIN[1:], "--data", str(data), "--cache", str(data)],
          f"--cache {data}: exists and is not a folder"),
+        (["tune", *TRAIN[1:], "--data", str(data), "--log", str(tmp_path / "no" / "t.jsonl")],
+         f"--log {tmp_path / 'no' / 't.jsonl'}: folder {tmp_path / 'no'} does not exist"),
     ):
         assert vsensor_main(argv) == 2
         assert capsys.readouterr().err.strip() == f"error: {says}"

@@ -140,8 +140,9 @@ def _score(args: argparse.Namespace) -> int:
 
 
 def _check_inputs(args: argparse.Namespace) -> None:
-    """Name a missing held-out file or a cache that is a file before the replays and the fit: a
-    missing --test file was found after the training, the models written without their card.
+    """Name a missing held-out file, a cache that is a file or a log in a missing folder before
+    the replays and the fit: a missing --test file was found after the training, the models
+    written without their card.
     (A missing --data file is named by the first replay, at once.)"""
     from gateway.cli.common import check_output
 
@@ -150,6 +151,7 @@ def _check_inputs(args: argparse.Namespace) -> None:
             said = "is a folder, not a kit CSV" if Path(path).is_dir() else "no such file"
             raise ValueError(f"--test {path}: {said}")
     check_output(getattr(args, "cache", None), "--cache", folder=True)
+    check_output(getattr(args, "log", None), "--log")  # tune appends to it after the fit
 
 
 def _check_sensors(paths: list[str]) -> None:

@@ -196,3 +196,13 @@ def test_vsensor_names_a_missing_test_file_or_a_file_cache_before_the_replays(ca
         assert vsensor_main(argv) == 2
         assert capsys.readouterr().err.strip() == f"error: {says}"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["k.csv"]
+
+
+def test_run_names_an_output_that_is_a_file_before_starting(capsys, tmp_path):
+    """It was mkdir's FileExistsError traceback from the set-up."""
+    taken = tmp_path / "run"
+    taken.write_text("")
+    line = _refused(capsys, training_main, ["run", "--out", str(taken), "--minutes", "1",
+                                            "--screen", "no"])
+    assert line == f"python -m training run: error: argument --out: {taken} exists and is not a folder"
+    assert taken.read_text() == ""

@@ -45,7 +45,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         __doc__.split("\n\n")[1].replace("``", "").replace("\n", " "),
         epilog="examples: python -m training run  (on a terminal: the status screen; q quits); "
         "python -m training run --minutes 120 | cat  (bounded, with a summary)")
-    p.add_argument("--out", type=Path, default=Path("out/run"), metavar="DIR",
+    p.add_argument("--out", type=_out_folder, default=Path("out/run"), metavar="DIR",
                    help="where the stores, logs and summary go; the previous run's are replaced "
                    "(default out/run)")
     p.add_argument("--minutes", type=float, metavar="N",
@@ -64,6 +64,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="start the online estimator from the middle of the parameter box instead "
                    "of a calibration on two earlier simulated days")
     p.set_defaults(func=run)
+
+
+def _out_folder(text: str) -> Path:
+    """argparse type of ``--out``: a file there was a FileExistsError traceback after the set-up
+    began (the demo's check: training.demo.output_folder)."""
+    from training.demo import output_folder
+
+    return Path(output_folder(text))
 
 
 def run(args: argparse.Namespace) -> int:

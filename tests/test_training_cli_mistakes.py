@@ -206,3 +206,13 @@ def test_run_names_an_output_that_is_a_file_before_starting(capsys, tmp_path):
                                             "--screen", "no"])
     assert line == f"python -m training run: error: argument --out: {taken} exists and is not a folder"
     assert taken.read_text() == ""
+
+
+def test_identifiability_names_an_output_that_is_a_folder(capsys, tmp_path):
+    """It was IsADirectoryError's traceback after the dataset was built."""
+    from training.identifiability import main
+
+    line = _refused(capsys, main, ["--out", str(tmp_path)])
+    assert line == (f"python -m training.identifiability: error: --out {tmp_path}: is a folder; "
+                    "give the dataset's file name")
+    assert list(tmp_path.iterdir()) == []

@@ -219,3 +219,12 @@ def test_identifiability_names_an_output_that_is_a_folder(capsys, tmp_path):
     assert line == (f"python -m training.identifiability: error: --out {tmp_path}: is a folder; "
                     "give the dataset's file name")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_vsensor_errors_names_an_only_that_matches_no_file(capsys, tmp_path):
+    """It was numpy's "need at least one array to concatenate", after the replays."""
+    data = tmp_path / "almeria-winter.csv"
+    data.write_text("not a kit CSV\n")  # never read: --only is checked first
+    assert vsensor_main(["errors", "--data", str(data), *TRAIN[1:], "--cache", str(tmp_path / "c"),
+                         "--sensor", str(data), "--only", "summer"]) == 2
+    assert capsys.readouterr().err.strip() == "error: --only 'summer': in no --data file's name"

@@ -229,6 +229,9 @@ def _errors(args: argparse.Namespace) -> int:
     from training.vsensor.errors import describe, study
 
     _check_sensors([args.onnx])
+    if args.only is not None and not any(args.only in Path(p).stem for p in args.data):
+        # found after the replays and the closed loops as numpy's "need at least one array"
+        raise ValueError(f"--only {args.only!r}: in no --data file's name")
     gh = load_greenhouse(args.greenhouse)
     print(describe(study(args.onnx, args.data, gh, args.model, args.cache,
                          overrides(args.set) or None, args.seed, args.only, args.target_kind)))

@@ -193,6 +193,8 @@ def test_vsensor_names_a_missing_test_file_or_a_file_cache_before_the_replays(ca
         ([*TRAIN, "--data", str(tmp_path / "corpus" / "*.csv"), *out],  # an empty corpus folder
          f"--data {tmp_path / 'corpus' / '*.csv'}: no such file (a pattern that matched nothing: "
          "an empty or mistyped folder?)"),
+        (["tune", *TRAIN[1:], "--data", str(data), "--subset", "k", "winter"],  # MAE null after it
+         "--subset winter: no --data file has that stem"),
         (["tune", *TRAIN[1:], "--data", str(data), "--log", str(tmp_path / "no" / "t.jsonl")],
          f"--log {tmp_path / 'no' / 't.jsonl'}: folder {tmp_path / 'no'} does not exist"),
     ):

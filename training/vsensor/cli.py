@@ -140,16 +140,20 @@ def _score(args: argparse.Namespace) -> int:
 
 
 def _check_inputs(args: argparse.Namespace) -> None:
-    """Name a missing held-out file, a cache that is a file, a log in a missing folder or a glob
-    that matched nothing before the replays and the fit: a missing --test file was found after
-    the training, the models written without their card.
+    """Name a missing held-out file, a cache that is a file, a log in a missing folder, a glob
+    that matched nothing or a tune --subset stem of no file before the replays and the fit: a
+    missing --test file was found after the training, the models written without their card.
     (A missing --data file is named by the first replay, at once.)"""
     from gateway.cli.common import check_output
 
-    for path in getattr(args, "data", None) or ():
+    data = getattr(args, "data", None) or []  # corpus has none
+    for path in data:
         if "*" in path and not Path(path).exists():  # the shell passes on a glob matching nothing
             raise ValueError(f"--data {path}: no such file (a pattern that matched nothing: an "
                              "empty or mistyped folder?)")
+    unknown = set(getattr(args, "subset", None) or ()) - {Path(p).stem for p in data}
+    if unknown:  # tune reported its MAE as null, after the fit
+        raise ValueError(f"--subset {' '.join(sorted(unknown))}: no --data file has that stem")
     for path in getattr(args, "test", None) or ():
         if not Path(path).is_file():
             said = "is a folder, not a kit CSV" if Path(path).is_dir() else "no such file"

@@ -71,7 +71,10 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--more-test", action="store_true",
                    help="also the opt-in MORE_TEST runs (more Biskra spring files) in DIR/more-test")
     c.set_defaults(func=_corpus)
-    d = sub.add_parser("dataset", help="run the adaptive model with and without vents, cache")
+    d = sub.add_parser("dataset", help="run the adaptive model with and without vents, cache",
+                       description="Replay each file with and without its vent signal and keep "
+                       "the products in --cache: what train, tune, errors and score do first "
+                       "(one process per file can run in parallel).")
     _data_args(d)
     d.set_defaults(func=_dataset)
     from training.vsensor.train_cli import add_train_parser

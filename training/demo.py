@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from gateway.cli.common import seed_int
+
 START = "2009-10-26"  # simulator start, 00:00 UTC
 DAYS = 10.0  # the live [diagnosis] default: 5 held-out days, 4.3 of them after the change
 CHANGE_AT = 41 / 72  # the change's start as a fraction of the length (16:40 on day 6 of 10)
@@ -64,8 +66,9 @@ def _days(text: str) -> float:
     return value
 
 
-def _folder(text: str) -> str:
-    """argparse type of ``--out``: a folder, or a path where one can be made."""
+def output_folder(text: str) -> str:
+    """argparse type of an output folder (``--out``): a folder, or a path where one can be made
+    (also ``training.demo_heater``'s)."""
     p = Path(text)
     for parent in (p, *p.parents):
         if parent.exists():
@@ -96,13 +99,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         f" {POWER:g} W m-2 heater from {CHANGE_AT:.3f} × the length on"
         f" ({_when(DAYS)}Z for {DAYS:g} days), calibrate on the first 2 days, replay, diagnose.",
     )
-    p.add_argument("--out", type=_folder, default="out/demo", metavar="DIR",
-                   help="output folder, created with its parents (out/demo)")
+    p.add_argument("--out", type=output_folder, default="out/demo", metavar="DIR",
+                   help="output folder, created with its parents (default out/demo)")
     p.add_argument("--days", type=_days, default=DAYS, metavar="D",
-                   help=f"days to simulate from {START} ({DAYS:g}); the undeclared heater "
+                   help=f"days to simulate from {START} (default {DAYS:g}); the undeclared heater "
                    f"({POWER:g} W m-2) starts {CHANGE_AT:.3f} × D after the start "
                    f"({_when(DAYS)}Z for {DAYS:g})")
-    p.add_argument("--seed", type=int, default=1, help="simulator and swarm seed (1)")
+    p.add_argument("--seed", type=seed_int, default=1, metavar="N",
+                   help="simulator and swarm seed, 0 or more (default 1)")
     p.add_argument("--set", action="append", default=[], type=_setting, metavar="OUTPUT.KEY=VALUE",
                    help="an online setting of step 3, passed to replay's --set (e.g. "
                    "t_in.iterations=10 for a quicker, rougher replay); repeatable")

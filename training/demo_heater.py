@@ -164,8 +164,12 @@ def fits(start, gh: Greenhouse, series: Series) -> list[str]:
 def main(argv: list[str] | None = None) -> int:
     from gateway.diagnose import search
 
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", default="out/demo-heater", help="folder for the two runs")
+    ap = argparse.ArgumentParser(prog="python -m training.demo_heater",
+                                 description=__doc__.split("\n\n")[0].replace("``", "")
+                                 .removesuffix(":") + ".")
+    ap.add_argument("--out", type=demo.output_folder, default="out/demo-heater", metavar="DIR",
+                    help="folder for the two runs, created with its parents (default "
+                    "out/demo-heater)")
     a = ap.parse_args(argv)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)

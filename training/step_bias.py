@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from gateway.cli.common import positive_number
 from gateway.estimate.objective import Objective
 from gateway.greenhouse import Greenhouse, load_greenhouse
 from gateway.model import build_model
@@ -153,7 +154,8 @@ def _fmt(r: Identified, names: list[str]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m training.step_bias", description=__doc__.split("\n")[0])
-    ap.add_argument("--h", type=float, default=1.0, help="RK4 step of the reference [s] (1)")
+    ap.add_argument("--h", type=positive_number, default=1.0, metavar="S",
+                    help="RK4 step of the reference [s] (default 1)")
     ap.add_argument("--skip-causes", action="store_true", help="only the before/after table")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()

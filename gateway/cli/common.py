@@ -107,6 +107,12 @@ def positive_int(text: str) -> int:
     return _whole_number(text, 1, "at least 1")
 
 
+def non_negative_int(text: str) -> int:
+    """argparse type: a count that may be none (0 closed-loop rounds: the series-parallel fit
+    alone); a negative one would silently mean 0."""
+    return _whole_number(text, 0, "0 or more")
+
+
 def seed_int(text: str) -> int:
     """argparse type: a whole number >= 0 (numpy's generators refuse a negative seed, which
     would be a traceback after the data was read)."""

@@ -45,9 +45,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         __doc__.split("\n\n")[1].replace("``", "").replace("\n", " "),
         epilog="examples: python -m training run  (on a terminal: the status screen; q quits); "
         "python -m training run --minutes 120 | cat  (bounded, with a summary)")
-    p.add_argument("--out", type=Path, default=Path("out/run"), metavar="DIR",
+    p.add_argument("--out", type=_out_folder, default=Path("out/run"), metavar="DIR",
                    help="where the stores, logs and summary go; the previous run's are replaced "
-                   "(out/run)")
+                   "(default out/run)")
     p.add_argument("--minutes", type=float, metavar="N",
                    help="simulated minutes to run (default: until you quit on a terminal, "
                    "120 without one)")
@@ -55,7 +55,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="simulated seconds per wall second, 1 to 1000 (default 120: two simulated "
                    "minutes a second)")
     p.add_argument("--screen", choices=("auto", "yes", "no"), default="auto",
-                   help="the status screen: auto = when stdin and stdout are a terminal")
+                   help="the status screen: auto = when stdin and stdout are a terminal "
+                   "(default auto)")
     p.add_argument("--model", default=MODEL, choices=("prototype", "prototype+vent_control"),
                    help=f"the greenhouse's model, calibrated and run live (default {MODEL}, the "
                    "shipped example's; prototype: the four-parameter model)")
@@ -63,6 +64,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="start the online estimator from the middle of the parameter box instead "
                    "of a calibration on two earlier simulated days")
     p.set_defaults(func=run)
+
+
+def _out_folder(text: str) -> Path:
+    """argparse type of ``--out``: a file there was a FileExistsError traceback after the set-up
+    began (the demo's check: training.demo.output_folder)."""
+    from training.demo import output_folder
+
+    return Path(output_folder(text))
 
 
 def run(args: argparse.Namespace) -> int:

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from gateway.cli.common import positive_number
+from gateway.cli.common import positive_number, seed_int
 from training.simulate.effects import EffectSpecError, describe_effects, parse_effect
 from training.simulate.plant import PRESETS
-from training.simulate.weather import DEFAULT_START, WEATHER_SOURCES, parse_start
+from training.simulate.weather import CLIMATES, DEFAULT_START, WEATHER_SOURCES, parse_start
 
 EPILOG = f"""\
 effects (--effect, repeatable; never declared in the CSV, listed in the truth JSON):
@@ -33,6 +33,15 @@ See docs/simulator.md.
 """
 
 
+def _step_seconds(text: str) -> float:
+    """argparse type of ``--step``: whole seconds, 1 or more. The kit CSV's times are whole
+    seconds: 0.5 s rounded the grid to a zero step (a ZeroDivisionError), 1.5 s to an uneven one."""
+    value = positive_number(text)
+    if value != round(value):
+        raise argparse.ArgumentTypeError(f"must be whole seconds (the CSV's times are), got {text!r}")
+    return value
+
+
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Register the ``simulate`` subcommand."""
     parser = subparsers.add_parser(
@@ -45,22 +54,22 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--plant", choices=sorted(PRESETS), default="almeria",
-                        help="greenhouse simulated (default: almeria); the gateway tools read its "
+                        help="greenhouse simulated (default almeria); the gateway tools read its "
                         "CSV with --greenhouse almeria-palmerillas --model almeria, or "
                         "biskra-prototype --model prototype for the prototype")
     parser.add_argument("--weather", choices=WEATHER_SOURCES, default="bleiswijk",
-                        help="bleiswijk = measured 2009-10-20..2009-12-10; biskra, almeria = "
-                        "synthetic seeded days (default: bleiswijk)")
+                        help="bleiswijk = measured 2009-10-20..2009-12-10; "
+                        f"{', '.join(CLIMATES)} = synthetic seeded days (default bleiswijk)")
     parser.add_argument("--start", default=None, metavar="YYYY-MM-DD[THH:MM]",
                         help="first sample, UTC (default per weather, below)")
     parser.add_argument("--days", type=positive_number, default=14.0, metavar="D",
-                        help="length [d] (default: 14)")
-    parser.add_argument("--step", type=positive_number, default=60.0, metavar="S",
-                        help="output step [s] (default: 60)")
+                        help="length [d] (default 14)")
+    parser.add_argument("--step", type=_step_seconds, default=60.0, metavar="S",
+                        help="output step [s], whole seconds (default 60)")
     parser.add_argument("--effect", action="append", default=[], metavar="SPEC",
                         help="inject an effect (repeatable), see below")
-    parser.add_argument("--seed", type=int, default=0,
-                        help="seed of synthetic weather and sensor errors (default: 0)")
+    parser.add_argument("--seed", type=seed_int, default=0, metavar="N",
+                        help="seed of synthetic weather and sensor errors, 0 or more (default 0)")
     parser.add_argument("--out", required=True, metavar="FILE.csv",
                         help="path of the kit CSV to write (its folder is created)")
     parser.set_defaults(func=run)

@@ -210,7 +210,7 @@ def describe_effects() -> str:
 
 
 class EffectSpecError(ValueError):
-    """A bad effect spec; the message lists the known effects and their parameters."""
+    """A bad effect spec; its one line names the known effects (``--help`` describes them)."""
 
 
 def parse_time(text: str) -> np.datetime64:
@@ -230,7 +230,8 @@ def _value(text: str) -> float | bool:
 def parse_effect(spec: str, default_start: np.datetime64) -> Effect | None:
     """An :class:`Effect` from a spec string (``None`` for ``none``); see the module doc."""
     match = _SPEC.match(spec.strip())
-    hint = f"\nknown effects:\n{describe_effects()}"
+    # one line, as every command-line refusal (the parameters: describe_effects, in --help)
+    hint = f" (known effects: {', '.join(EFFECTS)}, none; their parameters: --help)"
     if not match:
         raise EffectSpecError(
             f"bad effect spec {spec!r}; write name[@YYYY-MM-DDTHH:MM][:key=value,...]{hint}")
@@ -240,7 +241,11 @@ def parse_effect(spec: str, default_start: np.datetime64) -> Effect | None:
     if name not in EFFECTS:
         raise EffectSpecError(f"unknown effect {name!r}{hint}")
     cls = EFFECTS[name]
-    start = parse_time(match["time"]) if match["time"] else np.datetime64(default_start, "s")
+    try:
+        start = parse_time(match["time"]) if match["time"] else np.datetime64(default_start, "s")
+    except ValueError:  # numpy's "Month out of range in datetime string" named neither
+        raise EffectSpecError(f"effect {name}: bad start time {match['time']!r}; write "
+                              f"YYYY-MM-DD[THH:MM[:SS]] (UTC){hint}") from None
     kwargs: dict = {}
     for item in filter(None, (match["params"] or "").split(",")):
         key, sep, value = item.partition("=")

@@ -21,6 +21,8 @@ import sys
 import time
 from pathlib import Path
 
+from gateway.cli import CliError
+from gateway.cli.common import seed_int
 from gateway.greenhouse import GreenhouseError, list_presets, load_greenhouse
 from gateway.kitcsv import KitCsvError
 from gateway.vsensor.features import MODEL_KINDS
@@ -41,7 +43,8 @@ def _data_args(p: argparse.ArgumentParser, cache: bool = True) -> None:
     p.add_argument("--set", action="append", default=[], metavar="OUTPUT.KEY=VALUE",
                    help="online estimator setting, e.g. --set t_in.bats=6 (default: the "
                    "greenhouse's and the model's; recorded in the model)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the estimator and the network (0)")
+    p.add_argument("--seed", type=seed_int, default=0, metavar="N",
+                   help="seed of the estimator and the network, 0 or more (default 0)")
     if not cache:  # the target option reads the cached replays
         return
     p.add_argument("--target-kind", choices=MODEL_KINDS, default=None, metavar="KIND",
@@ -55,7 +58,10 @@ def build_parser() -> argparse.ArgumentParser:
                                      description="The PCA-NARX virtual ventilation sensor, offline "
                                      "(thesis §IV.3). See docs/vsensor.md.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    c = sub.add_parser("corpus", help="generate the training and test kit CSVs")
+    c = sub.add_parser("corpus", help="generate the training and test kit CSVs",
+                       description="Simulate the corpus's runs (training/vsensor/corpus.py) into "
+                       "DIR/train, DIR/test, ...: each a kit CSV with its truth files. The whole "
+                       "corpus takes minutes; --only picks runs.")
     c.add_argument("--out", required=True, metavar="DIR",
                    help="folder for the kit CSVs (train/, test/, ...) and their truth files")
     c.add_argument("--only", nargs="*", default=None, metavar="NAME",
@@ -65,7 +71,10 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--more-test", action="store_true",
                    help="also the opt-in MORE_TEST runs (more Biskra spring files) in DIR/more-test")
     c.set_defaults(func=_corpus)
-    d = sub.add_parser("dataset", help="run the adaptive model with and without vents, cache")
+    d = sub.add_parser("dataset", help="run the adaptive model with and without vents, cache",
+                       description="Replay each file with and without its vent signal and keep "
+                       "the products in --cache: what train, tune, errors and score do first "
+                       "(one process per file can run in parallel).")
     _data_args(d)
     d.set_defaults(func=_dataset)
     from training.vsensor.train_cli import add_train_parser
@@ -117,6 +126,7 @@ def _score(args: argparse.Namespace) -> int:
     from training.vsensor.dataset import build_segment
     from training.vsensor.heldout import score_segment, table
 
+    _check_sensors(args.onnx)
     gh = load_greenhouse(args.greenhouse)
     models = {str(p): Path(p) for p in args.onnx}
     scores = {Path(p).stem: score_segment(build_segment(p, gh, args.model, args.cache,
@@ -130,6 +140,37 @@ def _score(args: argparse.Namespace) -> int:
     else:
         print(table(scores), end="")
     return 0
+
+
+def _check_inputs(args: argparse.Namespace) -> None:
+    """Name a missing held-out file, a cache that is a file, a log in a missing folder, a glob
+    that matched nothing or a tune --subset stem of no file before the replays and the fit: a
+    missing --test file was found after the training, the models written without their card.
+    (A missing --data file is named by the first replay, at once.)"""
+    from gateway.cli.common import check_output
+
+    data = getattr(args, "data", None) or []  # corpus has none
+    for path in data:
+        if "*" in path and not Path(path).exists():  # the shell passes on a glob matching nothing
+            raise ValueError(f"--data {path}: no such file (a pattern that matched nothing: an "
+                             "empty or mistyped folder?)")
+    unknown = set(getattr(args, "subset", None) or ()) - {Path(p).stem for p in data}
+    if unknown:  # tune reported its MAE as null, after the fit
+        raise ValueError(f"--subset {' '.join(sorted(unknown))}: no --data file has that stem")
+    for path in getattr(args, "test", None) or ():
+        if not Path(path).is_file():
+            said = "is a folder, not a kit CSV" if Path(path).is_dir() else "no such file"
+            raise ValueError(f"--test {path}: {said}")
+    check_output(getattr(args, "cache", None), "--cache", folder=True)
+    check_output(getattr(args, "log", None), "--log")  # tune appends to it after the fit
+
+
+def _check_sensors(paths: list[str]) -> None:
+    """Name a missing sensor before the replays (minutes for a file not yet cached), not after."""
+    for path in paths:
+        if not Path(path).is_file():
+            raise ValueError(f"--sensor {path}: " + ("is a folder, not an ONNX file"
+                                                     if Path(path).is_dir() else "no such file"))
 
 
 def overrides(items: list[str]) -> dict[str, dict[str, float]]:
@@ -149,10 +190,13 @@ def _corpus(args: argparse.Namespace) -> int:
 
     every = (TRAIN + TEST + FRESH + OTHER + (HOT_DRY if args.hot_dry else ())
              + (MORE_TEST if args.more_test else ()))
+    from gateway.cli.common import check_output
+
+    check_output(args.out, "--out", folder=True)  # before a run's minutes, not after them
     unknown = sorted(set(args.only or ()) - {r.name for r in every})
-    if unknown:
-        raise ValueError(f"--only: no run named {', '.join(unknown)} (runs: "
-                         f"{', '.join(r.name for r in every)})")
+    if unknown or args.only == []:  # a bare --only wrote nothing and said "0 runs"
+        said = f"no run named {', '.join(unknown)}" if unknown else "name at least one run"
+        raise ValueError(f"--only: {said} (runs: {', '.join(r.name for r in every)})")
     runs = tuple(r for r in every if args.only is None or r.name in args.only)
     t0 = time.perf_counter()
     for path in write_corpus(Path(args.out), runs):
@@ -191,6 +235,10 @@ def _reference(args: argparse.Namespace) -> int:
 def _errors(args: argparse.Namespace) -> int:
     from training.vsensor.errors import describe, study
 
+    _check_sensors([args.onnx])
+    if args.only is not None and not any(args.only in Path(p).stem for p in args.data):
+        # found after the replays and the closed loops as numpy's "need at least one array"
+        raise ValueError(f"--only {args.only!r}: in no --data file's name")
     gh = load_greenhouse(args.greenhouse)
     print(describe(study(args.onnx, args.data, gh, args.model, args.cache,
                          overrides(args.set) or None, args.seed, args.only, args.target_kind)))
@@ -204,8 +252,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
+        _check_inputs(args)
         return int(args.func(args) or 0)
-    except (GreenhouseError, KitCsvError, ValueError) as exc:
+    except (CliError, GreenhouseError, KitCsvError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:  # a file named on the command line: say which, not Python's repr

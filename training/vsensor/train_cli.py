@@ -5,6 +5,9 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from pathlib import Path
+
+from gateway.cli.common import non_negative_int, positive_int, positive_number, seed_int
 
 
 def add_train_parser(sub: argparse._SubParsersAction, data_args) -> None:
@@ -34,18 +37,20 @@ def add_fit_args(p: argparse.ArgumentParser) -> None:
     """The fit's settings, shared by ``train`` and ``tune`` (same defaults: same figure)."""
     p.add_argument("--hidden", default="30,50,20", metavar="N,N,N",
                    help="hidden layer sizes (default 30,50,20, the thesis's)")
-    p.add_argument("--epochs", type=int, default=100, help="series-parallel epochs at most (100)")
-    p.add_argument("--rounds", type=int, default=6, help="closed-loop refinement rounds (6)")
-    p.add_argument("--round-lr", type=float, default=None, metavar="LR",
+    p.add_argument("--epochs", type=positive_int, default=100, metavar="N",
+                   help="series-parallel epochs at most (default 100)")
+    p.add_argument("--rounds", type=non_negative_int, default=6, metavar="N",
+                   help="closed-loop refinement rounds, 0 or more (default 6)")
+    p.add_argument("--round-lr", type=positive_number, default=None, metavar="LR",
                    help="Adam step size in the closed-loop rounds (default: the series-parallel "
                    "one, 1e-3)")
     p.add_argument("--pca-variance", type=float, default=0.90, metavar="SHARE",
                    help="keep the fewest principal components reaching this share of the "
                    "variance (0.90 to 1; default 0.90)")
-    p.add_argument("--ensemble", type=int, default=1, metavar="K",
+    p.add_argument("--ensemble", type=positive_int, default=1, metavar="K",
                    help="average K networks fitted from seeds NET_SEED … NET_SEED+K-1 inside each "
                    "NARX graph (PCA and no-PCA alike; default 1: one network)")
-    p.add_argument("--net-seed", type=int, default=None, metavar="N",
+    p.add_argument("--net-seed", type=seed_int, default=None, metavar="N",
                    help="first seed of the networks (default: --seed, which also seeds the "
                    "estimator's replays; changing only this reuses the cached replays)")
     p.add_argument("--feedback", choices=("member", "ensemble"), default="member",
@@ -54,7 +59,7 @@ def add_fit_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--feedback-noise", type=float, default=0.0, metavar="SIGMA",
                    help="a common N(0, SIGMA) offset, in units of the target's standard deviation, "
                    "on the five past outputs of every training row, redrawn each epoch (default 0)")
-    p.add_argument("--high-flow-weight", type=float, default=1.0, metavar="W",
+    p.add_argument("--high-flow-weight", type=positive_number, default=1.0, metavar="W",
                    help="loss weight of the training rows whose target is above the targets' 90th "
                    "percentile, the others 1 (default 1: unweighted)")
     p.add_argument("--target", choices=("identity", "sqrt", "log1p", "opening", "mixed"),
@@ -76,6 +81,16 @@ def add_fit_args(p: argparse.ArgumentParser) -> None:
                    "histories in the graph and the runtime) instead of the ensemble's mean")
 
 
+def _check_outputs(out: str, report: str | None) -> None:
+    """Refuse a sensor path that is a folder and a report folder that is a file before the
+    training: both were refused after it, with the models already written."""
+    from gateway.cli.common import check_output
+
+    if Path(out).is_dir():
+        raise ValueError(f"--out {out}: is a folder; give the sensor's file name (MODEL.onnx)")
+    check_output(report, "--report", folder=True)
+
+
 def run(args: argparse.Namespace) -> int:
     from threadpoolctl import threadpool_limits
 
@@ -84,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
     from training.vsensor.cli import overrides
     from training.vsensor.train import train
 
+    _check_outputs(args.out, args.report)
     gh = load_greenhouse(args.greenhouse)
     try:
         hidden = tuple(int(v) for v in args.hidden.split(","))

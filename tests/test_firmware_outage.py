@@ -1,0 +1,98 @@
+"""A gateway away for longer than the firmware's ring holds: the real firmware under the real
+MicroPython interpreter (fake hardware only), its datagrams relayed to the real gateway by a
+proxy that first drops everything, then forwards everything."""
+
+from __future__ import annotations
+
+import json
+import signal
+import time
+from pathlib import Path
+
+import pytest
+
+from gateway.store.keys import write_keys
+from tests.mcu_fakes.hostenv import micropython
+from tests.test_firmware_e2e import (
+    KEY,
+    Firmware,
+    LossyProxy,
+    check_exactly_once,
+    make_trace,
+    start_gateway,
+    stored,
+)
+
+pytestmark = pytest.mark.skipif(micropython() is None, reason="micropython not installed")
+RING = 120  # the smallest ring config.json allows
+
+
+def mem_lines(fw: Firmware) -> list[dict[str, int]]:
+    """The firmware's every-50-records console line, `MEM <heap bytes> ring <n> dropped <n>
+    sent <n> acked <n>`, as dicts (with `records`, the count of REC lines before it)."""
+    out, recs = [], 0
+    for line in list(fw.lines):
+        if line.startswith("REC "):
+            recs += 1
+        elif line.startswith("MEM ") and not line.startswith("MEM boot"):
+            f = line.split()
+            out.append({"records": recs, "heap": int(f[1]),
+                        **{f[i]: int(f[i + 1]) for i in range(2, len(f), 2)}})
+    return out
+
+
+def wait_until(fw: Firmware, cond, what: str, timeout: float) -> list[dict[str, int]]:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if fw.proc.poll() is not None:
+            raise AssertionError("firmware exited:\n" + "\n".join(fw.lines[-30:]))
+        mem = mem_lines(fw)
+        if cond(mem):
+            return mem
+        time.sleep(0.2)
+    raise AssertionError(f"not {what} in {timeout} s:\n" + "\n".join(fw.lines[-20:]))
+
+
+def test_gateway_away_longer_than_the_ring_then_back(tmp_path: Path) -> None:
+    """The ring keeps the newest RING records and counts what it drops (the oldest); the heap
+    does not grow while it overflows; when the gateway comes back the kept records are stored
+    exactly once and the ring empties."""
+    db, keys, trace = tmp_path / "g.db", tmp_path / "keys", tmp_path / "trace"
+    write_keys(keys, {7: KEY})
+    make_trace(trace)
+    gw, addr = start_gateway(db, keys, tmp_path / "gateway.log")
+    proxy = LossyProxy(addr, loss=1.0, seed=3)  # the gateway is away
+    dev = tmp_path / "board"
+    dev.mkdir()
+    (dev / "config.json").write_text(json.dumps({
+        "device_id": 7, "key": KEY.hex(), "wifi": {"ssid": "serra", "password": "pw"},
+        "gateway": {"host": "127.0.0.1", "port": proxy.port},
+        "sample_ms": 25, "period_s": 0.1, "ack_timeout_ms": 100, "wdt_ms": 5000,
+        "ring_size": RING,
+        "pins": {"dht_in": 4, "dht_out": 16, "pyranometer": 34, "anemometer": 35, "rain": 27}}))
+    fw = Firmware(dev, trace)
+    try:
+        away = wait_until(fw, lambda m: len(m) >= 6, "300 records", timeout=180)
+        full = [m for m in away if m["records"] > RING]
+        assert len(full) >= 3, away
+        for m in full:  # full: the newest RING kept, every older one dropped and counted
+            assert (m["ring"], m["dropped"], m["acked"]) == (RING, m["records"] - RING, 0), m
+            assert m["sent"] > 0
+        heap = [m["heap"] for m in full]
+        assert max(heap) - min(heap) <= 256, away  # bytes live after gc.collect()
+        proxy.loss = 0.0  # the gateway is back
+        back = wait_until(fw, lambda m: m[-1]["ring"] < 10 and m[-1]["records"] > away[-1]
+                          ["records"], "drained", timeout=180)
+    finally:
+        fw.stop()
+        proxy.close()
+        gw.send_signal(signal.SIGTERM)
+        gw.wait(timeout=30)
+    recs, rows = fw.records(), stored(db, 0)
+    first = min(rows)
+    assert first >= away[-1]["dropped"]  # the oldest were the ones dropped
+    assert set(rows) == set(range(first, max(rows) + 1))  # nothing kept was lost
+    kept = sorted(rows)
+    check_exactly_once({i: recs[s] for i, s in enumerate(kept)},
+                       {i: rows[s] for i, s in enumerate(kept)}, len(kept))
+    assert back[-1]["acked"] >= RING

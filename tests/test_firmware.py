@@ -146,6 +146,14 @@ def check_ring():
     assert 0 in list(r2.seq) and r2.dropped == 0
     r2.push(10, 0)  # seq 0 is now 10 behind: at the span, dropped
     assert 0 not in list(r2.seq) and r2.dropped == 1 and r2.count == 1
+    # Older than 2**28 ms: dropped, or its age would wrap on the ESP32 (ticks_diff < 2**29).
+    r3 = Ring(4)
+    r3.push(0, 5)
+    r3.push(1, 5 + (1 << 27))
+    r3.push(2, 5 + (1 << 28))
+    assert list(r3.seq)[:3] == [0, 1, 2] and r3.dropped == 0
+    r3.push(3, 6 + (1 << 28))
+    assert list(r3.seq) == [3, 1, 2, -1] and r3.dropped == 1 and r3.count == 3  # 0 went
 
 def check_wifi_backoff():
     import network

@@ -6,19 +6,21 @@ from __future__ import annotations
 
 import json
 import signal
+import sqlite3
 import time
 from pathlib import Path
 
 import pytest
 
 from gateway.store.keys import write_keys
-from tests.mcu_fakes.hostenv import micropython
+from tests.mcu_fakes.hostenv import FAKES, micropython, mpy_env
 from tests.test_firmware_e2e import (
     KEY,
     Firmware,
     LossyProxy,
     check_exactly_once,
     make_trace,
+    run_until_delivered,
     start_gateway,
     stored,
 )
@@ -53,6 +55,18 @@ def wait_until(fw: Firmware, cond, what: str, timeout: float) -> list[dict[str, 
     raise AssertionError(f"not {what} in {timeout} s:\n" + "\n".join(fw.lines[-20:]))
 
 
+def board(tmp_path: Path, port: int) -> Path:
+    dev = tmp_path / "board"
+    dev.mkdir()
+    (dev / "config.json").write_text(json.dumps({
+        "device_id": 7, "key": KEY.hex(), "wifi": {"ssid": "serra", "password": "pw"},
+        "gateway": {"host": "127.0.0.1", "port": port},
+        "sample_ms": 25, "period_s": 0.1, "ack_timeout_ms": 100, "wdt_ms": 5000,
+        "ring_size": RING,
+        "pins": {"dht_in": 4, "dht_out": 16, "pyranometer": 34, "anemometer": 35, "rain": 27}}))
+    return dev
+
+
 def test_gateway_away_longer_than_the_ring_then_back(tmp_path: Path) -> None:
     """The ring keeps the newest RING records and counts what it drops (the oldest); the heap
     does not grow while it overflows; when the gateway comes back the kept records are stored
@@ -62,15 +76,7 @@ def test_gateway_away_longer_than_the_ring_then_back(tmp_path: Path) -> None:
     make_trace(trace)
     gw, addr = start_gateway(db, keys, tmp_path / "gateway.log")
     proxy = LossyProxy(addr, loss=1.0, seed=3)  # the gateway is away
-    dev = tmp_path / "board"
-    dev.mkdir()
-    (dev / "config.json").write_text(json.dumps({
-        "device_id": 7, "key": KEY.hex(), "wifi": {"ssid": "serra", "password": "pw"},
-        "gateway": {"host": "127.0.0.1", "port": proxy.port},
-        "sample_ms": 25, "period_s": 0.1, "ack_timeout_ms": 100, "wdt_ms": 5000,
-        "ring_size": RING,
-        "pins": {"dht_in": 4, "dht_out": 16, "pyranometer": 34, "anemometer": 35, "rain": 27}}))
-    fw = Firmware(dev, trace)
+    fw = Firmware(board(tmp_path, proxy.port), trace)
     try:
         away = wait_until(fw, lambda m: len(m) >= 6, "300 records", timeout=180)
         full = [m for m in away if m["records"] > RING]
@@ -96,3 +102,43 @@ def test_gateway_away_longer_than_the_ring_then_back(tmp_path: Path) -> None:
     check_exactly_once({i: recs[s] for i, s in enumerate(kept)},
                        {i: rows[s] for i, s in enumerate(kept)}, len(kept))
     assert back[-1]["acked"] >= RING
+
+
+def test_records_made_before_the_tick_wrap_and_sent_after_it_are_dated_right(
+        tmp_path: Path) -> None:
+    """The ESP32's ticks_ms() wraps at 2**30 ms (12.4 days). With the board's clock period
+    (tests/mcu_fakes/esp32_clock) starting 3 s before the wrap and the gateway away until
+    after it, records made before the wrap are sent after it: their age, and so the time the
+    gateway gives them, must come out right, every record stored once."""
+    db, keys, trace = tmp_path / "g.db", tmp_path / "keys", tmp_path / "trace"
+    write_keys(keys, {7: KEY})
+    make_trace(trace)
+    gw, addr = start_gateway(db, keys, tmp_path / "gateway.log")
+    proxy = LossyProxy(addr, loss=1.0, seed=4)  # away until after the wrap
+    wrap = {"MICROPYPATH": f"{FAKES / 'esp32_clock'}:{mpy_env()['MICROPYPATH']}",
+            "SERRA_TICKS_START": str((1 << 30) - 3000)}
+    fw = Firmware(board(tmp_path, proxy.port), trace, env=wrap)
+    n = 60
+    try:
+        deadline = time.monotonic() + 120
+        while len(fw.records()) < 45 and time.monotonic() < deadline:  # 4.5 s: past the wrap
+            assert fw.proc.poll() is None, "\n".join(fw.lines[-30:])
+            time.sleep(0.1)
+        proxy.loss = 0.0
+        recs = run_until_delivered(fw, db, 0, n, timeout=120)
+    finally:
+        fw.stop()
+        proxy.close()
+        gw.send_signal(signal.SIGTERM)
+        gw.wait(timeout=30)
+    check_exactly_once(recs, stored(db, 0), n)
+    with sqlite3.connect(db) as c:
+        rows = c.execute("SELECT tick_ms, t FROM samples WHERE device_id = 7 AND boot = 0 AND "
+                         "seq < ? ORDER BY seq", (n,)).fetchall()
+    ticks = [r[0] for r in rows]
+    assert max(ticks) > (1 << 30) - 3000 and min(ticks) < 3000  # the wrap is inside
+    assert all((b - a) % (1 << 30) == 100 for a, b in zip(ticks, ticks[1:], strict=False))
+    t = [r[1] for r in rows]
+    steps = [b - a for a, b in zip(t, t[1:], strict=False)]
+    assert all(abs(s - 0.1) < 0.5 for s in steps), steps  # a wrapped age is days off
+    assert abs(t[-1] - t[0] - 0.1 * (n - 1)) < 0.5

@@ -55,12 +55,12 @@ def wait_until(fw: Firmware, cond, what: str, timeout: float) -> list[dict[str, 
     raise AssertionError(f"not {what} in {timeout} s:\n" + "\n".join(fw.lines[-20:]))
 
 
-def board(tmp_path: Path, port: int) -> Path:
+def board(tmp_path: Path, port: int, host: str = "127.0.0.1") -> Path:
     dev = tmp_path / "board"
     dev.mkdir()
     (dev / "config.json").write_text(json.dumps({
         "device_id": 7, "key": KEY.hex(), "wifi": {"ssid": "serra", "password": "pw"},
-        "gateway": {"host": "127.0.0.1", "port": port},
+        "gateway": {"host": host, "port": port},
         "sample_ms": 25, "period_s": 0.1, "ack_timeout_ms": 100, "wdt_ms": 5000,
         "ring_size": RING,
         "pins": {"dht_in": 4, "dht_out": 16, "pyranometer": 34, "anemometer": 35, "rain": 27}}))
@@ -142,3 +142,21 @@ def test_records_made_before_the_tick_wrap_and_sent_after_it_are_dated_right(
     steps = [b - a for a, b in zip(t, t[1:], strict=False)]
     assert all(abs(s - 0.1) < 0.5 for s in steps), steps  # a wrapped age is days off
     assert abs(t[-1] - t[0] - 0.1 * (n - 1)) < 0.5
+
+
+def test_a_gateway_name_that_does_not_resolve_is_looked_up_with_backoff(
+        tmp_path: Path) -> None:
+    """The gateway host as a name that does not resolve: the sender's open() fails, and on the
+    board each lookup may block for seconds (the DNS timeout), so it is not retried on every
+    10 ms loop but after 1, 2, 4 .. x the ack timeout (100 ms here); records wait in the ring.
+    The name has a 70-byte label, which the resolver refuses without asking any server."""
+    trace = tmp_path / "trace"
+    make_trace(trace)
+    fw = Firmware(board(tmp_path, 5683, host="a" * 70 + ".invalid"), trace)
+    try:
+        mem = wait_until(fw, lambda m: len(m) >= 2, "100 records", timeout=120)
+    finally:
+        fw.stop()
+    m = mem[1]  # 100 records of 0.1 s: 10 s
+    assert m["sent"] == 0 and m["ring"] == 100 and m["errors"] > 0, m
+    assert m["errors"] <= 10, m  # 0.1 + 0.2 + .. + 6.4 s: 7 lookups in 10 s, not 1000

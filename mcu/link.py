@@ -118,16 +118,30 @@ class Sender:
         self.acked = 0
         self.rejected = 0
         self.errors = 0
+        self._held = False
+        self._retry = 0  # tick before which a failed open() is not tried again
+        self._hold = rto  # ms, doubles per failed open() up to 60 s
 
     def close(self) -> None:
         self.port.close()
 
     def step(self, now) -> None:
+        if self._held:
+            if ticks_diff(now, self._retry) < 0:
+                return
+            self._held = False
         try:
             self.port.open()
         except OSError:
+            # A gateway host name that does not resolve: on the board each lookup can block for
+            # seconds, so not again on the next 10 ms loop: back off, 1, 2, 4 .. x the ack
+            # timeout up to 60 s.
             self.errors += 1
+            self._held = True
+            self._retry = ticks_add(now, self._hold)
+            self._hold = min(self._hold * 2, 60000)
             return
+        self._hold = self.rto
         self._poll_acks()
         ring = self.ring
         tx = self.tx

@@ -64,7 +64,7 @@ def run(cfg, boot: int, wdt, wlan, sensors, fail: tuple = (), ring=None, port=No
             if seq % 50 == 0:
                 gc.collect()
                 print("MEM", gc.mem_alloc(), "ring", ring.count, "dropped", ring.dropped,
-                      "sent", sender.sent, "acked", sender.acked)
+                      "sent", sender.sent, "acked", sender.acked, "errors", sender.errors)
         if wifi is None:
             sender.step(now)
         elif wifi.step(now):

@@ -7,15 +7,20 @@ period) is the same for the whole boot; the sender rebuilds the 63 bytes just be
 
 When full, the oldest record is dropped (and counted): fresh data is worth more than old. A
 record older than `max_span` sequence numbers is dropped too, so in-flight sequence numbers stay
-within the gateway's replay window (1024) even if one record keeps getting lost.
+within the gateway's replay window (1024) even if one record keeps getting lost. A record older
+than 2**28 ms (3.1 days; reachable with a long period and a big ring) is dropped as well: on the
+ESP32 ticks wrap at 2**30 and ticks_diff() measures only up to 2**29 ms, past which its age
+would come out negative and the gateway would date it weeks off.
 """
 
 from array import array
+from time import ticks_diff
 
 from micropython import const
 from wire import CHAN_LEN
 
 _FREE = const(-1)
+_MAX_AGE_MS = const(1 << 28)  # plus one period (<= 6553 s) and a resend, still below 2**29
 
 
 class Ring:
@@ -39,7 +44,8 @@ class Ring:
         slot = -1
         too_old = seq - self.max_span
         for i in range(self.capacity):
-            if self.seq[i] != _FREE and self.seq[i] <= too_old:
+            s = self.seq[i]
+            if s != _FREE and (s <= too_old or ticks_diff(tick, self.tick[i]) > _MAX_AGE_MS):
                 self.seq[i] = _FREE
                 self.count -= 1
                 self.dropped += 1

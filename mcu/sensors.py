@@ -29,6 +29,10 @@ _NOT_READY = const(0x15)
 _MISSING = const(-32768)  # raw value of a channel without a value
 _RAIN = const(6)  # channels: t_in, rh_in, t_out, rh_out, i_glob, wind, rain
 _SCALE_INV = (100, 100, 100, 100, 10, 100, 1)  # raw int16 per unit, as in wire-format.md
+# The ranges the gateway accepts (wire-format.md): it rejects a whole record for one value
+# outside them, so such a read is flagged range here and the other channels still arrive.
+_LO = (-40.0, 0.0, -40.0, 0.0, 0.0, 0.0, 0.0)
+_HI = (80.0, 100.0, 80.0, 100.0, 2000.0, 75.0, 1.0)
 _DHT_MIN_INTERVAL_MS = const(2000)  # datasheet: at most one conversion every 2 s
 
 
@@ -191,6 +195,9 @@ class Averager:
         self.status = [_NOT_READY] * 7
 
     def add(self, chan: int, value: float) -> None:
+        if not _LO[chan] <= value <= _HI[chan]:
+            self.fail(chan, _RANGE)  # e.g. a pyranometer calibrated above 2000 W m-2
+            return
         if chan == _RAIN:
             if value > self._sum[chan]:
                 self._sum[chan] = value

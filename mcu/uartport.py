@@ -12,6 +12,7 @@ class UartPort:
         self._rx = bytearray(2 * ACK_LEN)  # a frame in progress
         self._n = 0
         self._ack = bytearray(ACK_LEN)
+        self._b = bytearray(1)  # readinto() it: read(1) would allocate a bytes per byte
         self.bad_frames = 0
 
     def open(self) -> None:
@@ -28,10 +29,9 @@ class UartPort:
         """One decoded frame if complete, else None (never blocks)."""
         u = self.uart
         while u.any():
-            c = u.read(1)
-            if not c:
+            if not u.readinto(self._b):
                 return None
-            b = c[0]
+            b = self._b[0]
             if b != 0:
                 if self._n < len(self._rx):
                     self._rx[self._n] = b

@@ -146,6 +146,14 @@ def check_ring():
     assert 0 in list(r2.seq) and r2.dropped == 0
     r2.push(10, 0)  # seq 0 is now 10 behind: at the span, dropped
     assert 0 not in list(r2.seq) and r2.dropped == 1 and r2.count == 1
+    # Older than 2**28 ms: dropped, or its age would wrap on the ESP32 (ticks_diff < 2**29).
+    r3 = Ring(4)
+    r3.push(0, 5)
+    r3.push(1, 5 + (1 << 27))
+    r3.push(2, 5 + (1 << 28))
+    assert list(r3.seq)[:3] == [0, 1, 2] and r3.dropped == 0
+    r3.push(3, 6 + (1 << 28))
+    assert list(r3.seq) == [3, 1, 2, -1] and r3.dropped == 1 and r3.count == 3  # 0 went
 
 def check_wifi_backoff():
     import network
@@ -279,3 +287,49 @@ def test_fake_watchdog_and_reset_end_the_board_with_their_status(fakes: str) -> 
         r = subprocess.run([str(micropython()), "-c", f"import machine\n{code}\nprint('ran on')"],
                            env=env, capture_output=True, text=True, timeout=30)
         assert (r.returncode, said in r.stdout, "ran on" in r.stdout) == (status, True, False), r
+
+
+RANGE_MPY = r"""
+import sys, binascii, wire, sensors
+# Calibrations a farm may set: 0.05 W m-2 per count and 30 m s-1 per volt read above the
+# gateway's accepted ranges (2000 W m-2, 75 m s-1) near the top of the ADC.
+pins = {"dht_in": 4, "dht_out": None, "pyranometer": 34, "anemometer": 35, "rain": 27}
+cal = {"pyr_dark_counts": 0, "pyr_w_per_count": 0.05, "wind_mps_per_volt": 30.0,
+       "wind_dead_band_v": 0.03, "rain_active_low": True}
+sens = sensors.build(pins, cal)
+avg = sensors.Averager()
+for t in (0, 2000):
+    avg.sample(sens, t)
+avg.finish()
+buf = bytearray(wire.RECORD_LEN)
+wire.pack_record(buf, 7, 0, 0, 4000, 40, avg.raw, avg.status)
+wire.seal(buf, 0, wire.Hmac(binascii.unhexlify(sys.argv[1])))
+print(binascii.hexlify(buf).decode())
+"""
+
+
+@pytest.mark.skipif(micropython() is None, reason="micropython not installed")
+def test_a_read_outside_the_accepted_range_costs_its_channel_not_the_record(
+        tmp_path: Path) -> None:
+    """The gateway rejects (ack status 2, final) a record with one value outside its ranges; the
+    firmware would then drop all seven channels. A pyranometer read of 3250 W m-2 and a wind of
+    90 m s-1 travel as missing with status range; the record is stored with the rest."""
+    from gateway import protocol as p
+
+    key = bytes(range(1, 33))
+    trace = tmp_path / "trace"
+    trace.mkdir()
+    (trace / "dht_4.txt").write_text("21.5 60.0\n22.5 62.0\n")
+    (trace / "adc_34.txt").write_text("65000\n1000\n")  # 3250 W m-2, then 50 W m-2
+    (trace / "adc_35.txt").write_text("63420\n63420\n")  # 3.0 V: 90 m s-1
+    (trace / "pin_27.txt").write_text("1\n0\n")
+    script = tmp_path / "range_check.py"
+    script.write_text(RANGE_MPY)
+    r = run_mpy(script, key.hex(), cwd=tmp_path, env={"SERRA_TRACE": str(trace)}, timeout=60)
+    assert r.returncode == 0, r.stdout + r.stderr
+    rec = p.decode_record(bytes.fromhex(r.stdout.split()[-1]), {7: key})  # accepted, not raised
+    assert rec.values[:2] == (22.0, 61.0) and rec.status[:2] == (p.ST_OK, p.ST_OK)
+    assert rec.values[2:4] == (None, None) and rec.status[2] == p.ST_NO_SENSOR
+    assert (rec.values[4], rec.status[4]) == (50.0, p.ST_PARTIAL)  # one good read of two
+    assert (rec.values[5], rec.status[5]) == (None, p.ST_RANGE)
+    assert (rec.values[6], rec.status[6]) == (1.0, p.ST_OK)

@@ -127,14 +127,16 @@ def start_gateway(db: Path, keys: Path, log: Path | None = None
 
 
 class Firmware:
-    def __init__(self, workdir: Path, trace: Path, wifi: str = "ok", outage: str = "") -> None:
+    def __init__(self, workdir: Path, trace: Path, wifi: str = "ok", outage: str = "",
+                 env: dict[str, str] | None = None) -> None:
+        """env: more environment for the interpreter (e.g. MICROPYPATH with another fake)."""
         exe = micropython()
         assert exe
         self.lines: list[str] = []
         self.proc = subprocess.Popen(
             [exe, "-X", "heapsize=96K", str(MCU / "main.py")], cwd=workdir,
             env=mpy_env({"SERRA_TRACE": str(trace), "SERRA_WIFI": wifi,
-                         "SERRA_WIFI_OUTAGE": outage}),
+                         "SERRA_WIFI_OUTAGE": outage, **(env or {})}),
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         self.thread = threading.Thread(target=self._read, daemon=True)
         self.thread.start()

@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from gateway.store.keys import write_keys
-from tests.mcu_fakes.hostenv import micropython
+from tests.mcu_fakes.hostenv import micropython, run_mpy
 from tests.test_firmware_e2e import (
     KEY,
     ROOT,
@@ -111,3 +111,49 @@ def test_firmware_over_uart_with_a_noisy_cable(tmp_path: Path) -> None:
     # The corrupted frames were caught by COBS or by the tag, counted, never stored.
     counters = log.read_text().rsplit("counters", 1)[-1]
     assert "framing" in counters or "bad_tag" in counters or "short" in counters, counters
+
+
+RECV_HEAP_MPY = r"""
+import gc, machine, sys
+from time import ticks_diff, ticks_ms
+from uartport import UartPort
+port = UartPort(machine.UART(1))
+n = int(sys.argv[1])
+got = 0
+t0 = ticks_ms()
+def pump(upto):
+    global got
+    while got < upto and ticks_diff(ticks_ms(), t0) < 30000:
+        if port.recv() is not None:
+            got += 1
+pump(1)  # first call: anything allocated once is allocated now
+gc.collect()
+gc.disable()
+before = gc.mem_alloc()
+pump(n)
+print("RECV", got, gc.mem_alloc() - before, port.bad_frames)
+"""
+
+
+def test_uart_receive_allocates_nothing_per_byte(tmp_path: Path) -> None:
+    """UartPort.recv under MicroPython, the fake UART on a host pty holding 20 COBS-framed acks:
+    after the first, the other 19 (684 bytes) allocate nothing on the heap (read(1) made one
+    bytes object per byte received)."""
+    from gateway import protocol as p
+    from gateway.ingest.framing import cobs_encode
+
+    n = 20
+    frame = cobs_encode(p.encode_ack(7, 0, 1, p.ACK_STORED, 0, KEY)) + b"\0"
+    m, s, name = _pty()
+    try:
+        os.write(m, frame * n)
+        script = tmp_path / "recv_heap.py"
+        script.write_text(RECV_HEAP_MPY)
+        r = run_mpy(script, str(n), env={"SERRA_UART_1": name}, timeout=60)
+    finally:
+        os.close(m)
+        os.close(s)
+    assert r.returncode == 0, r.stdout + r.stderr
+    _, got, heap, bad = r.stdout.split()
+    assert (int(got), int(bad)) == (n, 0), r.stdout
+    assert int(heap) <= 64, r.stdout  # bytes for 19 frames; read(1) took > 10,000

@@ -93,14 +93,25 @@ class UART:
         self._poll = select.poll()
         self._poll.register(self._f, select.POLLIN)
 
+    def _ready(self):
+        for _ in self._poll.ipoll(0):  # ipoll: no allocation, so heap checks see the firmware's
+            return True
+        return False
+
     def any(self):
-        return 1 if self._poll.poll(0) else 0
+        return 1 if self._ready() else 0
 
     def read(self, n=1):
         out = bytearray()
-        while len(out) < n and self._poll.poll(0):
+        while len(out) < n and self._ready():
             out += self._f.read(1)
         return bytes(out) if out else None
+
+    def readinto(self, buf):
+        """Up to len(buf) bytes that are waiting; None if none (the board's timeout=0)."""
+        if not self._ready():
+            return None
+        return self._f.readinto(buf)
 
     def write(self, buf):
         n = self._f.write(buf)

@@ -1,0 +1,162 @@
+"""A gateway away for longer than the firmware's ring holds: the real firmware under the real
+MicroPython interpreter (fake hardware only), its datagrams relayed to the real gateway by a
+proxy that first drops everything, then forwards everything."""
+
+from __future__ import annotations
+
+import json
+import signal
+import sqlite3
+import time
+from pathlib import Path
+
+import pytest
+
+from gateway.store.keys import write_keys
+from tests.mcu_fakes.hostenv import FAKES, micropython, mpy_env
+from tests.test_firmware_e2e import (
+    KEY,
+    Firmware,
+    LossyProxy,
+    check_exactly_once,
+    make_trace,
+    run_until_delivered,
+    start_gateway,
+    stored,
+)
+
+pytestmark = pytest.mark.skipif(micropython() is None, reason="micropython not installed")
+RING = 120  # the smallest ring config.json allows
+
+
+def mem_lines(fw: Firmware) -> list[dict[str, int]]:
+    """The firmware's every-50-records console line, `MEM <heap bytes> ring <n> dropped <n>
+    sent <n> acked <n>`, as dicts (with `records`, the count of REC lines before it)."""
+    out, recs = [], 0
+    for line in list(fw.lines):
+        if line.startswith("REC "):
+            recs += 1
+        elif line.startswith("MEM ") and not line.startswith("MEM boot"):
+            f = line.split()
+            out.append({"records": recs, "heap": int(f[1]),
+                        **{f[i]: int(f[i + 1]) for i in range(2, len(f), 2)}})
+    return out
+
+
+def wait_until(fw: Firmware, cond, what: str, timeout: float) -> list[dict[str, int]]:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if fw.proc.poll() is not None:
+            raise AssertionError("firmware exited:\n" + "\n".join(fw.lines[-30:]))
+        mem = mem_lines(fw)
+        if cond(mem):
+            return mem
+        time.sleep(0.2)
+    raise AssertionError(f"not {what} in {timeout} s:\n" + "\n".join(fw.lines[-20:]))
+
+
+def board(tmp_path: Path, port: int, host: str = "127.0.0.1") -> Path:
+    dev = tmp_path / "board"
+    dev.mkdir()
+    (dev / "config.json").write_text(json.dumps({
+        "device_id": 7, "key": KEY.hex(), "wifi": {"ssid": "serra", "password": "pw"},
+        "gateway": {"host": host, "port": port},
+        "sample_ms": 25, "period_s": 0.1, "ack_timeout_ms": 100, "wdt_ms": 5000,
+        "ring_size": RING,
+        "pins": {"dht_in": 4, "dht_out": 16, "pyranometer": 34, "anemometer": 35, "rain": 27}}))
+    return dev
+
+
+def test_gateway_away_longer_than_the_ring_then_back(tmp_path: Path) -> None:
+    """The ring keeps the newest RING records and counts what it drops (the oldest); the heap
+    does not grow while it overflows; when the gateway comes back the kept records are stored
+    exactly once and the ring empties."""
+    db, keys, trace = tmp_path / "g.db", tmp_path / "keys", tmp_path / "trace"
+    write_keys(keys, {7: KEY})
+    make_trace(trace)
+    gw, addr = start_gateway(db, keys, tmp_path / "gateway.log")
+    proxy = LossyProxy(addr, loss=1.0, seed=3)  # the gateway is away
+    fw = Firmware(board(tmp_path, proxy.port), trace)
+    try:
+        away = wait_until(fw, lambda m: len(m) >= 6, "300 records", timeout=180)
+        full = [m for m in away if m["records"] > RING]
+        assert len(full) >= 3, away
+        for m in full:  # full: the newest RING kept, every older one dropped and counted
+            assert (m["ring"], m["dropped"], m["acked"]) == (RING, m["records"] - RING, 0), m
+            assert m["sent"] > 0
+        heap = [m["heap"] for m in full]
+        assert max(heap) - min(heap) <= 256, away  # bytes live after gc.collect()
+        proxy.loss = 0.0  # the gateway is back
+        back = wait_until(fw, lambda m: m[-1]["ring"] < 10 and m[-1]["records"] > away[-1]
+                          ["records"], "drained", timeout=180)
+    finally:
+        fw.stop()
+        proxy.close()
+        gw.send_signal(signal.SIGTERM)
+        gw.wait(timeout=30)
+    recs, rows = fw.records(), stored(db, 0)
+    first = min(rows)
+    assert first >= away[-1]["dropped"]  # the oldest were the ones dropped
+    assert set(rows) == set(range(first, max(rows) + 1))  # nothing kept was lost
+    kept = sorted(rows)
+    check_exactly_once({i: recs[s] for i, s in enumerate(kept)},
+                       {i: rows[s] for i, s in enumerate(kept)}, len(kept))
+    assert back[-1]["acked"] >= RING
+
+
+def test_records_made_before_the_tick_wrap_and_sent_after_it_are_dated_right(
+        tmp_path: Path) -> None:
+    """The ESP32's ticks_ms() wraps at 2**30 ms (12.4 days). With the board's clock period
+    (tests/mcu_fakes/esp32_clock) starting 3 s before the wrap and the gateway away until
+    after it, records made before the wrap are sent after it: their age, and so the time the
+    gateway gives them, must come out right, every record stored once."""
+    db, keys, trace = tmp_path / "g.db", tmp_path / "keys", tmp_path / "trace"
+    write_keys(keys, {7: KEY})
+    make_trace(trace)
+    gw, addr = start_gateway(db, keys, tmp_path / "gateway.log")
+    proxy = LossyProxy(addr, loss=1.0, seed=4)  # away until after the wrap
+    wrap = {"MICROPYPATH": f"{FAKES / 'esp32_clock'}:{mpy_env()['MICROPYPATH']}",
+            "SERRA_TICKS_START": str((1 << 30) - 3000)}
+    fw = Firmware(board(tmp_path, proxy.port), trace, env=wrap)
+    n = 60
+    try:
+        deadline = time.monotonic() + 120
+        while len(fw.records()) < 45 and time.monotonic() < deadline:  # 4.5 s: past the wrap
+            assert fw.proc.poll() is None, "\n".join(fw.lines[-30:])
+            time.sleep(0.1)
+        proxy.loss = 0.0
+        recs = run_until_delivered(fw, db, 0, n, timeout=120)
+    finally:
+        fw.stop()
+        proxy.close()
+        gw.send_signal(signal.SIGTERM)
+        gw.wait(timeout=30)
+    check_exactly_once(recs, stored(db, 0), n)
+    with sqlite3.connect(db) as c:
+        rows = c.execute("SELECT tick_ms, t FROM samples WHERE device_id = 7 AND boot = 0 AND "
+                         "seq < ? ORDER BY seq", (n,)).fetchall()
+    ticks = [r[0] for r in rows]
+    assert max(ticks) > (1 << 30) - 3000 and min(ticks) < 3000  # the wrap is inside
+    assert all((b - a) % (1 << 30) == 100 for a, b in zip(ticks, ticks[1:], strict=False))
+    t = [r[1] for r in rows]
+    steps = [b - a for a, b in zip(t, t[1:], strict=False)]
+    assert all(abs(s - 0.1) < 1.0 for s in steps), steps  # a wrapped age is days off
+    assert abs(t[-1] - t[0] - 0.1 * (n - 1)) < 1.0
+
+
+def test_a_gateway_name_that_does_not_resolve_is_looked_up_with_backoff(
+        tmp_path: Path) -> None:
+    """The gateway host as a name that does not resolve: the sender's open() fails, and on the
+    board each lookup may block for seconds (the DNS timeout), so it is not retried on every
+    10 ms loop but after 1, 2, 4 .. x the ack timeout (100 ms here); records wait in the ring.
+    The name has a 70-byte label, which the resolver refuses without asking any server."""
+    trace = tmp_path / "trace"
+    make_trace(trace)
+    fw = Firmware(board(tmp_path, 5683, host="a" * 70 + ".invalid"), trace)
+    try:
+        mem = wait_until(fw, lambda m: len(m) >= 2, "100 records", timeout=120)
+    finally:
+        fw.stop()
+    m = mem[1]  # 100 records of 0.1 s: 10 s
+    assert m["sent"] == 0 and m["ring"] == 100 and m["errors"] > 0, m
+    assert m["errors"] <= 10, m  # 0.1 + 0.2 + .. + 6.4 s: 7 lookups in 10 s, not 1000

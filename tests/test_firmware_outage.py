@@ -140,8 +140,10 @@ def test_records_made_before_the_tick_wrap_and_sent_after_it_are_dated_right(
     assert all((b - a) % (1 << 30) == 100 for a, b in zip(ticks, ticks[1:], strict=False))
     t = [r[1] for r in rows]
     steps = [b - a for a, b in zip(t, t[1:], strict=False)]
-    assert all(abs(s - 0.1) < 1.0 for s in steps), steps  # a wrapped age is days off
-    assert abs(t[-1] - t[0] - 0.1 * (n - 1)) < 1.0
+    # a wrapped age is days off (2**30 ms is 12.4 d); 30 s leaves room for a loaded machine's
+    # delays between the board stamping an age and the gateway reading its clock
+    assert all(abs(s - 0.1) < 30.0 for s in steps), steps
+    assert abs(t[-1] - t[0] - 0.1 * (n - 1)) < 30.0
 
 
 def test_a_gateway_name_that_does_not_resolve_is_looked_up_with_backoff(

@@ -61,7 +61,7 @@ bench: $(BENCH_STAMP)
 	$(BENCH_VENV)/bin/python tests/bench/run.py
 
 ## bench-generality: diagnosis and forecasts on three independent generators (one held out),
-## 3 weather windows, every change kind, 11 effect-free windows each; parallel processes.
+## 3 weather windows, every change kind, 10 effect-free windows each; parallel processes.
 ## JSON in bench/results/generality.json, Markdown into docs/effects.md ("Generality suite").
 bench-generality: $(STAMP)
 	$(PY) tests/generality/suite.py --jobs 2

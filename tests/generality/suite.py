@@ -89,7 +89,8 @@ def main(argv: list[str] | None = None) -> int:
                     help=f"comma-separated generators ({','.join(GENERATORS)}; "
                     f"{','.join(sorted(HELD_OUT))} is held out: reported apart)")
     ap.add_argument("--windows", default=",".join(MAIN_WINDOWS),
-                    help="main windows (the 8 extra effect-free ones run only with all three)")
+                    help=f"main windows (the {len(EXTRA_WINDOWS)} extra effect-free ones run only "
+                    "with all three)")
     ap.add_argument("--only", choices=["diagnose", "forecast"],
                     help="run only the diagnosis cases or only the forecast rows (both)")
     ap.add_argument("--kinds", default=",".join(ALL_KINDS), help="changes to diagnose (all)")

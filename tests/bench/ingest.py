@@ -324,7 +324,13 @@ def run() -> dict[str, Any]:
 
 
 if __name__ == "__main__":
-    if sys.argv[1:] == ["offered"]:
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("part", nargs="?", choices=["offered"],
+                    help="offered: the open-loop offered-load part alone, printed (default: the "
+                    "whole bench into bench/results/ingest.json)")
+    if ap.parse_args().part == "offered":
         import json
 
         print(json.dumps(bench_offered(), indent=2))

@@ -243,13 +243,7 @@ def test_subscribe_conflicts_on_the_command_line_name_its_options(capsys, tmp_pa
 def test_run_check_says_a_number_out_of_range_without_inf(capsys, tmp_path, in_gateway, tables,
                                                           said):
     """'0.0 is outside 1.0..inf' for a whole number of seconds: the bound is now said as one."""
-    assert main(["keys", "add", "7", "--keys", str(tmp_path / "keys.txt")]) == 0
-    config = tmp_path / "gateway.toml"
-    config.write_text(f'[gateway]\nfarm = "f1"\ndb = "serra.db"\nkeys = "keys.txt"\n{in_gateway}'
-                      f'{tables}[[greenhouse]]\nname = "north"\ngreenhouse = "biskra-prototype"\n'
-                      'model = "prototype"\ninside = 7\n')
-    capsys.readouterr()
-    assert main(["run", "--config", str(config), "--check"]) == 2
+    config = _checked_config(capsys, tmp_path, in_gateway + tables)
     assert one_error_line(capsys) == f"error: {config}: {said}"
 
 
@@ -260,14 +254,21 @@ def test_run_check_says_a_number_out_of_range_without_inf(capsys, tmp_path, in_g
 def test_run_check_reads_ingest_listen_as_ingest_listen_does(capsys, tmp_path, listen, said):
     """The config's [ingest] listen had a reader of its own: a port out of range was 'expected
     HOST:PORT', and a host name passed --check (ingest --listen refuses it: never resolved)."""
+    config = _checked_config(capsys, tmp_path, f'[ingest]\nlisten = "{listen}"\n')
+    assert one_error_line(capsys).startswith(f"error: {config}: ingest.listen: {said}")
+
+
+def _checked_config(capsys, tmp_path, more: str):
+    """A gateway.toml of one greenhouse with ``more`` after its [gateway] keys, refused by
+    ``run --check`` (exit 2); its path."""
     assert main(["keys", "add", "7", "--keys", str(tmp_path / "keys.txt")]) == 0
     config = tmp_path / "gateway.toml"
-    config.write_text(f'[gateway]\nfarm = "f1"\ndb = "serra.db"\nkeys = "keys.txt"\n[ingest]\n'
-                      f'listen = "{listen}"\n[[greenhouse]]\nname = "north"\ngreenhouse = '
-                      '"biskra-prototype"\nmodel = "prototype"\ninside = 7\n')
+    config.write_text(f'[gateway]\nfarm = "f1"\ndb = "serra.db"\nkeys = "keys.txt"\n{more}'
+                      '[[greenhouse]]\nname = "north"\ngreenhouse = "biskra-prototype"\n'
+                      'model = "prototype"\ninside = 7\n')
     capsys.readouterr()
     assert main(["run", "--config", str(config), "--check"]) == 2
-    assert one_error_line(capsys).startswith(f"error: {config}: ingest.listen: {said}")
+    return config
 
 
 @pytest.mark.parametrize(("content", "said"), [

@@ -135,13 +135,14 @@ def test_bounded_run_without_a_terminal_prints_a_consistent_summary(tmp_path: Pa
 @pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux not installed")
 def test_on_a_terminal_the_status_screen_shows_and_ctrl_c_stops_everything(tmp_path: Path) -> None:
     out, name = tmp_path / "run", f"serra-run-{os.getpid()}"
+    tmux = private_tmux(tmp_path)
     cmd = (f"{sys.executable} -m training run --scale 300 --no-calibrate --out {out}; "
            f"echo EXIT=$?; sleep 600")
-    subprocess.run(["tmux", "new-session", "-d", "-s", name, "-x", "80", "-y", "24", "-c",
+    subprocess.run([*tmux, "new-session", "-d", "-s", name, "-x", "80", "-y", "24", "-c",
                     str(tmp_path), cmd], check=True, timeout=60)
 
     def screen() -> str:
-        return subprocess.run(["tmux", "capture-pane", "-p", "-t", name], capture_output=True,
+        return subprocess.run([*tmux, "capture-pane", "-p", "-t", name], capture_output=True,
                               text=True, timeout=60).stdout
 
     try:
@@ -151,12 +152,12 @@ def test_on_a_terminal_the_status_screen_shows_and_ctrl_c_stops_everything(tmp_p
         assert "farm demo-farm · greenhouse north (1/1)" in lines[0] and "×300" in lines[0]
         assert "q quit" in lines[-1] and len(lines) <= 24
         print("\n--- make run, 80x24 ---\n" + shot)
-        subprocess.run(["tmux", "send-keys", "-t", name, "C-c"], check=True, timeout=60)
+        subprocess.run([*tmux, "send-keys", "-t", name, "C-c"], check=True, timeout=60)
         after = wait_for(lambda: s if "EXIT=" in (s := screen()) else "", 180, "the run to stop")
     finally:
-        log = subprocess.run(["tmux", "capture-pane", "-p", "-J", "-S", "-200", "-t", name],
+        log = subprocess.run([*tmux, "capture-pane", "-p", "-J", "-S", "-200", "-t", name],
                              capture_output=True, text=True, timeout=60).stdout
-        subprocess.run(["tmux", "kill-session", "-t", name], timeout=60)
+        subprocess.run([*tmux, "kill-session", "-t", name], timeout=60)
     assert "EXIT=0" in after, log
     assert "summary:" in log and "received by the subscriber" in " ".join(log.split())
     pgid = int(re.search(r"process group (\d+)", log)[1])
@@ -166,6 +167,12 @@ def test_on_a_terminal_the_status_screen_shows_and_ctrl_c_stops_everything(tmp_p
         time.sleep(0.1)
     s = json.loads((out / "summary.json").read_text())
     assert s["published"] == s["received"] and s["stored"] > 0
+
+
+def private_tmux(folder: Path) -> list[str]:
+    """tmux on a server of the test's own (its socket in ``folder``): not the user's default
+    server, and no /tmp/tmux-UID left behind."""
+    return ["tmux", "-S", str(folder / "tmux.sock")]
 
 
 def pids_of(command: str) -> list[int]:
@@ -188,23 +195,24 @@ def test_a_terminal_that_hangs_up_under_a_session_leader_that_waits_stops_the_ru
     plays make (it ignores SIGHUP and waits); the run must notice the terminal is gone, stop
     everything and write its summary."""
     out, name = tmp_path / "run", f"serra-hup-{os.getpid()}"
+    tmux = private_tmux(tmp_path)
     argv = f"{sys.executable} -m training run --scale 300 --no-calibrate --out {out}"
     cmd = f"trap '' HUP; {argv}; true"  # `; true`: the shell waits, it does not exec the run
-    subprocess.run(["tmux", "new-session", "-d", "-s", name, "-x", "80", "-y", "24", "-c",
+    subprocess.run([*tmux, "new-session", "-d", "-s", name, "-x", "80", "-y", "24", "-c",
                     str(tmp_path), cmd], check=True, timeout=60)
     run = gw = []
     try:
         wait_for(lambda: "farm demo-farm" in subprocess.run(
-            ["tmux", "capture-pane", "-p", "-t", name], capture_output=True, text=True,
+            [*tmux, "capture-pane", "-p", "-t", name], capture_output=True, text=True,
             timeout=60).stdout, 180, "the status screen")
         run = pids_of(argv)
         gw = pids_of(f"{sys.executable} -m gateway run --config {out / 'gateway.toml'}")
         assert len(run) == 1 and len(gw) == 1, (run, gw)
-        subprocess.run(["tmux", "kill-session", "-t", name], timeout=60)  # the terminal hangs up
+        subprocess.run([*tmux, "kill-session", "-t", name], timeout=60)  # the terminal hangs up
         wait_for(lambda: not pids_of(argv) and group_gone(gw[0]), 180,
                  "the run and every process of its group to stop")
     finally:
-        subprocess.run(["tmux", "kill-session", "-t", name], capture_output=True, timeout=60)
+        subprocess.run([*tmux, "kill-session", "-t", name], capture_output=True, timeout=60)
         for pid in run:  # a failed test leaves nothing behind either
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)

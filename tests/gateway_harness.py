@@ -40,11 +40,11 @@ def wait_for(cond: Callable[[], object], timeout: float, what: str, every: float
 
 
 def write_config(folder: Path, *, anchor: float, scale: float = 300.0, farm: str = "f1",
-                 devices: tuple[int, ...] = (7,), zenoh_listen: str = "tcp/127.0.0.1:0",
+                 devices: tuple[int, ...] = (7,), zenoh_listen: str | None = "tcp/127.0.0.1:0",
                  zenoh_connect: str | None = None, extra: str = "", status_every_s: float = 600,
                  greenhouses: str | None = None, diagnosis: str = "enabled = false") -> Path:
     """The gateway's TOML in ``folder`` (keys beside it); ``diagnosis``: the body of its
-    ``[diagnosis]`` table (off unless a test says otherwise)."""
+    ``[diagnosis]`` table (off unless a test says otherwise); ``zenoh_listen`` None: none."""
     write_keys(folder / "keys.txt", {d: KEY for d in devices})
     connect = f'connect = ["{zenoh_connect}"]' if zenoh_connect else ""
     gh = greenhouses or (f'[[greenhouse]]\nname = "north"\ngreenhouse = "biskra-prototype"\n'
@@ -60,7 +60,7 @@ status_every_s = {status_every_s}
 listen = "127.0.0.1:0"
 maintenance_s = 1
 [zenoh]
-listen = ["{zenoh_listen}"]
+listen = [{f'"{zenoh_listen}"' if zenoh_listen else ""}]
 {connect}
 resend_on_start_s = 2.0
 [diagnosis]
@@ -110,7 +110,7 @@ class GatewayProcess:
         parts = line.split()
         host, port = parts[parts.index("udp") + 1].rsplit(":", 1)
         self.udp = (host, int(port))
-        self.zenoh = parts[parts.index("zenoh") + 1]
+        self.zenoh = parts[parts.index("zenoh") + 1] if "zenoh" in parts else ""
 
     @staticmethod
     def _read(proc: subprocess.Popen, lines: queue.Queue) -> None:

@@ -3,6 +3,7 @@ Zenoh's peer default would listen on every interface at a random port."""
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -13,7 +14,7 @@ from gateway.cloud.store import SqliteCloudStore
 from gateway.cloud.subscriber import Subscriber
 from gateway.publish import zconfig
 from gateway.status.zenoh_source import ZenohSource
-from tests.gateway_harness import wait_for
+from tests.gateway_harness import GatewayProcess, wait_for, write_config
 
 
 @pytest.fixture
@@ -72,3 +73,18 @@ def test_a_subscriber_given_connect_alone_opens_no_port(far_side, tmp_path: Path
     finally:
         sub.stop()
         cloud.close()
+
+
+def test_a_gateway_given_connect_alone_opens_no_port(far_side, tmp_path: Path):
+    """The gateway service in peer mode with ``connect`` and no ``listen``: it dials the far
+    side and listens on nothing (its kits come over UDP)."""
+    session, endpoint = far_side
+    gw = GatewayProcess(write_config(tmp_path, anchor=time.time(), zenoh_listen=None,
+                                     zenoh_connect=endpoint))
+    gw.start()
+    try:
+        assert gw.proc is not None
+        wait_for(lambda: _connected(session), 60, "the gateway to connect")
+        assert zconfig.listening_ports(gw.proc.pid) == []
+    finally:
+        gw.stop()

@@ -40,18 +40,20 @@ def build(mode: str = "peer", connect: Iterable[str] = (), listen: Iterable[str]
     return conf
 
 
-def listening_ports() -> list[int]:
-    """TCP ports this process listens on (Linux /proc): what Zenoh bound for ``tcp/HOST:0``."""
+def listening_ports(pid: int | None = None) -> list[int]:
+    """TCP ports this process (or process ``pid``) listens on (Linux /proc): what Zenoh bound
+    for ``tcp/HOST:0``."""
+    proc = f"/proc/{pid if pid is not None else 'self'}"
     inodes = set()
-    for fd in os.listdir("/proc/self/fd"):
+    for fd in os.listdir(f"{proc}/fd"):
         try:
-            link = os.readlink(f"/proc/self/fd/{fd}")
+            link = os.readlink(f"{proc}/fd/{fd}")
         except OSError:
             continue
         if link.startswith("socket:["):
             inodes.add(link[8:-1])
     ports = []
-    for table in ("/proc/self/net/tcp", "/proc/self/net/tcp6"):
+    for table in (f"{proc}/net/tcp", f"{proc}/net/tcp6"):
         try:
             lines = open(table).read().splitlines()[1:]  # noqa: SIM115
         except OSError:

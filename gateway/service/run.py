@@ -97,7 +97,9 @@ class Gateway:
         extra = session_entries(z.connect, z.listen, z.tls, z.retry) | z.extra
 
         def config() -> zenoh.Config:
-            return zconfig.build(z.mode, z.connect, z.listen, z.multicast_scouting, extra=extra)
+            # given only endpoints to dial, a peer listens nowhere (not Zenoh's every interface)
+            return zconfig.build(z.mode, z.connect, z.listen, z.multicast_scouting, extra=extra,
+                                 dial_only=bool(z.connect))
 
         before = zconfig.listening_ports()
         if z.mode == "client":  # open() fails while no router answers: retried in the background

@@ -39,13 +39,7 @@ def test_status_on_a_config_whose_store_is_not_made_yet_says_so(capsys, tmp_path
     (".", "is a folder; name the store's file"),
 ])
 def test_run_check_refuses_a_store_it_could_not_create(capsys, tmp_path, db, message):
-    assert main(["keys", "add", "7", "--keys", str(tmp_path / "keys.txt")]) == 0
-    config = tmp_path / "gateway.toml"
-    config.write_text(f'[gateway]\nfarm = "f1"\ndb = "{db}"\nkeys = "keys.txt"\n[[greenhouse]]\n'
-                      'name = "north"\ngreenhouse = "biskra-prototype"\nmodel = "prototype"\n'
-                      'inside = 7\n')
-    capsys.readouterr()
-    assert main(["run", "--config", str(config), "--check"]) == 2
+    config = _checked_config(capsys, tmp_path, "", db=db)
     line = one_error_line(capsys)
     assert f"{config}: gateway.db: " in line and message in line
 
@@ -258,12 +252,12 @@ def test_run_check_reads_ingest_listen_as_ingest_listen_does(capsys, tmp_path, l
     assert one_error_line(capsys).startswith(f"error: {config}: ingest.listen: {said}")
 
 
-def _checked_config(capsys, tmp_path, more: str):
-    """A gateway.toml of one greenhouse with ``more`` after its [gateway] keys, refused by
-    ``run --check`` (exit 2); its path."""
+def _checked_config(capsys, tmp_path, more: str, db: str = "serra.db"):
+    """A gateway.toml of one greenhouse (store ``db``) with ``more`` after its [gateway] keys,
+    refused by ``run --check`` (exit 2); its path."""
     assert main(["keys", "add", "7", "--keys", str(tmp_path / "keys.txt")]) == 0
     config = tmp_path / "gateway.toml"
-    config.write_text(f'[gateway]\nfarm = "f1"\ndb = "serra.db"\nkeys = "keys.txt"\n{more}'
+    config.write_text(f'[gateway]\nfarm = "f1"\ndb = "{db}"\nkeys = "keys.txt"\n{more}'
                       '[[greenhouse]]\nname = "north"\ngreenhouse = "biskra-prototype"\n'
                       'model = "prototype"\ninside = 7\n')
     capsys.readouterr()

@@ -18,13 +18,17 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import TypeVar
 
 import pytest
 
 from gateway import protocol as p
 from gateway.store.keys import write_keys
 from tests.mcu_fakes.hostenv import MCU, micropython, mpy_env
+
+T = TypeVar("T")
 
 ROOT = Path(__file__).resolve().parents[1]
 KEY = hashlib.sha256(b"serra test key: device 7").digest()
@@ -133,6 +137,8 @@ class Firmware:
         exe = micropython()
         assert exe
         self.lines: list[str] = []
+        self.changed = threading.Condition()  # notified at every console line and at the end
+        self.ended = False
         self.proc = subprocess.Popen(
             [exe, "-X", "heapsize=96K", str(MCU / "main.py")], cwd=workdir,
             env=mpy_env({"SERRA_TRACE": str(trace), "SERRA_WIFI": wifi,
@@ -144,7 +150,27 @@ class Firmware:
     def _read(self) -> None:
         assert self.proc.stdout is not None
         for line in self.proc.stdout:
-            self.lines.append(line.rstrip("\n"))
+            with self.changed:
+                self.lines.append(line.rstrip("\n"))
+                self.changed.notify_all()
+        with self.changed:
+            self.ended = True
+            self.changed.notify_all()
+
+    def wait(self, cond: Callable[[], T], timeout: float, what: str) -> T:
+        """``cond()``'s first truthy value, checked again at each console line (no polling);
+        fails naming ``what`` when the firmware ends first or ``timeout`` [s] passes."""
+        deadline = time.monotonic() + timeout
+        with self.changed:
+            while not (value := cond()):
+                if self.ended:
+                    raise AssertionError("firmware exited:\n" + "\n".join(self.lines[-30:]))
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise AssertionError(f"not {what} in {timeout} s:\n"
+                                         + "\n".join(self.lines[-20:]))
+                self.changed.wait(left)
+        return value
 
     def records(self) -> dict[int, list[tuple[int, int]]]:
         out = {}

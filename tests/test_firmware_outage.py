@@ -7,7 +7,6 @@ from __future__ import annotations
 import json
 import signal
 import sqlite3
-import time
 from pathlib import Path
 
 import pytest
@@ -44,15 +43,13 @@ def mem_lines(fw: Firmware) -> list[dict[str, int]]:
 
 
 def wait_until(fw: Firmware, cond, what: str, timeout: float) -> list[dict[str, int]]:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if fw.proc.poll() is not None:
-            raise AssertionError("firmware exited:\n" + "\n".join(fw.lines[-30:]))
+    """The MEM lines once ``cond`` holds of them (checked at each console line)."""
+
+    def met() -> list[dict[str, int]] | None:
         mem = mem_lines(fw)
-        if cond(mem):
-            return mem
-        time.sleep(0.2)
-    raise AssertionError(f"not {what} in {timeout} s:\n" + "\n".join(fw.lines[-20:]))
+        return mem if cond(mem) else None
+
+    return fw.wait(met, timeout, what)
 
 
 def board(tmp_path: Path, port: int, host: str = "127.0.0.1") -> Path:
@@ -120,10 +117,7 @@ def test_records_made_before_the_tick_wrap_and_sent_after_it_are_dated_right(
     fw = Firmware(board(tmp_path, proxy.port), trace, env=wrap)
     n = 60
     try:
-        deadline = time.monotonic() + 120
-        while len(fw.records()) < 45 and time.monotonic() < deadline:  # 4.5 s: past the wrap
-            assert fw.proc.poll() is None, "\n".join(fw.lines[-30:])
-            time.sleep(0.1)
+        fw.wait(lambda: len(fw.records()) >= 45, 120, "45 records")  # 4.5 s: past the wrap
         proxy.loss = 0.0
         recs = run_until_delivered(fw, db, 0, n, timeout=120)
     finally:

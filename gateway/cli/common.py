@@ -113,10 +113,9 @@ def non_negative_int(text: str) -> int:
     return _whole_number(text, 0, "0 or more")
 
 
-def seed_int(text: str) -> int:
-    """argparse type: a whole number >= 0 (numpy's generators refuse a negative seed, which
-    would be a traceback after the data was read)."""
-    return _whole_number(text, 0, "0 or more")
+seed_int = non_negative_int
+"""argparse type of a seed: numpy's generators refuse a negative one, which would be a traceback
+after the data was read."""
 
 
 def add_seed_argument(p: argparse.ArgumentParser, what: str) -> None:

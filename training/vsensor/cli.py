@@ -158,9 +158,7 @@ def _check_inputs(args: argparse.Namespace) -> None:
     if unknown:  # tune reported its MAE as null, after the fit
         raise ValueError(f"--subset {' '.join(sorted(unknown))}: no --data file has that stem")
     for path in getattr(args, "test", None) or ():
-        if not Path(path).is_file():
-            said = "is a folder, not a kit CSV" if Path(path).is_dir() else "no such file"
-            raise ValueError(f"--test {path}: {said}")
+        _check_file(path, "--test", "a kit CSV")
     check_output(getattr(args, "cache", None), "--cache", folder=True)
     check_output(getattr(args, "log", None), "--log")  # tune appends to it after the fit
 
@@ -168,9 +166,13 @@ def _check_inputs(args: argparse.Namespace) -> None:
 def _check_sensors(paths: list[str]) -> None:
     """Name a missing sensor before the replays (minutes for a file not yet cached), not after."""
     for path in paths:
-        if not Path(path).is_file():
-            raise ValueError(f"--sensor {path}: " + ("is a folder, not an ONNX file"
-                                                     if Path(path).is_dir() else "no such file"))
+        _check_file(path, "--sensor", "an ONNX file")
+
+
+def _check_file(path: str, option: str, kind: str) -> None:
+    if not Path(path).is_file():
+        said = f"is a folder, not {kind}" if Path(path).is_dir() else "no such file"
+        raise ValueError(f"{option} {path}: {said}")
 
 
 def overrides(items: list[str]) -> dict[str, dict[str, float]]:

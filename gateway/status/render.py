@@ -162,7 +162,8 @@ def _parameter_lines(g: S.GreenhouseView) -> list[Text]:
 
 def _ventilation_line(v: S.Ventilation) -> Text:
     if v.flow is None:
-        return _line("Ventilation ", ("no virtual sensor" if not v.configured else
+        none = "no virtual sensor" + (f": {v.why_none}" if v.why_none else "")
+        return _line("Ventilation ", (none if not v.configured else
                                       "virtual sensor set, no estimate yet", DIM))
     flag = (" · inputs out of its range", WARN) if v.out_of_range else ""
     return _line(f"Ventilation {number(v.flow, '{:.3f}')} m³/s · heat loss "

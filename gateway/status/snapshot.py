@@ -145,6 +145,7 @@ class Ventilation:
     flow: float | None = None  # [m3 s-1]
     heat_loss: float | None = None  # [W m-2]
     out_of_range: bool = False
+    why_none: str = ""  # without a sensor set: why no shipped one fits the house ("" unknown)
 
 
 @dataclass(frozen=True)

@@ -34,6 +34,7 @@ class StoreSource:
         self.bins = bins
         self.conn = open_readonly(self.path)
         self._bounds: dict[str, tuple[list[str], list[float | None], list[float | None]]] = {}
+        self._no_sensor: dict[str, str] = {}  # greenhouse → why no shipped sensor fits it
 
     @property
     def label(self) -> str:
@@ -222,6 +223,19 @@ class StoreSource:
                 return names, [None] * len(names), [None] * len(names)
         return self._bounds[gh]
 
+    def _why_no_sensor(self, gh: str, cfg: dict[str, Any]) -> str:
+        """Why no shipped sensor fits the greenhouse file the config names ("" when one does or
+        the file cannot be read: the screen then says only that none is set)."""
+        if gh not in self._no_sensor:
+            try:
+                from gateway.greenhouse import load_greenhouse
+                from gateway.vsensor.fit import no_sensor_reason
+
+                self._no_sensor[gh] = no_sensor_reason(load_greenhouse(cfg["greenhouse"]))
+            except Exception:  # a file gone or changed, a model unreadable: no reason given
+                self._no_sensor[gh] = ""
+        return self._no_sensor[gh]
+
     def _ventilation(self, gh: str, cfg: dict[str, Any]) -> S.Ventilation:
         configured = bool(cfg.get("vsensor"))
         got = {}
@@ -231,7 +245,7 @@ class StoreSource:
                 "ORDER BY t DESC LIMIT 1", (gh, name)).fetchone()
         flow, loss = got["ventilation_flow"], got["ventilation_heat_loss"]
         if flow is None:
-            return S.Ventilation(configured)
+            return S.Ventilation(configured, why_none="" if configured else self._why_no_sensor(gh, cfg))
         return S.Ventilation(configured, flow[0], flow[1], loss[1] if loss else None,
                              flow[2] == "out_of_range")
 

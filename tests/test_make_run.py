@@ -132,6 +132,59 @@ def test_bounded_run_without_a_terminal_prints_a_consistent_summary(tmp_path: Pa
     assert "Service    NOT RUNNING" in r.stdout, r.stdout
 
 
+def process_group_of(pid: int) -> int:
+    return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[2])
+
+
+def test_ctrl_c_during_the_set_up_exits_130_and_leaves_no_process(tmp_path: Path) -> None:
+    """SIGINT once the gateway is up and the subscriber starting (before the kit and the
+    screen): the run did not happen, so the exit status says so (130, 128 + SIGINT, as a shell
+    reports a Ctrl-C), and every child is gone."""
+    out, log = tmp_path / "run", tmp_path / "stdout.txt"
+    gateway = f"{sys.executable} -m gateway run --config {out / 'gateway.toml'}"
+    with log.open("w") as stdout:
+        proc = subprocess.Popen([sys.executable, "-m", "training", "run", "--minutes", "30", "--scale",
+                                 "300", "--no-calibrate", "--out", str(out)], cwd=tmp_path,
+                                stdout=stdout, stderr=subprocess.STDOUT, text=True,
+                                stdin=subprocess.DEVNULL)
+    groups: set[int] = set()
+    try:
+        up = wait_for(lambda: "gateway ready" in log.read_text() or proc.poll() is not None, 300,
+                      "the gateway to be ready")
+        assert up is True and proc.poll() is None, log.read_text()
+        groups = {process_group_of(pid) for pid in pids_of(gateway)}
+        assert groups, "the gateway is not running"
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(180) == 130, log.read_text()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(60)
+        for pgid in groups:  # a failed test leaves nothing behind either
+            if not group_gone(pgid):
+                os.killpg(pgid, signal.SIGKILL)
+        for pid in pids_mentioning(out):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+    text = log.read_text()
+    assert "stopped: interrupted" in text and "Traceback" not in text, text
+    assert "summary:" not in text and not (out / "summary.json").exists()
+    assert all(map(group_gone, groups)), "a child of the run survived the Ctrl-C"
+    assert pids_mentioning(out) == [], "a process of the run survived the Ctrl-C"
+
+
+def pids_mentioning(folder: Path) -> list[int]:
+    """Processes whose command line names ``folder`` (the run's children name its --out)."""
+    return [pid for pid in pids_of("") if str(folder) in cmdline(pid)]
+
+
+def cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+    except (FileNotFoundError, ProcessLookupError, PermissionError):
+        return ""
+
+
 @pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux not installed")
 def test_on_a_terminal_the_status_screen_shows_and_ctrl_c_stops_everything(tmp_path: Path) -> None:
     out, name = tmp_path / "run", f"serra-run-{os.getpid()}"

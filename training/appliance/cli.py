@@ -124,6 +124,8 @@ class Demo:
             code = 1
         except KeyboardInterrupt:
             self.why = "interrupted"
+            if self.start_t is None:  # Ctrl-C before the kit ran: nothing was done, say so (128+2)
+                code = 130
         finally:
             stopped = self.shutdown()
             for s, h in old.items():

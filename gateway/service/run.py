@@ -131,10 +131,10 @@ class Gateway:
     def stop_zenoh(self) -> None:
         if self.opener is not None:
             self.opener.stop()  # no session opens after this
+        if self.history is not None:  # its read-only connection first: the publisher's, a
+            self.history.close()  # writer's, closes last and SQLite removes the -wal and -shm
         if self.publisher is not None:
             self.publisher.stop()
-        if self.history is not None:
-            self.history.close()
         if self.session is not None:
             self.session.close()
         self.publisher = self.history = self.session = self.opener = None

@@ -101,6 +101,7 @@ class Demo:
         self.calibrate_first = True
         self.model = MODEL
         self.why = ""  # why the run ended early
+        self.hurried = False  # Ctrl-C again while stopping: the group was killed
         out = sys.__stdout__  # the terminal we started on, if any (watched while the screen runs)
         self.tty_fd = out.fileno() if out is not None and out.isatty() else -1
         self.epoch = float(__import__("numpy").datetime64(START.rstrip("Z"), "s").astype("int64"))
@@ -127,23 +128,33 @@ class Demo:
             if self.start_t is None:  # Ctrl-C before the kit ran: nothing was done, say so (128+2)
                 code = 130
         finally:
+            # from here on a Ctrl-C only hurries the end, up to the process's exit (the default
+            # handler would leave a child whose stop was being waited for, and a traceback)
+            signal.signal(signal.SIGINT, self._hurry)
             stopped = self.shutdown()
             for s, h in old.items():
                 signal.signal(s, h)
         if self.why:
             self.say(f"stopped: {self.why}")
+        if self.hurried:  # no summary either: it was asked not to wait
+            self.say("stopped: Ctrl-C again while stopping: the run's processes were killed")
+            return 130
         if self.start_t is not None:
             self.report()
         if not stopped:
             self.say("error: a process of the run did not stop by itself (killed)")
             code = code or 1
-        return code
+        return 130 if self.hurried else code  # a Ctrl-C during the summary too
 
     def _signal(self, signum: int, _frame) -> None:
         self.why = signal.Signals(signum).name
         self.stop.set()
         if getattr(self, "app", None) is not None:
             self.app.call_from_thread(self.app.exit)  # type: ignore[union-attr]
+
+    def _hurry(self, _signum: int, _frame) -> None:
+        self.hurried = True
+        self.group.kill()
 
     # -- set-up -------------------------------------------------------------------------------
     def prepare(self) -> None:
@@ -287,6 +298,8 @@ class Demo:
         it has stored what was published; finally sweep the group. False when a process had to
         be killed."""
         g = self.group
+        if g.pgid is not None:
+            self.say("  stopping the kit, the gateway and the subscriber … (Ctrl-C again: kill them)")
         if self.kit is not None:
             self.kit.stop()
         self.settle()

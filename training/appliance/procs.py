@@ -101,6 +101,14 @@ class Group:
             return True
         return True
 
+    def kill(self) -> None:
+        """SIGKILL to every process of the group, at once (no waiting: a signal handler's)."""
+        if self.pgid is not None:
+            try:
+                os.killpg(self.pgid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+
     def sweep(self, timeout: float = 10.0) -> bool:
         """Terminate whatever is left in the group (then kill it); True when something was."""
         if not self.alive():

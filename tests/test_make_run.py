@@ -136,10 +136,14 @@ def process_group_of(pid: int) -> int:
     return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[2])
 
 
-def test_ctrl_c_during_the_set_up_exits_130_and_leaves_no_process(tmp_path: Path) -> None:
-    """SIGINT once the gateway is up and the subscriber starting (before the kit and the
-    screen): the run did not happen, so the exit status says so (130, 128 + SIGINT, as a shell
-    reports a Ctrl-C), and every child is gone."""
+@pytest.mark.parametrize(("signum", "said"), [(signal.SIGINT, "interrupted"),
+                                             (signal.SIGTERM, "SIGTERM")])
+def test_a_signal_during_the_set_up_stops_it_exits_128_plus_its_number_and_leaves_no_process(
+        tmp_path: Path, signum: signal.Signals, said: str) -> None:
+    """SIGINT (a Ctrl-C) or SIGTERM once the gateway is up and the subscriber starting (before
+    the kit and the screen): the run did not happen, so the exit status says so (128 + the
+    signal's number, as a shell reports it: 130, 143), and every child is gone. Both exited 0;
+    SIGTERM even went on to start the kit and wrote a summary."""
     out, log = tmp_path / "run", tmp_path / "stdout.txt"
     gateway = f"{sys.executable} -m gateway run --config {out / 'gateway.toml'}"
     with log.open("w") as stdout:
@@ -154,8 +158,8 @@ def test_ctrl_c_during_the_set_up_exits_130_and_leaves_no_process(tmp_path: Path
         assert up is True and proc.poll() is None, log.read_text()
         groups = {process_group_of(pid) for pid in pids_of(gateway)}
         assert groups, "the gateway is not running"
-        proc.send_signal(signal.SIGINT)
-        assert proc.wait(180) == 130, log.read_text()
+        proc.send_signal(signum)
+        assert proc.wait(180) == 128 + signum, log.read_text()
         left = [g for g in groups if not group_gone(g)], pids_mentioning(out)  # before our kill
     finally:
         if proc.poll() is None:
@@ -168,7 +172,7 @@ def test_ctrl_c_during_the_set_up_exits_130_and_leaves_no_process(tmp_path: Path
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
     text = log.read_text()
-    assert "stopped: interrupted" in text and "Traceback" not in text, text
+    assert f"stopped: {said}" in text and "Traceback" not in text, text
     assert "summary:" not in text and not (out / "summary.json").exists()
     assert left == ([], []), f"a process of the run survived the Ctrl-C: {left}"
 

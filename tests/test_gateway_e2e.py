@@ -6,6 +6,7 @@ everything cleanly."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import sqlite3
 import time
@@ -29,7 +30,7 @@ SCALE = 300.0
 
 
 def gw_count(db: Path, sql: str) -> int:
-    with sqlite3.connect(db) as c:
+    with contextlib.closing(sqlite3.connect(db)) as c:  # closed now, not at a garbage collection
         return c.execute(sql).fetchone()[0]
 
 
@@ -58,6 +59,9 @@ def test_kit_to_gateway_to_cloud(tmp_path: Path) -> None:
         assert seqs == [0, 1, 2, 3, 4]
         kit.stop()
         assert gw.stop() == 0  # SIGTERM: committed, acknowledged, published, closed
+        # the store is one file again: the WAL checkpointed, emptied and removed by the last close
+        files = {f.name: f.stat().st_size for f in tmp_path.glob("gw.db*")}
+        assert list(files) == ["gw.db"], files
         wait_for(lambda: sub.wait_idle(1.0) and cloud.count() >= gw_count(
             db, "SELECT count(*) FROM outbox"), 60, "the cloud to have every message")
     finally:

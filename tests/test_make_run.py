@@ -136,6 +136,103 @@ def test_bounded_run_without_a_terminal_prints_a_consistent_summary(tmp_path: Pa
     assert count_rows(out / "serra.db", "estimates WHERE source='vsensor'") == 0
 
 
+def process_group_of(pid: int) -> int:
+    return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[2])
+
+
+@pytest.mark.parametrize(("signum", "said"), [(signal.SIGINT, "interrupted"),
+                                             (signal.SIGTERM, "SIGTERM")])
+def test_a_signal_during_the_set_up_stops_it_exits_128_plus_its_number_and_leaves_no_process(
+        tmp_path: Path, signum: signal.Signals, said: str) -> None:
+    """SIGINT (a Ctrl-C) or SIGTERM once the gateway is up and the subscriber starting (before
+    the kit and the screen): the run did not happen, so the exit status says so (128 + the
+    signal's number, as a shell reports it: 130, 143), and every child is gone. Both exited 0;
+    SIGTERM even went on to start the kit and wrote a summary."""
+    out, log = tmp_path / "run", tmp_path / "stdout.txt"
+    gateway = f"{sys.executable} -m gateway run --config {out / 'gateway.toml'}"
+    with log.open("w") as stdout:
+        proc = subprocess.Popen([sys.executable, "-m", "training", "run", "--minutes", "30", "--scale",
+                                 "300", "--no-calibrate", "--out", str(out)], cwd=tmp_path,
+                                stdout=stdout, stderr=subprocess.STDOUT, text=True,
+                                stdin=subprocess.DEVNULL)
+    groups: set[int] = set()
+    try:
+        up = wait_for(lambda: "gateway ready" in log.read_text() or proc.poll() is not None, 300,
+                      "the gateway to be ready")
+        assert up is True and proc.poll() is None, log.read_text()
+        groups = {process_group_of(pid) for pid in pids_of(gateway)}
+        assert groups, "the gateway is not running"
+        proc.send_signal(signum)
+        assert proc.wait(180) == 128 + signum, log.read_text()
+        left = [g for g in groups if not group_gone(g)], pids_mentioning(out)  # before our kill
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(60)
+        for pgid in groups:  # a failed test leaves nothing behind either
+            if not group_gone(pgid):
+                os.killpg(pgid, signal.SIGKILL)
+        for pid in pids_mentioning(out):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+    text = log.read_text()
+    assert f"stopped: {said}" in text and "Traceback" not in text, text
+    assert "summary:" not in text and not (out / "summary.json").exists()
+    assert left == ([], []), f"a process of the run survived the Ctrl-C: {left}"
+
+
+def test_ctrl_c_again_while_stopping_kills_the_children_and_exits_130(tmp_path: Path) -> None:
+    """A second Ctrl-C while the run stops its children: Python's default handler raised in the
+    middle of the wait for one of them, so the run died of SIGINT with a traceback and left the
+    subscriber (or the gateway) running in its process group. Now it kills the group at once."""
+    out, log = tmp_path / "run", tmp_path / "stdout.txt"
+    gateway = f"{sys.executable} -m gateway run --config {out / 'gateway.toml'}"
+    with log.open("w") as stdout:
+        proc = subprocess.Popen([sys.executable, "-m", "training", "run", "--minutes", "30", "--scale",
+                                 "300", "--no-calibrate", "--out", str(out)], cwd=tmp_path,
+                                stdout=stdout, stderr=subprocess.STDOUT, text=True,
+                                stdin=subprocess.DEVNULL)
+    groups: set[int] = set()
+    try:
+        up = wait_for(lambda: "subscriber ready" in log.read_text() or proc.poll() is not None,
+                      300, "the subscriber to be ready")
+        assert up is True and proc.poll() is None, log.read_text()
+        groups = {process_group_of(pid) for pid in pids_of(gateway)}
+        assert groups, "the gateway is not running"
+        proc.send_signal(signal.SIGINT)
+        stopping = wait_for(lambda: "stopping the kit" in log.read_text() or proc.poll() is not None,
+                            180, "the run to start stopping")
+        assert stopping is True, log.read_text()
+        proc.send_signal(signal.SIGINT)  # during the stop, or just after: the same either way
+        assert proc.wait(180) == 130, log.read_text()
+        left = [g for g in groups if not group_gone(g)], pids_mentioning(out)  # before our kill
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(60)
+        for pgid in groups:  # a failed test leaves nothing behind either
+            if not group_gone(pgid):
+                os.killpg(pgid, signal.SIGKILL)
+        for pid in pids_mentioning(out):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+    text = log.read_text()
+    assert "Traceback" not in text, text
+    assert left == ([], []), f"a process of the run survived the second Ctrl-C: {left}"
+
+
+def pids_mentioning(folder: Path) -> list[int]:
+    """Processes whose command line names ``folder`` (the run's children name its --out)."""
+    return [pid for pid in pids_of("") if str(folder) in cmdline(pid)]
+
+
+def cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+    except (FileNotFoundError, ProcessLookupError, PermissionError):
+        return ""
+
+
 @pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux not installed")
 def test_on_a_terminal_the_status_screen_shows_and_ctrl_c_stops_everything(tmp_path: Path) -> None:
     out, name = tmp_path / "run", f"serra-run-{os.getpid()}"

@@ -48,7 +48,7 @@ def test_store_snapshot_holds_what_the_store_holds(store: Filled) -> None:
         rows = c.execute("SELECT t, name, value FROM estimates WHERE source IN ('measured', "
                          "'forecast')").fetchall()
     assert (g.inside.t, g.inside.values["t_in"], g.outside.values["rh_out"]) == last
-    assert g.series["t_in"].finite and len(g.series["t_in"].values) == 36
+    assert g.series["t_in"].finite and len(g.series["t_in"].values) == S.FINE_BINS
     t = g.temperature
     assert t.measured == est["t_in"] and t.forecasts[60] == est["t_in+60min"]
     assert sorted(t.forecasts) == [15, 30, 60] and t.outlook == "hold-latest"
@@ -134,7 +134,7 @@ def test_the_range_beside_a_sparkline_holds_the_latest_reading(store: Filled) ->
                                                  DROP)).fetchall()
     assert g.series["wind"].extent == (min(r[0] for r in rows), max(r[0] for r in rows))
     assert g.series["wind"].extent[1] == pytest.approx(gust)
-    assert g.series["wind"].hi < gust - 0.05  # the bins' means stay below it
+    assert g.series["wind"].rebinned(36).hi < gust - 0.05  # the drawn bins' means stay below it
     after = _ranges(snap)
     assert after["wind"][2] == gust
     for label, (latest, lo, hi) in after.items():
@@ -171,12 +171,12 @@ def test_the_measured_range_is_of_the_measurements_alone(store: Filled) -> None:
     lines = [x.plain for x in render.greenhouse_lines(snap, 0)]
     line = next(x for x in lines if x.startswith("measured "))
     assert line.endswith(f" {lo:.1f}..{hi:.1f} °C"), line
-    # the sparklines share one scale, the bins' of both, for drawing only
-    scale = (min(t.measured_series.lo, t.forecast_series.lo),
-             max(t.measured_series.hi, t.forecast_series.hi))
-    assert render.sparkline(t.measured_series, *scale) in line
+    # the sparklines share one scale, the bins' of both as drawn (36 at 78 columns), for drawing
+    measured, forecast = t.measured_series.rebinned(36), t.forecast_series.rebinned(36)
+    scale = (min(measured.lo, forecast.lo), max(measured.hi, forecast.hi))
+    assert render.sparkline(measured, *scale) in line
     ahead = next(x for x in lines if x.startswith("+60 min "))
-    assert render.sparkline(t.forecast_series, *scale) in ahead
+    assert render.sparkline(forecast, *scale) in ahead
 
 
 def test_the_ventilation_estimate_when_a_virtual_sensor_is_set(store: Filled) -> None:

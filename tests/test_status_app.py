@@ -167,3 +167,36 @@ def test_a_wider_terminal_shows_whole_lines_and_a_narrower_one_cuts_them_at_a_wo
     t_in = next(x.rstrip() for x in narrow.splitlines() if x.startswith(" T in "))
     assert re.search(r"( -?\d+\.\d\.\.-?\d+\.\d| …)$", t_in), t_in  # a whole range, or none
     print("\n--- 120x24: gateway ---\n" + wide + "\n--- 60x24: greenhouse ---\n" + narrow)
+
+
+def _sparkline_columns(shot: str) -> int:
+    """The columns of the T in sparkline on a greenhouse screen: from after its value cell to
+    the range beside it, which starts under the header's "min..max"."""
+    lines = shot.splitlines()
+    head = next(x for x in lines if "latest" in x and "min..max" in x)
+    t_in = next(x.rstrip() for x in lines if x.lstrip().startswith("T in "))
+    rng = re.search(r" (-?\d+\.\d\.\.-?\d+\.\d)$", t_in)
+    assert rng is not None, t_in  # the range is whole
+    assert rng.start(1) == head.index("min..max"), (head, t_in)
+    return rng.start(1) - 1 - (t_in.index("T in") + 20)  # "T in    " + value(10) + 2 spaces
+
+
+def test_the_sparklines_take_the_columns_the_terminal_gives(store: Filled) -> None:
+    """The sparklines were 36 bins at any width: a 120-column terminal left 40 columns blank
+    beside them. Now they grow and shrink with the panel, column for column, the range beside
+    them whole and under its header, and the "Inside T" pair alike."""
+    beat = fresh_status(store)
+    src = PinnedClock(store.path, beat + 1.0)
+    try:
+        shots = {w: asyncio.run(_drive(src, [], "Inside T  measured", size=(w, 24)))[0]
+                 for w in (80, 120)}
+    finally:
+        src.close()
+    columns = {w: _sparkline_columns(shot) for w, shot in shots.items()}
+    assert columns[80] == 36  # the panel: 78 columns (80 less its padding), as --once
+    assert columns[120] - columns[80] == 120 - 80, columns
+    for w, shot in shots.items():
+        measured = next(x for x in shot.splitlines() if x.lstrip().startswith("measured "))
+        bars = re.search(r"measured   ([▁▂▃▄▅▆▇█ ]+) \d", measured)
+        assert bars is not None and len(bars[1]) == columns[w], (w, measured)
+    print("\n--- 120x24: greenhouse ---\n" + shots[120])

@@ -214,3 +214,31 @@ def test_a_failed_commit_is_rolled_back_and_the_store_keeps_working(tmp_path: Pa
     assert sorted(r[0] for r in real.execute("SELECT seq FROM samples")) == list(range(6))
     s.conn = real
     s.close()
+
+
+def test_a_clean_close_leaves_no_wal_behind_even_with_a_reader_open(tmp_path: Path) -> None:
+    """The gateway's last connection to close was a read-only one (the history queryable's), so
+    SQLite's own checkpoint-on-close never ran and serra.db-wal stayed at ~4 MB after a clean
+    stop. Store.close() checkpoints and truncates it, whatever readers are still open."""
+    from gateway.store import open_readonly
+
+    db, wal = tmp_path / "g.db", tmp_path / "g.db-wal"
+    s = Store(db)
+    for b in range(20):
+        s.write_batch([(rec(100 * b + i), T0 + 100 * b + i) for i in range(100)])
+    reader = open_readonly(db)  # idle, as the history queryable between queries
+    try:
+        assert reader.execute("SELECT count(*) FROM samples").fetchone()[0] == 2000
+        assert wal.stat().st_size > 100_000  # the batches are in the WAL
+        s.close()
+        # SQLite deletes the -wal only when the last connection to close can write: with the
+        # reader open it stays, empty (SQLite's TRUNCATE checkpoint: zero bytes)
+        assert wal.stat().st_size == 0
+        assert reader.execute("SELECT count(*) FROM samples").fetchone()[0] == 2000
+    finally:
+        reader.close()
+    alone = sqlite3.connect(f"file:{db}?mode=ro&immutable=1", uri=True)  # the file, no WAL
+    try:
+        assert alone.execute("SELECT count(*) FROM samples").fetchone()[0] == 2000
+    finally:
+        alone.close()

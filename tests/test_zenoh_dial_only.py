@@ -1,5 +1,6 @@
-"""The tools that only connect out open no listening socket (``zconfig.build(dial_only=True)``):
-Zenoh's peer default would listen on every interface at a random port."""
+"""The tools that only connect out, and a gateway given no ``listen``, open no listening socket
+(``zconfig.build(dial_only=True)``): Zenoh's peer default would listen on every interface at a
+random port."""
 
 from __future__ import annotations
 
@@ -88,3 +89,19 @@ def test_a_gateway_given_connect_alone_opens_no_port(far_side, tmp_path: Path):
         assert zconfig.listening_ports(gw.proc.pid) == []
     finally:
         gw.stop()
+
+
+def test_a_gateway_given_neither_listen_nor_connect_listens_nowhere_and_says_so(tmp_path: Path):
+    """A peer given no endpoint at all: Zenoh's default would listen on every interface at a
+    random port ([::]:PORT, measured), a door on the farm's network that the config never asked
+    for and no subscriber could find. It listens nowhere, and its log says how to set one."""
+    gw = GatewayProcess(write_config(tmp_path, anchor=time.time(), zenoh_listen=None))
+    gw.start()
+    try:
+        assert gw.proc is not None
+        assert gw.zenoh == "-"  # the ready line: no endpoint
+        assert zconfig.listening_ports(gw.proc.pid) == []
+    finally:
+        assert gw.stop() == 0
+    log = (tmp_path / "gateway.log").read_text()
+    assert "listens nowhere" in log and "set [zenoh] listen" in log, log

@@ -28,7 +28,7 @@ from pathlib import Path
 import zenoh
 from zenoh.ext import CacheConfig, MissDetectionConfig, declare_advanced_publisher
 
-from gateway.store.db import open_db
+from gateway.store.db import close_db, open_db
 from gateway.store.outbox import Outbox, Pending
 
 log = logging.getLogger("serra.publish")
@@ -141,7 +141,7 @@ class OutboxPublisher:
             log.error("publisher stopped: %s", e)
         finally:
             self._ready.set()
-            conn.close()
+            close_db(conn)
 
     def _key(self, key: str) -> _Key:
         k = self.keys.get(key)

@@ -97,9 +97,11 @@ class Gateway:
         extra = session_entries(z.connect, z.listen, z.tls, z.retry) | z.extra
 
         def config() -> zenoh.Config:
-            # given only endpoints to dial, a peer listens nowhere (not Zenoh's every interface)
+            # a peer listens where `listen` says and nowhere else: Zenoh's default for a peer
+            # given none (every interface, a random port) is a door on the farm's network that
+            # no config asked for, and one no subscriber could find without scanning for it
             return zconfig.build(z.mode, z.connect, z.listen, z.multicast_scouting, extra=extra,
-                                 dial_only=bool(z.connect))
+                                 dial_only=True)
 
         before = zconfig.listening_ports()
         if z.mode == "client":  # open() fails while no router answers: retried in the background
@@ -131,10 +133,10 @@ class Gateway:
     def stop_zenoh(self) -> None:
         if self.opener is not None:
             self.opener.stop()  # no session opens after this
+        if self.history is not None:  # its read-only connection first: the publisher's, a
+            self.history.close()  # writer's, closes last and SQLite removes the -wal and -shm
         if self.publisher is not None:
             self.publisher.stop()
-        if self.history is not None:
-            self.history.close()
         if self.session is not None:
             self.session.close()
         self.publisher = self.history = self.session = self.opener = None
@@ -173,8 +175,10 @@ async def run_gateway(cfg: GatewayConfig, resources: list[GreenhouseResources],
                 await asyncio.to_thread(gw.start_zenoh)
                 z = cfg.zenoh
                 if not (z.listen or z.connect or z.multicast_scouting):
-                    log.warning("zenoh: no listen or connect endpoint and no scouting: nobody can "
-                                "reach this gateway; messages wait in the outbox")
+                    log.warning("zenoh: no listen or connect endpoint and no scouting: this "
+                                "gateway listens nowhere and dials no one, messages wait in the "
+                                'outbox; set [zenoh] listen (e.g. ["tcp/0.0.0.0:7447"], where '
+                                "subscribers connect) or connect (a router, the cloud's peer)")
             await asyncio.to_thread(gw.worker.start)
             ingest = asyncio.create_task(serve(icfg, ingest_ready), name="ingest")
             tasks.append(ingest)

@@ -20,7 +20,7 @@ from gateway.service.producers import GreenhouseInfo, Producers
 from gateway.service.resources import GreenhouseResources
 from gateway.service.settings import GatewayConfig
 from gateway.store.aggregate import aggregate
-from gateway.store.db import open_db
+from gateway.store.db import close_db, open_db
 from gateway.store.live import outbox_backlog, set_status
 from gateway.store.outbox import Outbox
 
@@ -107,7 +107,7 @@ class Worker:
             log.error("gateway worker stopped: %s: %s", type(e).__name__, e)
         finally:
             self._ready.set()
-            conn.close()
+            close_db(conn)
 
     def _pass(self, conn) -> bool:
         """One round; True when an estimator still has minutes to catch up on."""

@@ -65,7 +65,7 @@ class _Forecast:
 
 @dataclass
 class Messages:
-    bins: int = 36
+    bins: int = S.FINE_BINS
     seen: dict[str, float] = field(default_factory=dict)  # idempotency key → t
     latest: dict[tuple[str, str], tuple[float, dict[str, Any]]] = field(default_factory=dict)
     points: dict[tuple[str, str], dict[float, float]] = field(default_factory=dict)

@@ -63,10 +63,22 @@ def title(snap: S.Snapshot, panel: str, gh: int = 0, width: int = WIDTH) -> Text
 
 
 def greenhouse_lines(snap: S.Snapshot, index: int, width: int = WIDTH) -> list[Text]:
-    return fitted(_greenhouse_lines(snap, index), width)
+    return fitted(_greenhouse_lines(snap, index, spark_columns(width)), width)
 
 
-def _greenhouse_lines(snap: S.Snapshot, index: int) -> list[Text]:
+def spark_columns(width: int) -> int:
+    """The sparklines' columns on a panel ``width`` wide: 36 at ``WIDTH`` (78), one more or one
+    less for each column more or less, from 12 to the sources' bins (the range beside them and
+    the lines under them stay whole on a narrow terminal; a wide one shows more of the day)."""
+    return max(12, min(36 + width - WIDTH, S.FINE_BINS))
+
+
+def _spark(series: S.Series | None, columns: int, lo: float | None = None,
+           hi: float | None = None) -> str:
+    return f"{sparkline(series, lo, hi):<{columns}}"
+
+
+def _greenhouse_lines(snap: S.Snapshot, index: int, columns: int = 36) -> list[Text]:
     if not snap.greenhouses:
         return [_line(("No greenhouse in this store yet.", WARN))] + [_line(n) for n in snap.notes]
     g = snap.greenhouses[index % len(snap.greenhouses)]
@@ -80,20 +92,22 @@ def _greenhouse_lines(snap: S.Snapshot, index: int) -> list[Text]:
     some = next(iter(g.series.values()), None)
     span = duration(some.end - some.start) if some is not None else "24 h"
     label = f"last {span}"
-    lines = [head, _line((f"            latest   {label:<36} min..max", DIM))]
+    # "latest" over the values' right edge, the span over the sparklines, min..max over the ranges
+    lines = [head, _line((f"            latest  {label:<{columns}} min..max", DIM))]
     for ch, label, unit, fmt in CHANNELS:
         side = g.inside if ch in ("t_in", "rh_in") else g.outside
         v = side.values.get(ch)
         st = side.status.get(ch, "")
         cell = _channel_value(ch, v, fmt) + (f" {unit}" if v is not None and unit else "")
         s = g.series.get(ch)
+        s = s.rebinned(columns) if s is not None else None
         vr = S.value_range(s, v, side.t)
         rng = f"{number(vr[0], fmt)}..{number(vr[1], fmt)}" if vr is not None else "no data"
         style = WARN if st and st != "ok" else ""
         note = f" {st}" if st and st != "ok" else ""
         lines.append(_line(f"{label:<7} ", (f"{cell + note:>10}", style), "  ",
-                           (f"{sparkline(s):<36}", "cyan"), f" {rng}"))
-    lines += _temperature_lines(g.temperature)
+                           (_spark(s, columns), "cyan"), f" {rng}"))
+    lines += _temperature_lines(g.temperature, columns)
     lines += _parameter_lines(g)
     lines.append(_ventilation_line(g.ventilation))
     lines += _finding_lines(g, snap.gateway.diagnosis.get(g.name))
@@ -103,7 +117,7 @@ def _greenhouse_lines(snap: S.Snapshot, index: int) -> list[Text]:
     return lines
 
 
-def _temperature_lines(t: S.Temperature) -> list[Text]:
+def _temperature_lines(t: S.Temperature, columns: int = 36) -> list[Text]:
     if t.t is None:
         return [_line("Inside T  ", ("no estimate yet (the estimator waits for final minutes)", WARN))]
     pred: list[str | tuple[str, str]] = [" · predicted ", (number(t.predicted), "bold"),
@@ -114,12 +128,14 @@ def _temperature_lines(t: S.Temperature) -> list[Text]:
         fc = " · ".join(f"+{h} min {v:.2f}" for h, v in sorted(t.forecasts.items()))
         h = max(t.forecasts)
         out.append(_line(f"forecast  {fc} °C", (f" ({t.outlook})", DIM)))
-        lo, hi = _common_scale(t)
+        measured, ahead = (s.rebinned(columns) if s is not None else None
+                           for s in (t.measured_series, t.forecast_series))
+        lo, hi = _common_scale(measured, ahead)
         vr = S.value_range(t.measured_series, t.measured, t.t)
         rng = f"{number(vr[0], '{:.1f}')}..{number(vr[1], '{:.1f}')} °C" if vr else "no data"
-        out.append(_line(f"{'measured':<9}  ", (f"{sparkline(t.measured_series, lo, hi):<36}", "cyan"),
+        out.append(_line(f"{'measured':<9}  ", (_spark(measured, columns, lo, hi), "cyan"),
                          f" {rng}"))
-        out.append(_line(f"{f'+{h} min':<9}  ", (f"{sparkline(t.forecast_series, lo, hi):<36}", "magenta"),
+        out.append(_line(f"{f'+{h} min':<9}  ", (_spark(ahead, columns, lo, hi), "magenta"),
                          f" at validity; next {hhmm(t.t + 60 * h)}"))
     skill = [s for s in t.skill if s.n]
     if skill:
@@ -130,11 +146,11 @@ def _temperature_lines(t: S.Temperature) -> list[Text]:
     return out
 
 
-def _common_scale(t: S.Temperature) -> tuple[float | None, float | None]:
+def _common_scale(*series: S.Series | None) -> tuple[float | None, float | None]:
     """The one scale both inside-temperature sparklines are drawn on (measured and forecast
-    comparable by eye): the bins' of both. For drawing only: the range printed beside "measured"
-    is of the measurements (``S.value_range``). (None, None): neither has a bin."""
-    bins = [x for s in (t.measured_series, t.forecast_series) if s is not None for x in s.finite]
+    comparable by eye): the bins' of both, as drawn. For drawing only: the range printed beside
+    "measured" is of the measurements (``S.value_range``). (None, None): neither has a bin."""
+    bins = [x for s in series if s is not None for x in s.finite]
     return (min(bins), max(bins)) if bins else (None, None)
 
 

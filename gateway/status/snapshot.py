@@ -19,6 +19,9 @@ SILENT_S = 300.0
 HEARTBEAT_STALE_S = 20.0
 """[wall s] A gateway status older than this (the service writes it every 5 s): not running."""
 DAY = 86400.0
+FINE_BINS = 144
+"""The bins a source cuts the sparklines' span into (10 min of a day): the screen merges them
+into as many columns as its width gives (:meth:`Series.rebinned`; 36 at 78 columns, 4 each)."""
 
 
 @dataclass(frozen=True)
@@ -31,6 +34,23 @@ class Series:
     start: float  # [unix s] start of the first bin
     end: float  # [unix s] end of the last bin
     extent: tuple[float, float] = (math.nan, math.nan)
+    counts: tuple[int, ...] = ()  # points in each bin (empty: one in each bin with a value)
+
+    def rebinned(self, n: int) -> Series:
+        """The same span in ``n`` bins (no more than it has): each the mean of the points of
+        the bins merged into it (bin ``j`` takes bins ``j·N//n`` to ``(j+1)·N//n − 1`` of N)."""
+        size = len(self.values)
+        if n >= size or n < 1:
+            return self
+        counts = self.counts or tuple(int(math.isfinite(v)) for v in self.values)
+        values, merged = [], []
+        for j in range(n):
+            part = range(j * size // n, (j + 1) * size // n)
+            k = sum(counts[i] for i in part)
+            values.append(sum(self.values[i] * counts[i] for i in part if counts[i]) / k
+                          if k else math.nan)
+            merged.append(k)
+        return Series(tuple(values), self.start, self.end, self.extent, tuple(merged))
 
     @property
     def finite(self) -> list[float]:
@@ -53,7 +73,7 @@ def span_of(first: float | None, end: float) -> float:
     return min(max(end - first + 60.0, 3600.0), DAY)
 
 
-def bin_series(points: Iterable[tuple[float, float | None]], end: float, bins: int = 36,
+def bin_series(points: Iterable[tuple[float, float | None]], end: float, bins: int = FINE_BINS,
                span: float = DAY) -> Series:
     """(t, value) points → the mean of each of ``bins`` equal bins over (end − span, end], and
     the points' own min and max there."""
@@ -70,7 +90,7 @@ def bin_series(points: Iterable[tuple[float, float | None]], end: float, bins: i
         lo, hi = min(lo, v), max(hi, v)
     extent = (lo, hi) if lo <= hi else (math.nan, math.nan)
     return Series(tuple(s / n if n else math.nan for s, n in zip(sums, counts, strict=True)),
-                  start, end, extent)
+                  start, end, extent, tuple(counts))
 
 
 def value_range(series: Series | None, latest: float | None,

@@ -29,7 +29,7 @@ SKILL_SPAN = S.DAY
 class StoreSource:
     """Snapshots of one store. Raises :class:`gateway.store.StoreError` naming a bad file."""
 
-    def __init__(self, path: str | Path, bins: int = 36) -> None:
+    def __init__(self, path: str | Path, bins: int = S.FINE_BINS) -> None:
         self.path = Path(path)
         self.bins = bins
         self.conn = open_readonly(self.path)

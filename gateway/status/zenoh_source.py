@@ -26,7 +26,7 @@ LIMIT = 100_000
 
 class ZenohSource:
     def __init__(self, connect: Sequence[str], mode: str = "peer", farm: str = "*",
-                 timeout: float = 10.0, bins: int = 36) -> None:
+                 timeout: float = 10.0, bins: int = S.FINE_BINS) -> None:
         self.connect, self.mode, self.farm, self.timeout = list(connect), mode, farm, timeout
         self.session = zenoh.open(zconfig.build(mode, self.connect, [], dial_only=True))
         self.messages = Messages(bins)

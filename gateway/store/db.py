@@ -59,6 +59,20 @@ def open_db(path: str | Path, *, durable: bool = True) -> sqlite3.Connection:
     return conn
 
 
+def close_db(conn: sqlite3.Connection, wait_s: float = 2.0) -> None:
+    """Close a writer's connection cleanly: the WAL is first copied into the database and
+    truncated to zero bytes (``PRAGMA wal_checkpoint(TRUNCATE)``). SQLite does so by itself only
+    when the *last* connection to close is a writer's; with a reader still open (the history
+    queryable, the status screen) a clean stop left the -wal beside the store at its full size
+    (~4 MB). A reader in a transaction is waited for at most ``wait_s`` [s]; a checkpoint still
+    blocked then is partial, and the next start finishes it."""
+    with suppress(sqlite3.Error):  # a connection that failed: closing it is all that is left
+        if not conn.in_transaction:
+            conn.execute(f"PRAGMA busy_timeout={int(wait_s * 1000)}")
+            conn.execute("PRAGMA wal_checkpoint(TRUNCATE)").fetchall()
+    conn.close()
+
+
 def open_readonly(path: str | Path) -> sqlite3.Connection:
     """Open a Serra store for reading only (export, the status screen, any tool that reads).
 
@@ -158,7 +172,7 @@ class Store:
         self.conn = open_db(path, durable=durable)
 
     def close(self) -> None:
-        self.conn.close()
+        close_db(self.conn)
 
     def write_batch(self, items: Sequence[tuple[Record, float]]) -> int:
         """Store (record, t_recv) pairs in one transaction; durable when this returns.

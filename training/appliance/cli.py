@@ -89,6 +89,15 @@ def run(args: argparse.Namespace) -> int:
     return demo.main()
 
 
+class SetUpStopped(Exception):
+    """SIGTERM or SIGHUP during the set-up: it stopped there (the calibration alone can take
+    minutes; it went on to start everything, then stopped it and exited 0)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
 class Demo:
     def __init__(self, out: Path, scale: float, minutes: float | None, interactive: bool) -> None:
         from training.kitsim import KitClock
@@ -101,6 +110,8 @@ class Demo:
         self.calibrate_first = True
         self.model = MODEL
         self.why = ""  # why the run ended early
+        self.hurried = False  # Ctrl-C again while stopping: the group was killed
+        self.setting_up = False  # a SIGTERM or SIGHUP now stops the set-up where it is
         out = sys.__stdout__  # the terminal we started on, if any (watched while the screen runs)
         self.tty_fd = out.fileno() if out is not None and out.isatty() else -1
         self.epoch = float(__import__("numpy").datetime64(START.rstrip("Z"), "s").astype("int64"))
@@ -115,33 +126,53 @@ class Demo:
     def main(self) -> int:
         old = {s: signal.signal(s, self._signal) for s in (signal.SIGTERM, signal.SIGHUP)}
         code = 0
+        self.setting_up = True
         try:
             self.prepare()
             self.start_all()
+            self.setting_up = False
             self.watch()
         except ChildError as e:
             self.say(f"error: {e}")
             code = 1
         except KeyboardInterrupt:
             self.why = "interrupted"
+            if self.start_t is None:  # Ctrl-C before the kit ran: nothing was done, say so (128+2)
+                code = 130
+        except SetUpStopped as e:  # as a Ctrl-C there: 128 + the signal's number
+            code = 128 + e.signum
         finally:
+            self.setting_up = False
+            # from here on a Ctrl-C only hurries the end, up to the process's exit (the default
+            # handler would leave a child whose stop was being waited for, and a traceback)
+            signal.signal(signal.SIGINT, self._hurry)
             stopped = self.shutdown()
             for s, h in old.items():
                 signal.signal(s, h)
         if self.why:
             self.say(f"stopped: {self.why}")
+        if self.hurried:  # no summary either: it was asked not to wait
+            self.say("stopped: Ctrl-C again while stopping: the run's processes were killed")
+            return 130
         if self.start_t is not None:
             self.report()
         if not stopped:
             self.say("error: a process of the run did not stop by itself (killed)")
             code = code or 1
-        return code
+        return 130 if self.hurried else code  # a Ctrl-C during the summary too
 
     def _signal(self, signum: int, _frame) -> None:
         self.why = signal.Signals(signum).name
         self.stop.set()
+        if self.setting_up:  # nothing that watches the stop event runs yet: stop the set-up now
+            self.setting_up = False
+            raise SetUpStopped(signum)
         if getattr(self, "app", None) is not None:
             self.app.call_from_thread(self.app.exit)  # type: ignore[union-attr]
+
+    def _hurry(self, _signum: int, _frame) -> None:
+        self.hurried = True
+        self.group.kill()
 
     # -- set-up -------------------------------------------------------------------------------
     def prepare(self) -> None:
@@ -285,6 +316,8 @@ class Demo:
         it has stored what was published; finally sweep the group. False when a process had to
         be killed."""
         g = self.group
+        if g.pgid is not None:
+            self.say("  stopping the kit, the gateway and the subscriber … (Ctrl-C again: kill them)")
         if self.kit is not None:
             self.kit.stop()
         self.settle()

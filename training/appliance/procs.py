@@ -101,6 +101,14 @@ class Group:
             return True
         return True
 
+    def kill(self) -> None:
+        """SIGKILL to every process of the group, at once (no waiting: a signal handler's)."""
+        if self.pgid is not None:
+            try:
+                os.killpg(self.pgid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+
     def sweep(self, timeout: float = 10.0) -> bool:
         """Terminate whatever is left in the group (then kill it); True when something was."""
         if not self.alive():
@@ -113,12 +121,27 @@ class Group:
                 break
             deadline = time.monotonic() + wait
             while self.alive() and time.monotonic() < deadline:
-                for p in self.procs.values():
-                    p.poll()  # reap our own children so they leave the group
+                self._reap()
                 time.sleep(0.05)
             if not self.alive():
                 break
         return True
+
+
+    def _reap(self) -> None:
+        """Reap our children of the group that have exited, so they leave it: the named ones,
+        then any other (a Ctrl-C inside ``Popen``, after the fork, leaves a child in the group
+        that no name holds; unreaped, it would stay there as a zombie until we exit)."""
+        for p in self.procs.values():
+            p.poll()
+        assert self.pgid is not None
+        while True:
+            try:
+                pid, _ = os.waitpid(-self.pgid, os.WNOHANG)
+            except ChildProcessError:  # none of our children is left in the group
+                return
+            if pid == 0:
+                return
 
 
 def _pump(proc: subprocess.Popen, lines: queue.Queue[str]) -> None:

@@ -228,7 +228,7 @@ class Demo:
         zen = ready[ready.index("zenoh") + 1]
         self.say(f"  gateway ready: kits on udp {udp[0]}:{udp[1]}, Zenoh on {zen} "
                  f"(log: gateway.log)")
-        # --listen on loopback: a Zenoh peer given none listens on every interface ([::])
+        # --listen on loopback only (a peer given --connect alone listens nowhere: zconfig)
         g.start("subscriber", [py, "-m", "gateway", "subscribe", "--connect", zen, "--listen",
                                "tcp/127.0.0.1:0", "--db", str(self.out / "cloud.db")],
                 self.out / "subscribe.log", self.out)

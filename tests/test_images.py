@@ -35,7 +35,7 @@ import pytest
 
 from gateway import protocol
 from gateway.store.keys import write_keys
-from tests.images_common import read_unit
+from tests.images_common import build, read_unit
 from tests.mcu_fakes.hostenv import ROOT
 from tests.test_layering import imported_modules
 
@@ -73,8 +73,8 @@ def installed(bundles: Path, tmp_path_factory: pytest.TempPathFactory) -> Instal
 
 
 def _repo_package_files() -> set[str]:
-    return {str(p.relative_to(ROOT)) for p in (ROOT / "gateway").rglob("*")
-            if p.is_file() and "__pycache__" not in p.parts and p.suffix != ".pyc"}
+    """gateway/'s files as the build sees them: those git tracks (test_images_source.py)."""
+    return {str(p.relative_to(ROOT)) for p in build.tracked("gateway")}
 
 
 def test_wheel_holds_the_gateway_package_and_nothing_else(bundles: Path) -> None:

@@ -14,6 +14,14 @@
 The wheel is built from a staging copy of pyproject.toml, README.md and gateway/, offline
 (``--no-build-isolation --no-index``: the dev venv has setuptools), so a stale ``build/`` in
 the checkout can never leak old files into it and parallel builds do not collide.
+
+Only files git tracks are shipped (their working-tree content), so nothing .gitignore names
+(caches, ``out/``, a ``build/`` folder) reaches a bundle. A file git does not know under what is
+shipped (``SHIPPED``) stops the build, listed, before anything is written: it is either a
+forgotten ``git add`` (skipping it would ship a wheel without a module the checkout's tests ran
+with) or scratch or a secret (shipping it would publish it), and only the release engineer can
+tell which; as ``cargo package`` refuses a dirty tree. The build needs a git checkout: an
+exported tree (``git archive``) cannot show which of its files git tracks.
 """
 
 from __future__ import annotations
@@ -42,7 +50,54 @@ GATEWAY_FILES = (
     "README.md",
 )
 BUILT = {"firmware", "gateway", "firmware.tar.gz", "gateway.tar.gz"}  # what --out may hold
-IGNORE = shutil.ignore_patterns("__pycache__", "*.pyc", "*.egg-info", ".pytest_cache")
+SHIPPED = ("pyproject.toml", "README.md", "LICENSE", "gateway", "docs", "mcu", "images/gateway",
+           "images/firmware")  # every path a bundle or the wheel reads from
+
+
+class SourceError(Exception):
+    """The checkout cannot be shipped as it stands (one line for the release engineer)."""
+
+
+def _git(*args: str) -> list[str]:
+    """``git ls-files`` with ``args`` over SHIPPED, paths relative to ROOT."""
+    r = subprocess.run(["git", "-C", str(ROOT), "ls-files", "-z", *args, "--", *SHIPPED],
+                       capture_output=True, text=True)
+    if r.returncode:
+        raise SourceError(f"{ROOT}: git ls-files failed: {r.stderr.strip()}")
+    return [p for p in r.stdout.split("\0") if p]
+
+
+def check_source() -> None:
+    """Refuse a ROOT that is not the top of a git checkout, or holds files git does not know
+    (neither tracked nor ignored) under SHIPPED."""
+    r = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--show-toplevel"],
+                       capture_output=True, text=True)
+    if r.returncode or Path(r.stdout.strip()).resolve() != ROOT:
+        raise SourceError(f"{ROOT} is not a git checkout: the bundles ship the files git tracks, "
+                          "so build from a clone of the repository")
+    untracked = _git("--others", "--exclude-standard")
+    if untracked:
+        more = f" and {len(untracked) - 10} more" if len(untracked) > 10 else ""
+        raise SourceError(f"git does not track {len(untracked)} file(s) among what the bundles "
+                          f"ship: {', '.join(untracked[:10])}{more}; git add what belongs to the "
+                          "release, move the rest out of the checkout (or name it in .gitignore)")
+
+
+def tracked(under: str) -> list[Path]:
+    """The files git tracks under ``under`` (a path of SHIPPED or below it) that exist in the
+    working tree, sorted; refuses (SourceError) a checkout check_source refuses."""
+    check_source()
+    prefix = under.rstrip("/") + "/"
+    return sorted(ROOT / p for p in _git("--cached")
+                  if (p == under or p.startswith(prefix)) and (ROOT / p).is_file())
+
+
+def copy_tracked(under: str, dest: Path) -> None:
+    """The tracked files under ``under`` into ``dest``, keeping their paths below ``under``."""
+    for src in tracked(under):
+        target = dest / src.relative_to(ROOT / under)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(src, target)
 
 
 def mpy_cross() -> list[str]:
@@ -52,8 +107,9 @@ def mpy_cross() -> list[str]:
 
 def firmware_sources() -> list[Path]:
     mcu = ROOT / "mcu"
-    skip = {"typings_esp32", "fakes", "__pycache__"}
-    return [p for p in sorted(mcu.rglob("*.py")) if not skip & set(p.relative_to(mcu).parts)]
+    skip = {"typings_esp32", "fakes"}
+    return [p for p in tracked("mcu") if p.suffix == ".py"
+            and not skip & set(p.relative_to(mcu).parts)]
 
 
 def build_firmware(out: Path) -> list[Path]:
@@ -102,7 +158,7 @@ def build_wheel(dest: Path) -> Path:
         stage.mkdir()
         for name in ("pyproject.toml", "README.md", "LICENSE"):
             shutil.copy2(ROOT / name, stage / name)
-        shutil.copytree(ROOT / "gateway", stage / "gateway", ignore=IGNORE)
+        copy_tracked("gateway", stage / "gateway")
         wheels = Path(tmp) / "wheels"
         r = subprocess.run(
             [sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "--no-build-isolation",
@@ -123,7 +179,7 @@ def build_gateway(out: Path) -> list[Path]:
     build_wheel(out)
     for name in GATEWAY_FILES:
         shutil.copy2(HERE / "gateway" / name, out / name)
-    shutil.copytree(ROOT / "docs", out / "docs", ignore=IGNORE)  # "Every key ... docs/gateway.md"
+    copy_tracked("docs", out / "docs")  # "Every key ... docs/gateway.md"
     return sorted(out.iterdir())
 
 
@@ -142,6 +198,10 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.out.exists() and not args.out.is_dir():
         parser.error(f"--out {args.out}: exists and is not a folder")
+    try:
+        check_source()  # before --out is emptied: a refused build leaves the last one
+    except SourceError as e:
+        parser.error(str(e))
     if args.out.exists():
         foreign = sorted(p.name for p in args.out.iterdir() if p.name not in BUILT)
         if foreign:

@@ -1,10 +1,12 @@
 """A new user's mistakes with the gateway's service commands (status, run, ingest, keys,
 subscribe) and the help: each is one line naming the file, key or option and what was wrong,
-exit status 2, never a traceback; every numeric option's help shows its default."""
+exit status 2 (78, EX_CONFIG, for a wrong config of run or keys file of ingest: the systemd
+units do not restart on it), never a traceback; every numeric option's help shows its default."""
 
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 import pytest
@@ -64,7 +66,7 @@ def test_ingest_refuses_numbers_outside_the_configs_bounds(capsys, tmp_path, opt
 
 def test_ingest_without_its_keys_file_names_it_and_how_to_make_it(capsys, tmp_path):
     keys = tmp_path / "keys.txt"
-    assert main(["ingest", "--db", str(tmp_path / "s.db"), "--keys", str(keys)]) == 2
+    assert main(["ingest", "--db", str(tmp_path / "s.db"), "--keys", str(keys)]) == os.EX_CONFIG
     line = one_error_line(capsys)
     assert f"{keys}: cannot read the keys file: No such file" in line
     assert "python -m gateway keys add" in line and "Errno" not in line
@@ -177,7 +179,7 @@ def test_verbose_is_taken_after_the_command_too(capsys, tmp_path):
     assert main(["keys", "add", "7", "--keys", str(keys), "-v"]) == 0
     assert '"device_id": 7' in capsys.readouterr().out
     missing = tmp_path / "none.txt"  # refused before the service listens
-    assert main(["-v", "ingest", "--db", str(tmp_path / "s.db"), "--keys", str(missing)]) == 2
+    assert main(["-v", "ingest", "--db", str(tmp_path / "s.db"), "--keys", str(missing)]) == os.EX_CONFIG
     assert f"{missing}: cannot read the keys file" in one_error_line(capsys)
 
 
@@ -254,14 +256,14 @@ def test_run_check_reads_ingest_listen_as_ingest_listen_does(capsys, tmp_path, l
 
 def _checked_config(capsys, tmp_path, more: str, db: str = "serra.db"):
     """A gateway.toml of one greenhouse (store ``db``) with ``more`` after its [gateway] keys,
-    refused by ``run --check`` (exit 2); its path."""
+    refused by ``run --check`` (exit 78, EX_CONFIG); its path."""
     assert main(["keys", "add", "7", "--keys", str(tmp_path / "keys.txt")]) == 0
     config = tmp_path / "gateway.toml"
     config.write_text(f'[gateway]\nfarm = "f1"\ndb = "{db}"\nkeys = "keys.txt"\n{more}'
                       '[[greenhouse]]\nname = "north"\ngreenhouse = "biskra-prototype"\n'
                       'model = "prototype"\ninside = 7\n')
     capsys.readouterr()
-    assert main(["run", "--config", str(config), "--check"]) == 2
+    assert main(["run", "--config", str(config), "--check"]) == os.EX_CONFIG
     return config
 
 
@@ -287,7 +289,7 @@ def test_run_check_refuses_a_gateway_db_that_is_another_file(capsys, tmp_path, c
                       'name = "north"\ngreenhouse = "biskra-prototype"\nmodel = "prototype"\n'
                       'inside = 7\n')
     capsys.readouterr()
-    assert main(["run", "--config", str(config), "--check"]) == 2
+    assert main(["run", "--config", str(config), "--check"]) == os.EX_CONFIG
     assert one_error_line(capsys).startswith(f"error: {config}: gateway.db: {db}: {said}")
     assert db.read_bytes() == before
 

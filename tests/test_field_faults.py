@@ -145,7 +145,7 @@ def test_non_utf8_keys_file_is_one_line_naming_file_and_line(tmp_path: Path) -> 
         f.write(b"# caf\xe9 greenhouse\n")
     r = gateway_cli("ingest", "--db", str(tmp_path / "g.db"), "--keys", str(keys),
                     "--listen", "127.0.0.1:0")
-    assert r.returncode == 2, r.stderr
+    assert r.returncode == os.EX_CONFIG, r.stderr  # 78: a wrong keys file, not restarted
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1, r.stderr
     assert f"{keys}:2:" in lines[0] and "UTF-8" in lines[0], lines[0]

@@ -35,7 +35,7 @@ import pytest
 
 from gateway import protocol
 from gateway.store.keys import write_keys
-from tests.images_common import read_unit
+from tests.images_common import build, read_unit
 from tests.mcu_fakes.hostenv import ROOT
 from tests.test_layering import imported_modules
 
@@ -73,8 +73,8 @@ def installed(bundles: Path, tmp_path_factory: pytest.TempPathFactory) -> Instal
 
 
 def _repo_package_files() -> set[str]:
-    return {str(p.relative_to(ROOT)) for p in (ROOT / "gateway").rglob("*")
-            if p.is_file() and "__pycache__" not in p.parts and p.suffix != ".pyc"}
+    """gateway/'s files as the build sees them: those git tracks (test_images_source.py)."""
+    return {str(p.relative_to(ROOT)) for p in build.tracked("gateway")}
 
 
 def test_wheel_holds_the_gateway_package_and_nothing_else(bundles: Path) -> None:
@@ -162,6 +162,17 @@ def install_configs(installed: Installed, bundles: Path, root: Path) -> None:
         (root / config.name).write_text(_map_paths(config.read_text(), installed, root))
 
 
+def run_unit_command(name: str, installed: Installed, bundles: Path, root: Path,
+                     *more: str) -> subprocess.CompletedProcess[str]:
+    """A shipped unit's ExecStart (``more`` after it, e.g. ``--check``, what the bundle README
+    has the operator run after an edit) from the fresh venv, to its end, paths mapped into
+    ``root`` where the caller put the configs."""
+    (cmd,) = read_unit(bundles / "gateway" / name)["ExecStart"]
+    return subprocess.run([*shlex.split(_map_paths(cmd, installed, root)), *more],
+                          cwd=installed.cwd, env=installed.env, capture_output=True, text=True,
+                          timeout=120)
+
+
 @contextmanager
 def run_unit(name: str, installed: Installed, bundles: Path, root: Path,
              install: bool = True) -> Iterator[Popen[str]]:
@@ -240,14 +251,12 @@ def test_installed_wheel_stores_a_record_through_the_shipped_ingest_unit(
 def test_installed_wheel_runs_the_shipped_gateway_unit_from_its_default_config(
         installed: Installed, bundles: Path, tmp_path: Path) -> None:
     """The live gateway from the wheel alone, with the bundle's gateway.toml (paths and ports
-    mapped to a temp folder and loopback): its check, its ready line, a signed record stored and
+    mapped to a temp folder and loopback): its --check, its ready line, a signed record stored and
     acknowledged, the status screen reading the store it wrote, SIGTERM → exit 0."""
     key = secrets.token_bytes(32)
     write_keys(tmp_path / "keys.txt", {7: key})
     install_configs(installed, bundles, tmp_path)
-    (pre,) = read_unit(bundles / "gateway" / "serra-gateway.service")["ExecStartPre"]
-    check = subprocess.run(shlex.split(_map_paths(pre, installed, tmp_path)), cwd=installed.cwd,
-                           env=installed.env, capture_output=True, text=True, timeout=120)
+    check = run_unit_command("serra-gateway.service", installed, bundles, tmp_path, "--check")
     assert check.returncode == 0 and "ok: farm demo-farm" in check.stdout, check.stderr
     with run_unit("serra-gateway.service", installed, bundles, tmp_path) as proc, \
             socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
@@ -298,9 +307,7 @@ def test_installed_wheel_runs_the_gateway_as_client_of_the_shipped_router_unit(
     assert '"tls/0.0.0.0:7447"' in (bundles / "gateway" / "router.toml").read_text()
     assert '"tcp/0.0.0.0:7447"' in (bundles / "gateway" / "gateway.toml").read_text()
     _same_host_router_configs(tmp_path, _free_port())
-    (pre,) = read_unit(bundles / "gateway" / "serra-router.service")["ExecStartPre"]
-    check = subprocess.run(shlex.split(_map_paths(pre, installed, tmp_path)), cwd=installed.cwd,
-                           env=installed.env, capture_output=True, text=True, timeout=120)
+    check = run_unit_command("serra-router.service", installed, bundles, tmp_path, "--check")
     assert check.returncode == 0, check.stderr
     with run_unit("serra-router.service", installed, bundles, tmp_path, install=False) as router:
         ready = _line_starting(router, "serra router ready")
@@ -317,7 +324,7 @@ def test_installed_wheel_runs_the_gateway_as_client_of_the_shipped_router_unit(
 def test_installed_wheel_checks_a_config_with_the_shipped_ventilation_sensor(
         installed: Installed, bundles: Path, tmp_path: Path) -> None:
     """gateway.toml's comment names a command for the shipped sensor's path; that path, given as
-    the greenhouse's vsensor, passes the unit's check (onnxruntime loads it, from the wheel)."""
+    the greenhouse's vsensor, passes the unit's --check (onnxruntime loads it, from the wheel)."""
     write_keys(tmp_path / "keys.txt", {7: secrets.token_bytes(32)})
     install_configs(installed, bundles, tmp_path)
     config = tmp_path / "gateway.toml"
@@ -329,7 +336,44 @@ def test_installed_wheel_checks_a_config_with_the_shipped_ventilation_sensor(
     sensor = Path(r.stdout.strip())
     assert sensor.is_file() and sensor.is_relative_to(installed.python.parents[1]), sensor
     config.write_text(text.replace('# vsensor = "ventilation.onnx"', f'vsensor = "{sensor}"'))
-    (pre,) = read_unit(bundles / "gateway" / "serra-gateway.service")["ExecStartPre"]
-    check = subprocess.run(shlex.split(_map_paths(pre, installed, tmp_path)), cwd=installed.cwd,
-                           env=installed.env, capture_output=True, text=True, timeout=120)
+    check = run_unit_command("serra-gateway.service", installed, bundles, tmp_path, "--check")
     assert check.returncode == 0 and "ok: farm demo-farm" in check.stdout, check.stderr
+
+
+CONFIG_ERRORS = {  # unit → (what is wrong in the config it names, what the one line says)
+    "serra-gateway.service": [
+        (("[gateway]\n", "[gateway]\nfarmm = 'x'\n"), "gateway.toml: gateway.farmm: unknown key"),
+        (('farm = "demo-farm"', 'farm = "demo-farm'), "gateway.toml: invalid TOML"),
+        (("keys.txt", "nokeys.txt"), "gateway.toml: gateway.keys: cannot read "),
+        (('greenhouse = "', 'greenhouse = "no-such-'), "gateway.toml: greenhouse[1].greenhouse: "),
+    ],
+    "serra-router.service": [  # the certificates it names are not made (no `gateway certs`)
+        ((), "router.toml: tls.ca: "),
+        (("[router]\n", "[router]\nlisten_on = 1\n"), "router.toml: unknown key 'router.listen_on'"),
+    ],
+    "serra-ingest.service": [((), "keys.txt: cannot read the keys file")],  # no keys file
+}
+
+
+@pytest.mark.parametrize(("unit", "case"), [(u, i) for u, cases in CONFIG_ERRORS.items()
+                                            for i in range(len(cases))])
+def test_installed_wheel_exits_78_under_each_shipped_unit_when_its_config_is_wrong(
+        installed: Installed, bundles: Path, tmp_path: Path, unit: str, case: int) -> None:
+    """A wrong config, a key, a file it names: the unit's own command exits 78 (EX_CONFIG, the
+    units' RestartPreventExitStatus=, so systemd does not restart it every 5 s) with one line
+    naming the file and the key, before it listens or writes anything."""
+    edit, said = CONFIG_ERRORS[unit][case]
+    if unit != "serra-ingest.service":
+        write_keys(tmp_path / "keys.txt", {7: secrets.token_bytes(32)})
+    install_configs(installed, bundles, tmp_path)
+    config = tmp_path / ("router.toml" if unit == "serra-router.service" else "gateway.toml")
+    if edit:
+        old, new = edit
+        assert old in config.read_text()
+        config.write_text(config.read_text().replace(old, new, 1))
+    r = run_unit_command(unit, installed, bundles, tmp_path)
+    assert r.returncode == 78 == os.EX_CONFIG, r.stderr
+    assert r.stderr.count("\n") == 1 and r.stderr.startswith(f"error: {tmp_path}/"), r.stderr
+    assert said in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr and not r.stdout
+    assert not (tmp_path / "serra.db").exists()

@@ -52,6 +52,20 @@ def test_units_run_the_documented_commands_hardened(bundles: Path) -> None:
     assert read_unit(bundles / "gateway" / "serra-gateway.service")["Conflicts"] == ["serra-ingest.service"]
 
 
+def test_units_stop_on_a_config_error_and_restart_on_any_other_failure(bundles: Path) -> None:
+    """Exit 78 (EX_CONFIG: what run, router and the ingest service exit on a wrong config, see
+    test_images.py) is the one status systemd does not restart on: a wrong config would fail every
+    5 s for ever, a store error or a crash (exit 1, 2, a signal) may not. No ExecStartPre=: systemd
+    applies RestartPreventExitStatus= to the main process only (systemd#11868), so a --check there
+    that fails would still be restarted."""
+    for name in UNITS:
+        unit = read_unit(bundles / "gateway" / name)
+        assert unit["Restart"] == ["on-failure"] and unit["RestartSec"] == ["5"], name
+        assert unit["RestartPreventExitStatus"] == [str(os.EX_CONFIG)] == ["78"], name
+        assert "ExecStartPre" not in unit and "ExecCondition" not in unit, name
+        assert "SuccessExitStatus" not in unit, name  # 78 stays a failure: the unit shows failed
+
+
 @pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="systemd-analyze not installed")
 @pytest.mark.parametrize("name", UNITS)
 def test_units_pass_systemd_analyze(bundles: Path, tmp_path: Path, name: str) -> None:

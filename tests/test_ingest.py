@@ -276,7 +276,7 @@ def test_service_refuses_world_readable_keys(tmp_path: Path, capsys) -> None:
     os.chmod(k, 0o644)
     rc = service.main(["--db", str(tmp_path / "g.db"), "--keys", str(k),
                        "--listen", "127.0.0.1:0"])
-    assert rc == 2
+    assert rc == os.EX_CONFIG  # 78: the unit does not restart on a wrong keys file
     assert "chmod 600" in capsys.readouterr().err
 
 
@@ -310,7 +310,7 @@ def test_service_reports_bad_arguments_clearly(tmp_path: Path, capsys) -> None:
     write_keys(k, {7: KEY})
     assert service.main(["--db", str(tmp_path / "no" / "g.db"), "--keys", str(k)]) == 2
     assert "cannot open the store" in capsys.readouterr().err
-    assert service.main(["--db", str(tmp_path / "g.db"), "--keys", str(tmp_path / "none")]) == 2
+    assert service.main(["--db", str(tmp_path / "g.db"), "--keys", str(tmp_path / "none")]) == os.EX_CONFIG
     assert "No such file" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         service.main(["--db", "x", "--keys", str(k), "--listen", "nope"])

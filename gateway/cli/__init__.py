@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
 
 COMMANDS = {
@@ -28,7 +29,17 @@ COMMANDS = {
 
 
 class CliError(Exception):
-    """An error to print as one clear line, exit status 2."""
+    """An error to print as one clear line, exit status ``status`` (2)."""
+
+    status = 2
+
+
+class ConfigFileError(CliError):
+    """A service's configuration is wrong (a file, a key, what it names): exit status 78,
+    sysexits' EX_CONFIG. The systemd units list it in ``RestartPreventExitStatus=``: a wrong
+    config stops the unit with its one line in the journal instead of restarting it for ever."""
+
+    status = os.EX_CONFIG
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -98,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except CliError as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return exc.status
     except MemoryError as exc:  # e.g. --population 10000000: say it, not numpy's traceback
         print(f"error: {args.command}: out of memory ({exc}): the options or the data ask for "
               "more than this machine has (a smaller --population, window or span)",

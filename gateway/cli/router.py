@@ -8,7 +8,7 @@ import logging
 import signal
 import threading
 
-from gateway.cli import CliError
+from gateway.cli import CliError, ConfigFileError
 
 DESCRIPTION = "Run a Zenoh router: TLS endpoints, mutual TLS, access control, links to upstream routers."
 EPILOG = """\
@@ -41,8 +41,8 @@ def run(args: argparse.Namespace) -> int:
         settings = load_router_config(args.config)
         entries = router_entries(settings)
         build(entries)  # Zenoh's own checks (unknown keys in [zenoh], bad values) before start
-    except (ConfigError, CertError) as exc:
-        raise CliError(str(exc)) from None
+    except (ConfigError, CertError) as exc:  # exit 78 (EX_CONFIG): systemd does not restart it
+        raise ConfigFileError(str(exc)) from None
     if args.check:
         for warning in settings.warnings():
             print(f"warning: {warning}")

@@ -11,7 +11,7 @@ import sqlite3
 import sys
 from pathlib import Path
 
-from gateway.cli import CliError
+from gateway.cli import ConfigFileError
 
 _PRIORITY = {"DEBUG": 7, "INFO": 6, "WARNING": 4, "ERROR": 3, "CRITICAL": 2}
 
@@ -63,8 +63,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         cfg = load_config(args.config)
         resources = prepare(cfg)
-    except ConfigError as e:
-        raise CliError(str(e)) from None
+    except ConfigError as e:  # exit 78 (EX_CONFIG): systemd does not restart the unit
+        raise ConfigFileError(str(e)) from None
     setup_logging(args.log_level or ("debug" if args.verbose else cfg.log_level))
     if args.check:  # the service logs the same warnings once at start (worker.py)
         for line in (w for r in resources for w in r.warnings):
@@ -77,6 +77,7 @@ def run(args: argparse.Namespace) -> int:
 
 async def _main(cfg, resources) -> int:
     from gateway.ingest.service import ListenError
+    from gateway.service.config import ConfigError
     from gateway.service.run import run_gateway
 
     log = logging.getLogger("serra.gateway")
@@ -86,7 +87,10 @@ async def _main(cfg, resources) -> int:
         loop.add_signal_handler(sig, stop.set)
     try:
         await run_gateway(cfg, resources, stop)
-    except ListenError as e:  # the address is the config's: exit 2, as for any config error
+    except ConfigError as e:  # a config fault only the start finds: as run --check's, exit 78
+        log.error("%s", e)
+        return os.EX_CONFIG
+    except ListenError as e:  # exit 2, not 78: a port held or an address not up yet may pass
         log.error("%s", e)
         return 2
     except (OSError, sqlite3.Error, RuntimeError) as e:  # expected faults: one line, no traceback

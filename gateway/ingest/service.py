@@ -10,6 +10,7 @@ import asyncio
 import contextlib
 import ipaddress
 import logging
+import os
 import signal
 import socket
 import sqlite3
@@ -246,15 +247,18 @@ def main(argv: list[str] | None = None, prog: str = "python -m gateway.ingest.se
         maintenance_every=args.maintenance_every, batch_delay=args.batch_delay,
         policy=retention.Policy(samples_days=args.retention_days,
                                 max_db_bytes=int(args.max_db_mb * 2**20)))
+    # The keys file is the service's configuration: a wrong one exits 78 (EX_CONFIG), which the
+    # unit's RestartPreventExitStatus= keeps from restarting; the store, the address and the serial
+    # port exit 2 (a disk, a port or a USB cable can come right by themselves: systemd retries).
     try:
         load_keys(cfg.keys)  # fail early with a clear message
     except KeyFileError as e:
         print(f"error: {e}", file=sys.stderr)
-        return 2
+        return os.EX_CONFIG
     except OSError as e:
         print(f"error: {cfg.keys}: cannot read the keys file: {e.strerror or e} (make it with "
               f"python -m gateway keys add DEVICE_ID --keys {cfg.keys})", file=sys.stderr)
-        return 2
+        return os.EX_CONFIG
     try:
         Store(cfg.db).close()
     except StoreError as e:
@@ -274,7 +278,10 @@ def main(argv: list[str] | None = None, prog: str = "python -m gateway.ingest.se
 
     try:
         asyncio.run(_run())
-    except (ListenError, KeyFileError) as e:
+    except KeyFileError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return os.EX_CONFIG
+    except ListenError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     return 0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import shutil
 import signal
 import subprocess
@@ -143,10 +144,10 @@ def test_router_command_check_and_errors(example: Path, tmp_path: Path) -> None:
     bad = tmp_path / "bad.toml"
     bad.write_text('[router]\nlisten = ["tls/127.0.0.1:0"]\nlisten_on = 1\n')
     r = _cli("router", "--config", str(bad))
-    assert r.returncode == 2 and r.stderr.count("\n") == 1
+    assert r.returncode == os.EX_CONFIG and r.stderr.count("\n") == 1  # 78: not restarted
     assert "unknown key 'router.listen_on'" in r.stderr
     r = _cli("router", "--config", str(tmp_path / "none.toml"))
-    assert r.returncode == 2 and "cannot read router config" in r.stderr
+    assert r.returncode == os.EX_CONFIG and "cannot read router config" in r.stderr
 
 
 def test_router_command_stops_cleanly_on_sigint(tmp_path: Path) -> None:

@@ -6,11 +6,21 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
 
-from tests.mcu_fakes.hostenv import MCU, ROOT, micropython, mpy_env, run_mpy, tool
+from tests.mcu_fakes.hostenv import (
+    FAKES_COMMON,
+    MCU,
+    ROOT,
+    TICKS_START,
+    micropython,
+    mpy_env,
+    run_mpy,
+    tool,
+)
 
 FIRMWARE = sorted(p for p in MCU.rglob("*.py") if "typings_esp32" not in p.parts)
 STUBS = MCU / "typings_esp32"
@@ -197,10 +207,47 @@ def test_firmware_unit_under_micropython(name: str, tmp_path: Path) -> None:
     (trace / "pin_27.txt").write_text("0\n1\n0\n")
     script = tmp_path / "checks.py"
     script.write_text(CHECKS)
-    wifi = "fail,fail,fail,fail,ok" if name == "wifi_backoff" else "ok"
-    r = run_mpy(script, name, str(MCU / "config.example.json"), cwd=tmp_path,
-                env={"SERRA_TRACE": str(trace), "SERRA_WIFI": wifi}, timeout=60)
+    env = {"SERRA_TRACE": str(trace),
+           "SERRA_WIFI": "fail,fail,fail,fail,ok" if name == "wifi_backoff" else "ok"}
+    r = run_mpy(script, name, str(MCU / "config.example.json"), cwd=tmp_path, env=env,
+                timeout=60)
     assert r.returncode == 0 and f"PASS {name}" in r.stdout, r.stdout + r.stderr
+
+
+CLOCK_MPY = r"""
+import time
+own = time._t.ticks_ms()  # the interpreter's own clock, under the fake
+first = time.ticks_ms()
+time.sleep_ms(20)
+print(own, first, time.ticks_ms(), time.ticks_add(0, -1) + 1)
+"""
+
+
+@pytest.mark.skipif(micropython() is None, reason="micropython not installed")
+@pytest.mark.parametrize("start", [None, (1 << 30) - 5])
+def test_firmware_runs_read_the_boards_clock_whatever_the_hosts_uptime(
+        start: int | None, tmp_path: Path) -> None:
+    """The unix port's ticks_ms() is the host's CLOCK_MONOTONIC in ms (its uptime; period
+    2**62), which on a CI host up 24.8 days is past 2**31, where no board's clock ever is. Every
+    firmware run of the tests (mpy_env) reads the board's clock instead: period 2**30, first
+    reading TICKS_START (or the start a test sets) plus the time the interpreter has run, not
+    the host's uptime; set just below 2**30, it wraps to 0 as on the board."""
+    script = tmp_path / "clock.py"
+    script.write_text(CLOCK_MPY)
+    env = {} if start is None else {"SERRA_TICKS_START": str(start)}
+    before = time.monotonic()
+    r = run_mpy(script, env=env, timeout=60)
+    ran_ms = (time.monotonic() - before) * 1000
+    assert r.returncode == 0, r.stdout + r.stderr
+    own, first, later, period = map(int, r.stdout.split())
+    assert before * 1000 - 1 <= own <= before * 1000 + ran_ms + 1  # the host's uptime [ms]
+    assert period == 1 << 30
+    t0 = TICKS_START if start is None else start
+    assert t0 <= first <= t0 + ran_ms
+    if start is None:
+        assert first + 20 <= later <= t0 + ran_ms
+    else:
+        assert later < ran_ms  # wrapped at 2**30
 
 
 @pytest.mark.skipif(micropython() is None, reason="micropython not installed")
@@ -276,11 +323,11 @@ def test_fake_watchdog_and_reset_end_the_board_with_their_status(fakes: str) -> 
     """The one copy of the fake watchdog and reset (training/kitsim/fakes_common), through each
     fake `machine`: a watchdog fed in time lets the board run, one not fed within its timeout
     (here a negative one: always late) ends it with status 75, ``machine.reset()`` with 76."""
-    from training.kitsim.kit import FAKES, FAKES_COMMON
+    from training.kitsim.kit import FAKES as KIT_FAKES
 
     env = mpy_env()
     if fakes == "simulated kit":
-        env["MICROPYPATH"] = f"{FAKES}:{FAKES_COMMON}:{MCU}:.frozen"
+        env["MICROPYPATH"] = f"{KIT_FAKES}:{FAKES_COMMON}:{MCU}:.frozen"
     for code, status, said in (
             ("machine.WDT(timeout=60000).feed(); machine.WDT(timeout=-1).feed()", 75, "FAKE WDT"),
             ("machine.reset()", 76, "FAKE machine.reset()")):

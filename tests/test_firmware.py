@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from tests.mcu_fakes.hostenv import (
+    FAKES,
     FAKES_COMMON,
     MCU,
     ROOT,
@@ -164,6 +165,22 @@ def check_ring():
     assert list(r3.seq)[:3] == [0, 1, 2] and r3.dropped == 0
     r3.push(3, 6 + (1 << 28))
     assert list(r3.seq) == [3, 1, 2, -1] and r3.dropped == 1 and r3.count == 3  # 0 went
+    # The board's ticks (period 2**30) fit int32: 4 bytes a tick, as the RAM budget counts.
+    assert len(bytes(r3.tick)) == len(bytes(r3.due)) == 4 * 4
+
+def check_ring_wide_ticks():
+    # Run on the unix port's own clock (period 2**62: the host's uptime in ms), as the
+    # simulated kit runs: past 2**31 (a host up 24.8 days) a tick must be kept whole, or the
+    # record reads as ~50 days old and is dropped at the next push.
+    import time
+    from ring import Ring
+    assert time.ticks_add(0, -1) == (1 << 62) - 1
+    r = Ring(4)
+    t = (1 << 31) - 30000
+    for s in range(3):
+        r.push(s, time.ticks_add(t, 30000 * s))
+    assert list(r.tick)[:3] == [t, t + 30000, t + 60000], list(r.tick)
+    assert r.dropped == 0 and r.count == 3 and list(r.due) == list(r.tick)
 
 def check_wifi_backoff():
     import network
@@ -209,6 +226,8 @@ def test_firmware_unit_under_micropython(name: str, tmp_path: Path) -> None:
     script.write_text(CHECKS)
     env = {"SERRA_TRACE": str(trace),
            "SERRA_WIFI": "fail,fail,fail,fail,ok" if name == "wifi_backoff" else "ok"}
+    if name == "ring_wide_ticks":  # the interpreter's own clock, not the board's
+        env["MICROPYPATH"] = f"{FAKES}:{FAKES_COMMON}:{MCU}:.frozen"
     r = run_mpy(script, name, str(MCU / "config.example.json"), cwd=tmp_path, env=env,
                 timeout=60)
     assert r.returncode == 0 and f"PASS {name}" in r.stdout, r.stdout + r.stderr

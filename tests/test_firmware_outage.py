@@ -101,13 +101,16 @@ def test_gateway_away_longer_than_the_ring_then_back(tmp_path: Path) -> None:
     assert back[-1]["acked"] >= RING
 
 
-@pytest.mark.parametrize("bits, edge", [(30, 1 << 30)], ids=["esp32 wrap at 2**30"])
+@pytest.mark.parametrize("bits, edge", [(30, 1 << 30), (62, 1 << 31)],
+                         ids=["esp32 wrap at 2**30", "unix port past 2**31"])
 def test_records_made_before_the_tick_wrap_and_sent_after_it_are_dated_right(
         bits: int, edge: int, tmp_path: Path) -> None:
     """The ESP32's ticks_ms() wraps at 2**30 ms (12.4 days). With the board's clock period
     (tests/mcu_fakes/esp32_clock) starting 3 s before the wrap and the gateway away until
     after it, records made before the wrap are sent after it: their age, and so the time the
-    gateway gives them, must come out right, every record stored once."""
+    gateway gives them, must come out right, every record stored once. The unix port's clock
+    (period 2**62, the host's uptime in ms) passes 2**31 on a host up 24.8 days, and the ring
+    must keep such ticks whole: the same run with that clock crossing 2**31."""
     db, keys, trace = tmp_path / "g.db", tmp_path / "keys", tmp_path / "trace"
     write_keys(keys, {7: KEY})
     make_trace(trace)

@@ -7,7 +7,8 @@ ticks_ms() wraps at 2**30 ms (12.4 days) and ticks_add/ticks_diff work modulo 2*
 first reading is $SERRA_TICKS_START (hostenv sets it; 2**30 - 3000: the clock wraps 3 s after
 the interpreter starts), and the clock runs at the real rate from there, whatever the host's.
 $SERRA_TICKS_BITS sets the period (30, the ESP32's and every 32-bit port's, unless set; 62:
-the unix port's own, to run the firmware as the unix port would on a host up that long).
+the unix port's own, to run the firmware as the unix port would on a host up that long, with
+the port's own ticks_add and ticks_diff).
 Everything else is the real module.
 """
 
@@ -39,3 +40,9 @@ def ticks_add(t, delta):
 
 def ticks_diff(a, b):
     return ((a - b + _HALF) & _MASK) - _HALF
+
+
+if _t.ticks_add(0, -1) == _MASK:
+    # The port's own period: its own (C) functions, which take only small ints as a board's do.
+    ticks_add = _t.ticks_add
+    ticks_diff = _t.ticks_diff

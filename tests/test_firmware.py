@@ -90,6 +90,23 @@ def check_bootcount():
         raise AssertionError("corrupted counters accepted")
     except bootcount.BootCountError as e:
         assert "both corrupted" in str(e)
+    # One copy corrupted, the other missing: no bound on the lost count, so no boot at all (a
+    # repeated boot's records would be taken for stored ones), the recovery named.
+    for bad, gone in ((p, p + ".bak"), (p + ".bak", p)):
+        with open(bad, "w") as fh:
+            fh.write("boot 9 garbage")
+        os.remove(gone)
+        try:
+            n = bootcount.next_boot(p)
+            raise AssertionError("counted on from a missing copy: %d" % n)
+        except bootcount.BootCountError as e:
+            assert bad + " corrupted, the other copy missing" in str(e), str(e)
+            assert "keys rotate" in str(e)
+    # The primary alone (power lost before the first .bak was written): counts on from it.
+    os.remove(p + ".bak")
+    with open(p, "w") as fh:
+        fh.write("boot 0 %d\n" % (0 ^ 0x5A5A5A5A))
+    assert bootcount.next_boot(p) == 1 and bootcount.next_boot(p) == 2
 
 def check_dht22():
     import dht, machine

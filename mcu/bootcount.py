@@ -1,7 +1,11 @@
 """Boot counter in flash: sequence numbers restart at 0 each boot, so (boot, seq) never repeats.
 
-Two copies, each written to a temporary file then renamed (atomic on LittleFS). If one copy is
-corrupted, the other is at most one boot behind it, so skipping one value keeps boots unique.
+Two copies, each written to a temporary file then renamed (atomic on LittleFS), the primary
+first. If one copy is corrupted, the other is at most one boot behind it, so skipping one value
+keeps boots unique. A missing copy beside a corrupted one bounds nothing (it may have been
+deleted, or never written while the primary counted on): then, as when both are corrupted, the
+board does not start, because a repeated boot restarts seq at 0 and the gateway would take its
+records for duplicates of stored ones and store nothing.
 """
 
 import os
@@ -40,11 +44,15 @@ def _write(path: str, n: int) -> None:
 def next_boot(path: str = "boot.cnt") -> int:
     """Increment and persist the counter before anything is sent; returns the new value."""
     a, b = _read(path), _read(path + ".bak")
-    if a is None and b is None:
-        raise BootCountError(f"{path} and {path}.bak both corrupted: cannot guarantee unique sequence "
-                             "numbers; provision a new counter")
     if a is None or b is None:
-        n = (b if a is None else a) + 1  # the lost copy was at most this
+        good = b if a is None else a
+        if good is None or good < 0:
+            state = (f"{path} and {path}.bak both corrupted" if good is None else
+                     f"{path}{'' if a is None else '.bak'} corrupted, the other copy missing")
+            raise BootCountError(f"{state}: cannot guarantee unique boots; as for a reflashed "
+                                 f"board, delete {path} and {path}.bak and run `python -m gateway "
+                                 "keys rotate <device>` (docs/wire-format.md)")
+        n = good + 1  # the lost copy was at most this
     else:
         n = a if a > b else b
     n += 1

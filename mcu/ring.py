@@ -29,12 +29,20 @@ class Ring:
         self.max_span = max_span
         self.mv = memoryview(bytearray(capacity * CHAN_LEN))
         # Typed arrays, not lists: no boxed ints on the heap. Sequence numbers restart every
-        # boot and ticks wrap below 2**30: int32 for both.
+        # boot: int32. Ticks are small ints below the port's tick period: 2**30 on the ESP32,
+        # 2**62 on the unix port (the simulated kit, the host tests), where they pass 2**31
+        # after 24.8 days of its clock (the host's uptime), and an int32 cuts them short. A C
+        # long is the port's word (4 bytes on the ESP32, 8 on the unix port): every tick fits,
+        # and reads back as the small int ticks_diff() needs ("q" would give a long int, which
+        # ticks_diff() misreads, and allocate at every read).
+        from struct import calcsize
+
+        w = calcsize("l")
         self.seq = array("i", bytearray(4 * capacity))  # -1 (free) or the record's seq
         for i in range(capacity):
             self.seq[i] = _FREE
-        self.tick = array("i", bytearray(4 * capacity))  # tick at the end of the record's period
-        self.due = array("i", bytearray(4 * capacity))  # tick of the next (re)transmission
+        self.tick = array("l", bytearray(w * capacity))  # tick at the end of the record's period
+        self.due = array("l", bytearray(w * capacity))  # tick of the next (re)transmission
         self.tries = bytearray(capacity)
         self.count = 0
         self.dropped = 0

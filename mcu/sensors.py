@@ -45,8 +45,11 @@ class DHT22:
     """
 
     def __init__(self, pin, dht_cls, reinit_after: int = 3) -> None:
-        """pin: machine.Pin; dht_cls: dht.DHT22 (re-created after `reinit_after` failures in a
-        row, which clears a hung bus)."""
+        """pin: machine.Pin; dht_cls: dht.DHT22, re-created after `reinit_after` failures in a
+        row. That is only a fresh object (a new 5-byte buffer, the same pin): it does not reset
+        the sensor. Every measure() already sends the whole start signal (pin set open drain,
+        250 ms high, 18 ms low). A DHT22 that stops answering is commonly brought back only by
+        cutting its supply, which the firmware cannot do (the config has no pin switching it)."""
         self._pin = pin
         self._cls = dht_cls
         self._dev = dht_cls(pin)

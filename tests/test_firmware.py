@@ -6,11 +6,22 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
 
-from tests.mcu_fakes.hostenv import MCU, ROOT, micropython, mpy_env, run_mpy, tool
+from tests.mcu_fakes.hostenv import (
+    FAKES,
+    FAKES_COMMON,
+    MCU,
+    ROOT,
+    TICKS_START,
+    micropython,
+    mpy_env,
+    run_mpy,
+    tool,
+)
 
 FIRMWARE = sorted(p for p in MCU.rglob("*.py") if "typings_esp32" not in p.parts)
 STUBS = MCU / "typings_esp32"
@@ -79,6 +90,23 @@ def check_bootcount():
         raise AssertionError("corrupted counters accepted")
     except bootcount.BootCountError as e:
         assert "both corrupted" in str(e)
+    # One copy corrupted, the other missing: no bound on the lost count, so no boot at all (a
+    # repeated boot's records would be taken for stored ones), the recovery named.
+    for bad, gone in ((p, p + ".bak"), (p + ".bak", p)):
+        with open(bad, "w") as fh:
+            fh.write("boot 9 garbage")
+        os.remove(gone)
+        try:
+            n = bootcount.next_boot(p)
+            raise AssertionError("counted on from a missing copy: %d" % n)
+        except bootcount.BootCountError as e:
+            assert bad + " corrupted, the other copy missing" in str(e), str(e)
+            assert "keys rotate" in str(e)
+    # The primary alone (power lost before the first .bak was written): counts on from it.
+    os.remove(p + ".bak")
+    with open(p, "w") as fh:
+        fh.write("boot 0 %d\n" % (0 ^ 0x5A5A5A5A))
+    assert bootcount.next_boot(p) == 1 and bootcount.next_boot(p) == 2
 
 def check_dht22():
     import dht, machine
@@ -155,6 +183,25 @@ def check_ring():
     r3.push(3, 6 + (1 << 28))
     assert list(r3.seq) == [3, 1, 2, -1] and r3.dropped == 1 and r3.count == 3  # 0 went
 
+def check_ring_wide_ticks():
+    # Run on the unix port's own clock (period 2**62: the host's uptime in ms), as the
+    # simulated kit runs: past 2**31 (a host up 24.8 days) a tick must be kept whole, and read
+    # back as the built-in ticks_diff() reads it right (it misreads a long int), or a record
+    # reads weeks old or never due.
+    from time import ticks_add, ticks_diff
+    from ring import Ring
+    assert ticks_add(0, -1) == (1 << 62) - 1
+    r = Ring(4)
+    t = (1 << 31) - 30000
+    for s in range(3):
+        r.push(s, ticks_add(t, 30000 * s))
+    assert list(r.tick)[:3] == [t, t + 30000, t + 60000], list(r.tick)
+    assert r.dropped == 0 and r.count == 3 and list(r.due) == list(r.tick)
+    now = ticks_add(t, 90000)
+    assert [ticks_diff(now, r.due[i]) for i in range(3)] == [90000, 60000, 30000]
+    r.push(3, ticks_add(t, (1 << 28) + 1))  # seq 0 is now older than 2**28 ms: dropped
+    assert list(r.seq) == [3, 1, 2, -1] and r.dropped == 1, (list(r.seq), r.dropped)
+
 def check_wifi_backoff():
     import network
     from link import WifiLink, UP, BACKOFF
@@ -197,10 +244,49 @@ def test_firmware_unit_under_micropython(name: str, tmp_path: Path) -> None:
     (trace / "pin_27.txt").write_text("0\n1\n0\n")
     script = tmp_path / "checks.py"
     script.write_text(CHECKS)
-    wifi = "fail,fail,fail,fail,ok" if name == "wifi_backoff" else "ok"
-    r = run_mpy(script, name, str(MCU / "config.example.json"), cwd=tmp_path,
-                env={"SERRA_TRACE": str(trace), "SERRA_WIFI": wifi}, timeout=60)
+    env = {"SERRA_TRACE": str(trace),
+           "SERRA_WIFI": "fail,fail,fail,fail,ok" if name == "wifi_backoff" else "ok"}
+    if name == "ring_wide_ticks":  # the interpreter's own clock, not the board's
+        env["MICROPYPATH"] = f"{FAKES}:{FAKES_COMMON}:{MCU}:.frozen"
+    r = run_mpy(script, name, str(MCU / "config.example.json"), cwd=tmp_path, env=env,
+                timeout=60)
     assert r.returncode == 0 and f"PASS {name}" in r.stdout, r.stdout + r.stderr
+
+
+CLOCK_MPY = r"""
+import time
+own = time._t.ticks_ms()  # the interpreter's own clock, under the fake
+first = time.ticks_ms()
+time.sleep_ms(20)
+print(own, first, time.ticks_ms(), time.ticks_add(0, -1) + 1)
+"""
+
+
+@pytest.mark.skipif(micropython() is None, reason="micropython not installed")
+@pytest.mark.parametrize("start", [None, (1 << 30) - 5])
+def test_firmware_runs_read_the_boards_clock_whatever_the_hosts_uptime(
+        start: int | None, tmp_path: Path) -> None:
+    """The unix port's ticks_ms() is the host's CLOCK_MONOTONIC in ms (its uptime; period
+    2**62), which on a CI host up 24.8 days is past 2**31, where no board's clock ever is. Every
+    firmware run of the tests (mpy_env) reads the board's clock instead: period 2**30, first
+    reading TICKS_START (or the start a test sets) plus the time the interpreter has run, not
+    the host's uptime; set just below 2**30, it wraps to 0 as on the board."""
+    script = tmp_path / "clock.py"
+    script.write_text(CLOCK_MPY)
+    env = {} if start is None else {"SERRA_TICKS_START": str(start)}
+    before = time.monotonic()
+    r = run_mpy(script, env=env, timeout=60)
+    ran_ms = (time.monotonic() - before) * 1000
+    assert r.returncode == 0, r.stdout + r.stderr
+    own, first, later, period = map(int, r.stdout.split())
+    assert before * 1000 - 1 <= own <= before * 1000 + ran_ms + 1  # the host's uptime [ms]
+    assert period == 1 << 30
+    t0 = TICKS_START if start is None else start
+    assert t0 <= first <= t0 + ran_ms
+    if start is None:
+        assert first + 20 <= later <= t0 + ran_ms
+    else:
+        assert later < ran_ms  # wrapped at 2**30
 
 
 @pytest.mark.skipif(micropython() is None, reason="micropython not installed")
@@ -276,11 +362,11 @@ def test_fake_watchdog_and_reset_end_the_board_with_their_status(fakes: str) -> 
     """The one copy of the fake watchdog and reset (training/kitsim/fakes_common), through each
     fake `machine`: a watchdog fed in time lets the board run, one not fed within its timeout
     (here a negative one: always late) ends it with status 75, ``machine.reset()`` with 76."""
-    from training.kitsim.kit import FAKES, FAKES_COMMON
+    from training.kitsim.kit import FAKES as KIT_FAKES
 
     env = mpy_env()
     if fakes == "simulated kit":
-        env["MICROPYPATH"] = f"{FAKES}:{FAKES_COMMON}:{MCU}:.frozen"
+        env["MICROPYPATH"] = f"{KIT_FAKES}:{FAKES_COMMON}:{MCU}:.frozen"
     for code, status, said in (
             ("machine.WDT(timeout=60000).feed(); machine.WDT(timeout=-1).feed()", 75, "FAKE WDT"),
             ("machine.reset()", 76, "FAKE machine.reset()")):

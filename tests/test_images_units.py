@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from tests.images_common import build, read_unit
-from tests.mcu_fakes.hostenv import FAKE_PATH, MCU, ROOT, micropython
+from tests.mcu_fakes.hostenv import FAKE_PATH, MCU, ROOT, micropython, mpy_env
 
 UNITS = ("serra-gateway.service", "serra-router.service", "serra-ingest.service")
 
@@ -142,7 +142,7 @@ def _run_bundle(fw: Path, code: str) -> subprocess.CompletedProcess[str]:
     """MicroPython with only the bundle (and the fake hardware modules) on its path."""
     exe = micropython()
     assert exe
-    env = dict(os.environ, MICROPYPATH=f"{FAKE_PATH}:{fw}:.frozen")
+    env = mpy_env({"MICROPYPATH": f"{FAKE_PATH}:{fw}:.frozen"})  # the board's clock too
     return subprocess.run([exe, "-X", "heapsize=96K", "-c", code], cwd=fw, env=env,
                           capture_output=True, text=True, timeout=60)
 

@@ -4,7 +4,6 @@ and the smallest heap it runs in."""
 
 from __future__ import annotations
 
-import os
 import subprocess
 import tempfile
 import time
@@ -13,11 +12,11 @@ from typing import Any
 
 
 def _mpy_heap(heap: str, workdir: Path, mpydir: Path, records: int = 60) -> dict[str, Any]:
-    from tests.mcu_fakes.hostenv import FAKE_PATH, micropython
+    from tests.mcu_fakes.hostenv import FAKE_PATH, micropython, mpy_env
 
     exe = micropython()
     assert exe
-    env = dict(os.environ, MICROPYPATH=f"{FAKE_PATH}:{mpydir}:.frozen")
+    env = mpy_env({"MICROPYPATH": f"{FAKE_PATH}:{mpydir}:.frozen"})
     for f in workdir.glob("boot.cnt*"):
         f.unlink()
     proc = subprocess.Popen([exe, "-X", f"heapsize={heap}", "-c", "import main; main.main()"],
@@ -44,7 +43,8 @@ def _mpy_heap(heap: str, workdir: Path, mpydir: Path, records: int = 60) -> dict
 
 
 HEAP_CMD = ("micropython -X heapsize=96K -c 'import main; main.main()' with "
-            "MICROPYPATH=tests/mcu_fakes:training/kitsim/fakes_common:<mcu compiled by mpy-cross>:.frozen")
+            "MICROPYPATH=tests/mcu_fakes/esp32_clock:tests/mcu_fakes:training/kitsim/fakes_common:"
+            "<mcu compiled by mpy-cross>:.frozen")
 
 
 def _compile_firmware(mpy_cross: str, src_root: Path, mpydir: Path) -> list[str]:
@@ -77,14 +77,15 @@ def bench_heap() -> dict[str, Any]:
     full and every record is resent. That figure counts everything on the MicroPython heap: the
     interpreter's own start-up objects, the firmware's bytecode, the interned names of every
     module loaded (config and bootcount included: their code is dropped after boot, their
-    names stay), the ring and all buffers, and the fakes of machine/dht/network. The fakes are
-    test scaffolding at the hardware edge (on a board those modules are in ROM): measured
-    alone (imported, then gc.collect()) and subtracted. Their run-time state (trace cursors,
+    names stay), the ring and all buffers, and the fakes of machine/dht/network/time (time:
+    the board's clock, tests/mcu_fakes/esp32_clock). The fakes are test scaffolding at the
+    hardware edge (on a board those modules are in ROM): measured alone (imported, then
+    gc.collect()) and subtracted. Their run-time state (trace cursors,
     open trace files, the fake WLAN) is not subtracted: it stays in the firmware figure.
     """
     import json
 
-    from tests.mcu_fakes.hostenv import FAKE_PATH, MCU, micropython, tool
+    from tests.mcu_fakes.hostenv import FAKE_PATH, MCU, micropython, mpy_env, tool
 
     exe = micropython()
     if exe is None:
@@ -102,8 +103,8 @@ def bench_heap() -> dict[str, Any]:
         (tmpd / "config.json").write_text(json.dumps(cfg))
         # What the code of the UDP path and the fakes take when only imported.
         udp_path = [m for m in ("wire", "ring", "sensors", "link", "main") if m in modules]
-        env = dict(os.environ, MICROPYPATH=f"{FAKE_PATH}:{mpydir}:.frozen")
-        fake_mods = "machine, dht, network, socket"
+        env = mpy_env({"MICROPYPATH": f"{FAKE_PATH}:{mpydir}:.frozen"})
+        fake_mods = "machine, dht, network, socket, time"  # time: the board's clock
         code = _imported_heap(exe, tmpd, env, f"{fake_mods}\nimport {', '.join(udp_path)}")
         fakes = _imported_heap(exe, tmpd, env, fake_mods)
         # 160 records with no gateway answering: the ring fills, every record is resent.
@@ -131,7 +132,7 @@ def bench_heap() -> dict[str, Any]:
         "note": ("unix port, 64-bit (pointers and object headers twice an ESP32's). Total = "
                  "gc.mem_alloc() after gc.collect() in steady state (ring full, every record "
                  "resent), modules loaded from .mpy files (mpy-cross, default options); "
-                 "firmware_without_fakes = total minus the fakes of machine/dht/network "
+                 "firmware_without_fakes = total minus the fakes of machine/dht/network/time "
                  "imported alone; code_and_fakes = the UDP-path modules and the fakes imported "
                  "alone (a board with frozen modules keeps that bytecode in flash); data = "
                  "total minus code_and_fakes: the 128-record ring, buffers, driver objects, "

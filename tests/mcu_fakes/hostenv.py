@@ -12,8 +12,15 @@ MCU = ROOT / "mcu"
 FAKES = ROOT / "tests" / "mcu_fakes"
 FAKES_COMMON = ROOT / "training" / "kitsim" / "fakes_common"
 """The fakes the simulated kit shares (the watchdog and reset): after ``FAKES`` on the path."""
-FAKE_PATH = f"{FAKES}:{FAKES_COMMON}"
-"""MICROPYPATH's part for the fake hardware: the firmware tests' fakes, then the shared ones."""
+CLOCK = FAKES / "esp32_clock"
+"""The fake `time` with the board's tick period (2**30 ms), started at ``TICKS_START``."""
+FAKE_PATH = f"{CLOCK}:{FAKES}:{FAKES_COMMON}"
+"""MICROPYPATH's part for the fake hardware: the board's clock, the firmware tests' fakes, then
+the shared ones. The board's clock in every firmware run, because the unix port's own ticks_ms()
+is the host's uptime in ms: past 2**31, where no board's clock is, on a host up 24.8 days."""
+TICKS_START = 1000
+"""ticks_ms() [ms] when the interpreter starts, as on a board that has booted for a second; a
+test sets $SERRA_TICKS_START in mpy_env's ``extra`` for another (the wrap test, near 2**30)."""
 
 
 def tool(name: str) -> str | None:
@@ -31,9 +38,13 @@ def micropython() -> str | None:
 
 
 def mpy_env(extra: dict[str, str] | None = None) -> dict[str, str]:
+    """The interpreter's environment: the fakes and mcu/ on its path, the board's clock from
+    TICKS_START with the board's period (whatever the caller's environment says), then ``extra``."""
     env = dict(os.environ)
     # MICROPYPATH replaces the default path: keep .frozen or `import asyncio` fails.
     env["MICROPYPATH"] = f"{FAKE_PATH}:{MCU}:.frozen"
+    env["SERRA_TICKS_START"] = str(TICKS_START)
+    env["SERRA_TICKS_BITS"] = "30"
     env.update(extra or {})
     return env
 

@@ -1,14 +1,19 @@
-"""Fake `time` with the ESP32's tick period, for the tests that need the clock to wrap: on the
-board ticks_ms() wraps at 2**30 ms (12.4 days) and ticks_add/ticks_diff work modulo 2**30; the
-unix port's period is 2**62, so on the host the firmware never sees a wrap. $SERRA_TICKS_START
-sets the first reading (2**30 - 3000: the clock wraps 3 s after the interpreter starts).
-Put this folder first on MICROPYPATH; everything else is the real clock.
+"""Fake `time` with the ESP32's tick period, first on MICROPYPATH in every firmware run of the
+tests (tests/mcu_fakes/hostenv.py), so that no test depends on how long the host has been up.
+
+The unix port's ticks_ms() is the host's CLOCK_MONOTONIC in ms (its uptime), with a period of
+2**62: on a CI host up 24.8 days it is past 2**31, a value no board ever shows. On the board
+ticks_ms() wraps at 2**30 ms (12.4 days) and ticks_add/ticks_diff work modulo 2**30. Here the
+first reading is $SERRA_TICKS_START (hostenv sets it; 2**30 - 3000: the clock wraps 3 s after
+the interpreter starts), and the clock runs at the real rate from there, whatever the host's.
+$SERRA_TICKS_BITS sets the period (30, the ESP32's and every 32-bit port's, unless set; 62:
+the unix port's own, to run the firmware as the unix port would on a host up that long, with
+the port's own ticks_add and ticks_diff).
+Everything else is the real module.
 """
 
 import os
 import sys
-
-from micropython import const
 
 _path = sys.path
 sys.path = []  # import the built-in module this file shadows
@@ -18,8 +23,9 @@ try:
 finally:
     sys.path = _path
 
-_MASK = const((1 << 30) - 1)
-_HALF = const(1 << 29)
+_BITS = int(os.getenv("SERRA_TICKS_BITS") or "30")
+_MASK = (1 << _BITS) - 1
+_HALF = 1 << (_BITS - 1)
 _START = int(os.getenv("SERRA_TICKS_START") or "0")
 _T0 = _t.ticks_ms()
 
@@ -34,3 +40,9 @@ def ticks_add(t, delta):
 
 def ticks_diff(a, b):
     return ((a - b + _HALF) & _MASK) - _HALF
+
+
+if _t.ticks_add(0, -1) == _MASK:
+    # The port's own period: its own (C) functions, which take only small ints as a board's do.
+    ticks_add = _t.ticks_add
+    ticks_diff = _t.ticks_diff

@@ -3,8 +3,9 @@ tests' fakes (tests/mcu_fakes) and the simulated kit's (training/kitsim/fakes), 
 modules re-export them. A reset ends the process with a status the host reads: 75 the
 watchdog, 76 ``machine.reset()``.
 
-``ticks_ms`` is whatever `time` the interpreter has: the real clock in the firmware tests, the
-simulated kit's scaled device clock there (its fakes/time.py, first on MICROPYPATH).
+``ticks_ms`` is whatever `time` the interpreter has: the board's clock in the firmware tests
+(tests/mcu_fakes/esp32_clock), the simulated kit's scaled device clock there (its
+fakes/time.py); each is first on MICROPYPATH.
 """
 
 import sys

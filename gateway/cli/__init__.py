@@ -27,6 +27,10 @@ COMMANDS = {
 }
 
 
+QUIET_HELP = ("no progress on stderr (piped, the long commands write a 'progress:' line at each "
+              "tenth of the work and at least every 30 s; notes, warnings and errors still show)")
+
+
 class CliError(Exception):
     """An error to print as one clear line, exit status 2."""
 
@@ -40,6 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
         "Zenoh; certificates and routers for a fleet.",
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log details to stderr")
+    parser.add_argument("-q", "--quiet", action="store_true", help=QUIET_HELP)
     parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}",
                         help="print the installed serra version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
@@ -67,11 +72,15 @@ def _version() -> str:
 
 
 def _verbose_anywhere(parser: argparse.ArgumentParser) -> None:
-    """``-v`` after the command too (``calibrate ... -v``, where people add it), not only before
-    it; SUPPRESS leaves the value given before the command when it is not repeated after."""
+    """``-v`` and ``-q`` after the command too (``calibrate ... -v``, where people add it), not
+    only before it; SUPPRESS leaves the value given before the command when it is not repeated
+    after."""
     if "-v" not in parser._option_string_actions:
         parser.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS,
                             help="log details to stderr")
+    if "-q" not in parser._option_string_actions:
+        parser.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
+                            help=QUIET_HELP)
     for action in parser._actions:
         if isinstance(action, argparse._SubParsersAction):
             for child in action.choices.values():

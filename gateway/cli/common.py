@@ -315,30 +315,3 @@ def _clean(obj: Any) -> Any:
     if isinstance(obj, np.integer):
         return int(obj)
     return obj
-
-
-@contextmanager
-def progress_bar(label: str, total: int, enabled: bool) -> Iterator[Any]:
-    """A rich progress bar on stderr when it is a terminal; a no-op callback otherwise."""
-    if not (enabled and sys.stderr.isatty()):
-        yield lambda *a, **k: None
-        return
-    from rich.console import Console
-    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
-
-    with Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        TextColumn("{task.completed}/{task.total}"),
-        TextColumn("{task.fields[info]}"),
-        TimeRemainingColumn(),
-        console=Console(stderr=True),
-        transient=True,
-    ) as bar:
-        task = bar.add_task(label, total=total, info="")
-
-        def update(advance: int = 1, info: str = "", description: str | None = None) -> None:
-            # description None: rich keeps the current one
-            bar.update(task, advance=advance, info=info, description=description or None)
-
-        yield update

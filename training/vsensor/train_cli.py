@@ -30,6 +30,9 @@ def add_train_parser(sub: argparse._SubParsersAction, data_args) -> None:
     p.add_argument("--report", metavar="DIR",
                    help="where the report's PNGs go (default: MODEL.report/ beside the model)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    from gateway.cli import QUIET_HELP
+
+    p.add_argument("-q", "--quiet", action="store_true", help=QUIET_HELP)
     p.set_defaults(func=run)
 
 
@@ -94,7 +97,7 @@ def _check_outputs(out: str, report: str | None) -> None:
 def run(args: argparse.Namespace) -> int:
     from threadpoolctl import threadpool_limits
 
-    from gateway.cli.common import progress_bar
+    from gateway.cli.progress import progress_bar
     from gateway.greenhouse import load_greenhouse
     from training.vsensor.cli import overrides
     from training.vsensor.train import train
@@ -107,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--hidden {args.hidden!r}: expected sizes like 30,50,20") from None
     total = len(args.data) + len(args.test) + 2 * args.ensemble * (args.epochs + 30 * args.rounds)
     t0 = time.perf_counter()
-    with progress_bar("train", total, True) as bar, threadpool_limits(1):
+    with progress_bar("train", total, args.quiet) as bar, threadpool_limits(1):
         result = train(args.data, gh, args.model, args.out, args.cache, overrides(args.set) or None,
                        args.seed, hidden, args.epochs, args.rounds, progress=bar,
                        report_dir=args.report, round_lr=args.round_lr,

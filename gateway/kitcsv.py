@@ -18,6 +18,9 @@ from pathlib import Path
 import numpy as np
 
 log = logging.getLogger(__name__)
+NOTICE = {"notice": True}
+"""``extra`` of the reader's notices: the command line prints them as its other notes, ``note: …``
+(gateway/cli/__init__.py); other programs' logging shows them as warnings."""
 
 
 @dataclass(frozen=True)
@@ -146,7 +149,7 @@ def _read_header(path: Path, reader, required: Iterable[str], notices: list[str]
                           + _unknown_hint(extra))
     if extra:
         notices.append(f"{path}: ignoring unknown column(s) {', '.join(extra)}")
-        log.warning(notices[-1])
+        log.warning(notices[-1], extra=NOTICE)
     return header
 
 
@@ -231,7 +234,7 @@ def _read_rows(path: Path, reader, width: int, known: list[tuple[int, str]],
             f"{path}: skipped {len(repeats)} exact repeat(s) of the row before "
             f"(line(s) {', '.join(map(str, repeats[:5]))}{' …' if len(repeats) > 5 else ''})"
         )
-        log.warning(notices[-1])
+        log.warning(notices[-1], extra=NOTICE)
     return times, values
 
 

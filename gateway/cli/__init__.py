@@ -61,6 +61,24 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _CliFormatter(logging.Formatter):
+    """A notice meant for the person at the command line (a record logged with
+    ``extra=NOTICE``, gateway/kitcsv.py) reads as the commands' other notes, ``note: …``; any
+    other record stays a log line naming its logger."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        if getattr(record, "notice", False):
+            return f"note: {record.getMessage()}"
+        return super().format(record)
+
+
+def setup_cli_logging(verbose: bool) -> None:
+    """stderr logging of a command-line tool (gateway's and training's): INFO with ``-v``."""
+    handler = logging.StreamHandler()
+    handler.setFormatter(_CliFormatter("%(levelname)s %(name)s: %(message)s"))
+    logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, handlers=[handler])
+
+
 def _version() -> str:
     """The installed package's version (what a bug report needs), or why there is none."""
     from importlib.metadata import PackageNotFoundError, version
@@ -96,10 +114,7 @@ def main(argv: list[str] | None = None) -> int:
         return ingest_main(argv[1 + verbose:] + ["-v"] * verbose, prog="python -m gateway ingest")
     parser = build_parser()
     args = parser.parse_args(argv)
-    logging.basicConfig(
-        level=logging.INFO if args.verbose else logging.WARNING,
-        format="%(levelname)s %(name)s: %(message)s",
-    )
+    setup_cli_logging(args.verbose)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2

@@ -21,7 +21,7 @@ import sys
 import time
 from pathlib import Path
 
-from gateway.cli import CliError
+from gateway.cli import CliError, setup_cli_logging
 from gateway.cli.common import seed_int
 from gateway.greenhouse import GreenhouseError, list_presets, load_greenhouse
 from gateway.kitcsv import KitCsvError
@@ -250,6 +250,7 @@ def _errors(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    setup_cli_logging(False)  # the CSV reader's notices as note: lines, as the gateway's
     if not getattr(args, "func", None):
         parser.print_help()
         return 2

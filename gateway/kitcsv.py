@@ -14,6 +14,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
 
@@ -315,23 +316,31 @@ def format_time(t: np.datetime64) -> str:
 
 
 def write_kit_csv(
-    path: str | Path, time: np.ndarray, columns: Mapping[str, np.ndarray], digits: int = 6
+    path: str | Path | TextIO, time: np.ndarray, columns: Mapping[str, np.ndarray], digits: int = 6
 ) -> Path:
-    """Write a kit CSV; NaN becomes an empty cell. Only kit columns are accepted."""
+    """Write a kit CSV; NaN becomes an empty cell. Only kit columns are accepted. ``path`` may be
+    an open text stream (``export --out -``: stdout), returned as ``Path("-")``."""
     unknown = [c for c in columns if c not in COLUMNS]
     if unknown:
         raise ValueError(f"not kit CSV columns: {', '.join(unknown)} (see docs/data-format.md)")
+    if not isinstance(path, str | Path):
+        _write_rows(path, time, columns, digits)
+        return Path("-")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="", encoding="utf-8") as handle:
+        _write_rows(handle, time, columns, digits)
+    return path
+
+
+def _write_rows(handle: TextIO, time: np.ndarray, columns: Mapping[str, np.ndarray],
+                digits: int) -> None:
     names = [c for c in COLUMNS if c in columns]
     data = [np.asarray(columns[c], dtype=float) for c in names]
-    stamps = np.asarray(time, dtype="datetime64[s]")
-    with path.open("w", newline="", encoding="utf-8") as handle:
-        out = csv.writer(handle, lineterminator="\n")
-        out.writerow(["time", *names])
-        for i, stamp in enumerate(stamps):
-            out.writerow(
-                [str(stamp) + "Z"]
-                + [("" if not math.isfinite(v[i]) else f"{v[i]:.{digits}g}") for v in data]
-            )
-    return path
+    out = csv.writer(handle, lineterminator="\n")
+    out.writerow(["time", *names])
+    for i, stamp in enumerate(np.asarray(time, dtype="datetime64[s]")):
+        out.writerow(
+            [str(stamp) + "Z"]
+            + [("" if not math.isfinite(v[i]) else f"{v[i]:.{digits}g}") for v in data]
+        )

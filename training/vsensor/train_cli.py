@@ -87,8 +87,9 @@ def add_fit_args(p: argparse.ArgumentParser) -> None:
 def _check_outputs(out: str, report: str | None) -> None:
     """Refuse a sensor path that is a folder and a report folder that is a file before the
     training: both were refused after it, with the models already written."""
-    from gateway.cli.common import check_output
+    from gateway.cli.common import check_output, no_stdout
 
+    no_stdout(out, "--out")  # an ONNX graph, its card and report: files, not stdout
     if Path(out).is_dir():
         raise ValueError(f"--out {out}: is a folder; give the sensor's file name (MODEL.onnx)")
     check_output(report, "--report", folder=True)

@@ -19,9 +19,19 @@ from typing import TextIO
 import numpy as np
 
 log = logging.getLogger(__name__)
-NOTICE = {"notice": True}
+NOTICE = {"notice": "note"}
 """``extra`` of the reader's notices: the command line prints them as its other notes, ``note: …``
 (gateway/cli/__init__.py); other programs' logging shows them as warnings."""
+WARNING = {"notice": "warning"}
+"""``extra`` of a notice whose figures are likely wrong (°F temperatures): ``warning: …``."""
+LOOKS_FAHRENHEIT = "looks like °F"
+"""The words of the °F notice (gateway/cli/notes.py makes it a warning)."""
+FAHRENHEIT_MEDIAN = 45.0
+"""Median [°C] of t_in or t_out over a day or more above which the column is read as °F. Measured
+(2026-11-29, every 3-day window): no window of the hottest simulated houses in °C (the prototype
+and almeria in Biskra's and Sevilla's July: t_in median at most 34.9, t_out 33.1) is flagged;
+of Bleiswijk's autumn in °F, 27 of 48 windows are flagged, 14 refused by the range check (its
+error says °F) and 7 pass unsaid (inside and outside medians below 45 °F, 7 °C)."""
 
 
 @dataclass(frozen=True)
@@ -115,6 +125,7 @@ def read_kit_csv(path: str | Path, required: Iterable[str] = ()) -> KitData:
         except UnicodeDecodeError as exc:  # decoded a block at a time: find the line
             raise KitCsvError(_not_utf8(path, exc)) from None
     _refuse_rh_fractions(path, values)
+    _note_fahrenheit(path, times, values, notices)
     return KitData(
         time=np.array(times, dtype="datetime64[s]"),
         columns={k: np.array(v, dtype=float) for k, v in values.items()},
@@ -239,6 +250,27 @@ def _read_rows(path: Path, reader, width: int, known: list[tuple[int, str]],
     return times, values
 
 
+def _note_fahrenheit(path: Path, times: list[np.datetime64], values: dict[str, list[float]],
+                     notices: list[str]) -> None:
+    """Say so when t_in or t_out looks like °F (the kit CSV is °C; such a file passes the range
+    checks when it is cool, and every figure from it is wrong): over a day or more of rows (a
+    few midday hours of a hot house can be above it in °C), a median above
+    :data:`FAHRENHEIT_MEDIAN`."""
+    if len(times) < 2 or times[-1] - times[0] < np.timedelta64(1, "D"):
+        return
+    for name in ("t_in", "t_out"):
+        cells = np.array(values.get(name, []), dtype=float)
+        cells = cells[np.isfinite(cells)]
+        if len(cells) and np.median(cells) > FAHRENHEIT_MEDIAN:
+            notices.append(
+                f"{path}: column {name}: median {np.median(cells):.1f} over "
+                f"{(times[-1] - times[0]) / np.timedelta64(1, 'D'):.1f} days, above "
+                f"{FAHRENHEIT_MEDIAN:g} °C, which no greenhouse or climate holds for days: it "
+                f"{LOOKS_FAHRENHEIT} (the kit CSV wants °C: (°F - 32) / 1.8); the figures "
+                "computed from it are wrong")
+            log.warning(notices[-1], extra=WARNING)
+
+
 def _refuse_rh_fractions(path: Path, values: dict[str, list[float]]) -> None:
     for name in ("rh_in", "rh_out"):
         rh = np.array(values.get(name, []), dtype=float)
@@ -300,6 +332,8 @@ def _parse_cell(path: Path, line: int, name: str, cell: str) -> float:
         hint = ""
         if name in TEMPERATURE_COLUMNS and 200.0 < value < 400.0:
             hint = " (looks like kelvin: the kit CSV wants °C)"
+        elif name in TEMPERATURE_COLUMNS and col.upper < value <= 160.0:
+            hint = " (°F? the kit CSV wants °C: (°F - 32) / 1.8)"
         elif name.startswith("rh_") and value > 100.0:
             hint = " (relative humidity cannot exceed 100 %)"
         raise KitCsvError(

@@ -63,12 +63,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 class _CliFormatter(logging.Formatter):
     """A notice meant for the person at the command line (a record logged with
-    ``extra=NOTICE``, gateway/kitcsv.py) reads as the commands' other notes, ``note: …``; any
-    other record stays a log line naming its logger."""
+    ``extra=NOTICE`` or ``WARNING``, gateway/kitcsv.py) reads as the commands' other notes,
+    ``note: …`` or ``warning: …``; any other record stays a log line naming its logger."""
 
     def format(self, record: logging.LogRecord) -> str:
-        if getattr(record, "notice", False):
-            return f"note: {record.getMessage()}"
+        level = getattr(record, "notice", None)  # "note" or "warning"
+        if level:
+            return f"{level}: {record.getMessage()}"
         return super().format(record)
 
 

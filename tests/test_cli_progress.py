@@ -108,3 +108,21 @@ def test_stages_are_indented_on_a_terminal_and_labelled_in_a_log():
     stage_printer("diagnose", quiet=True, stream=log)("never")
     assert screen.getvalue() == "  round 1\n"
     assert log.getvalue() == "progress: diagnose: round 1, 0 s\n"
+
+
+def test_vsensor_dataset_piped_counts_its_files(capsys):
+    """``python -m training.vsensor dataset`` (the test files' cached replays, built once for the
+    run by tests/vsensor_data.py): a line per file on stderr, the per-file results on stdout."""
+    from tests import vsensor_data as vd
+    from training.vsensor.cli import main
+
+    paths = [str(p) for p in vd.train_files()]
+    sets = [a for part, opts in vd.TINY.items() for k, v in opts.items()
+            for a in ("--set", f"{part}.{k}={v}")]
+    assert main(["dataset", "--data", *paths, "--greenhouse", vd.GREENHOUSE, "--model", "almeria",
+                 "--cache", str(vd.workdir() / "cache"), *sets]) == 0
+    out, err = capsys.readouterr()
+    found = _progress(err)
+    assert [(m["pct"], m["done"]) for m in found if m["label"] == "dataset"] == [("50", "1"), ("100", "2")]
+    assert err.splitlines()[-1].startswith("progress: dataset done, ")
+    assert "progress" not in out and len(out.splitlines()) == 2

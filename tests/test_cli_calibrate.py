@@ -113,13 +113,15 @@ def _run_with_stderr(stderr_is_terminal: bool) -> tuple[int, str, str]:
     return proc.wait(timeout=60), out, screen.decode(errors="replace")
 
 
-def test_progress_bar_on_a_terminal_and_none_when_piped():
+def test_progress_bar_on_a_terminal_and_plain_lines_when_piped():
     code, out, screen = _run_with_stderr(True)
     assert code == 0 and json.loads(out)["algorithm"] == "rsba"
     assert f"/{BAR_ITERATIONS}" in screen and "MSE" in screen, screen[-500:]  # the bar was drawn
+    assert "progress: " not in screen  # the bar, not the log's lines
     code, out, err = _run_with_stderr(False)
     assert code == 0 and json.loads(out)["algorithm"] == "rsba"
-    assert f"/{BAR_ITERATIONS}" not in err and "\x1b[" not in err  # no bar, no escape codes in a pipe
+    # a pipe: the log's lines (tests/test_cli_progress.py), no escape codes
+    assert f"100 % ({BAR_ITERATIONS}/{BAR_ITERATIONS})" in err and "\x1b[" not in err
 
 
 @pytest.mark.parametrize("rows", [1, 3])
@@ -128,9 +130,9 @@ def test_too_short_data_is_one_clear_line_not_a_traceback(capsys, tmp_path, comm
     t = np.datetime64("2020-01-01T00:00:00", "s") + np.arange(rows) * np.timedelta64(60, "s")
     cols = {c: np.full(rows, 10.0) for c in ("t_in", "rh_in", "t_out", "rh_out", "i_glob", "wind")}
     path = write_kit_csv(tmp_path / "short.csv", t, cols)  # all kit columns: no note on stderr
-    code = main([command, "--data", str(path), "--greenhouse", "biskra-prototype",
+    code = main([command, "--data", str(path), "--greenhouse", "biskra-prototype", "-q",
                  "--model", "prototype", "--iterations" if command == "calibrate" else "--seed", "1"])
-    err = capsys.readouterr().err
+    err = capsys.readouterr().err  # -q: the progress lines of a pipe left out
     assert (code, err.count("\n")) == ((0, 0) if rows == 3 and command != "diagnose" else (2, 1)), err
     assert code == 0 or "short.csv" in err
 

@@ -192,3 +192,45 @@ def test_the_cloud_store_given_to_a_gateway_store_reader_says_what_reads_it(caps
         "missing tables devices, meta, minute, samples) (a cloud store, which 'python -m gateway "
         "subscribe --db ... --export DIR' reads)")
     assert db.read_bytes() == before
+
+
+@pytest.mark.parametrize("args", [
+    ["calibrate", "--iterations", "1", "--out", "-"],
+    ["replay", "--out", "-"],
+    ["replay", "--plot", "-"],
+    ["diagnose", "--report", "-"],
+    ["vsensor", "--out", "-"],
+    ["certs", "--out", "-", "--client", "c"],
+    ["subscribe", "--export", "-", "--connect", "tcp/127.0.0.1:1"],
+])
+def test_dash_is_not_stdout_and_is_refused_naming_the_option(capsys, tmp_path, monkeypatch, args):
+    """``--out -`` made a file named '-' (after the whole run): these outputs are files or
+    folders beside the report stdout carries, so '-' is one line naming the option, before the
+    work. (export --out - writes its CSV on stdout: tests/test_export.py.)"""
+    monkeypatch.chdir(tmp_path)  # where a file named '-' would have appeared
+    data = kit_csv(tmp_path)
+    option = args[args.index("-") - 1]
+    command = [*args, "--data", str(data), *PROTO] if args[0] not in ("certs", "subscribe") else args
+    if args[0] == "vsensor":
+        command = [*args, "--data", str(data), "--greenhouse", "biskra-prototype",
+                   "--model-kind", "prototype"]
+    assert main(command) == 2
+    assert one_error_line(capsys).startswith(f"error: {option} -: this output is not written to stdout")
+    assert not (tmp_path / "-").exists()
+
+
+def test_training_outputs_refuse_dash_naming_the_option(capsys, tmp_path, monkeypatch):
+    from training.__main__ import main as training_main
+    from training.vsensor.cli import main as vsensor_main
+
+    monkeypatch.chdir(tmp_path)
+    assert training_main(["simulate", "--out", "-", "--days", "0.01"]) == 2
+    assert one_error_line(capsys).startswith("error: --out -: the simulator writes the kit CSV")
+    data = kit_csv(tmp_path)
+    assert vsensor_main(["train", "--data", str(data), "--greenhouse", "biskra-prototype",
+                         "--model", "prototype", "--out", "-"]) == 2
+    assert one_error_line(capsys).startswith("error: --out -: this output is not written to stdout")
+    with pytest.raises(SystemExit):
+        training_main(["demo", "--out", "-"])
+    assert "- is not written to stdout" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["k.csv"]

@@ -5,6 +5,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -111,6 +113,27 @@ def test_the_csv_readers_notices_are_notes_too(capsys, tmp_path):
     assert [n["code"] for n in notes] == ["csv_reader", "csv_reader"]
     assert "ignoring unknown column(s) co2_ppm" in notes[0]["message"]
     assert all(f"note: {n['message']}" not in err for n in notes)  # the reader logs them itself
+
+
+def test_the_csv_readers_notices_read_as_notes_on_a_piped_stderr(tmp_path):
+    """The real command, stderr on a pipe: the reader's notices (logged by gateway/kitcsv.py)
+    are ``note: …`` lines as the other notes, once each, not ``WARNING gateway.kitcsv: …``;
+    and python -m training.vsensor says them the same way."""
+    data = _kit(tmp_path / "extra.csv", 0.5)
+    lines = data.read_text().splitlines()
+    data.write_text("\n".join([lines[0] + ",co2_ppm"] + [row + ",400" for row in lines[1:]]) + "\n")
+    r = subprocess.run([sys.executable, "-m", "gateway", "calibrate", "--data", str(data),
+                        "--greenhouse", str(_greenhouse(tmp_path)), "--model", "prototype",
+                        "--step", "300", *FAST["calibrate"], "-q"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    said = f"note: {data}: ignoring unknown column(s) co2_ppm"
+    assert r.stderr.splitlines().count(said) == 1 and "WARNING" not in r.stderr, r.stderr
+    assert f"{said} [csv_reader]" in r.stdout.splitlines()  # the report's closing block
+    r = subprocess.run([sys.executable, "-m", "training.vsensor", "reference", "--data", str(data),
+                        "--greenhouse", "biskra-prototype", "--model", "prototype"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and r.stderr.splitlines()[0] == said, r.stderr  # then: no vents
 
 
 @pytest.mark.parametrize("command", ["calibrate", "replay"])

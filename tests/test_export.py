@@ -150,3 +150,19 @@ def test_export_of_a_partly_aggregated_store_equals_the_fully_aggregated_one(tmp
         store.close()
     assert main(["export", "--db", str(db), "--out", str(tmp_path / "full.csv")]) == 0
     assert (tmp_path / "part.csv").read_bytes() == (tmp_path / "full.csv").read_bytes()
+
+
+def test_export_out_dash_writes_the_csv_on_stdout_and_says_what_on_stderr(tmp_path, kit, capsys):
+    """``--out -``: the kit CSV on stdout (a pipe into another tool), what was written on
+    stderr; with --json the two would share stdout, so that is refused naming the options."""
+    time, cols = kit
+    db = tmp_path / "g.db"
+    store_records(db, time, cols)
+    assert main(["export", "--db", str(db), "--out", "-"]) == 0
+    out, err = capsys.readouterr()
+    (tmp_path / "piped.csv").write_text(out)
+    assert len(read_kit_csv(tmp_path / "piped.csv")) == len(time)
+    assert err.startswith(f"wrote the CSV on stdout: device 7, {len(time)} minutes")
+    assert not (tmp_path / "-").exists() and not Path("-").exists()
+    assert main(["export", "--db", str(db), "--out", "-", "--json"]) == 2
+    assert capsys.readouterr().err.startswith("error: --out - with --json: ")

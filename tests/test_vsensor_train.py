@@ -163,10 +163,18 @@ def test_tune_prints_the_pca_narx_train_would_fit(tmp_path, capsys):
             *[a for part, opts in vd.TINY.items() for k, v in opts.items()
               for a in ("--set", f"{part}.{k}={v}")],  # the budget of the tiny sensors' replays
             "--hidden", "8,8", "--epochs", "8", "--rounds", "1"]
+    capsys.readouterr()
     assert main(["tune", *args, "--subset", "train-grower", "--log", str(log)]) == 0
+    out, err = capsys.readouterr()  # stdout the summary alone, the progress on stderr
+    assert json.loads(out)["label"] == "" and err.splitlines()[-1].startswith("progress: tune done")
     got = json.loads(log.read_text())
     model = tmp_path / "m.onnx"
     assert main(["train", *args, "--out", str(model)]) == 0
+    out, err = capsys.readouterr()  # stderr not a terminal: the log's progress lines
+    # the total is an upper bound (early stopping, cached replays): the done line ends the log
+    assert "progress: train 10 %" in err, err
+    assert err.splitlines()[-1].startswith("progress: train done, "), err
+    assert "progress" not in out and "\x1b" not in err and "\r" not in err
     meta = {p.key: p.value for p in onnx.load(str(model)).metadata_props}
     trained = json.loads(meta["metrics"])["validation_closed_loop"]["pca_narx"]
     assert got["mae"] == pytest.approx(trained["mae"], rel=1e-12)

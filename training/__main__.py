@@ -9,6 +9,8 @@ from __future__ import annotations
 import argparse
 import importlib
 
+from gateway.cli import setup_cli_logging
+
 COMMANDS = (
     "training.simulate.cli",
     "training.demo",
@@ -24,6 +26,7 @@ def main(argv: list[str] | None = None) -> int:
     for module in COMMANDS:
         importlib.import_module(module).add_parser(sub)
     args = parser.parse_args(argv)
+    setup_cli_logging(False)  # the CSV reader's notices as note: lines, as the gateway's
     if not hasattr(args, "func"):
         parser.print_help()
         return 2

@@ -69,6 +69,9 @@ def _days(text: str) -> float:
 def output_folder(text: str) -> str:
     """argparse type of an output folder (``--out``): a folder, or a path where one can be made
     (also ``training.demo_heater``'s)."""
+    if text == "-":  # made a folder named '-'
+        raise argparse.ArgumentTypeError("- is not written to stdout (a folder of outputs); give a "
+                                         "folder name")
     p = Path(text)
     for parent in (p, *p.parents):
         if parent.exists():

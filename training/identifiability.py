@@ -61,6 +61,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="where to write the dataset (default: the shipped "
                          "training/data/identifiability_prototype_2days.csv)")
     args = ap.parse_args(argv)
+    if str(args.out) == "-":  # made a file named '-'
+        ap.error("--out -: the dataset is not written to stdout; give its file name")
     if args.out.is_dir():  # was IsADirectoryError's traceback, after the dataset was built
         ap.error(f"--out {args.out}: is a folder; give the dataset's file name")
     print(write(args.out))

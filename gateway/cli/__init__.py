@@ -28,6 +28,10 @@ COMMANDS = {
 }
 
 
+QUIET_HELP = ("no progress on stderr (piped, the long commands write a 'progress:' line at each "
+              "tenth of the work and at least every 30 s; notes, warnings and errors still show)")
+
+
 class CliError(Exception):
     """An error to print as one clear line, exit status ``status`` (2)."""
 
@@ -51,6 +55,7 @@ def build_parser() -> argparse.ArgumentParser:
         "Zenoh; certificates and routers for a fleet.",
     )
     parser.add_argument("-v", "--verbose", action="store_true", help="log details to stderr")
+    parser.add_argument("-q", "--quiet", action="store_true", help=QUIET_HELP)
     parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}",
                         help="print the installed serra version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
@@ -67,6 +72,25 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _CliFormatter(logging.Formatter):
+    """A notice meant for the person at the command line (a record logged with
+    ``extra=NOTICE`` or ``WARNING``, gateway/kitcsv.py) reads as the commands' other notes,
+    ``note: …`` or ``warning: …``; any other record stays a log line naming its logger."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        level = getattr(record, "notice", None)  # "note" or "warning"
+        if level:
+            return f"{level}: {record.getMessage()}"
+        return super().format(record)
+
+
+def setup_cli_logging(verbose: bool) -> None:
+    """stderr logging of a command-line tool (gateway's and training's): INFO with ``-v``."""
+    handler = logging.StreamHandler()
+    handler.setFormatter(_CliFormatter("%(levelname)s %(name)s: %(message)s"))
+    logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, handlers=[handler])
+
+
 def _version() -> str:
     """The installed package's version (what a bug report needs), or why there is none."""
     from importlib.metadata import PackageNotFoundError, version
@@ -78,11 +102,15 @@ def _version() -> str:
 
 
 def _verbose_anywhere(parser: argparse.ArgumentParser) -> None:
-    """``-v`` after the command too (``calibrate ... -v``, where people add it), not only before
-    it; SUPPRESS leaves the value given before the command when it is not repeated after."""
+    """``-v`` and ``-q`` after the command too (``calibrate ... -v``, where people add it), not
+    only before it; SUPPRESS leaves the value given before the command when it is not repeated
+    after."""
     if "-v" not in parser._option_string_actions:
         parser.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS,
                             help="log details to stderr")
+    if "-q" not in parser._option_string_actions:
+        parser.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
+                            help=QUIET_HELP)
     for action in parser._actions:
         if isinstance(action, argparse._SubParsersAction):
             for child in action.choices.values():
@@ -98,10 +126,7 @@ def main(argv: list[str] | None = None) -> int:
         return ingest_main(argv[1 + verbose:] + ["-v"] * verbose, prog="python -m gateway ingest")
     parser = build_parser()
     args = parser.parse_args(argv)
-    logging.basicConfig(
-        level=logging.INFO if args.verbose else logging.WARNING,
-        format="%(levelname)s %(name)s: %(message)s",
-    )
+    setup_cli_logging(args.verbose)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2

@@ -16,11 +16,11 @@ from gateway.cli.common import (
     load_run,
     parse_span,
     positive_int,
-    progress_bar,
     write_params_file,
     writing,
 )
 from gateway.cli.notes import as_json, text_block
+from gateway.cli.progress import progress_bar
 from gateway.estimate.calibrate import calibrate, evaluate
 from gateway.estimate.objective import MODES
 from gateway.estimate.swarm import ALGORITHMS, make_algorithm
@@ -61,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     span = parse_span(args.calibrate_on, series) or (0, len(series))
     algorithm = make_algorithm(args.algorithm, model.name, args.iterations, args.population)
     radiation = 1 if model.radiation is not None and "i_in" in series else 0  # one closed-form fit
-    with progress_bar(f"{args.algorithm} {model.name}", algorithm.iterations + radiation, True) as bar:
+    with progress_bar(f"{args.algorithm} {model.name}", algorithm.iterations + radiation, args.quiet) as bar:
         try:
             result = calibrate(
                 model, series, gh, algorithm, span=span, mode=args.cost, seed=args.seed,

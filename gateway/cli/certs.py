@@ -49,8 +49,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from gateway.cli.common import no_stdout
     from gateway.net.certs import CertError, check_name, issue, load_ca, make_ca, sign_csr
 
+    no_stdout(args.out, "--out", "folder")
     out = Path(args.out)
     if not (args.router or args.gateway or args.client or args.sign) and (out / "ca.pem").exists():
         raise CliError("nothing to do: name at least one --router, --gateway, --client or --sign")

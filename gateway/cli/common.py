@@ -235,6 +235,15 @@ def read_params_file(path: str, model: Model, gh: Greenhouse) -> np.ndarray:
         raise CliError(str(exc)) from None
 
 
+def no_stdout(path: str | Path, option: str, kind: str = "file") -> None:
+    """Refuse ``-`` for an output that cannot go to stdout (a ``kind`` of files, a binary, or
+    beside the report stdout carries): it made a file named ``-``. ``export --out -`` is the
+    one output written on stdout."""
+    if str(path) == "-":
+        raise CliError(f"{option} -: this output is not written to stdout (stdout carries the "
+                       f"command's report); give a {kind} name")
+
+
 def check_output(path: str | Path | None, option: str, folder: bool = False,
                  inputs: dict[str, str | Path | None] | None = None) -> None:
     """Refuse an output the command could not write, before any computation (so that an hour
@@ -245,6 +254,7 @@ def check_output(path: str | Path | None, option: str, folder: bool = False,
     replace the data it was computed from."""
     if not path:
         return
+    no_stdout(path, option, "folder" if folder else "file")
     p = Path(path)
     for name, source in (inputs or {}).items():
         if source and Path(source).is_file() and p.exists() and p.samefile(source):
@@ -315,30 +325,3 @@ def _clean(obj: Any) -> Any:
     if isinstance(obj, np.integer):
         return int(obj)
     return obj
-
-
-@contextmanager
-def progress_bar(label: str, total: int, enabled: bool) -> Iterator[Any]:
-    """A rich progress bar on stderr when it is a terminal; a no-op callback otherwise."""
-    if not (enabled and sys.stderr.isatty()):
-        yield lambda *a, **k: None
-        return
-    from rich.console import Console
-    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
-
-    with Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        TextColumn("{task.completed}/{task.total}"),
-        TextColumn("{task.fields[info]}"),
-        TimeRemainingColumn(),
-        console=Console(stderr=True),
-        transient=True,
-    ) as bar:
-        task = bar.add_task(label, total=total, info="")
-
-        def update(advance: int = 1, info: str = "", description: str | None = None) -> None:
-            # description None: rich keeps the current one
-            bar.update(task, advance=advance, info=info, description=description or None)
-
-        yield update

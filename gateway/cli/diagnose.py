@@ -16,6 +16,7 @@ from gateway.cli.common import (
     writing,
 )
 from gateway.cli.notes import Note, as_json, echo, short_heldout_note, text_block
+from gateway.cli.progress import stage_printer
 
 if TYPE_CHECKING:
     from gateway.diagnose.heated import HeatedFloor
@@ -48,11 +49,7 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(f"--split {args.split}: must be between 0.1 and 0.9")
     check_output(args.report, "--report", folder=True)
     inputs = load_run(args)
-    tty = sys.stderr.isatty()
-
-    def say(msg: str) -> None:
-        if tty:
-            print(f"  {msg}", file=sys.stderr, flush=True)
+    say = stage_printer("diagnose", args.quiet)
 
     try:
         split = split_index(inputs.series, args.split)
@@ -85,7 +82,8 @@ def run(args: argparse.Namespace) -> int:
 
         with writing("--report", args.report):
             path = write_report(d, args.report, args.data, as_json(notes), hint)
-        say(f"report written to {path}")
+        if not args.quiet:  # where the report is, said piped too (it was a terminal's stage line)
+            print(f"report written to {path}", file=sys.stderr)
     return 0
 
 

@@ -23,7 +23,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--db", required=True, type=Path, metavar="serra.db",
                    help="the ingest service's SQLite store")
-    p.add_argument("--out", required=True, type=Path, metavar="FILE.csv", help="kit CSV to write")
+    p.add_argument("--out", required=True, type=Path, metavar="FILE.csv",
+                   help="kit CSV to write; - writes it on stdout (what it wrote then goes to stderr)")
     p.add_argument("--device", type=int, metavar="ID",
                    help="device id (default: the only one in the store)")
     p.add_argument("--from", dest="start", metavar="ISO",
@@ -55,6 +56,10 @@ def run(args: argparse.Namespace) -> int:
     start, end = _when(args.start, "--from"), _when(args.end, "--to")
     if start is not None and end is not None and end <= start:
         raise CliError(f"--to {args.end}: not after --from {args.start}")
+    to_stdout = str(args.out) == "-"
+    if to_stdout and args.json:
+        raise CliError("--out - with --json: the CSV and the JSON would share stdout; give --out "
+                       "a file name, or leave out --json")
     if args.out.is_dir():
         raise CliError(f"--out {args.out}: is a folder; give the kit CSV's file name")
     if args.out.exists() and args.db.exists() and args.out.samefile(args.db):
@@ -64,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     except StoreError as exc:
         raise CliError(str(exc)) from None
     try:
-        done = export_kit_csv(conn, args.out, args.device, start, end)
+        done = export_kit_csv(conn, sys.stdout if to_stdout else args.out, args.device, start, end)
     except ExportError as exc:
         raise CliError(f"{args.db}: {exc}") from None
     except sqlite3.Error as exc:
@@ -78,7 +83,8 @@ def run(args: argparse.Namespace) -> int:
                    "end": done.end, "dropped": done.dropped, "aggregated": done.aggregated,
                    "out": str(args.out)})
         return 0
-    print(f"wrote {args.out}: device {done.device_id}, {done.rows} minutes, {done.start} → {done.end}")
+    print(f"wrote {'the CSV on stdout' if to_stdout else args.out}: device {done.device_id}, "
+          f"{done.rows} minutes, {done.start} → {done.end}", file=sys.stderr if to_stdout else sys.stdout)
     print("  each row is the mean over its minute: calibrate reads such rows with --sampling mean "
           "(docs/data-format.md)", file=sys.stderr)
     for name, reasons in done.dropped.items():

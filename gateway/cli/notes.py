@@ -21,6 +21,7 @@ import numpy as np
 
 from gateway.cli.column_notes import column_notes
 from gateway.greenhouse import Greenhouse
+from gateway.kitcsv import LOOKS_FAHRENHEIT
 from gateway.model.model import Model
 from gateway.model.params_file import OutOfBox
 from gateway.model.sky import DEFAULT_CLOUD
@@ -69,7 +70,8 @@ def input_notes(series: Series, gh: Greenhouse, model: Model, data: str, greenho
     reads besides: vsensor's inputs), no site, daylight in the site's night, optional columns
     the run reads but the data lacks (column_notes.py). ``command``: ``calibrate``,
     ``replay``, ``diagnose`` or ``vsensor`` (what reads which column)."""
-    notes = [Note("csv_reader", text, echo=False) for text in series.notices]
+    notes = [Note("csv_reader", text, "warning" if LOOKS_FAHRENHEIT in text else "note",
+                  echo=False) for text in series.notices]
     extra = [c for c in needs if c not in model.requires]
     gap = gap_note(series, [*model.requires, *extra],
                    "the model or the sensor" if extra else "the model")

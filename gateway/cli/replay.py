@@ -13,11 +13,11 @@ from gateway.cli.common import (
     check_output,
     dump_json,
     load_run,
-    progress_bar,
     read_params_file,
     writing,
 )
 from gateway.cli.notes import Note, as_json, echo, params_notes, text_block
+from gateway.cli.progress import progress_bar
 from gateway.estimate.online import online_settings
 from gateway.estimate.outlook import OUTLOOKS, make_outlook
 from gateway.estimate.replay import HORIZONS, replay, report, steps_of, write_predictions
@@ -122,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
         except ValueError as exc:
             hint = "; or give --site LAT,LON" if gh.site is None else ""
             raise CliError(f"{exc}{hint}") from None
-    with progress_bar(f"replay {model.name}", len(series), True) as bar:
+    with progress_bar(f"replay {model.name}", len(series), args.quiet) as bar:
         result = replay(model, series, gh, theta0, settings, seed=args.seed,
                         progress=lambda done: bar(advance=100), outlook=outlook)
     rep = report(result, warmup)

@@ -13,11 +13,11 @@ from gateway.cli.common import (
     add_site_argument,
     check_output,
     dump_json,
-    progress_bar,
     with_site,
     writing,
 )
 from gateway.cli.notes import as_json, echo, input_notes, text_block, vsensor_notes
+from gateway.cli.progress import progress_bar
 from gateway.greenhouse import GreenhouseError, list_presets, load_greenhouse
 from gateway.kitcsv import KitCsvError
 from gateway.model import MODEL_NAMES, build_model
@@ -94,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
         notes = input_notes(series, gh, model, args.data, args.greenhouse, "vsensor", list(reads))
         echo(notes)
         replays = replays_needed(sensor, series, gh, args.model_kind)
-        with progress_bar("vsensor", replays * len(series), True) as bar:
+        with progress_bar("vsensor", replays * len(series), args.quiet) as bar:
             result = run_series(path, series, gh, args.model_kind, seed=args.seed,
                                 baselines=not args.no_baselines, clamp_inputs=args.clamp_inputs,
                                 progress=lambda done: bar(advance=100), sensor=sensor)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import sqlite3
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
 
@@ -58,13 +59,14 @@ def pick_device(conn: sqlite3.Connection, device_id: int | None) -> int:
 
 def export_kit_csv(
     conn: sqlite3.Connection,
-    out: str | Path,
+    out: str | Path | TextIO,
     device_id: int | None = None,
     start: float | None = None,
     end: float | None = None,
     catch_up: bool = True,
 ) -> Export:
-    """Write the minute aggregates of a device in [start, end) [unix s] as a kit CSV at ``out``.
+    """Write the minute aggregates of a device in [start, end) [unix s] as a kit CSV at ``out`` (a path
+    or an open text stream).
 
     Reads only (``conn`` may come from `open_readonly`); with ``catch_up`` the samples stored
     since the last aggregation pass are aggregated in memory and take their minutes' place."""

@@ -80,6 +80,10 @@ def run(args: argparse.Namespace) -> int:
     """Run the ``simulate`` subcommand."""
     from training.simulate.run import simulate
 
+    if args.out == "-":  # three files (CSV, truth JSON and npz) named after it, not one text
+        print("error: --out -: the simulator writes the kit CSV and its truth files beside it, not "
+              "to stdout; give the kit CSV's file name", file=sys.stderr)
+        return 2
     if Path(args.out).is_dir():
         print(f"error: --out {args.out}: is a folder; give the kit CSV's file name", file=sys.stderr)
         return 2

@@ -21,7 +21,7 @@ import sys
 import time
 from pathlib import Path
 
-from gateway.cli import CliError
+from gateway.cli import QUIET_HELP, CliError, setup_cli_logging
 from gateway.cli.common import seed_int
 from gateway.greenhouse import GreenhouseError, list_presets, load_greenhouse
 from gateway.kitcsv import KitCsvError
@@ -76,6 +76,7 @@ def build_parser() -> argparse.ArgumentParser:
                        "the products in --cache: what train, tune, errors and score do first "
                        "(one process per file can run in parallel).")
     _data_args(d)
+    d.add_argument("-q", "--quiet", action="store_true", help=QUIET_HELP)
     d.set_defaults(func=_dataset)
     from training.vsensor.train_cli import add_train_parser
 
@@ -208,14 +209,20 @@ def _corpus(args: argparse.Namespace) -> int:
 
 
 def _dataset(args: argparse.Namespace) -> int:
+    from gateway.cli.progress import progress_bar
     from training.vsensor.dataset import build_segment
 
     gh = load_greenhouse(args.greenhouse)
-    for path in args.data:
-        t0 = time.perf_counter()
-        seg = build_segment(path, gh, args.model, args.cache, overrides(args.set), args.seed,
-                            target_kind=args.target_kind)
-        print(f"{path}: {len(seg.time)} rows in {time.perf_counter() - t0:.0f} s", flush=True)
+    # counted in files; the replays' rows as info (piped: a line at least every 30 s of a file)
+    with progress_bar("dataset", len(args.data), args.quiet) as bar:
+        for path in args.data:
+            t0 = time.perf_counter()
+            bar(advance=0, description=Path(path).name)
+            seg = build_segment(path, gh, args.model, args.cache, overrides(args.set), args.seed,
+                                progress=lambda done: bar(advance=0, info=f"row {done}"),
+                                target_kind=args.target_kind)
+            bar(advance=1)
+            print(f"{path}: {len(seg.time)} rows in {time.perf_counter() - t0:.0f} s", flush=True)
     return 0
 
 
@@ -250,6 +257,7 @@ def _errors(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    setup_cli_logging(False)  # the CSV reader's notices as note: lines, as the gateway's
     if not getattr(args, "func", None):
         parser.print_help()
         return 2

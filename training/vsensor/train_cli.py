@@ -35,6 +35,9 @@ def add_train_parser(sub: argparse._SubParsersAction, data_args) -> None:
 
 def add_fit_args(p: argparse.ArgumentParser) -> None:
     """The fit's settings, shared by ``train`` and ``tune`` (same defaults: same figure)."""
+    from gateway.cli import QUIET_HELP
+
+    p.add_argument("-q", "--quiet", action="store_true", help=QUIET_HELP)
     p.add_argument("--hidden", default="30,50,20", metavar="N,N,N",
                    help="hidden layer sizes (default 30,50,20, the thesis's)")
     p.add_argument("--epochs", type=positive_int, default=100, metavar="N",
@@ -84,8 +87,9 @@ def add_fit_args(p: argparse.ArgumentParser) -> None:
 def _check_outputs(out: str, report: str | None) -> None:
     """Refuse a sensor path that is a folder and a report folder that is a file before the
     training: both were refused after it, with the models already written."""
-    from gateway.cli.common import check_output
+    from gateway.cli.common import check_output, no_stdout
 
+    no_stdout(out, "--out")  # an ONNX graph, its card and report: files, not stdout
     if Path(out).is_dir():
         raise ValueError(f"--out {out}: is a folder; give the sensor's file name (MODEL.onnx)")
     check_output(report, "--report", folder=True)
@@ -94,7 +98,7 @@ def _check_outputs(out: str, report: str | None) -> None:
 def run(args: argparse.Namespace) -> int:
     from threadpoolctl import threadpool_limits
 
-    from gateway.cli.common import progress_bar
+    from gateway.cli.progress import progress_bar
     from gateway.greenhouse import load_greenhouse
     from training.vsensor.cli import overrides
     from training.vsensor.train import train
@@ -107,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--hidden {args.hidden!r}: expected sizes like 30,50,20") from None
     total = len(args.data) + len(args.test) + 2 * args.ensemble * (args.epochs + 30 * args.rounds)
     t0 = time.perf_counter()
-    with progress_bar("train", total, True) as bar, threadpool_limits(1):
+    with progress_bar("train", total, args.quiet) as bar, threadpool_limits(1):
         result = train(args.data, gh, args.model, args.out, args.cache, overrides(args.set) or None,
                        args.seed, hidden, args.epochs, args.rounds, progress=bar,
                        report_dir=args.report, round_lr=args.round_lr,

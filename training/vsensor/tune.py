@@ -66,6 +66,7 @@ def groups(by_file: dict[str, dict], subset: list[str]) -> dict[str, float | Non
 def run(args: argparse.Namespace) -> int:
     from threadpoolctl import threadpool_limits
 
+    from gateway.cli.progress import progress_bar
     from gateway.greenhouse import load_greenhouse
     from training.vsensor import fit
     from training.vsensor.cli import overrides
@@ -80,13 +81,15 @@ def run(args: argparse.Namespace) -> int:
     if args.holdout_groups is not None:
         return run_groups(args, gh, hidden, seeds)
     t0 = time.perf_counter()
-    with threadpool_limits(1):
+    # as train's bar: the files' replays, then one network's epochs and rounds (an upper bound)
+    total = len(args.data) + len(seeds) * (args.epochs + min(30, args.epochs) * args.rounds)
+    with threadpool_limits(1), progress_bar("tune", total, args.quiet) as bar:
         prep = prepare(args.data, gh, args.model, args.cache, overrides(args.set) or None,
-                       args.seed, args.pca_variance, lambda **k: None,
+                       args.seed, args.pca_variance, bar,
                        tuple(args.extra_features), args.target_kind)
         net, log = fit.fit_ensemble("pca_narx", prep.split, prep.mean, prep.std, prep.loadings,
                                     seeds, hidden, args.epochs, args.rounds, min(30, args.epochs),
-                                    round_lr=args.round_lr,
+                                    progress=bar, round_lr=args.round_lr,
                                     opts=fit.row_options(args.feedback_noise, args.high_flow_weight,
                                                          args.target, gh),
                                     feedback=args.feedback)

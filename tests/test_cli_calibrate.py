@@ -69,7 +69,7 @@ def test_ingest_subcommand_hands_its_arguments_to_the_service(capsys, tmp_path):
     keys.write_text("7 " + "00" * 32 + "\n")
     keys.chmod(0o644)  # world-readable: the service must refuse it
     code = main(["ingest", "--db", str(tmp_path / "s.db"), "--keys", str(keys)])
-    assert code == 2
+    assert code == 78  # EX_CONFIG: a config error, which the shipped unit does not restart on
     assert "keys.txt" in capsys.readouterr().err
 
 

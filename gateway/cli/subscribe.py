@@ -176,10 +176,19 @@ def _subscribe(args: argparse.Namespace, s, store) -> None:
                 print(f"subscribe: {_stats(sub.stats)}", file=sys.stderr, flush=True)
     finally:
         sub.stop()
-        print(f"subscribe stopped: {_stats(sub.stats)}; {store.count()} messages in the store",
-              file=sys.stderr, flush=True)
+        print(f"subscribe stopped: {_stats(sub.stats)}; {_stored(store)}", file=sys.stderr, flush=True)
         if sub.error is not None:
             raise CliError(str(sub.error))
+
+
+def _stored(store) -> str:
+    """How many messages the store holds, or why it cannot say (it may be down: exiting then
+    must still say what was not stored, not end in a traceback)."""
+    try:
+        return f"{store.count()} messages in the store"
+    except Exception as e:
+        text = str(e).splitlines()[0] if str(e) else type(e).__name__
+        return f"the store cannot be read ({text})"
 
 
 def _stats(stats) -> str:

@@ -136,6 +136,7 @@ class PgStore:
     def __init__(self, conn: psycopg.Connection, dsn: str, schema: str = "serra") -> None:
         self.conn, self.dsn, self.schema = conn, dsn, schema
         self.rejected: list[Rejected] = []  # messages refused for bad payloads (logged too)
+        self.reconnecting = False  # the connection was lost and re-opening it has failed so far
         self._insert = sql.SQL(INSERT).format(schema=sql.Identifier(schema))
 
     @classmethod
@@ -189,8 +190,11 @@ class PgStore:
         except psycopg.OperationalError as exc:
             if not self.conn.closed and not self.conn.broken:
                 raise CloudStoreError(f"PostgreSQL ({redact(self.dsn)}): {_first_line(exc)}") from None
-            log.warning("PostgreSQL connection lost (%s); reconnecting", _first_line(exc))
+            if not self.reconnecting:  # once per outage, not once per retried batch
+                log.warning("PostgreSQL connection lost (%s); reconnecting", _first_line(exc))
+            self.reconnecting = True
             self.conn = self._open(self.dsn, 10.0)
+            self.reconnecting = False
             try:
                 return self._insert_all(batch)
             except psycopg.Error as again:

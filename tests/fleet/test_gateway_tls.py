@@ -142,3 +142,40 @@ def test_a_tls_client_gateway_waits_for_its_router_then_reaches_the_postgres_sto
     assert "session open after" in log
     assert "Traceback" not in log
     assert "messages in the store" in sub.text()
+
+
+def test_a_gateway_the_routers_access_table_does_not_list_says_so_and_holds(
+        pki: Pki, tmp_path: Path) -> None:
+    """Farm C's certificate is from the fleet CA, but [access].gateways lists farm-a and farm-b
+    only: its TLS link opens, the cloud store subscribes to serra/farm-c/**, and still nothing
+    flows (the router never tells the gateway of that subscription). The gateway's log says
+    so once, naming the zid that the router's refusal line names."""
+    if "farm-c" not in pki.issued:
+        pki.add("gateway", "farm-c")
+    clock = KitClock(SCALE, EPOCH)
+    cfg = write_config(tmp_path, anchor=clock.anchor, scale=SCALE, farm="farm-c", status_every_s=600)
+    db = tmp_path / "gw.db"
+    kit = PyKit(7, sim_trace(0.5), clock.now)
+    with ExitStack() as stack:
+        router = stack.enter_context(RouterProc(write_router_toml(
+            tmp_path / "cloud.toml", "cloud", pki, access=ACCESS)))
+        stack.enter_context(LineProc(subscriber_argv(
+            pki, "store", router.endpoints, "--farm", "farm-c", "--db", str(tmp_path / "cloud.db")),
+            "serra-subscribe ready", tmp_path / "subscribe.log"))
+        client_config(cfg, pki, "farm-c", router.endpoints[0])
+        gw = GatewayProcess(cfg)
+        stack.callback(kit.close)
+        stack.callback(gw.kill)
+        gw.start()
+        pump(kit, gw.udp, 3)
+        log = tmp_path / "gateway.log"
+        said = wait_until(lambda: next((x for x in log.read_text().splitlines()
+                                        if "nobody listens to the" in x), ""),
+                          what="the gateway saying nobody listens")
+        zid = zenoh_status(db)["zid"]
+        assert "linked to 1 router(s)" in said and "[access].gateways" in said and zid in said
+        wait_until(lambda: f"{zid} did not match any configured ACL subject" in router.log_text(),
+                   what="the router's refusal line naming the same zid")
+        assert gw.stop() == 0
+    assert all(r[3] is None for r in outbox(db))  # held, not lost
+    assert sum("nobody listens" in x for x in log.read_text().splitlines()) == 1  # said once

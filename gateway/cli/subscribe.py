@@ -27,6 +27,12 @@ Behind the routers' access control, subscribe per farm (--farm, or farms/access 
 a gateway is only told of subscriptions inside its own farm. Options given here override the
 file. In client mode the subscriber waits for a router (retried) and prints its ready line once
 subscribed. Keep a DSN's password out of the command line: use ~/.pgpass or PGPASSFILE.
+
+While the store refuses writes (PostgreSQL down) what arrives is held and retried; the counters
+line on stderr (every 10 s) shows received ahead of stored. Exit status 2: a bad option or file,
+the store unreachable at start (one line naming the DSN without its password), or stopped while
+the store still refused messages (how many were not stored; the next start's catch-up asks the
+gateways' history for them).
 """
 
 

@@ -16,7 +16,8 @@ The router is the Zenoh library itself in router mode. It listens on router.list
 every router in router.connect (retried for ever), requires certificates signed by tls.ca when
 tls.mutual is true, and applies [access] (default deny). A documented example ships as
 images/gateway/router.toml; docs/fleet.md has the topology and the certificate recipe.
-SIGTERM or Ctrl-C closes the session and exits 0. RUST_LOG, when set, overrides router.log.
+SIGTERM or Ctrl-C closes the session and exits 0. Zenoh's log goes to stdout (in colour on a
+terminal only), Serra's own lines to stderr. RUST_LOG, when set, overrides router.log.
 """
 
 
@@ -48,8 +49,13 @@ def run(args: argparse.Namespace) -> int:
             print(f"warning: {warning}")
         print(json.dumps(entries, indent=2))
         return 0
+    import os
+    import sys
+
     import zenoh
 
+    if not sys.stdout.isatty():  # a file, a pipe or the journal: Zenoh's log without colour codes
+        os.environ.setdefault("NO_COLOR", "1")
     zenoh.init_log_from_env_or(settings.log_filter())
     logging.getLogger("serra.router").setLevel(logging.INFO)
     stop = threading.Event()

@@ -27,6 +27,12 @@ Behind the routers' access control, subscribe per farm (--farm, or farms/access 
 a gateway is only told of subscriptions inside its own farm. Options given here override the
 file. In client mode the subscriber waits for a router (retried) and prints its ready line once
 subscribed. Keep a DSN's password out of the command line: use ~/.pgpass or PGPASSFILE.
+
+While the store refuses writes (PostgreSQL down) what arrives is held and retried; the counters
+line on stderr (every 10 s) shows received ahead of stored. Exit status 2: a bad option or file,
+the store unreachable at start (one line naming the DSN without its password), or stopped while
+the store still refused messages (how many were not stored; the next start's catch-up asks the
+gateways' history for them).
 """
 
 
@@ -176,10 +182,19 @@ def _subscribe(args: argparse.Namespace, s, store) -> None:
                 print(f"subscribe: {_stats(sub.stats)}", file=sys.stderr, flush=True)
     finally:
         sub.stop()
-        print(f"subscribe stopped: {_stats(sub.stats)}; {store.count()} messages in the store",
-              file=sys.stderr, flush=True)
+        print(f"subscribe stopped: {_stats(sub.stats)}; {_stored(store)}", file=sys.stderr, flush=True)
         if sub.error is not None:
             raise CliError(str(sub.error))
+
+
+def _stored(store) -> str:
+    """How many messages the store holds, or why it cannot say (it may be down: exiting then
+    must still say what was not stored, not end in a traceback)."""
+    try:
+        return f"{store.count()} messages in the store"
+    except Exception as e:
+        text = str(e).splitlines()[0] if str(e) else type(e).__name__
+        return f"the store cannot be read ({text})"
 
 
 def _stats(stats) -> str:

@@ -1,7 +1,8 @@
 """History queries answered by the cloud store (``subscribe --history``): the same selector as a
-gateway's (``serra/<farm>/<greenhouse>/history/<kind>?from=ISO;to=ISO;limit=N``, docs/cloud.md),
-the same replies (stored payloads, oldest first, on ``serra/<farm>/<greenhouse>/history/<kind>``),
-from every farm the store holds rather than one gateway's last ``history_days``.
+gateway's (``serra/<farm>/<greenhouse>/history/<kind>?from=ISO;to=ISO;limit=N``, or ``last=N``:
+the newest N of each key; docs/cloud.md), the same replies (stored payloads, oldest first, on
+``serra/<farm>/<greenhouse>/history/<kind>``), from every farm the store holds rather than one
+gateway's last ``history_days``.
 
 One queryable per farm, ``serra/<farm>/*/history/**``: behind the routers' access control a
 store may declare a queryable only on the farms its certificate has ``store = true`` rights for
@@ -60,7 +61,7 @@ class CloudHistory:
             try:
                 with self.lock:
                     rows = self.store.history(farm, f.greenhouse, f.kind, start, end, rng.limit,
-                                              match=f.wants)
+                                              match=f.wants, last=rng.last)
             except Exception as e:  # the store failed: the asker gets one error reply
                 self.errors += 1
                 log.warning("history query %s failed: %s", query.key_expr, e)

@@ -36,11 +36,10 @@ except ImportError as exc:  # an optional dependency: the gateway appliance neve
     raise ImportError("the PostgreSQL cloud store needs psycopg 3 (the cloud extra): "
                       "pip install 'psycopg[binary]>=3.1'") from exc
 
-from gateway.cloud.store import Received, kind_clause  # noqa: E402
+from gateway.cloud.store import Received, check_history_limits, kind_clause  # noqa: E402
 
 log = logging.getLogger("serra.cloud.postgres")
 SCHEMA_VERSION = 1
-MAX_LIMIT = 100_000
 CHUNK = 10_000  # rows per INSERT statement (arrays of this length)
 _SCHEMA_NAME = re.compile(r"^[a-z_][a-z0-9_]{0,62}$")
 
@@ -136,6 +135,7 @@ class PgStore:
     def __init__(self, conn: psycopg.Connection, dsn: str, schema: str = "serra") -> None:
         self.conn, self.dsn, self.schema = conn, dsn, schema
         self.rejected: list[Rejected] = []  # messages refused for bad payloads (logged too)
+        self.reconnecting = False  # the connection was lost and re-opening it has failed so far
         self._insert = sql.SQL(INSERT).format(schema=sql.Identifier(schema))
 
     @classmethod
@@ -189,8 +189,11 @@ class PgStore:
         except psycopg.OperationalError as exc:
             if not self.conn.closed and not self.conn.broken:
                 raise CloudStoreError(f"PostgreSQL ({redact(self.dsn)}): {_first_line(exc)}") from None
-            log.warning("PostgreSQL connection lost (%s); reconnecting", _first_line(exc))
+            if not self.reconnecting:  # once per outage, not once per retried batch
+                log.warning("PostgreSQL connection lost (%s); reconnecting", _first_line(exc))
+            self.reconnecting = True
             self.conn = self._open(self.dsn, 10.0)
+            self.reconnecting = False
             try:
                 return self._insert_all(batch)
             except psycopg.Error as again:
@@ -229,13 +232,14 @@ class PgStore:
 
     def history(self, farm: str, greenhouse: str | None = None, kind: str | None = None,
                 t_from: float | None = None, t_to: float | None = None,
-                limit: int = 1000, match: Callable[[str], bool] | None = None) -> list[Received]:
+                limit: int = 1000, match: Callable[[str], bool] | None = None,
+                last: int | None = None) -> list[Received]:
         """Messages of `farm` (a greenhouse and kind, or every one when None; a kind ending in
         ``/**`` takes every kind below it) observed in [t_from, t_to], oldest first, at most
         `limit` (1..100000). `match(key)`, when given, must also accept the message's key (a
-        history query's wildcards; rows are then read through a server-side cursor)."""
-        if not 1 <= limit <= MAX_LIMIT:
-            raise ValueError(f"limit {limit}: expected 1..{MAX_LIMIT}")
+        history query's wildcards; rows are then read through a server-side cursor). With
+        `last`, only the newest `last` of each key (then the newest `limit` of those)."""
+        check_history_limits(limit, last)
         where = [sql.SQL("farm = %s")]
         args: list[Any] = [farm]
         if greenhouse not in (None, "*", "**"):
@@ -251,11 +255,18 @@ class PgStore:
         if t_to is not None:
             where.append(sql.SQL("observed <= to_timestamp(%s)"))
             args.append(t_to)
+        rows_of = sql.SQL("{}.message WHERE {}").format(sql.Identifier(self.schema),
+                                                       sql.SQL(" AND ").join(where))
+        if last is not None:  # the newest `last` of each key, still oldest first
+            rows_of = sql.SQL("(SELECT *, row_number() OVER (PARTITION BY key ORDER BY observed "
+                              "DESC, id DESC) AS nth FROM {}) newest WHERE nth <= %s").format(rows_of)
+            args.append(last)
         query = sql.SQL(
             "SELECT key, payload::text, idem, farm, greenhouse, kind, "
             "extract(epoch FROM observed)::float8, extract(epoch FROM received)::float8 "
-            "FROM {}.message WHERE {} ORDER BY observed, id").format(
-                sql.Identifier(self.schema), sql.SQL(" AND ").join(where))
+            "FROM {} ORDER BY observed, id").format(rows_of)
+        if last is not None:
+            return list(self._scan(query, args, None, match))[-limit:]
         if match is None:
             rows = self.conn.execute(query + sql.SQL(" LIMIT %s"), [*args, limit]).fetchall()
             self.conn.commit()  # end the read transaction: no idle-in-transaction connection

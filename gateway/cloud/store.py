@@ -85,10 +85,12 @@ class CloudStore(Protocol):
 
     def history(self, farm: str, greenhouse: str | None = None, kind: str | None = None,
                 t_from: float | None = None, t_to: float | None = None, limit: int = 1000,
-                match: Callable[[str], bool] | None = None) -> list[Received]:
+                match: Callable[[str], bool] | None = None, last: int | None = None) -> list[Received]:
         """Messages of `farm` (a greenhouse and kind, or any when None; a kind ending in
         ``/**`` takes every kind below it) observed in [t_from, t_to], oldest first, at most
-        `limit`; `match(key)`, when given, must also accept the message key."""
+        `limit`; `match(key)`, when given, must also accept the message key. With `last`, only
+        the newest `last` of each key (then the newest `limit` of those), as a gateway's
+        ``?last=N`` answers."""
         ...
 
     def latest(self) -> dict[str, float]:
@@ -111,6 +113,13 @@ def open_store(db: str | Path | None = None, dsn: str | None = None, schema: str
     if db is None:
         raise ValueError("a cloud store needs an SQLite file or a PostgreSQL DSN")
     return SqliteCloudStore(db)
+
+
+def check_history_limits(limit: int, last: int | None) -> None:
+    if not 1 <= limit <= MAX_LIMIT:
+        raise ValueError(f"limit {limit}: expected 1..{MAX_LIMIT}")
+    if last is not None and not 1 <= last <= MAX_LIMIT:
+        raise ValueError(f"last {last}: expected 1..{MAX_LIMIT}")
 
 
 def kind_clause(kind: str) -> tuple[str, list[str]]:
@@ -208,9 +217,8 @@ class SqliteCloudStore:
 
     def history(self, farm: str, greenhouse: str | None = None, kind: str | None = None,
                 t_from: float | None = None, t_to: float | None = None, limit: int = 1000,
-                match: Callable[[str], bool] | None = None) -> list[Received]:
-        if not 1 <= limit <= MAX_LIMIT:
-            raise ValueError(f"limit {limit}: expected 1..{MAX_LIMIT}")
+                match: Callable[[str], bool] | None = None, last: int | None = None) -> list[Received]:
+        check_history_limits(limit, last)
         where = ["farm = ?", "t IS NOT NULL"]
         args: list[str | float] = [farm]
         if greenhouse is not None:
@@ -224,15 +232,20 @@ class SqliteCloudStore:
             if t is not None:
                 where.append(f"t {op} ?")
                 args.append(t)
+        cols = "key, payload, idem, farm, greenhouse, kind, t, received"
+        query = f"SELECT {cols} FROM messages WHERE {' AND '.join(where)} ORDER BY t, seq"
+        if last is not None:  # the newest `last` of each key, still oldest first
+            query = (f"SELECT {cols} FROM (SELECT *, row_number() OVER (PARTITION BY key "
+                     f"ORDER BY t DESC, seq DESC) AS nth FROM messages WHERE {' AND '.join(where)}) "
+                     "WHERE nth <= ? ORDER BY t, seq")
+            args.append(last)
         out: list[Received] = []
-        for r in self.conn.execute(
-                "SELECT key, payload, idem, farm, greenhouse, kind, t, received FROM messages "
-                f"WHERE {' AND '.join(where)} ORDER BY t, seq", args):
+        for r in self.conn.execute(query, args):
             if match is None or match(r[0]):
                 out.append(Received(*r))
-                if len(out) >= limit:
+                if last is None and len(out) >= limit:
                     break
-        return out
+        return out[-limit:]
 
     def latest(self) -> dict[str, float]:
         return {f: t for f, t in self.conn.execute(

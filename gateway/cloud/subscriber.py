@@ -41,7 +41,7 @@ RETRY_MAX_S = 30.0  # longest wait between attempts to store a refused batch
 
 @dataclass
 class SubscribeStats:
-    received: int = 0
+    received: int = 0  # samples and catch-up replies that arrived (stored, repeats, or held)
     stored: int = 0
     repeats: int = 0
     not_messages: int = 0
@@ -71,7 +71,7 @@ class Subscriber:
         self._idle = threading.Condition()
         self._queued = 0  # samples handed to the writer (under _idle)
         self._done = 0  # samples the writer has dealt with
-        self._stopping = threading.Event()
+        self._closing = threading.Event()  # stop() was called: a refused batch gets one last try
         self.session: Any = None
         self.subs: list[Any] = []
         self.history: Any = None
@@ -154,6 +154,7 @@ class Subscriber:
     def _on_raw(self, key: str, payload: bytes) -> None:
         with self._idle:
             self._queued += 1
+            self.stats.received += 1  # on arrival: while the store refuses, received > stored
         self._q.put((key, payload, time.time()))
 
     def _on_miss(self, miss) -> None:
@@ -175,7 +176,6 @@ class Subscriber:
             for it in batch:
                 if it is None:
                     continue
-                self.stats.received += 1
                 try:
                     msgs.append(parse(*it))
                 except NotAMessage as e:
@@ -193,7 +193,7 @@ class Subscriber:
     def _store(self, msgs: list[Received]) -> int | None:
         """Store a batch, retrying while the store refuses it; None if stopped before that
         (:attr:`error` then says how many messages were not stored)."""
-        wait, failing = 0.5, ""
+        wait, failing, since = 0.5, "", time.monotonic()
         while True:
             t0 = time.perf_counter()
             try:
@@ -204,15 +204,18 @@ class Subscriber:
                     log.error("cloud store refused %d messages (%s); kept, retrying", len(msgs), text)
                     failing = text
                 self.stats.store_retries += 1
-                if self._stopping.wait(wait):
-                    self.error = RuntimeError(f"stopped with {len(msgs) + self._q.qsize()} "
-                                              f"messages not stored: {text}")
+                if self._closing.is_set():  # stopping, and the last try failed: give up
+                    with self._idle:
+                        held = self._queued - self._done  # this batch and those queued after it
+                    self.error = RuntimeError(f"stopped with {held} messages not stored: {text}")
                     return None
+                self._closing.wait(wait)  # stop() wakes it for one last try
                 wait = min(wait * 2, RETRY_MAX_S)
                 continue
             self.stats.store_s = round(self.stats.store_s + time.perf_counter() - t0, 6)
-            if failing:
-                log.info("cloud store back: stored the kept batch")
+            if failing:  # a warning, as its error was: the default log level shows both
+                log.warning("cloud store back after %.0f s: stored the %d kept messages",
+                            time.monotonic() - since, len(msgs))
             return new
 
     def wait_idle(self, timeout: float) -> bool:
@@ -245,11 +248,9 @@ class Subscriber:
             self.session.close()
         self.session = None
         if self._writer.is_alive():
+            self._closing.set()  # a batch the store refuses now is tried once more, then given up
             self._q.put(None)
-            self._writer.join(timeout=30)
-            if self._writer.is_alive():  # the store still refuses: give up, say what is lost
-                self._stopping.set()
-                self._writer.join(timeout=30)
+            self._writer.join(timeout=60)
 
 
 # -- kit CSV from the cloud's copy ----------------------------------------------------------------

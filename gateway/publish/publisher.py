@@ -33,6 +33,7 @@ from gateway.store.outbox import Outbox, Pending
 
 log = logging.getLogger("serra.publish")
 BATCH = 256
+UNHEARD_WARN_S = 60.0  # [s, gateway clock] linked but nobody listening this long: say it once
 
 
 @dataclass
@@ -90,6 +91,8 @@ class OutboxPublisher:
         self._stop = threading.Event()
         self._ready = threading.Event()
         self._error: BaseException | None = None
+        self._unheard_since: float | None = None  # linked, messages held, no key matched since
+        self._said_unheard = False
         self._thread = threading.Thread(target=self._run, name="serra-publish", daemon=True)
 
     def kick(self, wait: float = 0.0) -> None:
@@ -191,4 +194,27 @@ class OutboxPublisher:
         self.state.peers, self.state.routers = len(info.peers_zid()), len(info.routers_zid())
         self.state.matched_keys = sum(k.matching() for k in self.keys.values())
         self.state.waiting_keys = sorted(blocked)
+        self._watch_unheard()
         return len(blocked)
+
+    def _watch_unheard(self) -> None:
+        """Say once when the session has a router or peer but, for UNHEARD_WARN_S, no key holding
+        messages has a subscriber: from the gateway that looks the same whether the cloud
+        subscriber is down or the routers' access control refuses this gateway (it is then
+        never told of any subscription), so name both, with the zid a refusing router logs."""
+        s = self.state
+        if not (s.peers or s.routers) or not s.waiting_keys or s.matched_keys:
+            self._unheard_since, self._said_unheard = None, False
+            return
+        now = self.clock()
+        if self._unheard_since is None:
+            self._unheard_since = now
+        elif not self._said_unheard and now - self._unheard_since >= UNHEARD_WARN_S:
+            self._said_unheard = True
+            log.warning(
+                "linked to %d router(s) and %d peer(s) for %.0f s but nobody listens to the %d "
+                "keys holding messages (%s%s); they stay in the outbox. Is the cloud subscriber "
+                "running? Behind access control: is this farm in the routers' [access].gateways? "
+                "(a router refusing this gateway logs '%s did not match any configured ACL "
+                "subject')", s.routers, s.peers, now - self._unheard_since, len(s.waiting_keys),
+                s.waiting_keys[0], ", ..." if len(s.waiting_keys) > 1 else "", s.zid)

@@ -2,6 +2,7 @@
 
     with PgCluster() as pg:          # initdb + pg_ctl start (~2 s); stopped and removed after
         store = PgStore.connect(pg.dsn, schema="t1")
+        pg.stop_server(); pg.start_server()   # the database down, then back (same data, port)
 
 It listens on a Unix socket in its own folder only (no TCP port, so nothing to collide with)
 and, when asked, on 127.0.0.1 at a port the OS chose. ``initdb`` refuses to run as root: as root
@@ -77,6 +78,11 @@ class PgCluster:
             with socket.socket() as s:
                 s.bind(("127.0.0.1", 0))
                 self.port = s.getsockname()[1]
+        return self.start_server()
+
+    def start_server(self) -> PgCluster:
+        """Start the server on the cluster made by start() (again after stop_server())."""
+        assert self.folder is not None
         options = (f"-k {self.folder} -p {self.port} "
                    f"-c listen_addresses={'127.0.0.1' if self.tcp else chr(39) * 2} "
                    "-c fsync=off -c synchronous_commit=off -c full_page_writes=off")
@@ -89,6 +95,13 @@ class PgCluster:
             raise RuntimeError(f"pg_ctl start failed: {r.stderr.strip()} {log}")
         self.running = True
         return self
+
+    def stop_server(self) -> None:
+        """Stop the server, keeping the cluster (a database that goes down: start_server())."""
+        r = self._run("pg_ctl", "-D", str(self.data), "-m", "fast", "-w", "-t", str(TIMEOUT), "stop")
+        if r.returncode != 0:
+            raise RuntimeError(f"pg_ctl stop failed: {r.stderr.strip()}")
+        self.running = False
 
     def stop(self) -> None:
         """Stop the server (immediate: a throwaway cluster) and remove its folder."""

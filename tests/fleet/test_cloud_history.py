@@ -138,6 +138,14 @@ def test_history_is_answered_from_the_store_over_zenoh(store: CloudStore) -> Non
                     "serra/farm-a/gh1/history/measurement/inside",
                     "serra/farm-a/gh2/history/measurement/inside"}
                 assert [json.loads(r.ok.payload.to_string())["n"] for r in replies] == [0, 0, 1]
+                # ?last=N as a gateway answers it (what `status --connect` asks): per key
+                latest = ask("serra/farm-a/*/history/**?last=1")
+                assert len(latest) == 2 * len(KINDS)  # greenhouses x kinds, once each
+                assert {json.loads(r.ok.payload.to_string())["n"] for r in latest} == {5}
+                two = ask("serra/farm-a/gh1/history/forecast?last=2")
+                assert [json.loads(r.ok.payload.to_string())["n"] for r in two] == [4, 5]
+                capped = ask("serra/farm-b/gh2/history/**?last=2;limit=3")
+                assert [json.loads(r.ok.payload.to_string())["n"] for r in capped] == [5, 5, 5]
                 both = ask(f"serra/*/gh2/history/device/7?from={iso(T0 + 120)};to={iso(T0 + 180)}")
                 assert sorted(str(r.ok.key_expr) for r in both) == [
                     "serra/farm-a/gh2/history/device/7"] * 2 + ["serra/farm-b/gh2/history/device/7"] * 2

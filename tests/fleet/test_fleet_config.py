@@ -157,3 +157,24 @@ def test_the_documented_subscriber_example_parses_and_every_key_is_documented(tm
     keys = set(re.findall(r"^#? ?(\w+) = ", text, re.M))
     doc = (ROOT / "docs" / "cloud.md").read_text()
     assert not sorted(k for k in keys if f"`{k}`" not in doc)
+
+
+def test_router_check_into_a_closed_pipe_ends_without_a_traceback(pki: Pki, tmp_path: Path) -> None:
+    """`python -m gateway router --config router.toml --check | head` stops reading early (the
+    access table of 60 farms makes ~40 KB of Zenoh config): the command ends quietly, as a
+    shell's own tools do, not in a BrokenPipeError traceback."""
+    import subprocess
+    import sys
+
+    access = dict(ACCESS, gateways=ACCESS["gateways"] + [f"farm-{i}" for i in range(60)])
+    config = write_router_toml(tmp_path / "cloud.toml", "cloud", pki, access=access)
+    read, write = os.pipe()
+    os.close(read)  # the reader is gone before the first write: deterministic
+    try:
+        r = subprocess.run([sys.executable, "-m", "gateway", "router", "--config", str(config),
+                            "--check"], stdout=write, stderr=subprocess.PIPE, text=True,
+                           timeout=60, cwd=Path(__file__).resolve().parents[2], check=False)
+    finally:
+        os.close(write)
+    assert "Traceback" not in r.stderr and "BrokenPipeError" not in r.stderr, r.stderr
+    assert r.returncode == 1

@@ -7,6 +7,7 @@ stopped, history is answered by the cloud store."""
 from __future__ import annotations
 
 import json
+import signal
 import sqlite3
 from contextlib import ExitStack
 from pathlib import Path
@@ -142,3 +143,79 @@ def test_a_tls_client_gateway_waits_for_its_router_then_reaches_the_postgres_sto
     assert "session open after" in log
     assert "Traceback" not in log
     assert "messages in the store" in sub.text()
+
+
+def test_the_postgres_history_survives_a_subscriber_killed_mid_stream(
+        pki: Pki, pg: PgCluster, schema: str, tmp_path: Path) -> None:
+    """The cloud subscriber SIGKILLed while the gateway publishes (a batch may be received and
+    not yet committed), records made while it is away, then a new subscriber: its catch-up from
+    the gateway's history and the gateway's drain leave PostgreSQL with every message once."""
+    clock = KitClock(SCALE, EPOCH)
+    cfg = write_config(tmp_path, anchor=clock.anchor, scale=SCALE, farm="farm-a", status_every_s=600)
+    db = tmp_path / "gw.db"
+    kit = PyKit(7, sim_trace(0.5), clock.now)
+    with ExitStack() as stack:
+        router = stack.enter_context(RouterProc(write_router_toml(
+            tmp_path / "cloud.toml", "cloud", pki, access=ACCESS)))
+        argv = subscriber_argv(pki, "store", router.endpoints, "--farm", "farm-a", "--dsn", pg.dsn,
+                               "--schema", schema)
+        first = stack.enter_context(LineProc(argv, "serra-subscribe ready", tmp_path / "sub1.log"))
+        client_config(cfg, pki, "farm-a", router.endpoints[0])
+        gw = GatewayProcess(cfg)
+        stack.callback(kit.close)
+        stack.callback(gw.kill)
+        gw.start()
+        wait_until(lambda: zenoh_status(db).get("matched_keys", 0) >= 2, what="the store matching")
+        pump(kit, gw.udp, 10)
+        wait_until(lambda: pg_rows(pg), what="rows in PostgreSQL")
+        pump(kit, gw.udp, 15)
+        first.stop(sig=signal.SIGKILL)  # mid-stream: whatever it held uncommitted is gone with it
+        pump(kit, gw.udp, 25)  # made while no subscriber listens: the gateway holds them
+        second = stack.enter_context(LineProc(argv, "serra-subscribe ready", tmp_path / "sub2.log"))
+        pump(kit, gw.udp, 30)
+        assert gw.stop() == 0
+        final = outbox(db)
+        assert all(r[3] is not None for r in final)
+        wait_until(lambda: len(pg_rows(pg)) >= len(final), what="every message in PostgreSQL")
+        assert second.stop() == 0
+    rows = pg_rows(pg)
+    assert len(rows) == len(final)  # none twice ...
+    assert sorted(r[2] for r in rows) == sorted(r[2] for r in final)  # ... and none lost
+    assert "caught up 0," not in second.text()  # the new subscriber asked the gateway's history
+
+
+def test_a_gateway_the_routers_access_table_does_not_list_says_so_and_holds(
+        pki: Pki, tmp_path: Path) -> None:
+    """Farm C's certificate is from the fleet CA, but [access].gateways lists farm-a and farm-b
+    only: its TLS link opens, the cloud store subscribes to serra/farm-c/**, and still nothing
+    flows (the router never tells the gateway of that subscription). The gateway's log says
+    so once, naming the zid that the router's refusal line names."""
+    if "farm-c" not in pki.issued:
+        pki.add("gateway", "farm-c")
+    clock = KitClock(SCALE, EPOCH)
+    cfg = write_config(tmp_path, anchor=clock.anchor, scale=SCALE, farm="farm-c", status_every_s=600)
+    db = tmp_path / "gw.db"
+    kit = PyKit(7, sim_trace(0.5), clock.now)
+    with ExitStack() as stack:
+        router = stack.enter_context(RouterProc(write_router_toml(
+            tmp_path / "cloud.toml", "cloud", pki, access=ACCESS)))
+        stack.enter_context(LineProc(subscriber_argv(
+            pki, "store", router.endpoints, "--farm", "farm-c", "--db", str(tmp_path / "cloud.db")),
+            "serra-subscribe ready", tmp_path / "subscribe.log"))
+        client_config(cfg, pki, "farm-c", router.endpoints[0])
+        gw = GatewayProcess(cfg)
+        stack.callback(kit.close)
+        stack.callback(gw.kill)
+        gw.start()
+        pump(kit, gw.udp, 3)
+        log = tmp_path / "gateway.log"
+        said = wait_until(lambda: next((x for x in log.read_text().splitlines()
+                                        if "nobody listens to the" in x), ""),
+                          what="the gateway saying nobody listens")
+        zid = zenoh_status(db)["zid"]
+        assert "linked to 1 router(s)" in said and "[access].gateways" in said and zid in said
+        wait_until(lambda: f"{zid} did not match any configured ACL subject" in router.log_text(),
+                   what="the router's refusal line naming the same zid")
+        assert gw.stop() == 0
+    assert all(r[3] is None for r in outbox(db))  # held, not lost
+    assert sum("nobody listens" in x for x in log.read_text().splitlines()) == 1  # said once

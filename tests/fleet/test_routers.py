@@ -5,7 +5,11 @@ router started before its upstream links up when the upstream appears."""
 
 from __future__ import annotations
 
+import os
+import signal
 import socket
+import subprocess
+import sys
 from contextlib import ExitStack
 from pathlib import Path
 
@@ -13,7 +17,16 @@ import zenoh
 
 from gateway.net.acl import AccessSpec, Subscriber
 from tests.fleet.conftest import ACCESS
-from tests.fleet.kit import Inbox, Pki, RouterProc, open_client, wait_until, write_router_toml
+from tests.fleet.kit import (
+    ROOT,
+    Inbox,
+    Pki,
+    RouterProc,
+    open_client,
+    signal_and_wait,
+    wait_until,
+    write_router_toml,
+)
 
 BLOCK = zenoh.CongestionControl.BLOCK
 SPEC = AccessSpec(gateways=tuple(ACCESS["gateways"]), routers=tuple(ACCESS["routers"]),
@@ -96,3 +109,22 @@ def test_a_router_links_to_its_upstream_when_it_appears(pki: Pki, tmp_path: Path
 
         wait_until(arrived, what="a put at the cloud store", interval=0.2)
         assert set(inbox.items) == {("serra/farm-b/gh2/status", "up")}
+
+
+def test_the_router_log_has_no_colour_codes_off_a_terminal(pki: Pki, tmp_path: Path) -> None:
+    """Under systemd (or `> file`) Zenoh's log is read with journalctl and grep: the refusal lines
+    docs/fleet.md quotes must be plain text, not wrapped in ANSI colour codes."""
+    env = {k: v for k, v in os.environ.items() if k != "NO_COLOR"}
+    out = tmp_path / "router.out"
+    with open(out, "w", encoding="utf-8") as f:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "gateway", "router", "--config",
+             str(write_router_toml(tmp_path / "cloud.toml", "cloud", pki, log="info"))],
+            cwd=ROOT, stdout=f, stderr=subprocess.STDOUT, env=env)
+    try:
+        wait_until(lambda: "serra router ready" in out.read_text(), what="the router ready")
+    finally:
+        signal_and_wait(proc, signal.SIGTERM, 60, "the router")
+    text = out.read_text()
+    assert "zenoh::net::runtime" in text  # Zenoh's own INFO lines are there ...
+    assert "\x1b[" not in text  # ... without colour codes

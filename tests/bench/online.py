@@ -151,6 +151,10 @@ def run() -> dict:
 
 
 if __name__ == "__main__":
+    import argparse
+
+    argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                            epilog="writes bench/results/online.json").parse_args()
     result = run()
     path = write_result("online", result)
     import json

@@ -36,6 +36,15 @@ def machine() -> dict[str, Any]:
     }
 
 
+def no_arguments(doc: str | None, name: str) -> None:
+    """``--help`` for a bench that takes no arguments (it runs the bench otherwise), and a clear
+    error on any other argument."""
+    import argparse
+
+    argparse.ArgumentParser(description=(doc or "").split("\n\n")[0],
+                            epilog=f"writes bench/results/{name}.json").parse_args()
+
+
 def write_result(name: str, result: dict[str, Any]) -> Path:
     RESULTS.mkdir(parents=True, exist_ok=True)
     path = RESULTS / f"{name}.json"

@@ -282,10 +282,16 @@ def run(sizes_wanted: tuple[int, ...] = SIZES, with_restart: bool = True) -> dic
 
 
 if __name__ == "__main__":
-    # python tests/bench/fleet.py [N ...] [restart]: other sizes (a quick look); no JSON then
-    args = sys.argv[1:]
-    result = run(tuple(int(a) for a in args if a.isdigit()) if args else SIZES,
-                 not args or "restart" in args)
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=(
+        "without arguments: every size and the restart, written to bench/results/fleet.json; "
+        "with sizes: a quick look, printed only"))
+    ap.add_argument("sizes", nargs="*", type=int, metavar="N", help="gateways per run")
+    ap.add_argument("--restart", action="store_true", help="with sizes: the restart run too")
+    a = ap.parse_args()
+    args = a.sizes
+    result = run(tuple(args) if args else SIZES, not args or a.restart)
     if args:
         print(result["summary"]["table"])
         print(json.dumps({k: v for k, v in result["summary"].items() if k != "table"}, indent=2))

@@ -30,7 +30,7 @@ ROOT = HERE.parents[1]
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(ROOT))
 import zenoh  # noqa: E402
-from _common import write_result  # noqa: E402
+from _common import no_arguments, write_result  # noqa: E402
 
 from gateway.publish import zconfig  # noqa: E402
 from tests.gateway_harness import EPOCH, GatewayProcess, PyKit, sim_trace, write_config  # noqa: E402
@@ -286,6 +286,7 @@ def run() -> dict:
 
 
 if __name__ == "__main__":
+    no_arguments(__doc__, "gateway")
     result = run()
     path = write_result("gateway", result)
     print(f"wrote {path}")

@@ -23,7 +23,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # not tests/bench/gateway.py
-from _common import one_core, write_result  # noqa: E402
+from _common import no_arguments, one_core, write_result  # noqa: E402
 
 one_core()
 
@@ -151,10 +151,7 @@ def run() -> dict:
 
 
 if __name__ == "__main__":
-    import argparse
-
-    argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                            epilog="writes bench/results/online.json").parse_args()
+    no_arguments(__doc__, "online")
     result = run()
     path = write_result("online", result)
     import json

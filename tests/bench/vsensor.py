@@ -29,7 +29,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # not tests/bench/gateway.py
-from _common import one_core, write_result  # noqa: E402
+from _common import no_arguments, one_core, write_result  # noqa: E402
 
 one_core()
 
@@ -223,6 +223,7 @@ def run() -> dict:
 
 
 if __name__ == "__main__":
+    no_arguments(__doc__, "vsensor")
     result = run()
     path = write_result("vsensor", result)
     print(json.dumps(result["summary"], indent=2))

@@ -207,6 +207,7 @@ class Kit:
     channels: dict[str, str] = field(default_factory=dict)  # channel → status name
     silent: bool = False
     refused: str = ""  # why its packets are refused as a whole, and the recovery
+    lost: int = 0  # records the board lost before they were stored (all boots)
 
 
 @dataclass(frozen=True)

@@ -463,3 +463,19 @@ def test_records_a_kit_lost_on_the_board_show_on_its_line(store: Filled) -> None
     kit = next(k for k in m.snapshot("z", store.now, True, Link(True, True, "")).kits
                if k.device_id == 7)
     assert kit.lost == 140
+
+
+def test_the_records_lost_on_the_boards_are_not_rejected_packets(store: Filled) -> None:
+    """The ingest counter lost_on_board counts records, not packets: said beside them."""
+    beat = fresh_status(store)
+    s = Store(store.path)
+    try:
+        set_status(s.conn, {"ingest": {"stored": 120, "duplicate": 2, "bad_tag": 3,
+                                       "lost_on_board": 40}}, store.now)
+    finally:
+        s.close()
+    snap = snap_of(store, wall=beat)
+    assert snap.gateway.rejects == {"bad_tag": 3}
+    kits = [t.plain for t in render.kit_lines(snap)]
+    assert ("Packets    120 stored · 2 duplicates · 3 rejected · 40 lost on the boards"
+            in kits), kits

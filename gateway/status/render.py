@@ -252,7 +252,9 @@ def _ingest_lines(gw: S.Gateway, now: float | None, width: int) -> list[Text]:
         return [_line("Packets    ", ("no counters (the gateway writes them while it runs)", DIM))]
     rej = gw.rejects
     head = _line(f"Packets    {gw.ingest.get('stored', 0)} stored · {gw.ingest.get('duplicate', 0)} "
-                 "duplicates · ", (f"{sum(rej.values())} rejected", WARN if rej else OK))
+                 "duplicates · ", (f"{sum(rej.values())} rejected", WARN if rej else OK),
+                 *([(f" · {lost} lost on the boards", WARN)]
+                   if (lost := gw.ingest.get("lost_on_board", 0)) else []))
     when = ""
     if gw.ingest_t is not None:
         ago = f" ({duration(now - gw.ingest_t)} ago)" if now is not None else ""

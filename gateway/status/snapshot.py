@@ -292,8 +292,10 @@ class Gateway:
 
     @property
     def rejects(self) -> dict[str, int]:
-        """Rejected packets by reason (every counter but stored and duplicate)."""
-        return {k: v for k, v in self.ingest.items() if k not in ("stored", "duplicate") and v}
+        """Rejected packets by reason (every counter but stored, duplicate and lost_on_board, a
+        count of records the boards lost, not of packets)."""
+        return {k: v for k, v in self.ingest.items()
+                if k not in ("stored", "duplicate", "lost_on_board") and v}
 
 
 @dataclass(frozen=True)

@@ -92,22 +92,28 @@ class _Accounts:
     def __init__(self, conn: sqlite3.Connection, report: Report) -> None:
         self.conn = conn
         self.report = report
+        self.rows: dict[tuple[int, int], tuple[int, int, int | None]] = {}
 
     def row(self, dev: int, boot: int) -> tuple[int, int, int | None]:
-        r = self.conn.execute("SELECT final_seq, lost, open_from FROM boot_losses WHERE "
-                              "device_id=? AND boot=?", (dev, boot)).fetchone()
-        return (r[0], r[1], r[2]) if r else (0, 0, None)
+        got = self.rows.get((dev, boot))
+        if got is None:
+            r = self.conn.execute("SELECT final_seq, lost, open_from FROM boot_losses WHERE "
+                                  "device_id=? AND boot=?", (dev, boot)).fetchone()
+            got = self.rows[(dev, boot)] = (r[0], r[1], r[2]) if r else (0, 0, None)
+        return got
 
     def put(self, dev: int, boot: int, final: int, lost: int, open_from: int | None) -> None:
+        self.rows[(dev, boot)] = (final, lost, open_from)
         self.conn.execute("INSERT OR REPLACE INTO boot_losses (device_id, boot, final_seq, lost, "
                           "open_from) VALUES (?, ?, ?, ?, ?)", (dev, boot, final, lost, open_from))
 
     def settled(self, dev: int, boot: int, lo: int, hi: int) -> set[int]:
         """Seqs in [lo, hi) stored or rejected (primary-key ranges)."""
-        q = "SELECT seq FROM {} WHERE device_id=? AND boot=? AND seq>=? AND seq<?"
         args = (dev, boot, lo, hi)
-        return ({r[0] for r in self.conn.execute(q.format("samples"), args)}
-                | {r[0] for r in self.conn.execute(q.format("rejected"), args)})
+        return {r[0] for r in self.conn.execute(
+            "SELECT seq FROM samples WHERE device_id=?1 AND boot=?2 AND seq>=?3 AND seq<?4 UNION ALL "
+            "SELECT seq FROM rejected WHERE device_id=?1 AND boot=?2 AND seq>=?3 AND seq<?4",
+            args)}
 
     def settle(self, dev: int, boot: int, upto: int, incoming: Iterable[int],
                ended: bool) -> None:

@@ -14,6 +14,7 @@ import pytest
 
 from gateway import protocol as p
 from gateway.store import losses
+from tests.mcu_fakes.hostenv import micropython, run_mpy
 from tests.test_ingest import KEY, OKV, Gateway, run
 
 PERIOD_S = 6553.5
@@ -32,12 +33,35 @@ def lost(db: Path) -> dict[int, tuple[int, int]]:
             "SELECT boot, final_seq, lost FROM boot_losses WHERE device_id = 7")}
 
 
-def test_span_follows_the_firmware_ring() -> None:
-    """mcu/ring.py drops seq ≤ S − 512, and a record older than 2**28 ms: (S − s) periods."""
-    assert SPAN == 41 == (1 << 28) // 6_553_500 + 1
-    assert losses.span_records(600) == 512  # 60 s: the 512 span comes first
-    assert losses.span_records(5243) == 512 and losses.span_records(5244) == 512
-    assert losses.span_records(5300) == (1 << 28) // 530_000 + 1 == 507
+RING_SCRIPT = """
+import sys
+from time import ticks_add, ticks_ms
+from ring import Ring
+period, cap, n = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
+r = Ring(cap)
+t0 = ticks_ms()
+for s in range(n):
+    r.push(s, ticks_add(t0, s * period))
+    print(s, min(x for x in r.seq if x >= 0))
+"""
+
+
+@pytest.mark.skipif(micropython() is None, reason="micropython not installed")
+@pytest.mark.parametrize("period_ds, cap", [(600, 1024), (6000, 1024), (65535, 120)],
+                         ids=["60 s", "10 min", "6553.5 s"])
+def test_the_span_is_where_the_firmware_ring_lets_go(period_ds: int, cap: int,
+                                                      tmp_path: Path) -> None:
+    """The real mcu/ring.py under MicroPython (the board's clock), nothing acknowledged, a ring
+    too big to fill before the span: after record S the oldest it holds is exactly
+    S − span + 1, span = span_records(period): what a gap's finality rests on."""
+    script = tmp_path / "ring_span.py"
+    script.write_text(RING_SCRIPT)
+    span = losses.span_records(period_ds)
+    assert span == {600: 512, 6000: (1 << 28) // 600_000 + 1, 65535: 41}[period_ds]
+    r = run_mpy(script, str(period_ds * 100), str(cap), str(span + 40), cwd=tmp_path)
+    assert r.returncode == 0, r.stdout + r.stderr
+    oldest = dict(tuple(map(int, line.split())) for line in r.stdout.splitlines())
+    assert oldest == {s: max(0, s - span + 1) for s in range(span + 40)}
 
 
 def test_gaps_are_counted_once_when_final_not_before(tmp_path: Path,

@@ -7,7 +7,8 @@ older than 2**28 ms; a full ring drops its oldest on top of that. Record s's tic
 (S − s) periods before S's (the period ends advance by the period), so "older than 2**28 ms" is
 S − s ≥ ⌊2**28 / period_ms⌋ + 1. Once the gateway has received record S, the board has made it,
 so every seq ≤ S − span (:func:`span_records`) that is not stored and was not rejected can no
-longer arrive: it is final. A new boot empties the ring, so every missing seq below the
+longer arrive: it is final. (The ring's size is not on the wire: a seq a full ring dropped
+earlier is counted when the span passes it.) A new boot empties the ring, so every missing seq below the
 previous boot's highest stored one is final too (seqs above it are unknowable: not counted).
 
 The accounting runs in the transaction that stores a batch, before its rows are inserted:
@@ -30,8 +31,8 @@ ARRIVED = "arrived"  # counted lost, then arrived after all (held in the network
 
 
 class Gap(NamedTuple):
-    """Seqs ``first``..``last`` of a boot, final and never stored (or, ``arrived``, one seq
-    counted lost before that has arrived after all)."""
+    """Seqs ``first``..``last`` of a boot, final and never stored (ARRIVED: seqs counted lost
+    that have arrived after all)."""
 
     device_id: int
     boot: int  # as stored

@@ -145,3 +145,29 @@ def test_a_restart_makes_the_gaps_below_its_last_record_final(tmp_path: Path,
     msgs = [r.getMessage() for r in caplog.records if "lost on the board" in r.getMessage()]
     assert msgs == ["device 7 boot 1: records 3, 5–6 lost on the board (it restarted before "
                     "they were stored)"]
+
+
+def test_a_long_gap_is_counted_as_it_becomes_final_and_logged_once_whole(tmp_path: Path) -> None:
+    """Seqs 10–54 missing: each is counted when the span passes it, the gap is reported once,
+    when the record above it settles, across a restart of the store (the writer's state is in
+    boot_losses)."""
+    from gateway.store import Store
+
+    def recs(seqs) -> list[tuple[p.Record, float]]:
+        return [(p.Record(7, 1, s, 1000 * s, 5, PERIOD_S, OKV, (0,) * 7), 1.7e9 + s)
+                for s in seqs]
+
+    s = Store(tmp_path / "g.db")
+    first = losses.Report()
+    s.write_batch(recs(range(10)), first)
+    s.write_batch(recs([55]), first)  # final up to 55 - SPAN: 10–14 lost, the run still open
+    s.close()
+    assert (first.lost, first.gaps) == (5, [])
+    assert lost(tmp_path / "g.db") == {1: (55 - SPAN + 1, 5)}
+    s = Store(tmp_path / "g.db")
+    then = losses.Report()
+    s.write_batch(recs(range(56, 101)), then)
+    s.close()
+    assert then.lost == 40
+    assert then.gaps == [losses.Gap(7, 1, 10, 54, losses.RING)]
+    assert lost(tmp_path / "g.db") == {1: (100 - SPAN + 1, 45)}

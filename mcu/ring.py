@@ -21,6 +21,8 @@ from wire import CHAN_LEN
 
 _FREE = const(-1)
 _MAX_AGE_MS = const(1 << 28)  # plus one period (<= 6553 s) and a resend, still below 2**29
+# The gateway counts the records dropped here from the seqs alone, with this and max_span
+# (gateway/store/losses.py; tests/test_board_losses.py runs this ring against it).
 
 
 class Ring:

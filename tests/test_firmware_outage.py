@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from gateway.store.keys import write_keys
+from gateway.store.losses import RING_MAX_SPAN
 from tests.mcu_fakes.hostenv import micropython
 from tests.test_firmware_e2e import (
     KEY,
@@ -22,6 +23,7 @@ from tests.test_firmware_e2e import (
     run_until_delivered,
     start_gateway,
     stored,
+    wait_for_line,
 )
 
 pytestmark = pytest.mark.skipif(micropython() is None, reason="micropython not installed")
@@ -99,6 +101,50 @@ def test_gateway_away_longer_than_the_ring_then_back(tmp_path: Path) -> None:
     check_exactly_once({i: recs[s] for i, s in enumerate(kept)},
                        {i: rows[s] for i, s in enumerate(kept)}, len(kept))
     assert back[-1]["acked"] >= RING
+
+
+def losses(db: Path) -> dict[int, int]:
+    """boot → records the gateway counts as lost on the board (device 7)."""
+    with sqlite3.connect(db) as c:
+        return dict(c.execute("SELECT boot, lost FROM boot_losses WHERE device_id = 7"))
+
+
+def test_the_records_the_ring_dropped_are_counted_lost_by_the_gateway(tmp_path: Path) -> None:
+    """After an outage longer than the ring, the gateway counts as lost exactly the records the
+    board's console says it dropped, once the board has made a record RING_MAX_SPAN (512) above
+    the last of them (before that the ring might still hold one), and logs the gap in one line;
+    a plain restart of the board (a new boot, seqs from 0 again) adds no loss."""
+    db, keys, trace = tmp_path / "g.db", tmp_path / "keys", tmp_path / "trace"
+    log = tmp_path / "gateway.log"
+    write_keys(keys, {7: KEY})
+    make_trace(trace)
+    gw, addr = start_gateway(db, keys, log)
+    proxy = LossyProxy(addr, loss=1.0, seed=5)  # the gateway is away
+    dev = board(tmp_path, proxy.port)
+    fw = Firmware(dev, trace)
+    try:
+        wait_until(fw, lambda m: len(m) >= 4, "200 records", timeout=180)
+        proxy.loss = 0.0  # back
+        after = wait_until(fw, lambda m: m[-1]["ring"] < 10 and
+                           m[-1]["records"] > m[-1]["dropped"] + RING_MAX_SPAN + 10,
+                           "512 records past the dropped ones", timeout=240)
+        dropped = after[-1]["dropped"]
+        assert dropped > 0 and all(m["dropped"] == dropped for m in after[-3:]), after
+        line = wait_for_line(log, "lost on the board", fw, timeout=60)
+        assert line.endswith(f"device 7 boot 0: records 0–{dropped - 1} lost on the board "
+                             "(dropped from its ring: overflow or too old)"), line
+        assert losses(db) == {0: dropped}
+        assert min(stored(db, 0)) == dropped
+        fw.stop()
+        fw = Firmware(dev, trace)  # a plain restart: boot 1
+        run_until_delivered(fw, db, 1, 20, timeout=120)
+    finally:
+        fw.stop()
+        proxy.close()
+        gw.send_signal(signal.SIGTERM)
+        gw.wait(timeout=30)
+    assert losses(db).get(0) == dropped and losses(db).get(1, 0) == 0, losses(db)
+    assert sum(1 for x in log.read_text().splitlines() if "lost on the board" in x) == 1
 
 
 @pytest.mark.parametrize("bits, edge", [(30, 1 << 30), (62, 1 << 31)],

@@ -29,7 +29,7 @@ def every_kind() -> dict[str, dict]:
         "measurement/outside": P.weather_observed(PLACE, "outside", READING, "o"),
         "status": P.agri_greenhouse(PLACE, T, [7, 8], "s", rh_in=61.0, t_in=21.5,
                                     state={"estimatorState": "running", "outboxPending": 3}),
-        "device/7": P.device("farm1", 7, T, "d", state="ok", boot=3, records=10, last_seen=T,
+        "device/7": P.device("farm1", 7, T, "d", state="ok", boot=3, records=10, lost=4, last_seen=T,
                              channels={"t_in": "ok", "t_out": "timeout"}, greenhouses=[PLACE]),
         "forecast": P.forecast(PLACE, T, "f", model="prototype", outlook="hold-latest", t_in=20.0,
                                horizons=[(15, 20.1), (30, 20.3), (60, 20.9)]),

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from gateway.protocol import CHANNELS
+from gateway.publish import payloads as P
 from gateway.status import render
 from gateway.status import snapshot as S
 from gateway.status.messages import Messages
@@ -435,3 +436,46 @@ def test_skill_of_nothing_is_not_a_number() -> None:
 
     s = skill_from_pairs(60, [])
     assert s.n == 0 and math.isnan(s.mae) and json.dumps(s.n) == "0"
+
+
+def test_records_a_kit_lost_on_the_board_show_on_its_line(store: Filled) -> None:
+    """Kit 7's boot 1 sends seqs 140–149 only, then it restarts (boot 2): 0–139 can no longer
+    arrive and are counted lost (gateway/store/losses.py); boot 0, whole, adds none. The store
+    source and the Zenoh source (the device message) both show them on the kit's line."""
+    s = Store(store.path)
+    try:
+        s.write_batch(records(7, range(140, 150), boot=1))
+        s.write_batch(records(7, range(150, 151), boot=2))
+    finally:
+        s.close()
+    snap = snap_of(store)
+    assert next(k for k in snap.kits if k.device_id == 7).lost == 140
+    lines = [t.plain for t in render.kit_lines(snap)]
+    assert lines[0].split()[5] == "lost"
+    row = next(x for x in lines if x.startswith("   7  north"))
+    assert row.split()[-3:-1] == ["140", "2"], row  # lost, boot
+    assert "     140 records lost on the board: ring overflow or restart, never stored" in lines
+    assert all(len(x) <= render.WIDTH for x in lines)
+    m = Messages()
+    doc = P.device("f1", 7, store.now, "d7", state="ok", boot=2, records=141, lost=140,
+                   last_seen=store.now, channels={}, greenhouses=[])
+    assert m.add("serra/f1/north/device/7", json.dumps(doc))
+    kit = next(k for k in m.snapshot("z", store.now, True, Link(True, True, "")).kits
+               if k.device_id == 7)
+    assert kit.lost == 140
+
+
+def test_the_records_lost_on_the_boards_are_not_rejected_packets(store: Filled) -> None:
+    """The ingest counter lost_on_board counts records, not packets: said beside them."""
+    beat = fresh_status(store)
+    s = Store(store.path)
+    try:
+        set_status(s.conn, {"ingest": {"stored": 120, "duplicate": 2, "bad_tag": 3,
+                                       "lost_on_board": 40}}, store.now)
+    finally:
+        s.close()
+    snap = snap_of(store, wall=beat)
+    assert snap.gateway.rejects == {"bad_tag": 3}
+    kits = [t.plain for t in render.kit_lines(snap)]
+    assert ("Packets    120 stored · 2 duplicates · 3 rejected · 40 lost on the boards"
+            in kits), kits

@@ -1,5 +1,5 @@
-"""Schema version 2: a version-1 store is migrated in place and keeps every row; a new store and a
-migrated one have the same tables; an unknown version is refused."""
+"""Schema version 3: a version-1 store is migrated in place (to 2, then 3) and keeps every row; a
+new store and a migrated one have the same tables; an unknown version is refused."""
 
 from __future__ import annotations
 
@@ -69,7 +69,7 @@ def test_v1_store_migrates_keeping_every_row(tmp_path: Path) -> None:
     before = dump(old)
     assert all(before[t] for t in V1_TABLES)
     s = Store(old)  # opening migrates
-    assert s.conn.execute("PRAGMA user_version").fetchone()[0] == schema.SCHEMA_VERSION == 2
+    assert s.conn.execute("PRAGMA user_version").fetchone()[0] == schema.SCHEMA_VERSION == 3
     assert s.integrity_ok()
     s.close()
     assert dump(old) == before  # every row of every version-1 table, unchanged
@@ -77,11 +77,14 @@ def test_v1_store_migrates_keeping_every_row(tmp_path: Path) -> None:
         idem = [r[0] for r in c.execute("SELECT idem FROM outbox ORDER BY id")]
         assert idem == [f"v1:{i}" for i in range(1, 7)]
         assert c.execute("SELECT count(*) FROM outbox WHERE sent IS NULL").fetchone()[0] == 3
+        # loss accounting starts at the latest boot's oldest stored seq (nothing counted)
+        assert c.execute("SELECT device_id, boot, final_seq, lost, open_from FROM boot_losses"
+                         ).fetchall() == [(7, 2, 0, 0, None)]
     # the migrated file has exactly the tables, columns and indexes of a new one
     new = tmp_path / "new.db"
     Store(new).close()
     assert tables(old) == tables(new)
-    # and works as a version-2 store: its unsent v1 messages come first, then new ones
+    # and works as a current store: its unsent v1 messages come first, then new ones
     s = Store(old)
     ob = Outbox(s.conn)
     ob.put(Message("serra/a/b/forecast", "forecast", 1.7e9, "a/b/forecast/1", "{}"))

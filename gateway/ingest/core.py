@@ -19,6 +19,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
+from collections import deque
 from collections.abc import Callable, Hashable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -28,7 +29,7 @@ from typing import TypeVar
 
 from gateway import protocol as p
 from gateway.ingest.counters import Counters, RateLimitedLog
-from gateway.store import Store
+from gateway.store import Store, losses
 from gateway.store.keys import key_id
 
 log = logging.getLogger("serra.ingest")
@@ -139,6 +140,7 @@ class IngestCore:
         # SQLite work runs in one dedicated thread so the event loop keeps receiving.
         self._exec = ThreadPoolExecutor(1, thread_name_prefix="serra-store")
         self.alarm = False
+        self._rejected: deque[losses.Report] = deque()
 
     def _load_devs(self, keys: dict[int, bytes]) -> dict[int, _Dev]:
         """The receiving state of ``keys``' devices from the store (runs on the store's thread
@@ -226,6 +228,9 @@ class IngestCore:
             boot, seq = int.from_bytes(data[8:12], "big"), int.from_bytes(data[12:16], "big")
             self._send(send, peer, p.encode_ack(dev_id, boot, seq, p.ACK_REJECTED,
                                                 p.REASON_CODES[e.reason], d.key))
+            # Kept in the store (its thread, in order with the batches): not a board loss.
+            self._exec.submit(self._note_rejected, dev_id, boot + d.base, seq, e.reason,
+                              self.clock())
             return None
         boot = rec.boot + d.base
         if boot < d.boot:
@@ -271,6 +276,22 @@ class IngestCore:
             self.counters["ack_send_failed"] += 1
             self.rlog.warning("ack_send_failed", "ack to %s failed: %s", peer_text(peer), e)
 
+    def _note_rejected(self, dev_id: int, boot: int, seq: int, reason: str, t: float) -> None:
+        """On the store's thread: remember a rejected record, so it is not counted lost."""
+        try:
+            # counted on the event loop at the next commit (deque.append is thread-safe)
+            self._rejected.append(self.store.note_rejected(dev_id, boot, seq, reason, t))
+        except Exception:  # at worst the record is later counted lost
+            log.exception("could not keep rejected record device %d boot %d seq %d", dev_id,
+                          boot, seq)
+
+    def _lost(self, report: losses.Report) -> None:
+        """Count and log the records the boards lost that have just become final."""
+        if report.lost:
+            self.counters["lost_on_board"] += report.lost
+        for line in losses.lines(report.gaps):
+            log.warning("%s", line)
+
     # -- committing -----------------------------------------------------------------------
     async def run_writer(self) -> None:
         loop = asyncio.get_running_loop()
@@ -286,8 +307,9 @@ class IngestCore:
         if not keys:
             return
         items = [(self._pending[k].rec, self._pending[k].t_recv) for k in keys]
+        report = losses.Report()
         try:
-            await loop.run_in_executor(self._exec, self.store.write_batch, items)
+            await loop.run_in_executor(self._exec, self.store.write_batch, items, report)
         except Exception as e:
             # Nothing acknowledged, nothing lost: the senders still hold these records.
             self.counters["store_error"] += len(keys)
@@ -297,6 +319,9 @@ class IngestCore:
                 self._pending.pop(k, None)
             return
         self.counters["stored"] += len(keys)
+        while self._rejected:
+            self._lost(self._rejected.popleft())
+        self._lost(report)
         for k in keys:
             pend = self._pending.pop(k)
             d = pend.dev

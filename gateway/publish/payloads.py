@@ -190,8 +190,12 @@ detector is reported as precipitation)."""
 
 def device(farm: str, device_id: int, t: float, idem: str, *, state: str, boot: int | None,
            records: int, last_seen: float | None, channels: Mapping[str, str],
-           greenhouses: Sequence[Place], board_boot: int | None = None) -> dict:
+           greenhouses: Sequence[Place], board_boot: int | None = None,
+           lost: int = 0) -> dict:
     """``device/<id>``: a kit's health (``deviceState`` ok | silent | unassigned).
+
+    ``recordsLost``: records the board made but lost before the gateway stored them (its ring
+    overflowed, or it restarted), all boots, counted once they can no longer arrive.
 
     ``bootCounter`` is the boot as stored (unique per device, as in ``kitRecord``);
     ``boardBootCounter`` the board's own counter (they differ after a key rotation)."""
@@ -202,6 +206,7 @@ def device(farm: str, device_id: int, t: float, idem: str, *, state: str, boot: 
         "deviceState": prop(state, None, t),
         "dateObserved": date_time(t),
         "records": prop(records, None, t),
+        "recordsLost": prop(lost, None, t),
         "channelStatus": prop(dict(channels) or {"all": "no record yet"}, None, t),
     }
     if boot is not None:

@@ -301,7 +301,7 @@ class Producers:
                     records=h.records if h else 0, last_seen=h.last_sample_t if h else None,
                     channels=h.channels if h else {},
                     greenhouses=[self.gh[g].place for g in ghs],
-                    board_boot=h.board_boot if h else None)))
+                    board_boot=h.board_boot if h else None, lost=h.lost if h else 0)))
         if len(msgs) > self.outbox.room():
             return 0  # state, not events: skipped while the backlog drains
         self.last_snapshot = now

@@ -228,7 +228,8 @@ class Messages:
             board = _value(doc, "boardBootCounter", _value(doc, "bootCounter"))
             out.append(S.Kit(dev, _roles(self.roles.get(dev, set())), last,
                              int(_value(doc, "records", 0) or 0), board, _value(doc, "bootCounter"),
-                             chans, S.silent(last, now)))
+                             chans, S.silent(last, now),
+                             lost=int(_value(doc, "recordsLost", 0) or 0)))
         return out
 
     def _gateway(self, status: list[dict[str, Any]], answered: bool | None, link: S.Link) -> S.Gateway:

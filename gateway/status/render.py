@@ -209,15 +209,16 @@ def _finding_lines(g: S.GreenhouseView, diagnosis: S.Diagnosis | None) -> list[T
 
 
 def kit_lines(snap: S.Snapshot, width: int = WIDTH) -> list[Text]:
-    out = [_line(("kit   greenhouse        last record               records  boot  state", DIM))]
+    out = [_line(("kit   greenhouse        last record               records  lost  boot  state",
+                  DIM))]
     for k in snap.kits:
         where = ", ".join(k.greenhouses) if k.greenhouses else "(unassigned)"
         age = (snap.now - k.last_seen) if snap.now is not None and k.last_seen is not None else None
         seen = f"{hhmm(k.last_seen)} ({duration(age)} ago)" if k.last_seen is not None else "never"
         boot = "—" if k.boot is None else str(k.boot)
         state = ("REFUSED", ALARM) if k.refused else ("SILENT", ALARM) if k.silent else ("ok", OK)
-        out.append(_line(f"{k.device_id:>4}  {where[:16]:<16}  {seen:<24} {k.records:>8}  "
-                         f"{boot:>4}  ", state))
+        out.append(_line(f"{k.device_id:>4}  {where[:16]:<16}  {seen:<24} {k.records:>8}",
+                         (f"{k.lost:>6}", WARN if k.lost else DIM), f"  {boot:>4}  ", state))
         bad = {c: s for c, s in k.channels.items() if s != "ok"}
         if not k.channels:
             chans = ("     no record yet", DIM)
@@ -229,6 +230,11 @@ def kit_lines(snap: S.Snapshot, width: int = WIDTH) -> list[Text]:
         extra = (f"; stored as boot {k.stored_boot} (key rotated)"
                  if k.stored_boot is not None and k.boot is not None and k.stored_boot != k.boot else "")
         out.append(_line(chans, extra))
+        if k.lost:
+            # the board made them but never got them stored (gateway/store/losses.py)
+            out.append(_line((f"     {k.lost} record{'s' * (k.lost > 1)} lost on the board"
+                              ": ring overflow or restart, never stored",
+                              WARN)))
         if k.refused:
             out += wrapped("refused: " + k.refused, "     ", ALARM, width)
     if not snap.kits:
@@ -246,7 +252,9 @@ def _ingest_lines(gw: S.Gateway, now: float | None, width: int) -> list[Text]:
         return [_line("Packets    ", ("no counters (the gateway writes them while it runs)", DIM))]
     rej = gw.rejects
     head = _line(f"Packets    {gw.ingest.get('stored', 0)} stored · {gw.ingest.get('duplicate', 0)} "
-                 "duplicates · ", (f"{sum(rej.values())} rejected", WARN if rej else OK))
+                 "duplicates · ", (f"{sum(rej.values())} rejected", WARN if rej else OK),
+                 *([(f" · {lost} lost on the boards", WARN)]
+                   if (lost := gw.ingest.get("lost_on_board", 0)) else []))
     when = ""
     if gw.ingest_t is not None:
         ago = f" ({duration(now - gw.ingest_t)} ago)" if now is not None else ""

@@ -207,6 +207,7 @@ class Kit:
     channels: dict[str, str] = field(default_factory=dict)  # channel → status name
     silent: bool = False
     refused: str = ""  # why its packets are refused as a whole, and the recovery
+    lost: int = 0  # records the board lost before they were stored (all boots)
 
 
 @dataclass(frozen=True)
@@ -291,8 +292,10 @@ class Gateway:
 
     @property
     def rejects(self) -> dict[str, int]:
-        """Rejected packets by reason (every counter but stored and duplicate)."""
-        return {k: v for k, v in self.ingest.items() if k not in ("stored", "duplicate") and v}
+        """Rejected packets by reason (every counter but stored, duplicate and lost_on_board, a
+        count of records the boards lost, not of packets)."""
+        return {k: v for k, v in self.ingest.items()
+                if k not in ("stored", "duplicate", "lost_on_board") and v}
 
 
 @dataclass(frozen=True)

@@ -269,7 +269,8 @@ class StoreSource:
             last = h.last_sample_t if h else None
             out.append(S.Kit(dev, tuple(roles.get(dev, [])), last, h.records if h else 0,
                              h.board_boot if h else None, h.boot if h else None,
-                             dict(h.channels) if h else {}, S.silent(last, now), refused))
+                             dict(h.channels) if h else {}, S.silent(last, now), refused,
+                             h.lost if h else 0))
         return out
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from gateway.protocol import CHANNELS, Record
-from gateway.store import schema
+from gateway.store import losses, schema
 
 
 class StoreError(RuntimeError):
@@ -22,7 +22,7 @@ class StoreError(RuntimeError):
 # The tables every Serra store has had since schema version 1: a file without them is not ours.
 SERRA_TABLES = frozenset({"samples", "devices", "minute", "meta"})
 _OURS = frozenset(re.findall(r"CREATE TABLE IF NOT EXISTS (\w+)",
-                             schema.DDL_V1 + schema.DDL_V2_TABLES)) | {
+                             schema.DDL_V1 + schema.DDL_V2_TABLES + schema.DDL_V3_TABLES)) | {
     "sqlite_sequence"}  # SQLite's own, for AUTOINCREMENT
 
 
@@ -174,20 +174,28 @@ class Store:
     def close(self) -> None:
         close_db(self.conn)
 
-    def write_batch(self, items: Sequence[tuple[Record, float]]) -> int:
+    def write_batch(self, items: Sequence[tuple[Record, float]],
+                    report: losses.Report | None = None) -> int:
         """Store (record, t_recv) pairs in one transaction; durable when this returns.
 
-        One commit per batch: fewer fsyncs, fewer SD-card page writes.
+        One commit per batch: fewer fsyncs, fewer SD-card page writes. The records the boards
+        lost that this batch makes final are counted in the same transaction (gateway/store/
+        losses.py), reported in ``report``.
         """
         if not items:
             return 0
         rows = []
+        seen: dict[int, dict[int, losses.BootBatch]] = {}
         dev: dict[int, list] = {}  # device -> [boot, max_seq, first_seen, last_seen, n]
         for rec, t_recv in items:
             v, st = rec.values, rec.status
             rows.append((rec.device_id, rec.boot, rec.seq, t_recv - rec.age_ms / 1000.0, t_recv,
                          rec.tick_ms, rec.period_s, v[0], st[0], v[1], st[1], v[2], st[2],
                          v[3], st[3], v[4], st[4], v[5], st[5], v[6], st[6]))
+            b = seen.setdefault(rec.device_id, {}).get(rec.boot)
+            if b is None:
+                b = seen[rec.device_id][rec.boot] = losses.BootBatch([], round(rec.period_s * 10))
+            b.seqs.append(rec.seq)
             d = dev.get(rec.device_id)
             if d is None:
                 dev[rec.device_id] = [rec.boot, rec.seq, t_recv, t_recv, 1]
@@ -199,11 +207,25 @@ class Store:
             d[4] += 1
         c = self.conn
         with transaction(c):
+            found = losses.Report()
+            losses.account(c, seen, found)
             before = c.total_changes
             c.executemany(_INSERT, rows)
             stored = c.total_changes - before
             c.executemany(_UPSERT_DEVICE, [(k, *d) for k, d in dev.items()])
+        if report is not None:
+            report.gaps += found.gaps
+            report.lost += found.lost
         return stored
+
+    def note_rejected(self, device_id: int, boot: int, seq: int, reason: str,
+                      t_recv: float) -> losses.Report:
+        """Keep a record acknowledged as rejected (boot as stored): the board drops it, so it
+        is not a loss."""
+        report = losses.Report()
+        with transaction(self.conn):
+            losses.note_rejected(self.conn, device_id, boot, seq, reason, t_recv, report)
+        return report
 
     def device_states(self) -> dict[int, DeviceState]:
         return {d: DeviceState(b, s) for d, b, s in

@@ -1,5 +1,9 @@
 """SQLite schema (version in PRAGMA user_version). Documented in docs/store.md.
 
+Version 3 adds ``boot_losses`` (records a board dropped before they were stored, per device and
+boot, and how far that is settled) and ``rejected`` (records acknowledged as rejected, which are
+not losses): :func:`migrate_v2_v3`, tables only.
+
 Version 2 (the live gateway) adds the greenhouse to ``estimates``; kind, observation time and
 idempotency key to ``outbox`` (which is also the log the history queryable answers from); and the
 tables ``greenhouses``, ``estimator_state``, ``findings`` and ``gateway_status``. A version-1
@@ -13,7 +17,7 @@ import sqlite3
 
 from gateway.protocol import CHANNELS
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 
 _chan_cols = ",\n".join(f"  {c} REAL,\n  {c}_st INTEGER NOT NULL" for c in CHANNELS)
 _qc_cols = ",\n".join(f"  {c} REAL,\n  {c}_qc INTEGER NOT NULL" for c in CHANNELS)
@@ -134,6 +138,46 @@ def migrate_v1_v2(conn: sqlite3.Connection) -> None:
         for stmt in DDL_V2_TABLES.split(";"):
             if stmt.strip():
                 conn.execute(stmt)
+        conn.execute("PRAGMA user_version = 2")
+    except BaseException:
+        conn.execute("ROLLBACK")
+        raise
+    conn.execute("COMMIT")
+
+
+DDL_V3_TABLES = """
+CREATE TABLE IF NOT EXISTS boot_losses (
+  device_id INTEGER NOT NULL,
+  boot INTEGER NOT NULL,          -- as stored (board counter + its key's boot base)
+  final_seq INTEGER NOT NULL,     -- every seq below is settled: stored, rejected or lost
+  lost INTEGER NOT NULL DEFAULT 0,  -- seqs below final_seq neither stored nor rejected
+  open_from INTEGER,              -- first seq of a lost run reaching final_seq - 1 (not logged)
+  PRIMARY KEY (device_id, boot)
+);
+CREATE TABLE IF NOT EXISTS rejected (
+  device_id INTEGER NOT NULL,
+  boot INTEGER NOT NULL,
+  seq INTEGER NOT NULL,
+  reason TEXT NOT NULL,           -- malformed, out_of_range (acked as rejected: not resent)
+  t_recv REAL NOT NULL,
+  PRIMARY KEY (device_id, boot, seq)
+);
+"""
+
+
+def migrate_v2_v3(conn: sqlite3.Connection) -> None:
+    """Version 2 → 3 in one transaction: the loss tables. Each device's latest boot is settled
+    up to its oldest stored seq (what came before may have gone to retention, or to a store
+    this one replaced: not counted); earlier boots are not counted."""
+    conn.execute("BEGIN IMMEDIATE")
+    try:
+        for stmt in DDL_V3_TABLES.split(";"):
+            if stmt.strip():
+                conn.execute(stmt)
+        conn.execute(
+            "INSERT OR IGNORE INTO boot_losses (device_id, boot, final_seq, lost) "
+            "SELECT d.device_id, d.boot, coalesce((SELECT min(seq) FROM samples s WHERE "
+            "s.device_id = d.device_id AND s.boot = d.boot), 0), 0 FROM devices d")
         conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
     except BaseException:
         conn.execute("ROLLBACK")
@@ -146,8 +190,10 @@ def create(conn: sqlite3.Connection) -> None:
     it is. A new file is made the same way as a migrated one (version 1, then the migration), so
     the two cannot differ."""
     ver = conn.execute("PRAGMA user_version").fetchone()[0]
-    if ver not in (0, 1, SCHEMA_VERSION):
+    if ver not in (0, 1, 2, SCHEMA_VERSION):
         raise RuntimeError(f"database schema version {ver}, this gateway knows {SCHEMA_VERSION}")
-    if ver < SCHEMA_VERSION:
+    if ver < 2:
         conn.executescript(DDL_V1)  # IF NOT EXISTS: nothing happens to a version-1 file
         migrate_v1_v2(conn)
+    if ver < SCHEMA_VERSION:
+        migrate_v2_v3(conn)

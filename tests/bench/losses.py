@@ -66,6 +66,10 @@ def _round() -> dict[str, float]:
     return {"bulk": _cpu_ms(_batches(4, 12, 400)), "live": _cpu_ms(_batches(1, 1, 2000))}
 
 
+BEFORE = "301f9ba"
+"""main's last commit without the count (the merge of fk; dr merged on top of it)."""
+
+
 def run(against: str) -> dict:
     base, this = against_rounds(__file__, against, ROUNDS)
     keys = list(this[0])
@@ -80,14 +84,14 @@ def run(against: str) -> dict:
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--against", metavar="REF", help="the git commit to measure against")
+    parser.add_argument("--against", metavar="REF", default=BEFORE,
+                        help=f"the git commit to measure against (default {BEFORE}: main just "
+                             "before the count; make bench runs it so)")
     parser.add_argument("--round", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.round:  # one round in this process, JSON on the last line (used by --against)
         print(json.dumps(_round()))
         raise SystemExit(0)
-    if not args.against:
-        parser.error("--against REF is required (a ratio needs a reference)")
     result = run(args.against)
     print(write_result("losses", result))
     print(json.dumps(result["summary"], indent=2))

@@ -95,12 +95,14 @@ def _journal_key(greenhouse: str) -> str:
 
 def save_journal(conn: sqlite3.Connection, greenhouse: str, minute: int, journal: Journal) -> None:
     """Advance the saved cursor to ``minute`` without rewriting the snapshot: its journal in
-    ``meta`` and the row's ``minute`` (one page of a row whose state spans many; in the
+    ``meta`` and the row's ``minute`` (one page of a row whose state spans ~40; in the
     caller's transaction)."""
     text = json.dumps({"snapshot": journal.snapshot, "columns": list(journal.columns),
                        "minutes": journal.minutes})  # repr floats and NaN: read back bit-exact
-    conn.execute("INSERT OR REPLACE INTO meta (name, value) VALUES (?, ?)",
-                 (_journal_key(greenhouse), text))
+    key = _journal_key(greenhouse)
+    # an UPDATE keeps the row's rowid: meta's page is written, not its key's index too
+    if conn.execute("UPDATE meta SET value=? WHERE name=?", (text, key)).rowcount == 0:
+        conn.execute("INSERT INTO meta (name, value) VALUES (?, ?)", (key, text))
     conn.execute("UPDATE estimator_state SET minute=? WHERE greenhouse=?", (minute, greenhouse))
 
 

@@ -17,10 +17,11 @@ commit a journal of the minutes stepped since (their values, a few hundred bytes
 restart steps the journal's minutes again from the snapshot without making their rows again
 (they are committed): the same values in the same order, so the same state (the estimator is
 deterministic, its random state is in the snapshot). Stepping them again from the store would
-not do: a lagging kit's late records change a minute after it was stepped. A snapshot of another model (the
-greenhouse's ``model =`` changed, e.g. ``prototype`` → ``prototype+vent_control``) is migrated
-(gateway/estimate/state_migration.py: the matching parameters keep their values, the start's log
-line names what was kept, added and dropped); one that cannot be used starts anew, saying why.
+not do: a lagging kit's late records change a minute after it was stepped. A snapshot of another
+model (the greenhouse's ``model =`` changed, e.g. ``prototype`` → ``prototype+vent_control``) is
+migrated (gateway/estimate/state_migration.py: the matching parameters keep their values, the
+start's log line names what was kept, added and dropped); one that cannot be used starts anew,
+saying why.
 A virtual ventilation sensor reads the fluxes of its own model kind: the forecasting estimator's
 when the kinds agree, else those of a second estimator of its kind stepped on the same minutes
 (gateway/service/ventilation.py; its state is saved beside the forecasting one).

@@ -51,6 +51,7 @@ def with_(path: str, value, base: dict | None = None) -> dict:
     ("zenoh.connect", ["192.168.1.2:7447"], "zenoh.connect[0]: expected a Zenoh endpoint"),
     ("estimator.horizons_min", [15, 0], "estimator.horizons_min: must be whole minutes"),
     ("estimator.forecast", "best", "estimator.forecast: 'best' is not one of adaptive, adaptive_kf, "),
+    ("estimator.snapshot_every_min", 61, "estimator.snapshot_every_min: 61 is outside 1..60"),
     ("clock.scale", 300, "clock.epoch: a scaled clock needs the time it starts from"),
     ("clock.epoch", "yesterday", "clock.epoch: expected an ISO UTC time"),
     ("greenhouse.0.inside", KeyError, "greenhouse[1].inside: missing (required)"),

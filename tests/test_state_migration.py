@@ -23,7 +23,10 @@ SUNRISE = 100  # [min after EPOCH, 06:00Z] the trace's sun is up (> 5 W m-2) fro
 
 
 def pipeline(model: str, theta0: np.ndarray | None = None) -> GreenhousePipeline:
-    return GreenhousePipeline("north", GH, build_model(model, GH), 7, 7, theta0, seed=1)
+    """The snapshot saved with every batch (``snapshot_every_min`` 1): these tests read and edit
+    the saved snapshot, which must then be the state at the cursor, whatever the batches."""
+    return GreenhousePipeline("north", GH, build_model(model, GH), 7, 7, theta0, seed=1,
+                              snapshot_every_min=1)
 
 
 def saved(store: Store) -> dict:

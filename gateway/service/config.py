@@ -271,6 +271,9 @@ def _estimator(e: _Table) -> EstimatorSettings:
         gap_s=e.get("gap_s", float, d["gap_s"], lo=60.0),
         history_min=e.get("history_min", int, d["history_min"], lo=1, hi=100_000),
         forecast=e.get("forecast", str, d["forecast"], choices=KINDS),
+        # at most an hour: the journal, rewritten every minute, grows ~150 bytes a minute
+        snapshot_every_min=e.get("snapshot_every_min", int, d["snapshot_every_min"], lo=1,
+                                 hi=60),
     )
     e.done()
     return s

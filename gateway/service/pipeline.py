@@ -10,11 +10,18 @@ own matured errors); ``forecast="combined"``, ``"adaptive_kf"`` or ``"adaptive"`
 another. A hole in the data
 longer than ``gap_s`` restarts the estimator's window and keeps its parameters; shorter holes
 are stepped as missing minutes (the estimator dead-reckons through them, as in ``replay``).
-Each batch of minutes is one transaction: its rows and the estimator's snapshot after it, so a
-restart resumes exactly where the last commit left off. A snapshot of another model (the
-greenhouse's ``model =`` changed, e.g. ``prototype`` → ``prototype+vent_control``) is migrated
-(gateway/estimate/state_migration.py: the matching parameters keep their values, the start's log
-line names what was kept, added and dropped); one that cannot be used starts anew, saying why.
+Each batch of minutes is one transaction: its rows and the cursor after it, so a restart resumes
+exactly where the last commit left off. The estimator's snapshot (~176 KB) is rewritten only once
+``snapshot_every_min`` minutes have been stepped since the last one; the batches in between
+commit a journal of the minutes stepped since (their values, a few hundred bytes a minute), and a
+restart steps the journal's minutes again from the snapshot without making their rows again
+(they are committed): the same values in the same order, so the same state (the estimator is
+deterministic, its random state is in the snapshot). Stepping them again from the store would
+not do: a lagging kit's late records change a minute after it was stepped. A snapshot of another
+model (the greenhouse's ``model =`` changed, e.g. ``prototype`` → ``prototype+vent_control``) is
+migrated (gateway/estimate/state_migration.py: the matching parameters keep their values, the
+start's log line names what was kept, added and dropped); one that cannot be used starts anew,
+saying why.
 A virtual ventilation sensor reads the fluxes of its own model kind: the forecasting estimator's
 when the kinds agree, else those of a second estimator of its kind stepped on the same minutes
 (gateway/service/ventilation.py; its state is saved beside the forecasting one).
@@ -45,7 +52,15 @@ from gateway.service.minutes import KIT_COLUMNS, Minute, final_before, first_min
 from gateway.service.settings import EstimatorSettings, GreenhouseSettings
 from gateway.service.ventilation import HISTORY_KEY, STATE_KEY, SensorFeed, VentilationSensor
 from gateway.store.db import transaction
-from gateway.store.live import EstimateRow, add_estimates, load_state, save_state
+from gateway.store.live import (
+    EstimateRow,
+    Journal,
+    add_estimates,
+    load_journal,
+    load_state,
+    save_journal,
+    save_state,
+)
 
 log = logging.getLogger("serra.gateway")
 DT = 60.0
@@ -75,7 +90,8 @@ class GreenhousePipeline:
                  gap_s: float = EstimatorSettings.gap_s,
                  history_min: int = EstimatorSettings.history_min,
                  ventilation: VentilationSensor | None = None,
-                 forecast: str = EstimatorSettings.forecast) -> None:
+                 forecast: str = EstimatorSettings.forecast,
+                 snapshot_every_min: int = EstimatorSettings.snapshot_every_min) -> None:
         """The keyword defaults are the config's ([estimator] and [[greenhouse]] outlook), read
         from its dataclasses so that they cannot drift apart."""
         self.name, self.gh, self.model = name, gh, model
@@ -89,6 +105,9 @@ class GreenhousePipeline:
         self._fresh = (theta0, seed, forecast)  # what a new estimator and forecaster start from
         self._start_fresh()
         self.cursor: int | None = None  # last minute stepped
+        self.snapshot_every_s = 60 * snapshot_every_min
+        self.saved: int | None = None  # last minute of the saved snapshot (None: none saved)
+        self.journal: list[tuple[int, list[float]]] = []  # minutes stepped since it: values
         self.history_min = history_min
         self.hist: dict[str, deque[float]] = {c: deque(maxlen=history_min) for c in KIT_COLUMNS}
         self.hist_minute: int | None = None
@@ -119,13 +138,18 @@ class GreenhousePipeline:
                 self.forecaster.restore(state.get("forecaster"))
                 if self.vent is not None:  # the state as saved: it may hold the sensor's kind
                     note += self.vent.restore(saved.state)
+                journal = load_journal(conn, self.name)
+                if journal is not None and journal.columns != KIT_COLUMNS:
+                    raise ValueError(f"journal of columns {journal.columns}")
             except (ValueError, KeyError, TypeError, IndexError) as e:
                 msg = f"greenhouse {self.name}: saved estimator state not used ({e}); starting anew"
                 saved = None
                 self._start_fresh()  # a restore that failed half-way leaves nothing behind
             else:
-                self.cursor = saved.minute
+                self.cursor = self.saved = saved.minute if journal is None else journal.snapshot
                 self._load_history(conn)
+                if journal is not None:
+                    note += self._replay(journal, saved.minute)
                 self.state = "running"
                 return (f"greenhouse {self.name}: estimator resumed at {_iso(saved.minute)} "
                         f"({self.est.counters.samples} minutes stepped so far){note}")
@@ -139,6 +163,17 @@ class GreenhousePipeline:
                                 (self.inside,)).fetchone()[0]
             self.cursor = max(first, last - 60 * self.history_min) - 60
         return msg
+
+    def _replay(self, journal: Journal, cursor: int) -> str:
+        """Step the journal's minutes again from the snapshot, their rows and notes dropped
+        (committed, said); returns what the start's log line adds."""
+        for minute, values in journal.minutes:
+            self._advance_to(Minute(minute, dict(zip(KIT_COLUMNS, values, strict=True))),
+                             StepReport())
+        if self.cursor != cursor:  # written in one transaction with it: cannot happen
+            raise RuntimeError(f"greenhouse {self.name}: the journal ends at {self.cursor}, "
+                               f"the saved cursor is {cursor}")
+        return f"; {len(journal.minutes)} minutes stepped again from the snapshot's journal"
 
     def _load_history(self, conn: sqlite3.Connection) -> None:
         assert self.cursor is not None
@@ -169,12 +204,23 @@ class GreenhousePipeline:
             assert self.cursor is not None
             with transaction(conn):
                 add_estimates(conn, rows)
-                save_state(conn, self.name, self.model.name, self.cursor, self._snapshot(), now)
+                self._save(conn, now)
             report.rows += len(rows)
             report.last_minute = self.cursor
             start = self.cursor + 60
         report.more = True
         return report
+
+    def _save(self, conn: sqlite3.Connection, now: float) -> None:
+        """The cursor, with the snapshot once ``snapshot_every_s`` have been stepped since the
+        last one, else with the journal of the minutes since it (in the caller's transaction)."""
+        assert self.cursor is not None
+        if self.saved is None or self.cursor - self.saved >= self.snapshot_every_s:
+            save_state(conn, self.name, self.model.name, self.cursor, self._snapshot(), now)
+            self.saved, self.journal = self.cursor, []
+        else:
+            save_journal(conn, self.name, self.cursor,
+                         Journal(self.saved, KIT_COLUMNS, self.journal))
 
     def _snapshot(self) -> dict:
         snap = self.est.snapshot()
@@ -186,6 +232,7 @@ class GreenhousePipeline:
         return snap
 
     def _advance_to(self, m: Minute, report: StepReport) -> list[EstimateRow]:
+        self.journal.append((m.minute, [m.values.get(c, math.nan) for c in KIT_COLUMNS]))
         rows: list[EstimateRow] = []
         if self.cursor is not None and m.minute - self.cursor > self.gap_s:
             gap_h = (m.minute - self.cursor) / 3600

@@ -55,6 +55,9 @@ class EstimatorSettings:
     gap_s: float = 300.0  # a longer hole restarts the estimator's window (not its parameters)
     history_min: int = 1440  # minutes of history handed to the weather outlook
     forecast: str = "corrected"  # which forecast is published (gateway/service/forecaster.py)
+    # minutes stepped between two saves of the estimator's snapshot (a journal in between):
+    # ~176 KB rewritten every 15 minutes, not every minute (SD-card wear, docs/gateway.md)
+    snapshot_every_min: int = 15
 
 
 @dataclass(frozen=True)

@@ -71,7 +71,8 @@ class Worker:
             p = GreenhousePipeline(s.name, r.gh, r.model, s.inside, s.outside, r.theta0,
                                    horizons=est.horizons_min, outlook=s.outlook, seed=est.seed,
                                    gap_s=est.gap_s, history_min=est.history_min,
-                                   ventilation=r.ventilation, forecast=est.forecast)
+                                   ventilation=r.ventilation, forecast=est.forecast,
+                                   snapshot_every_min=est.snapshot_every_min)
             for line in r.warnings:  # what run --check printed: said once, as the estimator is made
                 log.warning("%s", line)
             log.info(p.resume(conn))

@@ -58,8 +58,8 @@ def save_greenhouses(conn: sqlite3.Connection, rows: Sequence[dict[str, Any]], n
 @dataclass(frozen=True)
 class SavedState:
     model: str
-    minute: int  # last minute stepped [unix s]
-    state: dict[str, Any]
+    minute: int  # last minute stepped [unix s]: its rows are committed
+    state: dict[str, Any]  # the snapshot as of ``minute``, or of the journal's ``snapshot``
 
 
 def load_state(conn: sqlite3.Connection, greenhouse: str) -> SavedState | None:
@@ -70,10 +70,50 @@ def load_state(conn: sqlite3.Connection, greenhouse: str) -> SavedState | None:
 
 def save_state(conn: sqlite3.Connection, greenhouse: str, model: str, minute: int,
                state: dict[str, Any], now: float) -> None:
-    """The estimator's snapshot and its cursor (in the caller's transaction)."""
+    """The estimator's snapshot and its cursor (in the caller's transaction); the journal of
+    minutes stepped after an older snapshot is emptied."""
     conn.execute("INSERT OR REPLACE INTO estimator_state (greenhouse, model, minute, state, "
                  "updated) VALUES (?, ?, ?, ?, ?)",
                  (greenhouse, model, minute, json.dumps(state), now))
+    conn.execute("DELETE FROM meta WHERE name=?", (_journal_key(greenhouse),))
+
+
+@dataclass(frozen=True)
+class Journal:
+    """The minutes an estimator stepped after its saved snapshot, with the values it stepped
+    them on: stepping them again from the snapshot gives the state at the cursor. ``snapshot``
+    is the snapshot's last minute [unix s]; ``minutes`` are (minute [unix s], the values of
+    ``columns`` in that order, NaN for missing)."""
+
+    snapshot: int
+    columns: tuple[str, ...]
+    minutes: list[tuple[int, list[float]]]
+
+
+def _journal_key(greenhouse: str) -> str:
+    return f"estimator_journal/{greenhouse}"
+
+
+def save_journal(conn: sqlite3.Connection, greenhouse: str, minute: int, journal: Journal) -> None:
+    """Advance the saved cursor to ``minute`` without rewriting the snapshot: its journal in
+    ``meta`` and the row's ``minute`` (one page of a row whose state spans ~40; in the
+    caller's transaction)."""
+    text = json.dumps({"snapshot": journal.snapshot, "columns": list(journal.columns),
+                       "minutes": journal.minutes})  # repr floats and NaN: read back bit-exact
+    key = _journal_key(greenhouse)
+    # an UPDATE keeps the row's rowid: meta's page is written, not its key's index too
+    if conn.execute("UPDATE meta SET value=? WHERE name=?", (text, key)).rowcount == 0:
+        conn.execute("INSERT INTO meta (name, value) VALUES (?, ?)", (key, text))
+    conn.execute("UPDATE estimator_state SET minute=? WHERE greenhouse=?", (minute, greenhouse))
+
+
+def load_journal(conn: sqlite3.Connection, greenhouse: str) -> Journal | None:
+    r = conn.execute("SELECT value FROM meta WHERE name=?", (_journal_key(greenhouse),)).fetchone()
+    if r is None:
+        return None
+    j = json.loads(r[0])
+    return Journal(int(j["snapshot"]), tuple(j["columns"]),
+                   [(int(m), [float(v) for v in vs]) for m, vs in j["minutes"]])
 
 
 def set_status(conn: sqlite3.Connection, items: dict[str, Any], now: float) -> None:

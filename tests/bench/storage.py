@@ -12,8 +12,10 @@ producers make stays in the outbox. Measured with SQLite's ``dbstat`` (pages of 
 indexes) on a read-only connection while the gateway runs: rows a minute over a window from
 ``--hours`` − 24 h to ``--hours`` of stepped minutes (a day and a night, after the first day, when
 the snapshot's day buffers are full), bytes a row over the whole table at the window's end. The
-snapshot is rewritten with every committed batch (once a minute live); its daily write volume is
-derived from its size (×1440), as a scaled clock batches several minutes at once.
+snapshot is rewritten once ``[estimator] snapshot_every_min`` minutes have been stepped since the
+last (the default, 15: ~96 times a day live); its daily write volume is derived from its size
+(× 1440 / snapshot_every_min), as a scaled clock batches several minutes at once. What the
+estimator writes a day, live (one batch a minute), is measured by tests/bench/snapshot_writes.py.
 """
 
 from __future__ import annotations
@@ -164,6 +166,13 @@ def _size(path: Path) -> int:
     return path.stat().st_size if path.exists() else 0
 
 
+def _snapshot_every_min() -> int:
+    """The default minutes between two saves of the snapshot (read, not copied)."""
+    from gateway.service.settings import EstimatorSettings
+
+    return EstimatorSettings.snapshot_every_min
+
+
 def summarise(run: dict[str, Any]) -> dict[str, Any]:
     """Per growing table: rows a minute over the window, bytes a row at its end, bytes a day,
     MB a year, MB kept with the default retention; totals; the fixed tables; the snapshot."""
@@ -187,9 +196,11 @@ def summarise(run: dict[str, Any]) -> dict[str, Any]:
     out["mb_kept_with_defaults"] = round(sum(v["mb_kept"] for v in t.values()))
     out["fixed_kb"] = {k: round(v["bytes"] / 1e3) for k, v in b["tables"].items() if k not in GROWING}
     snap = b["snapshot_bytes"]
+    saves = 1440 / _snapshot_every_min()  # a day, live
     out["snapshot"] = {"bytes": snap, "parts_bytes": b["snapshot_parts"],
-                       "mb_written_per_day_saved_each_minute": round(snap * 1440 / 1e6),
-                       "gb_written_per_year": round(snap * 1440 * 365 / 1e9)}
+                       "saves_per_day": saves,
+                       "mb_written_per_day": round(snap * saves / 1e6, 1),
+                       "gb_written_per_year": round(snap * saves * 365 / 1e9, 1)}
     out["file"] = {"mb": round(run["file_bytes"] / 1e6, 2), "wal_mb": round(run["wal_bytes"] / 1e6, 2),
                    "free_mb": round(b["free_pages"] * b["page_size"] / 1e6, 2)}
     return out

@@ -17,8 +17,7 @@ from gateway import protocol as p
 from gateway.store.keys import write_keys
 from gateway.store.losses import RING_MAX_SPAN
 from tests.mcu_fakes.hostenv import micropython
-from tests.test_firmware_e2e import KEY, Firmware, LossyProxy, make_trace, start_gateway, \
-    wait_for_line
+from tests.test_firmware_e2e import KEY, Firmware, LossyProxy, make_trace, start_gateway, wait_for_line
 from tests.test_firmware_outage import RING, losses, mem_lines
 
 pytestmark = pytest.mark.skipif(micropython() is None, reason="micropython not installed")

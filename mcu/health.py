@@ -21,14 +21,19 @@ class Health:
         self.last = now
         self.hseq = 0  # health packets this boot: the gateway's replay check
         self.told = 0  # ring.dropped in the last packet
-        self.up_ms = 0  # accumulated each loop: ticks wrap (2**30 ms on the ESP32)
+        # Uptime accumulated each loop, as ticks wrap (2**30 ms on the ESP32); in s plus ms, so
+        # it stays a small int (31 bits there: 12.4 days in ms) and adds never allocate.
+        self.up_s = 0
+        self.up_rem_ms = 0
         self.up_tick = now
         self.buf = bytearray(wire.HEALTH_LEN)
         self.c = [0] * 10
 
     def due_now(self, now, dropped: int) -> bool:
-        self.up_ms += ticks_diff(now, self.up_tick)
+        ms = self.up_rem_ms + ticks_diff(now, self.up_tick)
         self.up_tick = now
+        self.up_s += ms // 1000
+        self.up_rem_ms = ms % 1000
         return ticks_diff(now, self.due) >= 0 or (
             dropped != self.told and ticks_diff(now, self.last) >= self.soon)
 
@@ -36,7 +41,7 @@ class Health:
         """Build, print and send one packet through the sender's port (open: link up)."""
         ring = sender.ring
         c = self.c
-        c[0] = self.up_ms // 1000
+        c[0] = self.up_s
         c[1] = records
         c[2] = ring.dropped - ring.dropped_old
         c[3] = ring.dropped_old

@@ -83,7 +83,9 @@ def run(cfg, boot: int, wdt, wlan, sensors, fail: tuple = (), ring=None, port=No
             sender.step(now)
         elif wifi.state != UP:
             sender.close()
-        if health.due_now(now, ring.dropped) and (wifi is None or wifi.state == UP):
+        # Over Wi-Fi only: uartport.py's frame buffer holds a record (63 bytes), not the 72 of
+        # a health packet (sizing it is the UART's own change).
+        if health.due_now(now, ring.dropped) and wifi is not None and wifi.state == UP:
             health.send(now, sender, seq, rssi(wlan))
         if wifi is not None and wifi.state != last_state:
             last_state = wifi.state

@@ -15,7 +15,8 @@ from gateway.status.messages import Messages
 from gateway.status.snapshot import Link
 from gateway.store import Store
 from gateway.store.board_health import board_fields, latest
-from tests.status_helpers import snap_of
+from gateway.store.live import set_status
+from tests.status_helpers import fresh_status, snap_of
 from tests.status_store import Filled
 
 HEALTH = p.BoardHealth(7, 0, 5, -67, 7260, 400, 150, 2, 500, 240, 0, 3, 40960, 8)
@@ -51,6 +52,17 @@ def test_the_boards_own_drops_show_beside_the_inferred_count(store: Filled) -> N
     assert kit.board is not None and kit.board.dropped == 152
     from_store = next(k for k in snap_of(store).kits if k.device_id == 7).board
     assert kit.board == from_store
+
+
+def test_health_packets_taken_are_not_rejected_packets(store: Filled) -> None:
+    beat = fresh_status(store)
+    s = Store(store.path)
+    try:
+        set_status(s.conn, {"ingest": {"stored": 120, "health": 4, "health_replay": 1}},
+                   store.now)
+    finally:
+        s.close()
+    assert snap_of(store, wall=beat).gateway.rejects == {"health_replay": 1}
 
 
 def test_a_store_without_the_health_table_reads_as_no_reports() -> None:

@@ -311,10 +311,10 @@ class Gateway:
 
     @property
     def rejects(self) -> dict[str, int]:
-        """Rejected packets by reason (every counter but stored, duplicate and lost_on_board, a
-        count of records the boards lost, not of packets)."""
+        """Rejected packets by reason (every counter but stored, duplicate, health (health
+        packets taken) and lost_on_board, a count of records the boards lost, not of packets)."""
         return {k: v for k, v in self.ingest.items()
-                if k not in ("stored", "duplicate", "lost_on_board") and v}
+                if k not in ("stored", "duplicate", "health", "lost_on_board") and v}
 
 
 @dataclass(frozen=True)

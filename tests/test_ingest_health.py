@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from gateway import protocol as p
+from tests.mcu_fakes.hostenv import micropython, run_mpy
 from tests.test_ingest import KEY, Gateway, pkt, run, until
 
 
@@ -39,6 +40,29 @@ def test_roundtrip_and_what_an_old_gateway_makes_of_it() -> None:
     with pytest.raises(p.ProtocolError) as e:
         p.peek_device(data)
     assert e.value.reason == "long"
+
+
+MPY_HEALTH = """
+import sys, binascii, wire
+buf = bytearray(wire.HEALTH_LEN)
+for hseq, rssi in ((4, -61), (5, -128)):
+    wire.seal_health(buf, wire.Hmac(binascii.unhexlify(sys.argv[1])), 7, 1, hseq, rssi,
+                     [240, 40, 3, 1, 50, 30, 1, 2, 41000, 5])
+    print(binascii.hexlify(buf).decode())
+"""
+
+
+@pytest.mark.skipif(micropython() is None, reason="micropython interpreter not installed")
+def test_the_firmware_builds_the_same_bytes(tmp_path: Path) -> None:
+    """mcu/wire.py (under the real MicroPython) and gateway/protocol.py: one byte layout."""
+    script = tmp_path / "health_mpy.py"
+    script.write_text(MPY_HEALTH)
+    r = run_mpy(script, KEY.hex(), timeout=60)
+    assert r.returncode == 0, r.stderr
+    want = [p.encode_health(health(4, uptime_s=240), KEY).hex(),
+            p.encode_health(health(5, uptime_s=240, rssi_dbm=None), KEY).hex()]
+    assert r.stdout.split() == want
+    assert p.parse_health(bytes.fromhex(want[1])).rssi_dbm is None
 
 
 def test_health_is_stored_and_refused_when_tampered_replayed_or_inconsistent(

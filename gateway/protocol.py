@@ -1,4 +1,5 @@
-"""Serra wire format v1: record packets from the kit and authenticated acknowledgements.
+"""Serra wire format v1: record packets from the kit, authenticated acknowledgements, and the
+board's health packets (its own counters; no ack).
 
 One spec with mcu/wire.py (MicroPython); both pass the vectors in tests/vectors/. The byte table
 is in docs/wire-format.md. Big-endian, fixed size, HMAC-SHA256 truncated to 16 bytes.
@@ -17,6 +18,7 @@ MAGIC = b"SR"
 VERSION = 1
 TYPE_RECORD = 0x01
 TYPE_ACK = 0x02
+TYPE_HEALTH = 0x03
 TAG_LEN = 16
 
 # magic, version, type, device_id, boot, seq, tick_ms, age_ms, period_ds
@@ -46,6 +48,14 @@ RECORD_LEN = RECORD_BODY_LEN + TAG_LEN  # 63
 # magic, version, type, device_id, boot, seq, status, reason
 _ACK = struct.Struct(">2sBBIIIBB")
 ACK_LEN = _ACK.size + TAG_LEN  # 34
+
+# magic, version, type, device_id, boot, hseq, layout, rssi_dbm, uptime_s, records,
+# dropped_full, dropped_old, sent, acked, rejected, send_errors, heap_free, ring
+_HEALTH = struct.Struct(">2sBBIIIBbIIIIIIIIIH")
+HEALTH_BODY_LEN = _HEALTH.size  # 56
+HEALTH_LEN = HEALTH_BODY_LEN + TAG_LEN  # 72
+HEALTH_LAYOUT = 1
+RSSI_UNKNOWN = -128
 
 # Channel status codes. Below 0x10 the value is present, from 0x10 on it is missing and the raw
 # value must be MISSING: a failed read is never sent as a made-up number.
@@ -256,3 +266,66 @@ def decode_ack(data: bytes, key: bytes) -> Ack:
     if st not in (ACK_STORED, ACK_DUPLICATE, ACK_REJECTED):
         raise ProtocolError("malformed", f"ack status {st}")
     return Ack(dev, boot, seq, st, reason)
+
+
+@dataclass(frozen=True, slots=True)
+class BoardHealth:
+    """The board's own counters since its boot (docs/wire-format.md, "Health packet")."""
+
+    device_id: int
+    boot: int
+    hseq: int  # health packets of this boot, from 0: the replay check
+    rssi_dbm: int | None  # Wi-Fi signal, None when unknown (UART, not connected)
+    uptime_s: int
+    records: int  # records made this boot (the next record's seq)
+    dropped_full: int  # dropped from the ring: full
+    dropped_old: int  # dropped from the ring: more than 512 seqs or 2**28 ms old
+    sent: int  # transmissions, resends included
+    acked: int  # records acknowledged stored or duplicate
+    rejected: int  # records acknowledged rejected
+    send_errors: int
+    heap_free: int  # bytes
+    ring: int  # records in the ring now
+
+    @property
+    def dropped(self) -> int:
+        return self.dropped_full + self.dropped_old
+
+
+def encode_health(h: BoardHealth, key: bytes | Mac) -> bytes:
+    """Encode and authenticate one health packet (tests and the vector generator)."""
+    body = _HEALTH.pack(MAGIC, VERSION, TYPE_HEALTH, h.device_id, h.boot, h.hseq, HEALTH_LAYOUT,
+                        RSSI_UNKNOWN if h.rssi_dbm is None else h.rssi_dbm, h.uptime_s,
+                        h.records, h.dropped_full, h.dropped_old, h.sent, h.acked, h.rejected,
+                        h.send_errors, h.heap_free, h.ring)
+    return body + (key.tag(body) if isinstance(key, Mac) else tag(key, body))
+
+
+def is_health(data: bytes) -> bool:
+    """Framing of a health packet (length and header), before any crypto."""
+    return (len(data) == HEALTH_LEN and data[0:2] == MAGIC and data[2] == VERSION
+            and data[3] == TYPE_HEALTH)
+
+
+def verify_health(data: bytes, key: bytes | Mac) -> None:
+    body = data[:HEALTH_BODY_LEN]
+    good = key.tag(body) if isinstance(key, Mac) else tag(key, body)
+    if not hmac.compare_digest(good, data[HEALTH_BODY_LEN:]):
+        raise ProtocolError("bad_tag")
+
+
+def parse_health(data: bytes) -> BoardHealth:
+    """Decode an authenticated health packet and check it adds up. Every record a board made
+    is in its ring, acknowledged, rejected or dropped, so records = ring + acked + rejected +
+    dropped exactly; a packet where it does not is `malformed`."""
+    f = _HEALTH.unpack_from(data, 0)
+    if f[6] != HEALTH_LAYOUT:
+        raise ProtocolError("malformed", f"health layout {f[6]}, this gateway knows "
+                            f"{HEALTH_LAYOUT}")
+    if f[7] > 0:
+        raise ProtocolError("malformed", f"rssi {f[7]} dBm")
+    h = BoardHealth(f[3], f[4], f[5], None if f[7] == RSSI_UNKNOWN else f[7], *f[8:])
+    if h.records != h.ring + h.acked + h.rejected + h.dropped:
+        raise ProtocolError("malformed", f"records {h.records} != ring {h.ring} + acked "
+                            f"{h.acked} + rejected {h.rejected} + dropped {h.dropped}")
+    return h

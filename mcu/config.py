@@ -31,6 +31,7 @@ class Config:
     period_ms: int
     ack_timeout_ms: int
     ring_size: int
+    health_ms: int  # between health packets (docs/wire-format.md, "Health packet")
     wdt_ms: int
     boot_file: str
     pins: dict | None  # set to None once the drivers are built
@@ -103,6 +104,7 @@ def parse(d, where: str = "config") -> Config:
         raise ConfigError(f"{where}: sample_ms {c.sample_ms} longer than period_s {period_s}")
     c.ack_timeout_ms = _get(d, "ack_timeout_ms", int, 3000, lo=50, hi=600000, where=where)
     c.ring_size = _get(d, "ring_size", int, 128, lo=120, hi=1024, where=where)
+    c.health_ms = _get(d, "health_s", int, 3600, lo=1, hi=86400, where=where) * 1000
     c.wdt_ms = _get(d, "wdt_ms", int, 30000, lo=2000, hi=3600000, where=where)
     c.boot_file = _get(d, "boot_file", str, "boot.cnt", where=where)
     pins = d.get("pins", {})

@@ -10,6 +10,7 @@ import sys
 from time import sleep_ms, ticks_add, ticks_diff, ticks_ms
 
 import wire
+from health import Health
 from link import UP, Sender, UdpPort, WifiLink
 from ring import Ring
 from sensors import Averager
@@ -21,6 +22,16 @@ def log_record(seq: int, avg) -> None:
     for i in range(7):
         print(f" {avg.raw[i]}:{avg.status[i]}", end="")
     print()
+
+
+def rssi(wlan) -> int:
+    """The Wi-Fi signal in dBm, -128 when unknown (UART, or a port without it)."""
+    if wlan is None:
+        return -128
+    try:
+        return int(wlan.status("rssi"))
+    except (OSError, ValueError, TypeError):
+        return -128
 
 
 def run(cfg, boot: int, wdt, wlan, sensors, fail: tuple = (), ring=None, port=None,
@@ -45,6 +56,7 @@ def run(cfg, boot: int, wdt, wlan, sensors, fail: tuple = (), ring=None, port=No
     period_end = ticks_add(now, period_ms)
     last_state = -1
     loops = 0
+    health = Health(now, cfg.health_ms)
     gc.collect()
     print("MEM boot", gc.mem_alloc())
     while loops != max_loops:
@@ -71,6 +83,10 @@ def run(cfg, boot: int, wdt, wlan, sensors, fail: tuple = (), ring=None, port=No
             sender.step(now)
         elif wifi.state != UP:
             sender.close()
+        # Over Wi-Fi only: uartport.py's frame buffer holds a record (63 bytes), not the 72 of
+        # a health packet (sizing it is the UART's own change).
+        if health.due_now(now, ring.dropped) and wifi is not None and wifi.state == UP:
+            health.send(now, sender, seq, rssi(wlan))
         if wifi is not None and wifi.state != last_state:
             last_state = wifi.state
             print("serra: wifi", ("down", "connecting", "up", "backoff")[last_state])

@@ -47,7 +47,8 @@ class Ring:
         self.due = array("l", bytearray(w * capacity))  # tick of the next (re)transmission
         self.tries = bytearray(capacity)
         self.count = 0
-        self.dropped = 0
+        self.dropped = 0  # all drops; the health packet splits them: full, too old
+        self.dropped_old = 0
 
     def push(self, seq: int, tick):
         """Reserve a slot for a new record; returns its channel bytes (a CHAN_LEN memoryview)."""
@@ -59,6 +60,7 @@ class Ring:
                 self.seq[i] = _FREE
                 self.count -= 1
                 self.dropped += 1
+                self.dropped_old += 1
         if self.count == self.capacity:
             oldest = 0
             for i in range(self.capacity):

@@ -1,6 +1,6 @@
 """Serra wire format v1 (same spec as gateway/protocol.py, byte table in docs/wire-format.md).
 
-Record packet: 63 bytes, big-endian, HMAC-SHA256 tag truncated to 16 bytes. MicroPython has
+Record packet: 63 bytes; health packet (the board's counters, no ack): 72 bytes; big-endian, HMAC-SHA256 tag truncated to 16 bytes. MicroPython has
 hashlib.sha256 but no hmac module, so HMAC (RFC 2104) is built here from two hash passes.
 
 Names starting with "_" are compile-time constants: they take no RAM on the board (no global,
@@ -25,6 +25,10 @@ _AGE_OFF = const(20)
 _ACK_BODY_LEN = const(18)
 ACK_LEN = const(34)
 ACK_REJECTED = const(2)  # ack status: 0 stored, 1 duplicate, 2 rejected (final)
+_TYPE_HEALTH = const(3)
+_HEALTH_LAYOUT = const(1)
+_HEALTH_BODY_LEN = const(56)
+HEALTH_LEN = const(72)
 
 
 class Hmac:
@@ -70,6 +74,17 @@ def seal(buf, age_ms: int, mac: Hmac) -> None:
     struct.pack_into(">I", buf, _AGE_OFF, age_ms & 0xFFFFFFFF)
     mv = memoryview(buf)
     mv[_BODY_LEN:RECORD_LEN] = mac.digest(mv[:_BODY_LEN])[:_TAG_LEN]
+
+
+def seal_health(buf, mac: Hmac, dev: int, boot: int, hseq: int, rssi: int, c) -> None:
+    """Write a whole health packet into buf (>= HEALTH_LEN bytes): rssi in dBm (-128 unknown),
+    c the nine uint32 counters (uptime_s, records, dropped_full, dropped_old, sent, acked,
+    rejected, send_errors, heap_free) then the ring's count (uint16), in that order."""
+    struct.pack_into(">2sBBIIIBbIIIIIIIIIH", buf, 0, _MAGIC, _VERSION, _TYPE_HEALTH, dev, boot,
+                     hseq, _HEALTH_LAYOUT, rssi, c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7],
+                     c[8], c[9])
+    mv = memoryview(buf)
+    mv[_HEALTH_BODY_LEN:HEALTH_LEN] = mac.digest(mv[:_HEALTH_BODY_LEN])[:_TAG_LEN]
 
 
 def parse_ack(data, dev: int, mac: Hmac):

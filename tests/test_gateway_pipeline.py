@@ -14,6 +14,7 @@ import pytest
 
 from gateway.greenhouse import load_greenhouse
 from gateway.model import build_model
+from gateway.protocol import BoardHealth
 from gateway.publish import validate
 from gateway.publish.payloads import Place
 from gateway.service.diagnosis import store_findings
@@ -223,12 +224,21 @@ def test_producers_make_every_message_once_and_pause_when_the_outbox_is_full(tmp
     assert seqs == list(range(30))  # in order
     for m in everything[::7]:
         assert validate.errors(json.loads(m.payload)) == [], m.key
+    # kit 7's latest health packet, as ingest keeps it: its own counters go into device/7
+    s.note_health(BoardHealth(7, 0, 2, -58, 1800, 30, 0, 0, 31, 30, 0, 0, 41000, 0), 0,
+                  EPOCH + 3500)
     snap = prod.snapshots(EPOCH + 3600, 300.0, {"north": {"estimatorState": "running"}})
     assert snap == 3  # status, device/7, device/9 (unassigned)
     keys = {m.key for m in outbox.peek(10)}
     assert keys == {"serra/f1/north/status", "serra/f1/north/device/7", "serra/f1/unassigned/device/9"}
     for m in outbox.peek(10):
         assert validate.errors(json.loads(m.payload)) == []
+    dev7 = next(json.loads(m.payload) for m in outbox.peek(10) if m.key.endswith("device/7"))
+    assert dev7["recordsDroppedOnBoard"]["value"] == 0 and dev7["rssi"]["value"] == -58
+    assert dev7["boardCounters"]["value"]["bootCounter"] == 0
+    assert dev7["boardCounters"]["value"]["uptime"] == 1800
+    assert "boardCounters" not in next(json.loads(m.payload) for m in outbox.peek(10)
+                                       if m.key.endswith("device/9"))
 
 
 def test_findings_keep_their_identity_and_are_published_once_per_revision(tmp_path: Path) -> None:

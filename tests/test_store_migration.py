@@ -69,7 +69,7 @@ def test_v1_store_migrates_keeping_every_row(tmp_path: Path) -> None:
     before = dump(old)
     assert all(before[t] for t in V1_TABLES)
     s = Store(old)  # opening migrates
-    assert s.conn.execute("PRAGMA user_version").fetchone()[0] == schema.SCHEMA_VERSION == 3
+    assert s.conn.execute("PRAGMA user_version").fetchone()[0] == schema.SCHEMA_VERSION == 4
     assert s.integrity_ok()
     s.close()
     assert dump(old) == before  # every row of every version-1 table, unchanged
@@ -92,6 +92,25 @@ def test_v1_store_migrates_keeping_every_row(tmp_path: Path) -> None:
     s.close()
     Store(old).close()  # opening a current store again changes nothing
     assert dump(old)["samples"] == before["samples"]
+
+
+def test_v3_store_gains_the_health_table_keeping_every_row(tmp_path: Path) -> None:
+    """Version 3 → 4 adds only ``board_health`` (empty), in its own step."""
+    old = tmp_path / "v3.db"
+    make_v1(old)
+    Store(old).close()
+    with sqlite3.connect(old) as c:  # what a version-3 gateway left
+        c.execute("DROP TABLE board_health")
+        c.execute("PRAGMA user_version = 3")
+    before = dump(old)
+    s = Store(old)
+    assert s.conn.execute("PRAGMA user_version").fetchone()[0] == 4
+    assert s.conn.execute("SELECT count(*) FROM board_health").fetchone()[0] == 0
+    s.close()
+    assert dump(old) == before
+    new = tmp_path / "new.db"
+    Store(new).close()
+    assert tables(old) == tables(new)
 
 
 def test_unknown_schema_version_is_refused(tmp_path: Path) -> None:

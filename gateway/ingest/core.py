@@ -69,6 +69,7 @@ class _Dev:
     boot: int = -1  # as stored: board boot + base
     max_seq: int = -1
     seen: set[int] = field(default_factory=set)  # committed seqs of `boot` inside the window
+    health: tuple[int, int, int] = (-1, -1, 0)  # latest health packet: boot, hseq, dropped
 
 
 @dataclass(slots=True)
@@ -146,6 +147,9 @@ class IngestCore:
         """The receiving state of ``keys``' devices from the store (runs on the store's thread
         once the writer runs): boot base of each key, latest stored boot, its committed seqs."""
         devs = {d: _Dev(p.Mac(k), self.store.boot_base(d, key_id(k))) for d, k in keys.items()}
+        for dev, h in self.store.health_states().items():
+            if dev in devs:
+                devs[dev].health = h
         for dev, st in self.store.device_states().items():
             d = devs.get(dev)
             if d is not None:
@@ -209,6 +213,8 @@ class IngestCore:
     def _handle(self, data: bytes, peer: Hashable, send: Send) -> None:
         if len(data) == p.RECORD_LEN and data[:4] == _HEADER:  # fast path: well framed
             dev_id = int.from_bytes(data[4:8], "big")
+        elif p.is_health(data):
+            return self._health(data, peer)
         else:
             try:
                 dev_id = p.peek_device(data)
@@ -268,6 +274,43 @@ class IngestCore:
             log.warning("ingest queue at %d/%d records: the store is not keeping up",
                         len(self._pending), self.max_pending)
         self.alarm = alarm
+
+    def _health(self, data: bytes, peer: Hashable) -> None:
+        """A health packet: the board's own counters. Authenticated like a record; never
+        acknowledged (the next one carries the totals again); taken only if newer than the
+        latest taken, by (boot, hseq), so a replay cannot put old counters back."""
+        dev_id = int.from_bytes(data[4:8], "big")
+        d = self.devs.get(dev_id)
+        if d is None:
+            return self._reject("unknown_device", f"health packet of device {dev_id}", peer,
+                                dev_id)
+        try:
+            p.verify_health(data, d.key)
+            h = p.parse_health(data)
+        except p.ProtocolError as e:
+            return self._reject(e.reason, f"health packet of device {dev_id} {e.detail}", peer,
+                                dev_id)
+        boot = h.boot + d.base
+        if boot < d.boot or (boot, h.hseq) <= d.health[:2]:
+            return self._reject("health_replay", f"device {dev_id}: health packet boot {h.boot} "
+                                f"#{h.hseq} not newer than the latest taken (boot "
+                                f"{d.health[0] - d.base} #{d.health[1]}) nor records' boot", peer,
+                                dev_id)
+        before = d.health[2] if d.health[0] == boot else 0
+        d.health = (boot, h.hseq, h.dropped)
+        self.counters["health"] += 1
+        if h.dropped > before:
+            log.warning("device %d boot %d reports %d records dropped from its ring (full %d, "
+                        "too old %d; %d since its previous health packet)", dev_id, boot,
+                        h.dropped, h.dropped_full, h.dropped_old, h.dropped - before)
+        self._exec.submit(self._note_health, h, boot, self.clock())
+        return None
+
+    def _note_health(self, h: p.BoardHealth, boot: int, t: float) -> None:
+        try:
+            self.store.note_health(h, boot, t)
+        except Exception:  # the next packet carries the same totals
+            log.exception("could not keep the health packet of device %d", h.device_id)
 
     def _send(self, send: Send, peer: Hashable, pkt: bytes) -> None:
         try:

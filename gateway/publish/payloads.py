@@ -188,14 +188,26 @@ CONTROLLED = ("temperature", "humidity", "solarRadiation", "windSpeed", "precipi
 detector is reported as precipitation)."""
 
 
+_BOARD_COUNTERS = (("bootCounter", "board_boot"), ("uptime", "uptime_s"), ("records", "records"),
+                   ("droppedRingFull", "dropped_full"), ("droppedTooOld", "dropped_old"),
+                   ("sent", "sent"), ("acked", "acked"), ("rejected", "rejected"),
+                   ("sendErrors", "send_errors"), ("heapFree", "heap_free"), ("ring", "ring"))
+"""``boardCounters``' names and the health packet's fields (uptime in s, heapFree in bytes)."""
+
+
 def device(farm: str, device_id: int, t: float, idem: str, *, state: str, boot: int | None,
            records: int, last_seen: float | None, channels: Mapping[str, str],
            greenhouses: Sequence[Place], board_boot: int | None = None,
-           lost: int = 0) -> dict:
+           lost: int = 0, board: Mapping[str, Any] | None = None) -> dict:
     """``device/<id>``: a kit's health (``deviceState`` ok | silent | unassigned).
 
     ``recordsLost``: records the board made but lost before the gateway stored them (its ring
     overflowed, or it restarted), all boots, counted once they can no longer arrive.
+
+    ``board``: the fields of its latest health packet (gateway/store/board_health.BoardReport),
+    observed when it arrived: ``recordsDroppedOnBoard`` (its ring's drops this boot, as the
+    board counts them: known at once, where ``recordsLost`` waits for the seq span),
+    ``boardCounters`` (the rest) and ``rssi`` [dBm] when the board knows it.
 
     ``bootCounter`` is the boot as stored (unique per device, as in ``kitRecord``);
     ``boardBootCounter`` the board's own counter (they differ after a key rotation)."""
@@ -215,6 +227,12 @@ def device(farm: str, device_id: int, t: float, idem: str, *, state: str, boot: 
         attrs["boardBootCounter"] = prop(board_boot, None, t)
     if last_seen is not None:
         attrs["dateLastValueReported"] = date_time(last_seen)
+    if board is not None:
+        tb = board["t_recv"]
+        attrs["recordsDroppedOnBoard"] = prop(board["dropped_full"] + board["dropped_old"], None, tb)
+        attrs["boardCounters"] = prop({name: board[key] for name, key in _BOARD_COUNTERS}, None, tb)
+        if board["rssi_dbm"] is not None:
+            attrs["rssi"] = prop(board["rssi_dbm"], "dBm", tb)
     if greenhouses:
         attrs["location"] = point(greenhouses[0].latitude, greenhouses[0].longitude)
         attrs["controlledAsset"] = {"type": "ListRelationship",

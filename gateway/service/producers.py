@@ -31,6 +31,7 @@ from gateway.protocol import CHANNELS
 from gateway.publish import keyspace as K
 from gateway.publish import payloads as P
 from gateway.service.diagnosis import RUN_META, read_run
+from gateway.store.board_health import board_fields
 from gateway.store.db import transaction
 from gateway.store.live import device_health, findings
 from gateway.store.outbox import Message, Outbox, OutboxFull
@@ -301,7 +302,8 @@ class Producers:
                     records=h.records if h else 0, last_seen=h.last_sample_t if h else None,
                     channels=h.channels if h else {},
                     greenhouses=[self.gh[g].place for g in ghs],
-                    board_boot=h.board_boot if h else None, lost=h.lost if h else 0)))
+                    board_boot=h.board_boot if h else None, lost=h.lost if h else 0,
+                    board=board_fields(h.board, h.boot, h.board_boot) if h and h.board else None)))
         if len(msgs) > self.outbox.room():
             return 0  # state, not events: skipped while the backlog drains
         self.last_snapshot = now

@@ -56,6 +56,21 @@ def doc_time(doc: dict[str, Any]) -> float | None:
     return None
 
 
+def _board(doc: dict[str, Any]) -> S.BoardCounters | None:
+    """The board's own counters in a ``device/<id>`` message (payloads.device), if it has them."""
+    c = _value(doc, "boardCounters")
+    if not isinstance(c, dict):
+        return None
+    try:
+        rssi = _value(doc, "rssi")
+        return S.BoardCounters(int(c["droppedRingFull"]), int(c["droppedTooOld"]),
+                               int(c["sendErrors"]), int(c["heapFree"]), int(c["uptime"]),
+                               None if rssi is None else int(rssi),
+                               _time(doc["boardCounters"].get("observedAt")))
+    except (KeyError, TypeError, ValueError):
+        return None  # a message from another version: shown without them
+
+
 @dataclass
 class _Forecast:
     measured: float | None
@@ -229,7 +244,7 @@ class Messages:
             out.append(S.Kit(dev, _roles(self.roles.get(dev, set())), last,
                              int(_value(doc, "records", 0) or 0), board, _value(doc, "bootCounter"),
                              chans, S.silent(last, now),
-                             lost=int(_value(doc, "recordsLost", 0) or 0)))
+                             lost=int(_value(doc, "recordsLost", 0) or 0), board=_board(doc)))
         return out
 
     def _gateway(self, status: list[dict[str, Any]], answered: bool | None, link: S.Link) -> S.Gateway:

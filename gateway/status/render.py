@@ -208,6 +208,17 @@ def _finding_lines(g: S.GreenhouseView, diagnosis: S.Diagnosis | None) -> list[T
     return out
 
 
+def _board_lines(b: S.BoardCounters, width: int) -> list[Text]:
+    """What the board itself reported (its health packet), under the count the gateway infers:
+    its drops are known at once, the inferred ones a seq span (512 records) later."""
+    rssi = f" · wifi {b.rssi_dbm} dBm" if b.rssi_dbm is not None else ""
+    errors = f" · {b.send_errors} send errors" if b.send_errors else ""
+    text = (f"board says ({hhmm(b.reported)}): {b.dropped} dropped from its ring this boot "
+            f"(full {b.dropped_full}, too old {b.dropped_old}){errors}{rssi} · heap "
+            f"{b.heap_free // 1024} kB free · up {duration(b.uptime_s)}")
+    return wrapped(text, "     ", WARN if b.dropped or b.send_errors else DIM, width)
+
+
 def kit_lines(snap: S.Snapshot, width: int = WIDTH) -> list[Text]:
     out = [_line(("kit   greenhouse        last record               records  lost  boot  state",
                   DIM))]
@@ -235,6 +246,8 @@ def kit_lines(snap: S.Snapshot, width: int = WIDTH) -> list[Text]:
             out.append(_line((f"     {k.lost} record{'s' * (k.lost > 1)} lost on the board"
                               ": ring overflow or restart, never stored",
                               WARN)))
+        if k.board is not None:
+            out += _board_lines(k.board, width)
         if k.refused:
             out += wrapped("refused: " + k.refused, "     ", ALARM, width)
     if not snap.kits:

@@ -197,6 +197,24 @@ class GreenhouseView:
 
 
 @dataclass(frozen=True)
+class BoardCounters:
+    """A kit's latest health packet: its own counters for its current boot (docs/wire-format.md,
+    "Health packet"). Its drops are known at once; ``Kit.lost`` waits for the seq span."""
+
+    dropped_full: int  # dropped from its ring: full
+    dropped_old: int  # dropped from its ring: too old
+    send_errors: int
+    heap_free: int  # bytes
+    uptime_s: int
+    rssi_dbm: int | None
+    reported: float | None  # when it arrived [gateway clock]
+
+    @property
+    def dropped(self) -> int:
+        return self.dropped_full + self.dropped_old
+
+
+@dataclass(frozen=True)
 class Kit:
     device_id: int
     greenhouses: tuple[str, ...]  # "north in", "north out", … (empty: unassigned)
@@ -208,6 +226,7 @@ class Kit:
     silent: bool = False
     refused: str = ""  # why its packets are refused as a whole, and the recovery
     lost: int = 0  # records the board lost before they were stored (all boots)
+    board: BoardCounters | None = None  # its latest health packet
 
 
 @dataclass(frozen=True)
@@ -292,10 +311,10 @@ class Gateway:
 
     @property
     def rejects(self) -> dict[str, int]:
-        """Rejected packets by reason (every counter but stored, duplicate and lost_on_board, a
-        count of records the boards lost, not of packets)."""
+        """Rejected packets by reason (every counter but stored, duplicate, health (health
+        packets taken) and lost_on_board, a count of records the boards lost, not of packets)."""
         return {k: v for k, v in self.ingest.items()
-                if k not in ("stored", "duplicate", "lost_on_board") and v}
+                if k not in ("stored", "duplicate", "health", "lost_on_board") and v}
 
 
 @dataclass(frozen=True)

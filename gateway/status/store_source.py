@@ -19,6 +19,7 @@ from gateway.protocol import STATUS_NAMES
 from gateway.status import snapshot as S
 from gateway.store import open_readonly
 from gateway.store.aggregate import QC_MISSING, QC_SPIKE, QC_STUCK
+from gateway.store.board_health import BoardReport
 from gateway.store.live import device_health, findings, outbox_backlog, read_status
 
 DROP = QC_MISSING | QC_SPIKE | QC_STUCK  # as the export drops them
@@ -270,8 +271,13 @@ class StoreSource:
             out.append(S.Kit(dev, tuple(roles.get(dev, [])), last, h.records if h else 0,
                              h.board_boot if h else None, h.boot if h else None,
                              dict(h.channels) if h else {}, S.silent(last, now), refused,
-                             h.lost if h else 0))
+                             h.lost if h else 0, _board(h.board) if h and h.board else None))
         return out
+
+
+def _board(r: BoardReport) -> S.BoardCounters:
+    return S.BoardCounters(r.dropped_full, r.dropped_old, r.send_errors, r.heap_free, r.uptime_s,
+                           r.rssi_dbm, r.t_recv)
 
 
 def forecast_skill(conn: sqlite3.Connection, greenhouse: str, horizon_min: int,

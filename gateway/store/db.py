@@ -11,7 +11,7 @@ from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import NamedTuple
 
-from gateway.protocol import CHANNELS, Record
+from gateway.protocol import CHANNELS, BoardHealth, Record
 from gateway.store import losses, schema
 
 
@@ -226,6 +226,22 @@ class Store:
         with transaction(self.conn):
             losses.note_rejected(self.conn, device_id, boot, seq, reason, t_recv, report)
         return report
+
+    def note_health(self, h: BoardHealth, boot: int, t_recv: float) -> None:
+        """Keep a device's latest health packet (boot as stored), replacing the one before."""
+        with transaction(self.conn):
+            self.conn.execute(
+                "INSERT OR REPLACE INTO board_health (device_id, boot, hseq, t_recv, uptime_s, "
+                "records, dropped_full, dropped_old, sent, acked, rejected, send_errors, "
+                "heap_free, ring, rssi_dbm) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (h.device_id, boot, h.hseq, t_recv, h.uptime_s, h.records, h.dropped_full,
+                 h.dropped_old, h.sent, h.acked, h.rejected, h.send_errors, h.heap_free, h.ring,
+                 h.rssi_dbm))
+
+    def health_states(self) -> dict[int, tuple[int, int, int]]:
+        """device → (boot as stored, hseq, records dropped) of its latest health packet."""
+        return {r[0]: (r[1], r[2], r[3] + r[4]) for r in self.conn.execute(
+            "SELECT device_id, boot, hseq, dropped_full, dropped_old FROM board_health")}
 
     def device_states(self) -> dict[int, DeviceState]:
         return {d: DeviceState(b, s) for d, b, s in

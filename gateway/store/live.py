@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from gateway.protocol import CHANNELS, STATUS_NAMES
+from gateway.store.board_health import BoardReport, latest
 from gateway.store.db import transaction
 from gateway.store.losses import lost_by_device
 
@@ -178,7 +179,8 @@ class DeviceHealth:
     ``boot`` is the boot as stored (the board's counter plus its key's boot base);
     ``board_boot`` is the board's own counter (docs/wire-format.md, "A reflashed or replaced
     board"); ``lost`` the records the board lost before they were stored, all boots
-    (gateway/store/losses.py)."""
+    (gateway/store/losses.py); ``board`` the counters of its latest health packet
+    (gateway/store/board_health.py)."""
 
     device_id: int
     boot: int
@@ -189,6 +191,7 @@ class DeviceHealth:
     channels: dict[str, str] = field(default_factory=dict)  # channel → status name
     board_boot: int | None = None
     lost: int = 0
+    board: BoardReport | None = None  # its latest health packet (its own counters)
 
 
 def boot_bases(conn: sqlite3.Connection) -> dict[int, list[int]]:
@@ -213,13 +216,15 @@ def device_health(conn: sqlite3.Connection) -> list[DeviceHealth]:
     cols = ", ".join(f"{c}_st" for c in CHANNELS)
     bases = boot_bases(conn)
     lost = lost_by_device(conn)
+    reports = latest(conn)
     for dev, boot, n, first, last in conn.execute(
             "SELECT device_id, boot, n_samples, first_seen, last_seen FROM devices ORDER BY device_id"):
         r = conn.execute(f"SELECT t, {cols} FROM samples WHERE device_id=? "
                          "ORDER BY boot DESC, seq DESC LIMIT 1", (dev,)).fetchone()
         chans = {c: STATUS_NAMES.get(s, str(s)) for c, s in zip(CHANNELS, r[1:], strict=True)} if r else {}
         out.append(DeviceHealth(dev, boot, n, first, last, r[0] if r else None, chans,
-                                board_boot(boot, bases.get(dev, [])), lost.get(dev, 0)))
+                                board_boot(boot, bases.get(dev, [])), lost.get(dev, 0),
+                                reports.get(dev)))
     return out
 
 

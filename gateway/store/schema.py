@@ -1,5 +1,8 @@
 """SQLite schema (version in PRAGMA user_version). Documented in docs/store.md.
 
+Version 4 adds ``board_health``: the latest health packet of each device, the counters its board
+reports itself (docs/wire-format.md, "Health packet"): :func:`migrate_v3_v4`, one table.
+
 Version 3 adds ``boot_losses`` (records a board dropped before they were stored, per device and
 boot, and how far that is settled) and ``rejected`` (records acknowledged as rejected, which are
 not losses): :func:`migrate_v2_v3`, tables only.
@@ -17,7 +20,7 @@ import sqlite3
 
 from gateway.protocol import CHANNELS
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 
 _chan_cols = ",\n".join(f"  {c} REAL,\n  {c}_st INTEGER NOT NULL" for c in CHANNELS)
 _qc_cols = ",\n".join(f"  {c} REAL,\n  {c}_qc INTEGER NOT NULL" for c in CHANNELS)
@@ -178,7 +181,40 @@ def migrate_v2_v3(conn: sqlite3.Connection) -> None:
             "INSERT OR IGNORE INTO boot_losses (device_id, boot, final_seq, lost) "
             "SELECT d.device_id, d.boot, coalesce((SELECT min(seq) FROM samples s WHERE "
             "s.device_id = d.device_id AND s.boot = d.boot), 0), 0 FROM devices d")
-        conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+        conn.execute("PRAGMA user_version = 3")
+    except BaseException:
+        conn.execute("ROLLBACK")
+        raise
+    conn.execute("COMMIT")
+
+
+DDL_V4_TABLES = """
+CREATE TABLE IF NOT EXISTS board_health (
+  device_id INTEGER PRIMARY KEY,
+  boot INTEGER NOT NULL,          -- as stored: the board's counter plus its key's boot base
+  hseq INTEGER NOT NULL,          -- health packet number in that boot (the replay check)
+  t_recv REAL NOT NULL,           -- gateway clock [unix s]
+  uptime_s INTEGER NOT NULL,
+  records INTEGER NOT NULL,       -- records made this boot
+  dropped_full INTEGER NOT NULL,  -- dropped from the board's ring: full
+  dropped_old INTEGER NOT NULL,   -- dropped from the board's ring: too old (seq span, 2**28 ms)
+  sent INTEGER NOT NULL,          -- transmissions, resends included
+  acked INTEGER NOT NULL,
+  rejected INTEGER NOT NULL,
+  send_errors INTEGER NOT NULL,
+  heap_free INTEGER NOT NULL,     -- bytes
+  ring INTEGER NOT NULL,          -- records waiting in the ring
+  rssi_dbm INTEGER                -- NULL: unknown (UART, or the port has none)
+)
+"""
+
+
+def migrate_v3_v4(conn: sqlite3.Connection) -> None:
+    """Version 3 → 4 in one transaction: the health table, empty (filled by the next packets)."""
+    conn.execute("BEGIN IMMEDIATE")
+    try:
+        conn.execute(DDL_V4_TABLES)
+        conn.execute("PRAGMA user_version = 4")
     except BaseException:
         conn.execute("ROLLBACK")
         raise
@@ -190,10 +226,12 @@ def create(conn: sqlite3.Connection) -> None:
     it is. A new file is made the same way as a migrated one (version 1, then the migration), so
     the two cannot differ."""
     ver = conn.execute("PRAGMA user_version").fetchone()[0]
-    if ver not in (0, 1, 2, SCHEMA_VERSION):
+    if ver not in (0, 1, 2, 3, SCHEMA_VERSION):
         raise RuntimeError(f"database schema version {ver}, this gateway knows {SCHEMA_VERSION}")
     if ver < 2:
         conn.executescript(DDL_V1)  # IF NOT EXISTS: nothing happens to a version-1 file
         migrate_v1_v2(conn)
-    if ver < SCHEMA_VERSION:
+    if ver < 3:
         migrate_v2_v3(conn)
+    if ver < 4:
+        migrate_v3_v4(conn)

@@ -14,6 +14,7 @@ STAT_WRONG_PASSWORD = 202
 STAT_CONNECT_FAIL = 203
 
 CONNECT_DELAY_MS = 50
+RSSI_DBM = -61
 _T0 = ticks_ms()
 
 
@@ -61,6 +62,10 @@ class WLAN:
         return self._ok and ticks_diff(ticks_ms(), self._t) >= CONNECT_DELAY_MS
 
     def status(self, *a):
+        if a == ("rssi",):  # the ESP32 port's signal strength [dBm]
+            if not self.isconnected():
+                raise OSError("not connected")
+            return RSSI_DBM
         if self.isconnected():
             return STAT_GOT_IP
         return STAT_CONNECTING if self._ok else STAT_NO_AP_FOUND

@@ -1,7 +1,8 @@
 """Serra wire format v1 (same spec as gateway/protocol.py, byte table in docs/wire-format.md).
 
-Record packet: 63 bytes; health packet (the board's counters, no ack): 72 bytes; big-endian, HMAC-SHA256 tag truncated to 16 bytes. MicroPython has
-hashlib.sha256 but no hmac module, so HMAC (RFC 2104) is built here from two hash passes.
+Record packet: 63 bytes; health packet (the board's counters, no ack): 72 bytes; big-endian,
+HMAC-SHA256 tag truncated to 16 bytes. MicroPython has hashlib.sha256 but no hmac module, so HMAC
+(RFC 2104) is built here from two hash passes.
 
 Names starting with "_" are compile-time constants: they take no RAM on the board (no global,
 no interned name). Only what other modules use is public.

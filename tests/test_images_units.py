@@ -66,6 +66,20 @@ def test_units_stop_on_a_config_error_and_restart_on_any_other_failure(bundles: 
         assert "SuccessExitStatus" not in unit, name  # 78 stays a failure: the unit shows failed
 
 
+def test_units_wait_for_the_services_ready_message(bundles: Path) -> None:
+    """Type=notify: `systemctl start` returns once the service sends READY=1, which it does once
+    it serves (tests/test_sdnotify.py), and fails on the spot when the service exits before (a
+    config error: 78); only the main process may notify. The gateway alone has a watchdog: its
+    supervising loop pings every second, the unit allows two minutes."""
+    for name in UNITS:
+        unit = read_unit(bundles / "gateway" / name)
+        assert unit["Type"] == ["notify"] and unit["NotifyAccess"] == ["main"], name
+        # above a slow start's 10 s per mute Zenoh endpoint and the estimators' own 120 s
+        assert 90 <= int(unit["TimeoutStartSec"][0]) <= 300, name
+        assert ("WatchdogSec" in unit) == (name == "serra-gateway.service"), name
+    assert read_unit(bundles / "gateway" / "serra-gateway.service")["WatchdogSec"] == ["120"]
+
+
 @pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="systemd-analyze not installed")
 @pytest.mark.parametrize("name", UNITS)
 def test_units_pass_systemd_analyze(bundles: Path, tmp_path: Path, name: str) -> None:

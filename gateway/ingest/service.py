@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 from gateway.ingest.core import IngestCore
 from gateway.ingest.keys_watch import KeysWatch
 from gateway.ingest.udp import UdpServer
+from gateway.sdnotify import Notifier
 from gateway.store import Store, StoreError, aggregate, retention
 from gateway.store.keys import KeyFileError, load_keys
 
@@ -235,6 +236,27 @@ def build_parser(prog: str = "python -m gateway.ingest.service") -> argparse.Arg
     return ap
 
 
+async def _run_until_signal(cfg: IngestConfig) -> None:
+    """serve() until SIGTERM/SIGINT; under systemd (Type=notify, $NOTIFY_SOCKET) READY=1 once
+    every transport is open, STOPPING=1 at the signal."""
+    notify = Notifier()
+
+    def ready(r: Running) -> None:
+        where = [f"udp {_where(*r.udp_address)}"] if r.udp_address else []
+        notify.ready(", ".join(where + ([f"serial {cfg.serial}"] if cfg.serial else [])))
+
+    def stop() -> None:
+        notify.stopping()
+        task.cancel()
+
+    task = asyncio.ensure_future(serve(cfg, ready))
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        loop.add_signal_handler(sig, stop)
+    with contextlib.suppress(asyncio.CancelledError):
+        await task
+
+
 def main(argv: list[str] | None = None, prog: str = "python -m gateway.ingest.service") -> int:
     args = build_parser(prog).parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
@@ -268,16 +290,8 @@ def main(argv: list[str] | None = None, prog: str = "python -m gateway.ingest.se
         print(f"error: cannot open the store {cfg.db}: {e}", file=sys.stderr)
         return 2
 
-    async def _run() -> None:
-        task = asyncio.ensure_future(serve(cfg))
-        loop = asyncio.get_running_loop()
-        for sig in (signal.SIGTERM, signal.SIGINT):
-            loop.add_signal_handler(sig, task.cancel)
-        with contextlib.suppress(asyncio.CancelledError):
-            await task
-
     try:
-        asyncio.run(_run())
+        asyncio.run(_run_until_signal(cfg))
     except KeyFileError as e:
         print(f"error: {e}", file=sys.stderr)
         return os.EX_CONFIG

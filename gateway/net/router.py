@@ -18,6 +18,7 @@ from typing import Any
 
 from gateway.net.routerconf import RouterSettings, router_entries
 from gateway.net.zenohcfg import build
+from gateway.sdnotify import Notifier
 
 log = logging.getLogger("serra.router")
 READY = "serra router ready:"  # the line tests and supervisors wait for
@@ -67,14 +68,22 @@ class Router:
 
 
 def serve(settings: RouterSettings, stop: threading.Event,
-          on_ready: Callable[[Router], None] | None = None, watch_every: float = 5.0) -> int:
-    """Run until `stop` is set; report the router's links as they change. Returns 0."""
+          on_ready: Callable[[Router], None] | None = None, watch_every: float = 5.0,
+          notify: Notifier | None = None) -> int:
+    """Run until `stop` is set; report the router's links as they change. Returns 0. Under
+    systemd (``notify``, by default from $NOTIFY_SOCKET): READY=1 after the ready line (the
+    session open, its listeners bound; upstream links are not waited for: they are retried for
+    ever), STATUS= as the links change, STOPPING=1 when `stop` is set."""
+    notify = notify or Notifier()
     for warning in settings.warnings():
         log.warning("%s", warning)
     with Router(settings) as router:
-        print(f"{READY} name={settings.name} zid={router.zid} listen={','.join(router.locators)} "
+        listen = ",".join(router.locators)
+        print(f"{READY} name={settings.name} zid={router.zid} listen={listen} "
               f"connect={','.join(settings.connect) or '-'} "
               f"access={'on' if settings.access and settings.access.enabled else 'off'}", flush=True)
+        notify.ready(f"listening {listen or '-'}" + ("; upstream not linked yet"
+                                                     if settings.connect else ""))
         if on_ready is not None:
             on_ready(router)
         seen: list[str] | None = None
@@ -87,6 +96,9 @@ def serve(settings: RouterSettings, stop: threading.Event,
                 else:
                     log.warning("router %s: no upstream router reachable (%s); retrying",
                                 settings.name, ", ".join(settings.connect))
+                notify.status(f"listening {listen or '-'}; " + (
+                    f"linked to {len(now)} upstream router(s)" if now else "no upstream reachable"))
                 seen = now
+        notify.stopping()
         log.info("router %s: stopping", settings.name)
     return 0

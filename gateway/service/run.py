@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from gateway.ingest.service import IngestConfig, ListenError, Running, serve
+from gateway.sdnotify import Notifier
 from gateway.service.clock import Clock, make_clock
 from gateway.service.diagnosis import DiagnosisScheduler
 from gateway.service.resources import GreenhouseResources
@@ -152,8 +153,13 @@ class Gateway:
 
 
 async def run_gateway(cfg: GatewayConfig, resources: list[GreenhouseResources],
-                      stop: asyncio.Event, on_ready: Callable[[Gateway], None] | None = None) -> None:
-    """Run until ``stop`` is set (or a part fails: re-raised after a clean shutdown)."""
+                      stop: asyncio.Event, on_ready: Callable[[Gateway], None] | None = None,
+                      notify: Notifier | None = None) -> None:
+    """Run until ``stop`` is set (or a part fails: re-raised after a clean shutdown). Under
+    systemd (``notify``, by default from $NOTIFY_SOCKET) READY=1 follows the ready line, STATUS=
+    says what changes, WATCHDOG=1 comes from the supervising loop and STOPPING=1 starts the
+    shutdown."""
+    notify = notify or Notifier()
     gw = await asyncio.to_thread(Gateway, cfg, resources)
     ready = asyncio.Event()
 
@@ -192,10 +198,14 @@ async def run_gateway(cfg: GatewayConfig, resources: list[GreenhouseResources],
                     DiagnosisScheduler, cfg, resources, gw.clock.now, Path(tmp), gw.worker.wake.set)
                 tasks.append(asyncio.create_task(gw.diagnosis.run_forever(), name="diagnosis"))
             _announce(gw)
+            notify.ready(systemd_status(gw))
             if on_ready is not None:
                 on_ready(gw)
-            await _supervise(gw, tasks, stop)
+            await _supervise(gw, tasks, stop, notify)
         finally:
+            # a failing part's shutdown too: it may wait a minute for the worker, with no
+            # watchdog pings; the exit status still decides whether systemd restarts it
+            notify.stopping()
             await _shutdown(gw, tasks)
 
 
@@ -226,7 +236,37 @@ def _announce(gw: Gateway) -> None:
              gw.cfg.db)
 
 
-async def _supervise(gw: Gateway, tasks: list[asyncio.Task], stop: asyncio.Event) -> None:
+def systemd_status(gw: Gateway) -> str:
+    """The line ``systemctl status`` shows (STATUS=): greenhouses, kits, ports, Zenoh's link."""
+    parts = [f"{_n(len(gw.cfg.greenhouses), 'greenhouse')}, {_n(len(gw.cfg.devices()), 'kit')}"]
+    if gw.running is not None and gw.running.udp_address:
+        parts.append(f"udp {gw.running.udp_address[0]}:{gw.running.udp_address[1]}")
+    if gw.cfg.serial:
+        parts.append(f"serial {gw.cfg.serial}")
+    parts.append(_zenoh_status(gw))
+    return "; ".join(parts)
+
+
+def _zenoh_status(gw: Gateway) -> str:
+    if not gw.cfg.zenoh.enabled:
+        return "zenoh off"
+    if gw.publisher is not None:
+        s = gw.publisher.state
+        if s.routers or s.peers:
+            return f"zenoh linked ({_n(s.routers, 'router')}, {_n(s.peers, 'peer')})"
+        return "zenoh open, not linked yet"
+    if gw.opener is not None:
+        o = gw.opener.state
+        return f"zenoh connecting to {', '.join(gw.cfg.zenoh.connect)} (attempt {o.attempts})"
+    return "zenoh not open"
+
+
+def _n(count: int, word: str) -> str:
+    return f"{count} {word}{'s' * (count != 1)}"
+
+
+async def _supervise(gw: Gateway, tasks: list[asyncio.Task], stop: asyncio.Event,
+                     notify: Notifier) -> None:
     while not stop.is_set():
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(stop.wait(), 1.0)
@@ -238,6 +278,10 @@ async def _supervise(gw: Gateway, tasks: list[asyncio.Task], stop: asyncio.Event
             raise RuntimeError(f"a gateway part stopped: {type(err).__name__}: {err}")
         if gw.running is not None:
             gw.ingest_counters = gw.running.core.counters.snapshot()
+        # here, where every part was just checked: the event loop (ingest, acks) turns; a slow
+        # worker or publisher does not hold it back (WatchdogSec= in serra-gateway.service)
+        notify.watchdog()
+        notify.status(systemd_status(gw))
 
 
 async def _shutdown(gw: Gateway, tasks: list[asyncio.Task]) -> None:

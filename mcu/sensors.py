@@ -33,6 +33,9 @@ _SCALE_INV = (100, 100, 100, 100, 10, 100, 1)  # raw int16 per unit, as in wire-
 # outside them, so such a read is flagged range here and the other channels still arrive.
 _LO = (-40.0, 0.0, -40.0, 0.0, 0.0, 0.0, 0.0)
 _HI = (80.0, 100.0, 80.0, 100.0, 2000.0, 75.0, 1.0)
+# read_u16() at the ADC's full scale, whatever its width: the ESP32 port scales a raw count
+# to 16 bits by repeating its bits (4095 of 12 bits -> 65535).
+_FULL_U16 = const(65535)
 _DHT_MIN_INTERVAL_MS = const(2000)  # datasheet: at most one conversion every 2 s
 
 
@@ -121,8 +124,8 @@ class Anemometer:
     """DC-motor cup anemometer on an ADC input: m s-1 = volts * mps_per_volt above a dead band."""
 
     def __init__(self, adc, mps_per_volt: float, dead_band_v: float,
-                 sat: int = 3_100_000) -> None:
-        """adc: machine.ADC (read_uv is the ESP32's calibrated reading); sat: saturation (uV)."""
+                 sat: int = _FULL_U16) -> None:
+        """adc: machine.ADC; sat: raw read_u16() count at which the ADC is saturated."""
         self._adc = adc
         self._k = mps_per_volt
         self._zero = int(dead_band_v * 1_000_000)  # uV
@@ -131,10 +134,14 @@ class Anemometer:
         self.status = _NOT_READY
 
     def read(self) -> int:
-        uv = self._adc.read_uv()
-        if uv >= self._sat:
+        # Saturation on the raw count: read_uv() applies the chip's eFuse calibration, so its
+        # full-scale reading differs from chip to chip (a fixed uV threshold is never reached
+        # on one that reads low, and cuts real readings on one that reads high). The value
+        # from read_uv(), a second conversion of the same input, keeps that calibration.
+        if self._adc.read_u16() >= self._sat:
             self.status = _SATURATED
         else:
+            uv = self._adc.read_uv()
             # The motor needs a starting torque: below the dead band the voltage is noise.
             self.value = uv * self._k / 1_000_000 if uv > self._zero else 0.0
             self.status = _OK

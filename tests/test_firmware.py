@@ -422,3 +422,47 @@ def test_a_read_outside_the_accepted_range_costs_its_channel_not_the_record(
     assert (rec.values[4], rec.status[4]) == (50.0, p.ST_PARTIAL)  # one good read of two
     assert (rec.values[5], rec.status[5]) == (None, p.ST_RANGE)
     assert (rec.values[6], rec.status[6]) == (1.0, p.ST_OK)
+
+
+SATURATION_MPY = r"""
+import sys, binascii, wire, sensors
+pins = {"dht_in": None, "dht_out": None, "pyranometer": None, "anemometer": 35, "rain": None}
+cal = {"pyr_dark_counts": 0, "pyr_w_per_count": 0.03, "wind_mps_per_volt": 20.0,
+       "wind_dead_band_v": 0.03, "rain_active_low": True}
+sens = sensors.build(pins, cal)
+avg = sensors.Averager()
+mac = wire.Hmac(binascii.unhexlify(sys.argv[1]))
+for seq in range(2):  # one read a period: the ADC at full scale, then just below it
+    avg.sample(sens, 0)
+    avg.finish()
+    buf = bytearray(wire.RECORD_LEN)
+    wire.pack_record(buf, 7, 0, seq, 4000, 40, avg.raw, avg.status)
+    wire.seal(buf, 0, mac)
+    print(binascii.hexlify(buf).decode())
+"""
+
+
+@pytest.mark.skipif(micropython() is None, reason="micropython not installed")
+@pytest.mark.parametrize("full_uv", [3_000_000, 3_250_000])
+def test_anemometer_saturation_is_the_adc_full_scale_whatever_the_chips_calibration(
+        full_uv: int, tmp_path: Path) -> None:
+    """read_uv() is the chip's eFuse-calibrated reading: at the ADC's full scale one chip reads
+    3.0 V, another 3.25 V. Saturated is the raw count at full scale (65535 from read_u16), on
+    both: the first chip's full scale is flagged (a fixed 3.1 V threshold never is), the second
+    chip's 3.17 V just below full scale is a wind (a fixed 3.1 V threshold drops it). The gateway
+    reads the flag as saturated with no value (docs/wire-format.md)."""
+    from gateway import protocol as p
+
+    key = bytes(range(1, 33))
+    trace = tmp_path / "trace"
+    trace.mkdir()
+    (trace / "adc_35.txt").write_text("65535\n64000\n")
+    script = tmp_path / "saturation_check.py"
+    script.write_text(SATURATION_MPY)
+    r = run_mpy(script, key.hex(), cwd=tmp_path,
+                env={"SERRA_TRACE": str(trace), "SERRA_ADC_FULL_UV": str(full_uv)}, timeout=60)
+    assert r.returncode == 0, r.stdout + r.stderr
+    full, below = (p.decode_record(bytes.fromhex(h), {7: key}) for h in r.stdout.split()[-2:])
+    assert (full.values[5], full.status[5]) == (None, p.ST_SATURATED)
+    mps = 20.0 * (64000 * full_uv // 65535) / 1e6  # 58.6 or 63.5 m s-1
+    assert below.status[5] == p.ST_OK and below.values[5] == pytest.approx(mps, abs=0.01)

@@ -61,22 +61,33 @@ class Pin:
 
 
 class ADC:
+    """An input's trace line is its voltage as raw counts (read_u16, full scale 65535). One line
+    per sample: read_u16() takes the next line; read_uv() converts the line read_u16() took just
+    before (a second conversion of the same input), or takes the next line if read alone.
+    read_uv() is the chip's eFuse-calibrated reading: $SERRA_ADC_FULL_UV [uV] at full scale
+    (3_100_000 unless set; chips differ by several per cent)."""
+
     ATTN_11DB = 3
 
     def __init__(self, pin, atten=None):
         self._cur = _cursor("adc", pin.id, "0")
         self._last = 0
+        self._held = False  # _last taken by read_u16() and not yet converted by read_uv()
+        self._full_uv = int(os.getenv("SERRA_ADC_FULL_UV") or "3100000")
 
     def atten(self, a):
         self._atten = a
 
     def read_u16(self):
         self._last = int(self._cur.next())
+        self._held = True
         return self._last
 
     def read_uv(self):
-        # 11 dB attenuation: full scale about 3.1 V.
-        return self.read_u16() * 3_100_000 // 65535
+        if not self._held:
+            self._last = int(self._cur.next())
+        self._held = False
+        return self._last * self._full_uv // 65535
 
 
 class UART:

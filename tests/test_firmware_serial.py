@@ -225,3 +225,42 @@ def test_a_backlog_over_a_1200_baud_uart_does_not_stall_sampling(tmp_path: Path)
     # 100 ms apart, plus at most one 10 ms sleep and a loaded host's delay; a blocked write: 3.3 s
     assert samples >= 30 and max_gap_ms < 1500, r.stdout
     assert sent.count(b"\0") >= 6, (sent.count(b"\0"), r.stdout)  # 4 s at 0.54 s a frame
+
+
+SEND_HEAP_MPY = r"""
+import gc, machine, sys
+from uartport import UartPort
+from wire import RECORD_LEN
+port = UartPort(machine.UART(1, baudrate=4000000))
+rec = bytearray(range(1, RECORD_LEN + 1))
+n = int(sys.argv[1])
+port.send(rec)  # first call: anything allocated once is allocated now
+gc.collect()
+gc.disable()
+before = gc.mem_alloc()
+for _ in range(n):
+    port.send(rec)
+print("SEND", gc.mem_alloc() - before)
+"""
+
+
+def test_uart_send_allocates_nothing_per_frame(tmp_path: Path) -> None:
+    """UartPort.send under MicroPython: 50 record frames reach the pty whole and allocate
+    nothing on the heap (a memoryview slice per frame took 64 bytes each on this port)."""
+    from gateway.ingest.framing import cobs_encode
+
+    n = 50
+    m, s, name = _pty()
+    got = bytearray()
+    try:
+        script = tmp_path / "send_heap.py"
+        script.write_text(SEND_HEAP_MPY)
+        r = run_mpy(script, str(n), env={"SERRA_UART_1": name}, timeout=60)
+        while select.select([m], [], [], 0)[0]:
+            got += os.read(m, 65536)
+    finally:
+        os.close(m)
+        os.close(s)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert got == (cobs_encode(bytes(range(1, 64))) + b"\0") * (n + 1)
+    assert int(r.stdout.split()[-1]) <= 64, r.stdout  # bytes for 50 frames

@@ -145,9 +145,8 @@ class UART:
             sleep_ms((over * 10000 + self._baud - 1) // self._baud)
         start = self._idle_at if ticks_diff(self._idle_at, now) > 0 else now
         self._idle_at = ticks_add(start, (n * 10000 + self._baud - 1) // self._baud)
-        n = self._f.write(buf)
-        self._f.flush()
-        return n
+        return self._f.write(buf)  # unbuffered (the unix port's files): no flush, which on a
+        # tty is an fsync() that fails with EINVAL
 
     def txdone(self):
         return ticks_diff(self._idle_at, ticks_ms()) <= 0

@@ -163,6 +163,7 @@ BACKLOG_MPY = r"""
 import sys, config, main, wire
 from time import ticks_diff, ticks_ms
 from ring import Ring
+from sensors import RainDetector
 from uartport import from_config
 
 cfg = config.parse({
@@ -176,16 +177,13 @@ for s in range(backlog):  # records kept through an outage, all due now, never a
     wire.pack_channels(ring.push(s, t0), 0, [0] * 7, [0] * 7)
 
 
-class Rain:  # the hardware edge: a rain detector that notes when it is read
-    value = 0
-    status = 0
-
+class RainPin:  # the hardware edge: the rain detector's pin notes when it is read
     def __init__(self):
         self.at = []
 
-    def read(self):
+    def value(self):
         self.at.append(ticks_ms())
-        return 0
+        return 1
 
 
 class Dog:
@@ -193,9 +191,9 @@ class Dog:
         pass
 
 
-rain = Rain()
-main.run(cfg, 0, Dog(), None, (None, None, None, None, rain), (), ring, from_config(cfg),
-         max_loops=int(sys.argv[2]))
+rain = RainPin()
+main.run(cfg, 0, Dog(), None, (None, None, None, None, RainDetector(rain)), (), ring,
+         from_config(cfg), max_loops=int(sys.argv[2]))
 gaps = [ticks_diff(b, a) for a, b in zip(rain.at, rain.at[1:])]
 print("SAMPLES", len(rain.at), "MAXGAP", max(gaps), "FIRST", ticks_diff(rain.at[0], t0))
 """

@@ -85,6 +85,9 @@ class UdpPort:
             self.sock.close()
             self.sock = None
 
+    def ready(self) -> bool:
+        return True  # a non-blocking socket: a full buffer raises EAGAIN, counted as an error
+
     def send(self, buf) -> None:
         if self.sock is not None and self.addr is not None:
             self.sock.sendto(buf, self.addr)
@@ -151,6 +154,8 @@ class Sender:
                 break
             if ring.seq[i] < 0 or ticks_diff(now, ring.due[i]) < 0:
                 continue
+            if not self.port.ready():
+                break  # the link is still sending: the rest go on later passes, still due
             wire.pack_head(tx, self.dev, self.boot, ring.seq[i], ring.tick[i], self.period_ds)
             tx[26:47] = ring.slot(i)  # the channels, after the 26-byte header
             wire.seal(tx, ticks_diff(now, ring.tick[i]), self.mac)

@@ -28,11 +28,19 @@ _NOT_READY = const(0x15)
 
 _MISSING = const(-32768)  # raw value of a channel without a value
 _RAIN = const(6)  # channels: t_in, rh_in, t_out, rh_out, i_glob, wind, rain
-_SCALE_INV = (100, 100, 100, 100, 10, 100, 1)  # raw int16 per unit, as in wire-format.md
-# The ranges the gateway accepts (wire-format.md): it rejects a whole record for one value
-# outside them, so such a read is flagged range here and the other channels still arrive.
-_LO = (-40.0, 0.0, -40.0, 0.0, 0.0, 0.0, 0.0)
-_HI = (80.0, 100.0, 80.0, 100.0, 2000.0, 75.0, 1.0)
+# Each driver reads integer counts (DHT22 tenths, ADC counts, 10 uV) and gives `scale`, the
+# wire's raw int16 units (wire-format.md: 0.01 degC, 0.01 %, 0.1 W m-2, 0.01 m s-1) per count:
+# the period sums integers and converts once per record. A float per read would be a heap
+# object per read on the ESP32. The upper ranges the gateway accepts (wire-format.md): it
+# rejects a whole record for one value outside them, so such a read is flagged range by its
+# driver and the other channels still arrive (the lower bounds, 0, are clamped by the dead
+# band / dark offset; the DHT22's are checked in its driver).
+_I_GLOB_MAX = 2000.0  # W m-2
+_WIND_MAX = 75.0  # m s-1
+_UV_PER_COUNT = const(10)  # the anemometer's count: a sum of 3460 full-scale reads fits a small int
+# read_u16() at the ADC's full scale, whatever its width: the ESP32 port scales a raw count
+# to 16 bits by repeating its bits (4095 of 12 bits -> 65535).
+_FULL_U16 = const(65535)
 _DHT_MIN_INTERVAL_MS = const(2000)  # datasheet: at most one conversion every 2 s
 
 
@@ -57,8 +65,9 @@ class DHT22:
         self._fails = 0
         self._last = 0
         self._fresh = True
-        self.temperature = 0.0  # degC, valid only when status < 0x10
-        self.humidity = 0.0  # %
+        self.t_tenths = 0  # 0.1 degC, valid only when status < 0x10
+        self.rh_tenths = 0  # 0.1 %
+        self.scale = 10  # wire units (0.01 degC, 0.01 %) per tenth
         self.status = _NOT_READY
 
     def read(self, now) -> int:
@@ -70,15 +79,20 @@ class DHT22:
         st = _OK
         try:
             self._dev.measure()
-            t = self._dev.temperature()
-            rh = self._dev.humidity()
+            # The frame as integer tenths (DHT22 datasheet; what dht.DHT22's temperature() and
+            # humidity() decode into a float each): RH, then T with its sign in bit 15.
+            b = self._dev.buf
+            rh = b[0] << 8 | b[1]
+            t = (b[2] & 0x7F) << 8 | b[3]
+            if b[2] & 0x80:
+                t = -t
             if t == 0 and rh == 0:
                 st = _CHECKSUM
-            elif not (-40.0 <= t <= 80.0 and 0.0 <= rh <= 100.0):
+            elif not (-400 <= t <= 800 and 0 <= rh <= 1000):
                 st = _RANGE
             else:
-                self.temperature = t
-                self.humidity = rh
+                self.t_tenths = t
+                self.rh_tenths = rh
         except OSError:
             st = _TIMEOUT
         except Exception:  # the dht module raises a plain Exception on a checksum error
@@ -101,18 +115,24 @@ class Pyranometer:
         sat: counts at which the ADC is saturated."""
         self._adc = adc
         self._zero = dark_counts
-        self._k = w_per_count
         self._sat = sat
-        self.value = 0.0
+        # Counts above dark at the gateway's upper range (none above it if w_per_count <= 0).
+        self._hi = int(_I_GLOB_MAX / w_per_count) if w_per_count > 0 else 0
+        self.scale = w_per_count * 10  # wire units (0.1 W m-2) per count
+        self.value = 0  # counts above dark
         self.status = _NOT_READY
 
     def read(self) -> int:
         c = self._adc.read_u16()
         if c >= self._sat:
             self.status = _SATURATED  # above the calibrated range: value unknown
+            return self.status
+        # Below the dark offset is noise at night, not negative light.
+        c = c - self._zero if c > self._zero else 0
+        if c > self._hi:
+            self.status = _RANGE  # e.g. a pyranometer calibrated above 2000 W m-2
         else:
-            # Below the dark offset is noise at night, not negative light.
-            self.value = (c - self._zero) * self._k if c > self._zero else 0.0
+            self.value = c
             self.status = _OK
         return self.status
 
@@ -121,22 +141,33 @@ class Anemometer:
     """DC-motor cup anemometer on an ADC input: m s-1 = volts * mps_per_volt above a dead band."""
 
     def __init__(self, adc, mps_per_volt: float, dead_band_v: float,
-                 sat: int = 3_100_000) -> None:
-        """adc: machine.ADC (read_uv is the ESP32's calibrated reading); sat: saturation (uV)."""
+                 sat: int = _FULL_U16) -> None:
+        """adc: machine.ADC; sat: raw read_u16() count at which the ADC is saturated."""
         self._adc = adc
-        self._k = mps_per_volt
-        self._zero = int(dead_band_v * 1_000_000)  # uV
+        self._zero = int(dead_band_v * 1_000_000) // _UV_PER_COUNT
         self._sat = sat
-        self.value = 0.0
+        # Counts at the gateway's upper range (none above it if mps_per_volt <= 0).
+        self._hi = (int(_WIND_MAX / mps_per_volt * 1_000_000) // _UV_PER_COUNT
+                    if mps_per_volt > 0 else 0)
+        self.scale = mps_per_volt * _UV_PER_COUNT / 10_000  # wire units (0.01 m s-1) per count
+        self.value = 0  # counts of 10 uV
         self.status = _NOT_READY
 
     def read(self) -> int:
-        uv = self._adc.read_uv()
-        if uv >= self._sat:
+        # Saturation on the raw count: read_uv() applies the chip's eFuse calibration, so its
+        # full-scale reading differs from chip to chip (a fixed uV threshold is never reached
+        # on one that reads low, and cuts real readings on one that reads high). The value
+        # from read_uv(), a second conversion of the same input, keeps that calibration.
+        if self._adc.read_u16() >= self._sat:
             self.status = _SATURATED
+            return self.status
+        c = self._adc.read_uv() // _UV_PER_COUNT
+        # The motor needs a starting torque: below the dead band the voltage is noise.
+        c = c if c > self._zero else 0
+        if c > self._hi:
+            self.status = _RANGE
         else:
-            # The motor needs a starting torque: below the dead band the voltage is noise.
-            self.value = uv * self._k / 1_000_000 if uv > self._zero else 0.0
+            self.value = c
             self.status = _OK
         return self.status
 
@@ -149,6 +180,7 @@ class RainDetector:
         self._pin = pin
         self._zero = 0 if active_low else 1  # the level that means wet
         self.value = 0
+        self.scale = 1
         self.status = _NOT_READY
 
     def read(self) -> int:
@@ -182,7 +214,8 @@ def build(pins, cal):
 
 
 class Averager:
-    """Sums good reads, counts failures; finish() yields raw int16 values and statuses.
+    """Sums good reads (integer counts), counts failures; finish() yields raw int16 values and
+    statuses.
 
     A channel with no good read in the period is missing (raw -32768) with its last error code;
     a channel with some failed reads is averaged over the good ones and flagged partial. Rain is
@@ -190,23 +223,23 @@ class Averager:
     """
 
     def __init__(self) -> None:
-        self._sum = [0.0] * 7
+        self._sum = [0] * 7
         self._n = [0] * 7
         self._fail = [0] * 7
         self._err = [_NOT_READY] * 7
+        self._scale = [1] * 7  # raw int16 units per count, from the channel's driver
         self.raw = [_MISSING] * 7
         self.status = [_NOT_READY] * 7
 
-    def add(self, chan: int, value: float) -> None:
-        if not _LO[chan] <= value <= _HI[chan]:
-            self.fail(chan, _RANGE)  # e.g. a pyranometer calibrated above 2000 W m-2
-            return
+    def add(self, chan: int, count: int, scale) -> None:
+        """A good read: `count` in its driver's integer unit, `scale` raw units per count."""
         if chan == _RAIN:
-            if value > self._sum[chan]:
-                self._sum[chan] = value
+            if count > self._sum[chan]:
+                self._sum[chan] = count
         else:
-            self._sum[chan] += value
+            self._sum[chan] += count
         self._n[chan] += 1
+        self._scale[chan] = scale
 
     def fail(self, chan: int, code: int) -> None:
         self._fail[chan] += 1
@@ -224,13 +257,13 @@ class Averager:
                     self.fail(c + 1, _NO_SENSOR)
             elif i < 2:
                 if drv.read(now) == _OK:
-                    self.add(c, drv.temperature)
-                    self.add(c + 1, drv.humidity)
+                    self.add(c, drv.t_tenths, drv.scale)
+                    self.add(c + 1, drv.rh_tenths, drv.scale)
                 else:
                     self.fail(c, drv.status)
                     self.fail(c + 1, drv.status)
             elif drv.read() == _OK:
-                self.add(c, drv.value)
+                self.add(c, drv.value, drv.scale)
             else:
                 self.fail(c, drv.status)
 
@@ -243,10 +276,10 @@ class Averager:
                 self.status[i] = self._err[i]
             else:
                 v = self._sum[i] if i == _RAIN else self._sum[i] / n
-                r = int(round(v * _SCALE_INV[i]))
+                r = int(round(v * self._scale[i]))
                 self.raw[i] = 32767 if r > 32767 else (-32767 if r < -32767 else r)
                 self.status[i] = _PARTIAL if self._fail[i] else _OK
-            self._sum[i] = 0.0
+            self._sum[i] = 0
             self._n[i] = 0
             self._fail[i] = 0
             self._err[i] = _NOT_READY

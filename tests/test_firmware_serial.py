@@ -157,3 +157,108 @@ def test_uart_receive_allocates_nothing_per_byte(tmp_path: Path) -> None:
     _, got, heap, bad = r.stdout.split()
     assert (int(got), int(bad)) == (n, 0), r.stdout
     assert int(heap) <= 64, r.stdout  # bytes for 19 frames; read(1) took > 10,000
+
+
+BACKLOG_MPY = r"""
+import sys, config, main, wire
+from time import ticks_diff, ticks_ms
+from ring import Ring
+from sensors import RainDetector
+from uartport import from_config
+
+cfg = config.parse({
+    "device_id": 7, "key": "00" * 32, "transport": "uart",
+    "uart": {"id": 1, "baudrate": 1200}, "sample_ms": 100, "period_s": 600,
+    "ack_timeout_ms": 60000, "pins": {}})
+backlog = int(sys.argv[1])
+ring = Ring(cfg.ring_size)
+t0 = ticks_ms()
+for s in range(backlog):  # records kept through an outage, all due now, never acked here
+    wire.pack_channels(ring.push(s, t0), 0, [0] * 7, [0] * 7)
+
+
+class RainPin:  # the hardware edge: the rain detector's pin notes when it is read
+    def __init__(self):
+        self.at = []
+
+    def value(self):
+        self.at.append(ticks_ms())
+        return 1
+
+
+class Dog:
+    def feed(self):
+        pass
+
+
+rain = RainPin()
+main.run(cfg, 0, Dog(), None, (None, None, None, None, RainDetector(rain)), (), ring,
+         from_config(cfg), max_loops=int(sys.argv[2]))
+gaps = [ticks_diff(b, a) for a, b in zip(rain.at, rain.at[1:])]
+print("SAMPLES", len(rain.at), "MAXGAP", max(gaps), "FIRST", ticks_diff(rain.at[0], t0))
+"""
+
+
+def test_a_backlog_over_a_1200_baud_uart_does_not_stall_sampling(tmp_path: Path) -> None:
+    """Ten records due at once over a 1200-baud UART (65-byte frames, 0.54 s each on the line;
+    the fake UART drains 120 bytes a second from the ESP32's 128-byte FIFO and its write()
+    blocks as the board's does). Written as one burst of 8, they held the loop 3.3 s; sent one
+    frame at a time once the last has left (txdone), sampling every 100 ms stays on time while
+    the backlog drains at the line's rate."""
+    m, s, name = _pty()
+    try:
+        script = tmp_path / "backlog.py"
+        script.write_text(BACKLOG_MPY)
+        # 400 passes of the loop: >= 4 s (each sleeps up to 10 ms until the next sample).
+        r = run_mpy(script, "10", "400", env={"SERRA_UART_1": name}, timeout=120)
+        sent = b""
+        while select.select([m], [], [], 0)[0]:
+            sent += os.read(m, 4096)
+    finally:
+        os.close(m)
+        os.close(s)
+    assert r.returncode == 0, r.stdout + r.stderr
+    out = r.stdout.split()
+    samples, max_gap_ms = int(out[out.index("SAMPLES") + 1]), int(out[out.index("MAXGAP") + 1])
+    # 100 ms apart, plus at most one 10 ms sleep and a loaded host's delay; a blocked write: 3.3 s
+    assert samples >= 30 and max_gap_ms < 1500, r.stdout
+    assert sent.count(b"\0") >= 6, (sent.count(b"\0"), r.stdout)  # 4 s at 0.54 s a frame
+
+
+SEND_HEAP_MPY = r"""
+import gc, machine, sys
+from uartport import UartPort
+from wire import RECORD_LEN
+port = UartPort(machine.UART(1, baudrate=4000000))
+rec = bytearray(range(1, RECORD_LEN + 1))
+n = int(sys.argv[1])
+port.send(rec)  # first call: anything allocated once is allocated now
+gc.collect()
+gc.disable()
+before = gc.mem_alloc()
+for _ in range(n):
+    port.send(rec)
+print("SEND", gc.mem_alloc() - before)
+"""
+
+
+def test_uart_send_allocates_nothing_per_frame(tmp_path: Path) -> None:
+    """UartPort.send under MicroPython: 50 record frames reach the pty whole and allocate
+    nothing on the heap (a memoryview slice per frame took 64 bytes each on this port)."""
+    from gateway.ingest.framing import cobs_encode
+
+    n = 50
+    m, s, name = _pty()
+    got = bytearray()
+    try:
+        script = tmp_path / "send_heap.py"
+        script.write_text(SEND_HEAP_MPY)
+        r = run_mpy(script, str(n), env={"SERRA_UART_1": name}, timeout=60)
+        while select.select([m], [], [], 0)[0]:
+            got += os.read(m, 65536)
+    finally:
+        os.close(m)
+        os.close(s)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert got == (cobs_encode(bytes(range(1, 64))) + b"\0") * (n + 1)
+    assert int(r.stdout.split()[-1]) <= 64, r.stdout  # bytes for 50 frames

@@ -1,14 +1,15 @@
 """Fake `dht`: each measure() takes the next trace line: "t rh", "timeout", "checksum" or
-"zero" (the all-zero frame with a valid checksum that real DHT22s send after a bus glitch)."""
+"zero" (the all-zero frame with a valid checksum that real DHT22s send after a bus glitch), and
+leaves the sensor's frame in `buf` as MicroPython's dht.DHT22 does."""
 
+from dht_frame import fill
 from machine import _cursor
 
 
 class DHT22:
     def __init__(self, pin):
         self._cur = _cursor("dht", pin.id, "20.0 50.0")
-        self._t = 0.0
-        self._rh = 0.0
+        self.buf = bytearray(5)
 
     def measure(self):
         v = self._cur.next()
@@ -17,13 +18,8 @@ class DHT22:
         if v == "checksum":
             raise Exception("checksum error")
         if v == "zero":
-            self._t, self._rh = 0.0, 0.0
+            fill(self.buf, 0.0, 0.0)
         else:
             t, rh = v.split()
-            self._t, self._rh = float(t), float(rh)
+            fill(self.buf, float(t), float(rh))
 
-    def temperature(self):
-        return self._t
-
-    def humidity(self):
-        return self._rh

@@ -83,9 +83,10 @@ def run(cfg, boot: int, wdt, wlan, sensors, fail: tuple = (), ring=None, port=No
             sender.step(now)
         elif wifi.state != UP:
             sender.close()
-        # Over Wi-Fi only: uartport.py's frame buffer holds a record (63 bytes), not the 72 of
-        # a health packet (sizing it is the UART's own change).
-        if health.due_now(now, ring.dropped) and wifi is not None and wifi.state == UP:
+        # On a link that is up, and on a UART once the last frame has left (write() never
+        # blocks then); not sent now, it stays due for a later pass.
+        if (health.due_now(now, ring.dropped) and (wifi is None or wifi.state == UP)
+                and sender.port.ready()):
             health.send(now, sender, seq, rssi(wlan))
         if wifi is not None and wifi.state != last_state:
             last_state = wifi.state

@@ -1,7 +1,7 @@
 """Packets over a UART (a board on the gateway's USB port): COBS frames, 0x00 delimited."""
 
 from cobs import decode, encode_into
-from wire import ACK_LEN, RECORD_LEN
+from wire import ACK_LEN, HEALTH_LEN, RECORD_LEN
 
 
 class UartPort:
@@ -9,6 +9,7 @@ class UartPort:
         """uart: machine.UART already configured (baud rate, pins)."""
         self.uart = uart
         self._tx = bytearray(RECORD_LEN + 2)  # a record's frame: COBS adds 1 byte, then 0x00
+        self._htx = bytearray(HEALTH_LEN + 2)  # a health packet's (74 bytes: fits the 128 FIFO)
         self._rx = bytearray(2 * ACK_LEN)  # a frame in progress
         self._n = 0
         self._ack = bytearray(ACK_LEN)
@@ -31,9 +32,10 @@ class UartPort:
         return self.uart.txdone()
 
     def send(self, buf) -> None:
-        n = encode_into(buf, len(buf), self._tx)
-        # A record fills the buffer: written whole, no memoryview slice allocated per frame.
-        self.uart.write(self._tx if n == len(self._tx) else memoryview(self._tx)[:n])
+        tx = self._tx if len(buf) == RECORD_LEN else self._htx
+        n = encode_into(buf, len(buf), tx)
+        # A packet fills its buffer: written whole, no memoryview slice allocated per frame.
+        self.uart.write(tx if n == len(tx) else memoryview(tx)[:n])
 
     def recv(self):
         """One decoded frame if complete, else None (never blocks)."""

@@ -18,6 +18,7 @@ from pathlib import Path
 import pytest
 
 from gateway.store.keys import write_keys
+from tests.gateway_harness import wait_for
 from tests.mcu_fakes.hostenv import micropython, run_mpy
 from tests.test_firmware_e2e import (
     KEY,
@@ -28,6 +29,7 @@ from tests.test_firmware_e2e import (
     run_until_delivered,
     stored,
 )
+from tests.test_firmware_health import stored_health
 
 pytestmark = pytest.mark.skipif(micropython() is None, reason="micropython not installed")
 
@@ -86,7 +88,7 @@ def test_firmware_over_uart_with_a_noisy_cable(tmp_path: Path) -> None:
     board.mkdir()
     (board / "config.json").write_text(json.dumps({
         "device_id": 7, "key": KEY.hex(), "transport": "uart", "uart": {"id": 1},
-        "sample_ms": 50, "period_s": 0.2, "ack_timeout_ms": 300, "wdt_ms": 5000,
+        "sample_ms": 50, "period_s": 0.2, "ack_timeout_ms": 300, "wdt_ms": 5000, "health_s": 1,
         "pins": {"dht_in": 4, "dht_out": 16, "pyranometer": 34, "anemometer": 35, "rain": 27}}))
     os.environ["SERRA_UART_1"] = board_tty
     n = 40
@@ -97,6 +99,8 @@ def test_firmware_over_uart_with_a_noisy_cable(tmp_path: Path) -> None:
         fw = Firmware(board, trace)
         try:
             recs = run_until_delivered(fw, db, 0, n, timeout=120)
+            # health packets (74-byte frames) go over the UART too: one a second here
+            wait_for(lambda: stored_health(db) is not None, 120, "a health packet stored")
         finally:
             fw.stop()
         check_exactly_once(recs, stored(db, 0), n)

@@ -145,14 +145,15 @@ def process_group_of(pid: int) -> int:
 def test_a_signal_during_the_set_up_stops_it_exits_128_plus_its_number_and_leaves_no_process(
         tmp_path: Path, signum: signal.Signals, said: str) -> None:
     """SIGINT (a Ctrl-C) or SIGTERM once the gateway is up and the subscriber starting (before
-    the kit and the screen): the run did not happen, so the exit status says so (128 + the
-    signal's number, as a shell reports it: 130, 143), and every child is gone. Both exited 0;
-    SIGTERM even went on to start the kit and wrote a summary."""
+    the kit and the screen, or just after on a loaded machine): the run did not do what was
+    asked, so the exit status says so (128 + the signal's number, as a shell reports it: 130,
+    143), and every child is gone. Both exited 0; SIGTERM even went on to start the kit and
+    wrote a summary. A day of minutes (288 s at 300x): the run cannot end by itself first."""
     out, log = tmp_path / "run", tmp_path / "stdout.txt"
     gateway = f"{sys.executable} -m gateway run --config {out / 'gateway.toml'}"
     with log.open("w") as stdout:
-        proc = subprocess.Popen([sys.executable, "-m", "training", "run", "--minutes", "30", "--scale",
-                                 "300", "--no-calibrate", "--out", str(out)], cwd=tmp_path,
+        proc = subprocess.Popen([sys.executable, "-m", "training", "run", "--minutes", "1440",
+                                 "--scale", "300", "--no-calibrate", "--out", str(out)], cwd=tmp_path,
                                 stdout=stdout, stderr=subprocess.STDOUT, text=True,
                                 stdin=subprocess.DEVNULL)
     groups: set[int] = set()
@@ -177,19 +178,21 @@ def test_a_signal_during_the_set_up_stops_it_exits_128_plus_its_number_and_leave
                 os.kill(pid, signal.SIGKILL)
     text = log.read_text()
     assert f"stopped: {said}" in text and "Traceback" not in text, text
-    assert "summary:" not in text and not (out / "summary.json").exists()
+    if "kit 7 started" not in text:  # stopped in the set-up: nothing ran, nothing to sum up
+        assert "summary:" not in text and not (out / "summary.json").exists()
     assert left == ([], []), f"a process of the run survived the Ctrl-C: {left}"
 
 
 def test_ctrl_c_again_while_stopping_kills_the_children_and_exits_130(tmp_path: Path) -> None:
     """A second Ctrl-C while the run stops its children: Python's default handler raised in the
     middle of the wait for one of them, so the run died of SIGINT with a traceback and left the
-    subscriber (or the gateway) running in its process group. Now it kills the group at once."""
+    subscriber (or the gateway) running in its process group. Now it kills the group at once.
+    A day of minutes (288 s at 300x): the run cannot end by itself before the first Ctrl-C."""
     out, log = tmp_path / "run", tmp_path / "stdout.txt"
     gateway = f"{sys.executable} -m gateway run --config {out / 'gateway.toml'}"
     with log.open("w") as stdout:
-        proc = subprocess.Popen([sys.executable, "-m", "training", "run", "--minutes", "30", "--scale",
-                                 "300", "--no-calibrate", "--out", str(out)], cwd=tmp_path,
+        proc = subprocess.Popen([sys.executable, "-m", "training", "run", "--minutes", "1440",
+                                 "--scale", "300", "--no-calibrate", "--out", str(out)], cwd=tmp_path,
                                 stdout=stdout, stderr=subprocess.STDOUT, text=True,
                                 stdin=subprocess.DEVNULL)
     groups: set[int] = set()

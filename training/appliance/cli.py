@@ -9,7 +9,9 @@ MicroPython, its sensors fed by the reference simulator, ``--scale`` times faste
 clock, the gateway's clock scaled alike), and the status screen. On a terminal it
 runs until you quit the screen (q or Ctrl-C); without one (CI, a pipe) for ``--minutes`` simulated
 minutes, printing progress. Either way it then stops everything in order, leaves no process
-behind, and prints a summary (also written to ``summary.json``).
+behind, and prints a summary (also written to ``summary.json``). It exits 0 when its minutes
+are done or the screen is quit; a signal that ends it early (Ctrl-C outside the screen, SIGTERM,
+SIGHUP) gives 128 + its number (130, 143, 129), as a shell reports it.
 """
 
 from __future__ import annotations
@@ -91,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
 
 class SetUpStopped(Exception):
     """SIGTERM or SIGHUP during the set-up: it stopped there (the calibration alone can take
-    minutes; it went on to start everything, then stopped it and exited 0)."""
+    minutes; it went on to start everything, then stopped it)."""
 
     def __init__(self, signum: int) -> None:
         super().__init__(signal.Signals(signum).name)
@@ -112,6 +114,7 @@ class Demo:
         self.why = ""  # why the run ended early
         self.hurried = False  # Ctrl-C again while stopping: the group was killed
         self.setting_up = False  # a SIGTERM or SIGHUP now stops the set-up where it is
+        self.signalled = 0  # the signal that ended the run early: it exits 128 + its number
         out = sys.__stdout__  # the terminal we started on, if any (watched while the screen runs)
         self.tty_fd = out.fileno() if out is not None and out.isatty() else -1
         self.epoch = float(__import__("numpy").datetime64(START.rstrip("Z"), "s").astype("int64"))
@@ -135,10 +138,9 @@ class Demo:
         except ChildError as e:
             self.say(f"error: {e}")
             code = 1
-        except KeyboardInterrupt:
+        except KeyboardInterrupt:  # outside the screen (the set-up, a headless run): 128 + 2
             self.why = "interrupted"
-            if self.start_t is None:  # Ctrl-C before the kit ran: nothing was done, say so (128+2)
-                code = 130
+            self.signalled = signal.SIGINT
         except SetUpStopped as e:  # as a Ctrl-C there: 128 + the signal's number
             code = 128 + e.signum
         finally:
@@ -159,10 +161,14 @@ class Demo:
         if not stopped:
             self.say("error: a process of the run did not stop by itself (killed)")
             code = code or 1
-        return 130 if self.hurried else code  # a Ctrl-C during the summary too
+        if self.hurried:  # a Ctrl-C during the summary too
+            return 130
+        # ended by a signal, not by its minutes or the screen's quit: not the run asked for
+        return code or (128 + self.signalled if self.signalled else 0)
 
     def _signal(self, signum: int, _frame) -> None:
         self.why = signal.Signals(signum).name
+        self.signalled = signum
         self.stop.set()
         if self.setting_up:  # nothing that watches the stop event runs yet: stop the set-up now
             self.setting_up = False

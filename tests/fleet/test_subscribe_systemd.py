@@ -7,6 +7,7 @@ and a PostgreSQL that does not answer at start exits 2 (restarted), also before 
 from __future__ import annotations
 
 import os
+import signal
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -19,6 +20,7 @@ from gateway.publish import zconfig
 from tests.fleet.kit import free_port
 from tests.fleet.pg import PgCluster
 from tests.fleet.test_cloud_history import message
+from tests.fleet.test_cloud_outage import publisher
 from tests.test_sdnotify import DEADLINE, service, stdout_so_far, stop_cleanly
 
 SCHEMA = "t_systemd"
@@ -54,11 +56,13 @@ def test_subscribe_is_ready_after_its_line_counts_what_it_stores_and_says_stoppi
         line = stdout_so_far(proc)  # printed before READY=1 was sent
         assert line.startswith(f"serra-subscribe ready serra/farm-a/** on {endpoint} store "), line
         with zenoh.open(zconfig.build("peer", connect=[endpoint])) as gw:
-            gw.put("serra/farm-a/gh1/forecast", message("farm-a", "gh1", "forecast", 0).payload)
+            pub = publisher(gw)  # once the subscription is known: a put before it is dropped
+            pub.put(message("farm-a", "gh1", "forecast", 0).payload)
             while "1 message stored" not in (status := sock.wait_for("STATUS", proc)[0]["STATUS"]):
                 pass  # each STATUS= differs from the last; the count reaches 1 or wait_for fails
             assert status.startswith("1 message stored, 0 held; zenoh linked (0 routers, 1 peer)"), \
                 status
+            pub.undeclare()
         stop_cleanly(proc, sock)  # STOPPING=1 + STATUS=stopping, then exit 0
     with psycopg.connect(schema.dsn) as c:
         assert c.execute(f"SELECT idem FROM {SCHEMA}.message").fetchall() == [
@@ -95,3 +99,34 @@ def test_subscribe_whose_postgresql_does_not_answer_at_start_exits_2_and_never_s
         assert sock.next(0) == {}
     err = (tmp_path / "service.stderr").read_text().strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error: PostgreSQL (") and "cannot connect" in err[0]
+
+
+def test_subscribe_refused_by_its_postgresql_at_start_exits_2_not_78(pg: PgCluster,
+                                                                      tmp_path: Path) -> None:
+    """The server answers but refuses (here: no such database; a wrong password or a missing
+    role alike): decided by the server and fixed there, maybe by a provisioning run after this
+    start, so exit 2, restarted, not 78 (docs/cloud.md, "Under systemd")."""
+    dsn = pg.dsn.replace("dbname=postgres", "dbname=not_provisioned_yet")
+    config = subscriber_toml(tmp_path, f'listen = ["tcp/127.0.0.1:{free_port()}"]\ndsn = "{dsn}"')
+    with service(subscribe_argv(config), tmp_path, str(tmp_path / "notify")) as (proc, sock):
+        assert proc.wait(timeout=DEADLINE) == 2
+        assert sock.next(0) == {}
+    err = (tmp_path / "service.stderr").read_text().strip().splitlines()
+    assert len(err) == 1 and 'database "not_provisioned_yet" does not exist' in err[0], err
+
+
+def test_subscribe_waiting_for_its_router_says_so_and_is_not_ready(tmp_path: Path) -> None:
+    """Client mode with no router answering: no READY=1 (systemctl start waits, up to the unit's
+    TimeoutStartSec=), but STATUS= says what it waits for; SIGTERM meanwhile exits 0."""
+    port = free_port()
+    config = subscriber_toml(tmp_path, f'mode = "client"\nconnect = ["tcp/127.0.0.1:{port}"]\n'
+                             'db = "cloud.db"')
+    with service(subscribe_argv(config), tmp_path, str(tmp_path / "notify")) as (proc, sock):
+        status, before = sock.wait_for("STATUS", proc)
+        assert not before and "READY" not in status, (before, status)
+        assert status["STATUS"].startswith(
+            f"0 messages stored, 0 held; zenoh connecting to tcp/127.0.0.1:{port} (attempt "), status
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=DEADLINE) == 0
+        assert not [m for m in iter(lambda: sock.next(0), {}) if "READY" in m]
+        assert "serra-subscribe ready" not in stdout_so_far(proc)

@@ -5,7 +5,8 @@
   ``config.template.json`` (mcu/config.example.json with its key replaced by a placeholder the
   board refuses, so no board runs on the published key); ``README.md`` (flashing and
   provisioning with esptool and mpremote); ``MANIFEST.txt`` (mpy-cross version, file hashes).
-- ``gateway/``: the wheel (gateway/ only: pyproject.toml), the systemd units, the default
+- ``gateway/``: the wheel (gateway/ only: pyproject.toml), the systemd units (the Pi's, and the
+  cloud host's router and subscriber: one wheel serves both), the default
   configs (gateway.toml, router.toml), ``README.md`` (install steps) and ``docs/`` (the
   repository's, which the configs, the units and the commands' messages name; installed into
   /opt/serra/docs).
@@ -45,6 +46,7 @@ GATEWAY_FILES = (
     "serra-gateway.service",  # python -m gateway run --config /etc/serra/gateway.toml
     "serra-router.service",  # optional Zenoh router: python -m gateway router --config ...
     "serra-ingest.service",  # ingest only (store, no estimator, no publishing)
+    "serra-subscribe.service",  # the cloud host's subscriber: python -m gateway subscribe ...
     "gateway.toml",
     "router.toml",
     "README.md",

@@ -227,7 +227,7 @@ def test_every_help_page_fits_a_terminal(monkeypatch):
 ])
 def test_subscribe_conflicts_on_the_command_line_name_its_options(capsys, tmp_path, args,
                                                                   message):
-    assert main(["subscribe", "--db", str(tmp_path / "c.db"), *args]) == 2
+    assert main(["subscribe", "--db", str(tmp_path / "c.db"), *args]) == 78  # EX_CONFIG
     assert one_error_line(capsys) == f"error: command line: {message}"
     assert list(tmp_path.iterdir()) == []  # no store made
 

@@ -197,7 +197,7 @@ def test_subscribe_cli_exports_a_kit_csv_per_greenhouse(tmp_path: Path, capsys) 
     assert main(["subscribe", "--db", str(tmp_path / "cloud.db"), "--export", str(tmp_path / "csv")]) == 0
     data = read_kit_csv(tmp_path / "csv" / "f1-north.csv")
     assert list(data.columns["t_in"]) == [20.0, 21.0, 22.0] and list(data.columns["rh_in"]) == [60.0] * 3
-    assert main(["subscribe", "--db", str(tmp_path / "cloud.db")]) == 2
+    assert main(["subscribe", "--db", str(tmp_path / "cloud.db")]) == 78  # EX_CONFIG
     assert "give --connect" in capsys.readouterr().err
 
 

@@ -18,6 +18,7 @@ import re
 import secrets
 import select
 import shlex
+import shutil
 import socket
 import sqlite3
 import subprocess
@@ -352,6 +353,10 @@ CONFIG_ERRORS = {  # unit → (what is wrong in the config it names, what the on
         (("[router]\n", "[router]\nlisten_on = 1\n"), "router.toml: unknown key 'router.listen_on'"),
     ],
     "serra-ingest.service": [((), "keys.txt: cannot read the keys file")],  # no keys file
+    "serra-subscribe.service": [  # no subscriber.toml; the example as shipped: no certificates
+        ((), "subscriber.toml: cannot read subscriber config"),
+        (("", ""), "subscriber.toml: tls.ca: "),
+    ],
 }
 
 
@@ -366,7 +371,10 @@ def test_installed_wheel_exits_78_under_each_shipped_unit_when_its_config_is_wro
     if unit != "serra-ingest.service":
         write_keys(tmp_path / "keys.txt", {7: secrets.token_bytes(32)})
     install_configs(installed, bundles, tmp_path)
-    config = tmp_path / ("router.toml" if unit == "serra-router.service" else "gateway.toml")
+    config = tmp_path / {"serra-router.service": "router.toml",
+                         "serra-subscribe.service": "subscriber.toml"}.get(unit, "gateway.toml")
+    if unit == "serra-subscribe.service" and edit:  # the README's install step
+        shutil.copy(bundles / "gateway" / "docs" / "examples" / "subscriber.toml", config)
     if edit:
         old, new = edit
         assert old in config.read_text()

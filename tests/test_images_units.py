@@ -19,7 +19,8 @@ import pytest
 from tests.images_common import build, read_unit
 from tests.mcu_fakes.hostenv import FAKE_PATH, MCU, ROOT, micropython, mpy_env
 
-UNITS = ("serra-gateway.service", "serra-router.service", "serra-ingest.service")
+UNITS = ("serra-gateway.service", "serra-router.service", "serra-ingest.service",
+         "serra-subscribe.service")
 
 
 HARDENING = {  # in every unit
@@ -37,6 +38,8 @@ EXEC = {
     "serra-router.service": "/opt/serra/venv/bin/python -m gateway router --config /etc/serra/router.toml",
     "serra-ingest.service": "/opt/serra/venv/bin/python -m gateway.ingest.service --db "
                             "/var/lib/serra/serra.db --keys /etc/serra/keys.txt --listen 0.0.0.0:5683",
+    "serra-subscribe.service": "/opt/serra/venv/bin/python -m gateway subscribe --config "
+                               "/etc/serra/subscriber.toml",
 }
 
 
@@ -50,14 +53,20 @@ def test_units_run_the_documented_commands_hardened(bundles: Path) -> None:
         assert unit["WantedBy"] == ["multi-user.target"]
     # the full gateway and the ingest-only unit share the UDP port: one excludes the other
     assert read_unit(bundles / "gateway" / "serra-gateway.service")["Conflicts"] == ["serra-ingest.service"]
+    # the cloud subscriber starts after a PostgreSQL and a router of its host, wanting neither
+    # (either may live on another host)
+    sub = read_unit(bundles / "gateway" / "serra-subscribe.service")
+    assert sub["After"] == ["network-online.target postgresql.service serra-router.service"]
+    assert sub["Wants"] == ["network-online.target"]
 
 
 def test_units_stop_on_a_config_error_and_restart_on_any_other_failure(bundles: Path) -> None:
-    """Exit 78 (EX_CONFIG: what run, router and the ingest service exit on a wrong config, see
-    test_images.py) is the one status systemd does not restart on: a wrong config would fail every
-    5 s for ever, a store error or a crash (exit 1, 2, a signal) may not. No ExecStartPre=: systemd
-    applies RestartPreventExitStatus= to the main process only (systemd#11868), so a --check there
-    that fails would still be restarted."""
+    """Exit 78 (EX_CONFIG: what run, router, subscribe and the ingest service exit on a wrong
+    config, see test_images.py and tests/fleet/test_subscribe_systemd.py) is the one status
+    systemd does not restart on: a wrong config would fail every 5 s for ever, a store error, a
+    PostgreSQL not answering at start or a crash (exit 1, 2, a signal) may not. No
+    ExecStartPre=: systemd applies RestartPreventExitStatus= to the main process only
+    (systemd#11868), so a --check there that fails would still be restarted."""
     for name in UNITS:
         unit = read_unit(bundles / "gateway" / name)
         assert unit["Restart"] == ["on-failure"] and unit["RestartSec"] == ["5"], name
@@ -99,7 +108,7 @@ def test_install_steps_create_the_keys_file_0600_and_install_every_shipped_file(
     readme = (bundles / "gateway" / "README.md").read_text(encoding="utf-8")
     assert "sudo install -m 0600 -o serra -g serra /dev/null /etc/serra/keys.txt" in readme
     assert "useradd --system" in readme and "python3 -m venv /opt/serra/venv" in readme
-    for name in [*UNITS, "gateway.toml", "router.toml", "serra-*.whl"]:
+    for name in [*UNITS, "gateway.toml", "router.toml", "serra-*.whl", "subscriber.toml"]:
         assert name in readme, name
     shipped = {p.name for p in (bundles / "gateway").iterdir()}
     assert shipped == {*UNITS, "gateway.toml", "router.toml", "README.md", "docs",

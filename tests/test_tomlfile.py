@@ -54,7 +54,7 @@ def test_greenhouse_and_params_files_say_what_is_wrong(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(("command", "status"), [
-    (["router", "--config"], os.EX_CONFIG), (["subscribe", "--config"], 2),
+    (["router", "--config"], os.EX_CONFIG), (["subscribe", "--config"], os.EX_CONFIG),
     (["run", "--config"], os.EX_CONFIG)])  # the services' config errors exit 78, not restarted
 def test_a_config_that_is_not_utf8_is_one_line_and_its_exit_status(
         tmp_path: Path, command: list[str], status: int) -> None:

@@ -10,7 +10,7 @@ import threading
 import time
 from pathlib import Path
 
-from gateway.cli import CliError
+from gateway.cli import CliError, ConfigFileError
 from gateway.cli.common import check_output, writing
 
 EPILOG = """\
@@ -29,10 +29,12 @@ file. In client mode the subscriber waits for a router (retried) and prints its 
 subscribed. Keep a DSN's password out of the command line: use ~/.pgpass or PGPASSFILE.
 
 While the store refuses writes (PostgreSQL down) what arrives is held and retried; the counters
-line on stderr (every 10 s) shows received ahead of stored. Exit status 2: a bad option or file,
-the store unreachable at start (one line naming the DSN without its password), or stopped while
-the store still refused messages (how many were not stored; the next start's catch-up asks the
-gateways' history for them).
+line on stderr (every 10 s) shows received ahead of stored. Exit status 78 (EX_CONFIG): a wrong
+setting, file, certificate or DSN syntax (one line; its systemd unit does not restart on it).
+Exit status 2: PostgreSQL not answering or refusing at start, wrong password included (one line
+naming the DSN without its password; the unit restarts it), or stopped while the store still
+refused messages (how many were not stored; the next start's catch-up asks the gateways' history
+for them). Under systemd (NOTIFY_SOCKET) it says READY=1 after its ready line (docs/cloud.md).
 """
 
 
@@ -95,8 +97,8 @@ def settings(args: argparse.Namespace):
                               listen=tuple(args.listen), keys=tuple(args.key), farms=tuple(args.farm),
                               db=args.db, dsn=args.dsn, schema=args.schema, history=args.history,
                               tls=tls).check()
-    except (ConfigError, CertError) as e:
-        raise CliError(str(e)) from None
+    except (ConfigError, CertError) as e:  # exit 78 (EX_CONFIG): systemd does not restart it
+        raise ConfigFileError(str(e)) from None
 
 
 def _export(store, folder: Path) -> None:
@@ -115,18 +117,21 @@ def _export(store, folder: Path) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Exit 78 (EX_CONFIG) on what the settings say wrong on their face, found before Zenoh or a
+    server is asked; 2 on what may pass (PostgreSQL not answering or refusing at start, a port
+    in use), which the unit restarts (docs/cloud.md, "Under systemd")."""
     import sqlite3
 
-    from gateway.cloud.store import open_store
+    from gateway.cloud.store import StoreConfigError, open_store
 
     if args.duration is not None and not args.duration > 0:  # also NaN
         raise CliError(f"--duration {args.duration:g}: must be a positive number of seconds")
     check_output(args.export, "--export", folder=True)  # before a run whose end it is
     s = settings(args)
     if not s.connect and not s.listen and not args.export:
-        raise CliError("give --connect ENDPOINT (or --listen) to subscribe, or --export DIR")
+        raise ConfigFileError("give --connect ENDPOINT (or --listen) to subscribe, or --export DIR")
     if s.db is None and not s.dsn:
-        raise CliError("give --db FILE (SQLite) or --dsn DSN (PostgreSQL) for the cloud store")
+        raise ConfigFileError("give --db FILE (SQLite) or --dsn DSN (PostgreSQL) for the cloud store")
     if not (s.connect or s.listen) and not s.dsn and not Path(s.db).exists():
         # export only: a reader must not create an empty store from a mistyped path
         raise CliError(f"{s.db}: no such cloud store (subscribe --db creates it when it "
@@ -135,10 +140,10 @@ def run(args: argparse.Namespace) -> int:
         store = open_store(s.db, s.dsn, s.schema)
     except sqlite3.Error as e:
         raise CliError(f"{s.db}: cannot open the cloud store: {e}") from None
-    except ImportError as e:
-        raise CliError(str(e)) from None
-    except RuntimeError as e:  # CloudStoreError (one line, no password), NotACloudStore
-        raise CliError(str(e)) from None
+    except (ImportError, StoreConfigError) as e:  # psycopg missing, a bad DSN, another database
+        raise ConfigFileError(str(e)) from None
+    except RuntimeError as e:  # CloudStoreError: the server did not answer or refused (one line,
+        raise CliError(str(e)) from None  # no password): it may be starting or being provisioned
     try:
         if s.connect or s.listen:
             _subscribe(args, s, store)
@@ -151,7 +156,9 @@ def run(args: argparse.Namespace) -> int:
 
 def _subscribe(args: argparse.Namespace, s, store) -> None:
     from gateway.cloud.subscriber import Subscriber
+    from gateway.sdnotify import Notifier
 
+    notify = Notifier()
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
@@ -164,27 +171,58 @@ def _subscribe(args: argparse.Namespace, s, store) -> None:
         sub.stop()
         raise CliError(f"cannot open the Zenoh session: {e}") from None
     t0 = time.monotonic()
-    announced = False
-    last = t0
+    last = told = t0
+    waiting = ""
     try:
         while not stop.wait(0.2):
-            if not announced and sub.ready.is_set():
+            if not notify.readied and sub.ready.is_set():
                 if sub.opener.error is not None:
                     raise CliError(f"cannot subscribe: {sub.opener.error}")
                 what = f"{keys[0]} (+{len(keys) - 1} more)" if len(keys) > 1 else keys[0]
                 print(f"serra-subscribe ready {what} on {', '.join(s.connect + s.listen)} "
                       f"store {store.path}{' history' if sub.history else ''}", flush=True)
-                announced = True
+                notify.ready(systemd_status(sub))  # after the line: the journal shows it first
+            elif not notify.readied and notify.enabled and (text := systemd_status(sub)) != waiting:
+                waiting = text  # systemctl status shows it while the start waits for a router
+                notify.send(f"STATUS={text}")
             if args.duration is not None and time.monotonic() - t0 >= args.duration:
                 break
+            if notify.readied and time.monotonic() - told >= 1:
+                told = time.monotonic()
+                notify.status(systemd_status(sub))
             if time.monotonic() - last >= 10:
                 last = time.monotonic()
                 print(f"subscribe: {_stats(sub.stats)}", file=sys.stderr, flush=True)
     finally:
+        notify.stopping()  # before the last store attempt, which may take a while
         sub.stop()
         print(f"subscribe stopped: {_stats(sub.stats)}; {_stored(store)}", file=sys.stderr, flush=True)
         if sub.error is not None:
             raise CliError(str(sub.error))
+
+
+def systemd_status(sub) -> str:
+    """The line ``systemctl status`` shows (STATUS=): what was stored and held, Zenoh's link."""
+    st = sub.stats
+    held = st.received - st.stored - st.repeats - st.not_messages
+    parts = [f"{_n(st.stored, 'message')} stored, {held} held"
+             + (" (the store refuses them, retrying)" if held and sub.store_failing else "")]
+    session = sub.session
+    if session is None:
+        o = sub.opener.state
+        parts.append(f"zenoh connecting to {', '.join(sub.connect) or '-'} (attempt {o.attempts})")
+    else:
+        try:
+            routers, peers = len(session.info.routers_zid()), len(session.info.peers_zid())
+        except Exception:  # a session closing under us: say nothing wrong about the link
+            return parts[0]
+        parts.append(f"zenoh linked ({_n(routers, 'router')}, {_n(peers, 'peer')})"
+                     if routers or peers else "zenoh open, not linked yet")
+    return "; ".join(parts)
+
+
+def _n(count: int, noun: str) -> str:
+    return f"{count} {noun}{'' if count == 1 else 's'}"
 
 
 def _stored(store) -> str:

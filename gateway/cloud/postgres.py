@@ -36,7 +36,12 @@ except ImportError as exc:  # an optional dependency: the gateway appliance neve
     raise ImportError("the PostgreSQL cloud store needs psycopg 3 (the cloud extra): "
                       "pip install 'psycopg[binary]>=3.1'") from exc
 
-from gateway.cloud.store import Received, check_history_limits, kind_clause  # noqa: E402
+from gateway.cloud.store import (  # noqa: E402
+    Received,
+    StoreConfigError,
+    check_history_limits,
+    kind_clause,
+)
 
 log = logging.getLogger("serra.cloud.postgres")
 SCHEMA_VERSION = 1
@@ -74,6 +79,10 @@ ON CONFLICT (farm, idem) DO NOTHING
 
 class CloudStoreError(RuntimeError):
     """The store cannot do its job (connection, schema); one line, no password in it."""
+
+
+class PgConfigError(CloudStoreError, StoreConfigError):
+    """A DSN that does not parse or a bad schema name: found without the server."""
 
 
 class MessageLike(Protocol):
@@ -142,7 +151,12 @@ class PgStore:
     def connect(cls, dsn: str, schema: str = "serra", create: bool = True,
                 connect_timeout: float = 10.0) -> PgStore:
         if not _SCHEMA_NAME.match(schema):
-            raise CloudStoreError(f"schema name {schema!r}: use lower-case letters, digits and _")
+            raise PgConfigError(f"schema name {schema!r}: use lower-case letters, digits and _")
+        try:  # the syntax alone, before any server is asked (a refusal by one may be transient)
+            psycopg.conninfo.conninfo_to_dict(dsn)
+        except psycopg.Error as exc:
+            raise PgConfigError(f"PostgreSQL DSN: {_first_line(exc)} (the DSN is not shown: it "
+                               "may hold a password)") from None
         store = cls(cls._open(dsn, connect_timeout), dsn, schema)
         if create:
             store.create_schema()

@@ -131,7 +131,13 @@ def kind_clause(kind: str) -> tuple[str, list[str]]:
     return "kind = %s", [kind]
 
 
-class NotACloudStore(RuntimeError):
+class StoreConfigError(RuntimeError):
+    """The store's settings are wrong on their face (a DSN that does not parse, a bad schema
+    name, a file that is another database): no retry can help, unlike a server that does not
+    answer. ``subscribe`` exits 78 (EX_CONFIG) on it, which its unit does not restart."""
+
+
+class NotACloudStore(StoreConfigError):
     """An SQLite file that is another database; the message names it."""
 
 

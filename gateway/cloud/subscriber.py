@@ -77,6 +77,7 @@ class Subscriber:
         self.history: Any = None
         self.opener: Any = None
         self.error: BaseException | None = None
+        self.store_failing = ""  # why the store refuses the batch in hand ("": it does not)
         self.catching_up: threading.Thread | None = None
         self._cancel: Any = None  # the catch-up's zenoh.CancellationToken
         self.caught_up = threading.Event()  # set when the catch-up of the last join has ended
@@ -202,7 +203,7 @@ class Subscriber:
                 text = str(e).splitlines()[0] if str(e) else type(e).__name__
                 if text != failing:
                     log.error("cloud store refused %d messages (%s); kept, retrying", len(msgs), text)
-                    failing = text
+                    failing = self.store_failing = text
                 self.stats.store_retries += 1
                 if self._closing.is_set():  # stopping, and the last try failed: give up
                     with self._idle:
@@ -213,6 +214,7 @@ class Subscriber:
                 wait = min(wait * 2, RETRY_MAX_S)
                 continue
             self.stats.store_s = round(self.stats.store_s + time.perf_counter() - t0, 6)
+            self.store_failing = ""
             if failing:  # a warning, as its error was: the default log level shows both
                 log.warning("cloud store back after %.0f s: stored the %d kept messages",
                             time.monotonic() - since, len(msgs))

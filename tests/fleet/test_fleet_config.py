@@ -129,11 +129,11 @@ def test_the_subscriber_is_named_by_its_certificate(pki: Pki, tmp_path: Path) ->
 
 def test_subscribe_command_line_errors_are_one_line(pki: Pki, tmp_path: Path, capsys) -> None:
     argv = ["subscribe", "--mode", "client", "--connect", "tls/127.0.0.1:7447", "--db", "x.db"]
-    assert main(argv) == 2
+    assert main(argv) == 78  # EX_CONFIG
     assert "needs TLS files" in capsys.readouterr().err
-    assert main(argv + ["--tls-cert", str(pki.issued["store"].cert)]) == 2
+    assert main(argv + ["--tls-cert", str(pki.issued["store"].cert)]) == 78  # EX_CONFIG
     assert "--tls-cert/--tls-key need --tls-ca" in capsys.readouterr().err
-    assert main(["subscribe", "--connect", "tcp/127.0.0.1:7447"]) == 2
+    assert main(["subscribe", "--connect", "tcp/127.0.0.1:7447"]) == 78  # EX_CONFIG
     assert "give --db FILE (SQLite) or --dsn DSN (PostgreSQL)" in capsys.readouterr().err
 
 

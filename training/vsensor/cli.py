@@ -23,6 +23,7 @@ from pathlib import Path
 
 from gateway.cli import QUIET_HELP, CliError, setup_cli_logging
 from gateway.cli.common import seed_int
+from gateway.cli.helpformat import ArgumentParser
 from gateway.greenhouse import GreenhouseError, list_presets, load_greenhouse
 from gateway.kitcsv import KitCsvError
 from gateway.vsensor.features import MODEL_KINDS
@@ -41,7 +42,7 @@ def _data_args(p: argparse.ArgumentParser, cache: bool = True) -> None:
         p.add_argument("--cache", default=str(DEFAULT_CACHE), metavar="DIR",
                        help=f"where the replays' products are kept (default {DEFAULT_CACHE})")
     p.add_argument("--set", action="append", default=[], metavar="OUTPUT.KEY=VALUE",
-                   help="online estimator setting, e.g. --set t_in.bats=6 (default: the "
+                   help="online estimator setting, e.g. --set t_in.bats=6 (default the "
                    "greenhouse's and the model's; recorded in the model)")
     p.add_argument("--seed", type=seed_int, default=0, metavar="N",
                    help="seed of the estimator and the network, 0 or more (default 0)")
@@ -49,15 +50,15 @@ def _data_args(p: argparse.ArgumentParser, cache: bool = True) -> None:
         return
     p.add_argument("--target-kind", choices=MODEL_KINDS, default=None, metavar="KIND",
                    help="the adaptive model whose replay with the vents gives the target flow "
-                   "(default: --model's; e.g. --model prototype --target-kind almeria: kit-only "
+                   "(default --model's; e.g. --model prototype --target-kind almeria: kit-only "
                    "inputs, the almeria model's flow, which needs t_soil in the training CSVs)")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m training.vsensor",
-                                     description="The PCA-NARX virtual ventilation sensor, offline "
-                                     "(thesis §IV.3). See docs/vsensor.md.")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    parser = ArgumentParser(prog="python -m training.vsensor",
+                            description="The PCA-NARX virtual ventilation sensor, offline "
+                            "(thesis §IV.3). See docs/vsensor.md.")
+    sub = parser.add_subparsers(dest="command", title="commands", metavar="COMMAND")
     c = sub.add_parser("corpus", help="generate the training and test kit CSVs",
                        description="Simulate the corpus's runs (training/vsensor/corpus.py) into "
                        "DIR/train, DIR/test, ...: each a kit CSV with its truth files. The whole "

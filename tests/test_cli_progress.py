@@ -126,3 +126,76 @@ def test_vsensor_dataset_piped_counts_its_files(capsys):
     assert [(m["pct"], m["done"]) for m in found if m["label"] == "dataset"] == [("50", "1"), ("100", "2")]
     assert err.splitlines()[-1].startswith("progress: dataset done, ")
     assert "progress" not in out and len(out.splitlines()) == 2
+
+
+def _vsensor(capsys, *argv: str) -> tuple[str, str, str]:
+    """``python -m training.vsensor ARGV`` in this process (stderr captured: not a terminal),
+    then again with ``-q``: (stdout, stderr, the quiet run's stderr); the two stdouts equal
+    but for the times some commands print."""
+    from training.vsensor.cli import main
+
+    capsys.readouterr()
+    assert main(list(argv)) == 0
+    out, err = capsys.readouterr()
+    assert main([*argv, "-q"]) == 0
+    quiet_out, quiet_err = capsys.readouterr()
+    timeless = [re.sub(r"in [\d.]+ s", "in - s", o) for o in (out, quiet_out)]
+    assert timeless[0] == timeless[1] and "progress" not in out
+    return out, err, quiet_err
+
+
+def _counted(err: str, label: str) -> list[tuple[str, str]]:
+    """(percent, done) of each ``label`` line, in order, a repeat (a 30-s line under load) once."""
+    found = [(m["pct"], m["done"]) for m in _progress(err) if m["label"] == label]
+    assert err.splitlines()[-1].startswith(f"progress: {label} done, "), err
+    return list(dict.fromkeys(found))
+
+
+def _tiny_args() -> list[str]:
+    from tests import vsensor_data as vd
+
+    return ["--greenhouse", vd.GREENHOUSE, "--model", "almeria", "--cache",
+            str(vd.workdir() / "cache"),
+            *[a for part, opts in vd.TINY.items() for k, v in opts.items()
+              for a in ("--set", f"{part}.{k}={v}")]]
+
+
+def test_vsensor_errors_piped_counts_the_files_then_the_closed_loop(capsys):
+    """``errors`` on the two tiny training files and the tiny sensor (tests/vsensor_data.py)."""
+    from tests import vsensor_data as vd
+
+    out, err, quiet = _vsensor(capsys, "errors", "--sensor", str(vd.tiny_model()), "--data",
+                               *[str(p) for p in vd.train_files()], *_tiny_args())
+    assert _counted(err, "errors") == [("33", "1"), ("66", "2"), ("100", "3")]
+    assert out.startswith("by file:") and quiet == ""
+
+
+def test_vsensor_score_piped_counts_each_files_replays_and_each_sensor(capsys):
+    """``score`` of the tiny sensor and its linear ARX on the tiny test file."""
+    from gateway.vsensor.batch import baseline_paths
+    from tests import vsensor_data as vd
+
+    model = vd.tiny_model()
+    arx = baseline_paths(model)["linear_arx"]
+    out, err, quiet = _vsensor(capsys, "score", "--sensor", str(model), str(arx), "--data",
+                               str(vd.test_file()), *_tiny_args(), "--json")
+    assert _counted(err, "score") == [("33", "1"), ("66", "2"), ("100", "3")]
+    assert set(json.loads(out)["test-grower"]) == {str(model), str(arx)} and quiet == ""
+
+
+def test_vsensor_reference_piped_counts_its_files(capsys):
+    """``reference`` (no cache: a replay per run) on one tiny training file."""
+    from tests import vsensor_data as vd
+
+    args = [a for a in _tiny_args() if not a.startswith(("--cache", str(vd.workdir())))]
+    out, err, quiet = _vsensor(capsys, "reference", "--data", str(vd.train_files()[0]), *args)
+    assert _counted(err, "reference") == [("100", "1")]
+    assert out.startswith("train-grower.csv: ") and quiet == ""
+
+
+def test_vsensor_corpus_piped_counts_its_runs(capsys, tmp_path):
+    """``corpus --only`` two of the real runs (the simulator: well under a second each)."""
+    runs = ["other-house-spring", "biskra-spring-controller"]
+    out, err, quiet = _vsensor(capsys, "corpus", "--out", str(tmp_path), "--only", *runs)
+    assert _counted(err, "corpus") == [("50", "1"), ("100", "2")]
+    assert [ln.split()[0] for ln in out.splitlines()] == ["wrote", "wrote", "2"] and quiet == ""

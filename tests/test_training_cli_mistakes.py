@@ -230,3 +230,31 @@ def test_vsensor_errors_names_an_only_that_matches_no_file(capsys, tmp_path):
     assert vsensor_main(["errors", "--data", str(data), *TRAIN[1:], "--cache", str(tmp_path / "c"),
                          "--sensor", str(data), "--only", "summer"]) == 2
     assert capsys.readouterr().err.strip() == "error: --only 'summer': in no --data file's name"
+
+
+
+
+def _pages(parser: argparse.ArgumentParser) -> dict[str, str]:
+    """``--help`` of ``parser`` and of each of its subcommands, by prog."""
+    pages = {parser.prog: parser.format_help()}
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child in action.choices.values():
+                pages.update(_pages(child))
+    return pages
+
+
+def test_every_help_page_fits_80_columns_unbroken(monkeypatch):
+    """At 80 columns: train's --target choices made its usage 86 wide, simulate's raw
+    description and effects ran to 120, and argparse broke 'almeria-palmerillas' and
+    'docs/data-format.md' at their hyphens. A default is '(default X)', never '(default: X)'."""
+    from training.__main__ import build_parser as training_parser
+    from training.vsensor.cli import build_parser as vsensor_parser
+
+    monkeypatch.setenv("COLUMNS", "80")  # what argparse wraps to
+    pages = {**_pages(training_parser()), **_pages(vsensor_parser())}
+    assert len(pages) == 2 + 3 + 7  # the two tools, simulate/demo/run, the sensor's seven
+    lines = [(name, line) for name, text in pages.items() for line in text.splitlines()]
+    assert [nl for nl in lines if len(nl[1]) > 80] == []
+    assert [nl for nl in lines if nl[1][-2:-1].isalpha() and nl[1].endswith("-")] == []
+    assert [nl for nl in lines if "(default:" in nl[1]] == []

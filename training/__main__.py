@@ -6,10 +6,10 @@ subcommand and sets ``func``; add new commands to ``COMMANDS``.
 
 from __future__ import annotations
 
-import argparse
 import importlib
 
 from gateway.cli import setup_cli_logging
+from gateway.cli.helpformat import ArgumentParser
 
 COMMANDS = (
     "training.simulate.cli",
@@ -18,13 +18,21 @@ COMMANDS = (
 )
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Parse ``argv`` and run the chosen command; returns the exit status."""
-    parser = argparse.ArgumentParser(prog="python -m training",
-                                     description="Serra offline tools.")
+def build_parser() -> ArgumentParser:
+    """The parser of every command (``--help`` pages: tests/test_training_cli_mistakes.py)."""
+    parser = ArgumentParser(prog="python -m training", description="Serra offline tools.",
+                            epilog="The virtual ventilation sensor's own tools (corpus, "
+                            "dataset, train, tune, reference, errors, score): python -m "
+                            "training.vsensor --help.")
     sub = parser.add_subparsers(title="commands", metavar="COMMAND")
     for module in COMMANDS:
         importlib.import_module(module).add_parser(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Parse ``argv`` and run the chosen command; returns the exit status."""
+    parser = build_parser()
     args = parser.parse_args(argv)
     setup_cli_logging(False)  # the CSV reader's notices as note: lines, as the gateway's
     if not hasattr(args, "func"):

@@ -51,8 +51,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="where the stores, logs and summary go; the previous run's are replaced "
                    "(default out/run)")
     p.add_argument("--minutes", type=float, metavar="N",
-                   help="simulated minutes to run (default: until you quit on a terminal, "
-                   "120 without one)")
+                   help="simulated minutes to run (default 120 without a terminal; on "
+                   "one, until you quit)")
     p.add_argument("--scale", type=float, default=120.0, metavar="X",
                    help="simulated seconds per wall second, 1 to 1000 (default 120: two simulated "
                    "minutes a second)")

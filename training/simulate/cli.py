@@ -4,32 +4,45 @@ from __future__ import annotations
 
 import argparse
 import sys
+import textwrap
 import time
 from pathlib import Path
 
 import numpy as np
 
 from gateway.cli.common import positive_number, seed_int
+from gateway.cli.helpformat import RawDescriptionHelpFormatter
 from training.simulate.effects import EffectSpecError, describe_effects, parse_effect
 from training.simulate.plant import PRESETS
 from training.simulate.weather import CLIMATES, DEFAULT_START, WEATHER_SOURCES, parse_start
 
+HELP_WIDTH = 79
+"""The epilog is written as is (raw): wrapped here for an 80-column terminal."""
+
+
+def _wrapped(text: str, indent: str = "") -> str:
+    return "\n".join(textwrap.fill(line, HELP_WIDTH, subsequent_indent=indent,
+                                   break_on_hyphens=False) for line in text.splitlines())
+
+
 EPILOG = f"""\
-effects (--effect, repeatable; never declared in the CSV, listed in the truth JSON):
-  spec: name[@YYYY-MM-DD[THH:MM[:SS]]][:key=value[,key=value...]]   (times UTC)
-{describe_effects()}
+effects (--effect, repeatable; never declared in the CSV, listed in the truth
+JSON):
+  spec: name[@YYYY-MM-DD[THH:MM[:SS]]][:key=value[,key=value...]]  (times UTC)
+{_wrapped(describe_effects(), " " * 4)}
 
 examples:
   python -m training simulate --plant almeria --weather bleiswijk --days 14 \\
-      --start 2009-11-01 --effect cover_transmission@2009-11-08T10:00:factor=0.7 \\
+      --start 2009-11-01 \\
+      --effect cover_transmission@2009-11-08T10:00:factor=0.7 \\
       --seed 1 --out data.csv
   python -m training simulate --plant prototype --weather biskra --days 5 \\
       --effect heater@2019-01-28:power=30,night_only=1 --out proto.csv
 
-outputs: the kit CSV (docs/data-format.md), <stem>.truth.json (plant, weather, seed, effects,
-sensor errors, units) and <stem>.truth.npz (true states, flows [m3 s-1], fluxes [W m-2]).
-Default start: {", ".join(f"{k} {v}" for k, v in DEFAULT_START.items())}.
-See docs/simulator.md.
+{_wrapped("outputs: the kit CSV (docs/data-format.md), <stem>.truth.json (plant, weather, "
+          "seed, effects, sensor errors, units) and <stem>.truth.npz (true states, flows "
+          "[m3 s-1], fluxes [W m-2]). Default start: "
+          + ", ".join(f"{k} {v}" for k, v in DEFAULT_START.items()) + ". See docs/simulator.md.")}
 """
 
 
@@ -47,17 +60,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser = subparsers.add_parser(
         "simulate",
         help="simulate a greenhouse on real or synthetic weather -> kit CSV + truth",
-        description="Reference greenhouse simulator: air, cover and soil nodes, crop "
-        "transpiration, Kittas ventilation with a vent controller, sensor models, and "
-        "injectable effects.",
+        description=_wrapped("Reference greenhouse simulator: air, cover and soil nodes, crop "
+                             "transpiration, Kittas ventilation with a vent controller, sensor "
+                             "models, and injectable effects."),
         epilog=EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        formatter_class=RawDescriptionHelpFormatter,
     )
     parser.add_argument("--plant", choices=sorted(PRESETS), default="almeria",
                         help="greenhouse simulated (default almeria); the gateway tools read its "
                         "CSV with --greenhouse almeria-palmerillas --model almeria, or "
                         "biskra-prototype --model prototype for the prototype")
-    parser.add_argument("--weather", choices=WEATHER_SOURCES, default="bleiswijk",
+    parser.add_argument("--weather", choices=WEATHER_SOURCES, default="bleiswijk", metavar="NAME",
                         help="bleiswijk = measured 2009-10-20..2009-12-10; "
                         f"{', '.join(CLIMATES)} = synthetic seeded days (default bleiswijk)")
     parser.add_argument("--start", default=None, metavar="YYYY-MM-DD[THH:MM]",

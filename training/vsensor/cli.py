@@ -23,6 +23,7 @@ from pathlib import Path
 
 from gateway.cli import QUIET_HELP, CliError, setup_cli_logging
 from gateway.cli.common import seed_int
+from gateway.cli.helpformat import ArgumentParser
 from gateway.greenhouse import GreenhouseError, list_presets, load_greenhouse
 from gateway.kitcsv import KitCsvError
 from gateway.vsensor.features import MODEL_KINDS
@@ -41,7 +42,7 @@ def _data_args(p: argparse.ArgumentParser, cache: bool = True) -> None:
         p.add_argument("--cache", default=str(DEFAULT_CACHE), metavar="DIR",
                        help=f"where the replays' products are kept (default {DEFAULT_CACHE})")
     p.add_argument("--set", action="append", default=[], metavar="OUTPUT.KEY=VALUE",
-                   help="online estimator setting, e.g. --set t_in.bats=6 (default: the "
+                   help="online estimator setting, e.g. --set t_in.bats=6 (default the "
                    "greenhouse's and the model's; recorded in the model)")
     p.add_argument("--seed", type=seed_int, default=0, metavar="N",
                    help="seed of the estimator and the network, 0 or more (default 0)")
@@ -49,15 +50,15 @@ def _data_args(p: argparse.ArgumentParser, cache: bool = True) -> None:
         return
     p.add_argument("--target-kind", choices=MODEL_KINDS, default=None, metavar="KIND",
                    help="the adaptive model whose replay with the vents gives the target flow "
-                   "(default: --model's; e.g. --model prototype --target-kind almeria: kit-only "
+                   "(default --model's; e.g. --model prototype --target-kind almeria: kit-only "
                    "inputs, the almeria model's flow, which needs t_soil in the training CSVs)")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m training.vsensor",
-                                     description="The PCA-NARX virtual ventilation sensor, offline "
-                                     "(thesis §IV.3). See docs/vsensor.md.")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    parser = ArgumentParser(prog="python -m training.vsensor",
+                            description="The PCA-NARX virtual ventilation sensor, offline "
+                            "(thesis §IV.3). See docs/vsensor.md.")
+    sub = parser.add_subparsers(dest="command", title="commands", metavar="COMMAND")
     c = sub.add_parser("corpus", help="generate the training and test kit CSVs",
                        description="Simulate the corpus's runs (training/vsensor/corpus.py) into "
                        "DIR/train, DIR/test, ...: each a kit CSV with its truth files. The whole "
@@ -70,6 +71,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also the opt-in HOT_DRY runs (Sevilla, a third climate) in DIR/hot-dry")
     c.add_argument("--more-test", action="store_true",
                    help="also the opt-in MORE_TEST runs (more Biskra spring files) in DIR/more-test")
+    c.add_argument("-q", "--quiet", action="store_true", help=QUIET_HELP)
     c.set_defaults(func=_corpus)
     d = sub.add_parser("dataset", help="run the adaptive model with and without vents, cache",
                        description="Replay each file with and without its vent signal and keep "
@@ -96,6 +98,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--above", type=float, default=30.0, metavar="M3_S",
                    help="a peak is a minute with G above this [m3 s-1] (default 30)")
     r.add_argument("--json", action="store_true", help="print the studies as JSON")
+    r.add_argument("-q", "--quiet", action="store_true", help=QUIET_HELP)
     r.set_defaults(func=_reference)
     e = sub.add_parser("errors", help="where a model's closed-loop validation error comes from",
                        description="Run MODEL in closed loop over the training files and split its "
@@ -105,6 +108,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--sensor", dest="onnx", required=True, metavar="MODEL.onnx",
                    help="the written sensor to study (e.g. gateway/vsensor/models/almeria.onnx)")
     e.add_argument("--only", metavar="TEXT", help="the breakdowns over files whose name has TEXT")
+    e.add_argument("-q", "--quiet", action="store_true", help=QUIET_HELP)
     e.set_defaults(func=_errors)
     s = sub.add_parser("score", help="written sensors side by side on held-out files (cached)",
                        description="Run every MODEL in closed loop over each file (the gateway's "
@@ -117,6 +121,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true", help="print the scores as JSON")
     s.add_argument("--clamp-inputs", action="store_true",
                    help="the sensors clamp their inputs to the padded training ranges")
+    s.add_argument("-q", "--quiet", action="store_true", help=QUIET_HELP)
     s.set_defaults(func=_score)
     return parser
 
@@ -124,17 +129,25 @@ def build_parser() -> argparse.ArgumentParser:
 def _score(args: argparse.Namespace) -> int:
     import json
 
+    from gateway.cli.progress import progress_bar
     from training.vsensor.dataset import build_segment
     from training.vsensor.heldout import score_segment, table
 
     _check_sensors(args.onnx)
     gh = load_greenhouse(args.greenhouse)
     models = {str(p): Path(p) for p in args.onnx}
-    scores = {Path(p).stem: score_segment(build_segment(p, gh, args.model, args.cache,
-                                                        overrides(args.set) or None, args.seed,
-                                                        target_kind=args.target_kind),
-                                          models, gh, args.model, args.clamp_inputs)
-              for p in args.data}
+    scores = {}
+    # counted per file: its replays (cached: at once; else minutes, their rows as info), then
+    # each sensor's minute-by-minute run
+    with progress_bar("score", len(args.data) * (1 + len(models)), args.quiet) as bar:
+        for p in args.data:
+            bar(advance=0, description=Path(p).name)
+            seg = build_segment(p, gh, args.model, args.cache, overrides(args.set) or None,
+                                args.seed, progress=lambda done: bar(advance=0, info=f"row {done}"),
+                                target_kind=args.target_kind)
+            bar(advance=1, info="replays")
+            scores[Path(p).stem] = score_segment(seg, models, gh, args.model, args.clamp_inputs,
+                                                 progress=bar)
     if args.json:
         print(json.dumps({f: {m: {k: s[k] for k in ("flow", "q_vent", "flow_error_pct")}
                               for m, s in per.items()} for f, per in scores.items()}, indent=1))
@@ -201,8 +214,12 @@ def _corpus(args: argparse.Namespace) -> int:
         said = f"no run named {', '.join(unknown)}" if unknown else "name at least one run"
         raise ValueError(f"--only: {said} (runs: {', '.join(r.name for r in every)})")
     runs = tuple(r for r in every if args.only is None or r.name in args.only)
+    from gateway.cli.progress import progress_bar
+
     t0 = time.perf_counter()
-    for path in write_corpus(Path(args.out), runs):
+    with progress_bar("corpus", len(runs), args.quiet) as bar:
+        paths = write_corpus(Path(args.out), runs, progress=bar)
+    for path in paths:
         print(f"wrote {path}")
     print(f"{len(runs)} runs in {time.perf_counter() - t0:.1f} s")
     return 0
@@ -229,11 +246,17 @@ def _dataset(args: argparse.Namespace) -> int:
 def _reference(args: argparse.Namespace) -> int:
     import json
 
+    from gateway.cli.progress import progress_bar
     from training.vsensor.reference import as_dict, describe, study
 
     gh = load_greenhouse(args.greenhouse)
-    studies = [study(p, gh, args.model, overrides(args.set) or None, args.seed, args.above)
-               for p in args.data]
+    studies = []
+    with progress_bar("reference", len(args.data), args.quiet) as bar:  # the replay's rows as info
+        for p in args.data:
+            bar(advance=0, description=Path(p).name)
+            studies.append(study(p, gh, args.model, overrides(args.set) or None, args.seed,
+                                 args.above, progress=lambda done: bar(advance=0, info=f"row {done}")))
+            bar(advance=1)
     if args.json:
         print(json.dumps([as_dict(s) for s in studies], indent=1))
     else:
@@ -242,6 +265,7 @@ def _reference(args: argparse.Namespace) -> int:
 
 
 def _errors(args: argparse.Namespace) -> int:
+    from gateway.cli.progress import progress_bar
     from training.vsensor.errors import describe, study
 
     _check_sensors([args.onnx])
@@ -249,8 +273,12 @@ def _errors(args: argparse.Namespace) -> int:
         # found after the replays and the closed loops as numpy's "need at least one array"
         raise ValueError(f"--only {args.only!r}: in no --data file's name")
     gh = load_greenhouse(args.greenhouse)
-    print(describe(study(args.onnx, args.data, gh, args.model, args.cache,
-                         overrides(args.set) or None, args.seed, args.only, args.target_kind)))
+    # the files' replays, then one closed loop over them all (errors.study)
+    with progress_bar("errors", len(args.data) + 1, args.quiet) as bar:
+        tables = study(args.onnx, args.data, gh, args.model, args.cache,
+                       overrides(args.set) or None, args.seed, args.only, args.target_kind,
+                       progress=bar)
+    print(describe(tables))
     return 0
 
 

@@ -18,6 +18,7 @@ training.vsensor corpus --out DIR`` writes ``DIR/train``, ``DIR/test``, ``DIR/fr
 from __future__ import annotations
 
 import importlib.util
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -142,11 +143,16 @@ def part_of(run: Run) -> str:
             else "hot-dry" if run in HOT_DRY else "more-test" if run in MORE_TEST else "train")
 
 
-def write_corpus(out: Path, runs: tuple[Run, ...] = TRAIN + TEST + FRESH + OTHER) -> list[Path]:
+def write_corpus(out: Path, runs: tuple[Run, ...] = TRAIN + TEST + FRESH + OTHER,
+                 progress: Callable[..., None] | None = None) -> list[Path]:
     """Every run of ``runs`` under ``out/<part_of(run)>`` (the default leaves the opt-in
-    ``HOT_DRY`` and ``MORE_TEST`` out)."""
+    ``HOT_DRY`` and ``MORE_TEST`` out). ``progress(advance=1, description=None)``
+    (gateway/cli/progress.py's callback): each run named as it starts, counted when written."""
+    progress = progress or (lambda **k: None)
     paths = []
     for run in runs:
+        progress(advance=0, description=run.name)
         part = part_of(run)
         paths.append(generate(run, out / part / f"{run.name}.csv"))
+        progress(advance=1)
     return paths

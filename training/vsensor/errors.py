@@ -11,6 +11,7 @@ no part in choosing what to try next.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -154,16 +155,28 @@ def breakdowns(segments: list[Segment], sims: list[np.ndarray], vents: list[dict
 
 
 def study(model: str | Path, paths: list[str], gh: Greenhouse, kind: str, cache, overrides,
-          seed: int, only: str | None = None, target_kind: str | None = None) -> list[Breakdown]:
+          seed: int, only: str | None = None, target_kind: str | None = None,
+          progress: Callable[..., None] | None = None) -> list[Breakdown]:
+    """The breakdowns of ``model`` over ``paths``. ``progress(advance=1, info="",
+    description=None)`` (gateway/cli/progress.py's callback) counts ``len(paths) + 1`` steps:
+    each file's replays (their rows as info), then the closed loop over all of them."""
+    progress = progress or (lambda **k: None)
     extra = extras_of(kind, model_feature_names(model))
-    segments = [build_segment(p, gh, kind, cache, overrides, seed, extra=extra,
-                              target_kind=target_kind) for p in paths]
+    segments = []
+    for p in paths:
+        progress(advance=0, description=f"replays {Path(p).name}")
+        segments.append(build_segment(p, gh, kind, cache, overrides, seed,
+                                      progress=lambda done: progress(advance=0, info=f"row {done}"),
+                                      extra=extra, target_kind=target_kind))
+        progress(advance=1)
     vents = []
     for p in paths:
         series = load_series(str(p), step=60.0)
         vents.append({k: series[k] if k in series.columns else np.zeros(len(series))
                       for k in ("vent_roof", "vent_side")})
+    progress(advance=0, description="closed loop")
     sims = simulate_model(model, segments, gh, kind)
+    progress(advance=1)
     return breakdowns(segments, sims, vents, only)
 
 

@@ -9,6 +9,7 @@ validation quarter of the training files only.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -24,11 +25,16 @@ LABELS = {"pca_narx": "PCA-NARX", "narx_no_pca": "NARX without PCA", "linear_arx
 
 
 def score_segment(seg: Segment, models: dict[str, Path], gh: Greenhouse, kind: str,
-                  clamp_inputs: bool = False) -> dict:
-    """``score()`` of every model on one held-out segment (same keys as the CLI's JSON)."""
+                  clamp_inputs: bool = False,
+                  progress: Callable[..., None] | None = None) -> dict:
+    """``score()`` of every model on one held-out segment (same keys as the CLI's JSON).
+    ``progress(advance=1, info="")`` after each model's run (minute by minute, seconds each)."""
     nov = AdaptiveRun(seg.time, seg.x, seg.fluxes, np.empty((len(seg.time), 0)), [])
-    runs = {name: run_sensor(VentSensor(path, gh, kind, clamp_inputs=clamp_inputs), nov, name)
-            for name, path in models.items()}
+    runs = {}
+    for name, path in models.items():
+        runs[name] = run_sensor(VentSensor(path, gh, kind, clamp_inputs=clamp_inputs), nov, name)
+        if progress is not None:
+            progress(advance=1, info=Path(path).name)
     dt = seg.x["t_in"] - seg.x["t_out"]
     ref = seg.flow  # NaN in the first hour, which score() leaves out anyway
     return score(BatchResult(seg.time, runs, ref, heat_loss(ref, dt, gh), dt))

@@ -17,6 +17,7 @@ This is what docs/vsensor.md ("The reference flow's peaks") is built from.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -77,10 +78,13 @@ def true_flow(csv: str | Path, n: int) -> np.ndarray | None:
 
 
 def study(path: str | Path, gh: Greenhouse, kind: str = "almeria", overrides: Overrides | None = None,
-          seed: int = 0, above: float = 30.0) -> ReferenceStudy:
-    """Replay ``path`` with the vent signal and describe its explicit flow (see module doc)."""
+          seed: int = 0, above: float = 30.0,
+          progress: Callable[[int], None] | None = None) -> ReferenceStudy:
+    """Replay ``path`` with the vent signal and describe its explicit flow (see module doc).
+    ``progress(rows)`` during the replay (as ``run_adaptive``'s)."""
     series = load_checked(path, gh, kind)
-    run = run_adaptive(kind, series, gh, vents=True, overrides=overrides, seed=seed)
+    run = run_adaptive(kind, series, gh, vents=True, overrides=overrides, seed=seed,
+                       progress=progress)
     keep = np.arange(len(series)) >= WARMUP_STEPS
     keep &= np.isfinite(run.flow)
     g = run.flow[keep]

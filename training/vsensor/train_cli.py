@@ -28,7 +28,7 @@ def add_train_parser(sub: argparse._SubParsersAction, data_args) -> None:
                    "python -m gateway vsensor does) into the model card and the summary; never "
                    "used by the fit")
     p.add_argument("--report", metavar="DIR",
-                   help="where the report's PNGs go (default: MODEL.report/ beside the model)")
+                   help="where the report's PNGs go (default MODEL.report/ beside the model)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=run)
 
@@ -45,8 +45,8 @@ def add_fit_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rounds", type=non_negative_int, default=6, metavar="N",
                    help="closed-loop refinement rounds, 0 or more (default 6)")
     p.add_argument("--round-lr", type=positive_number, default=None, metavar="LR",
-                   help="Adam step size in the closed-loop rounds (default: the series-parallel "
-                   "one, 1e-3)")
+                   help="Adam step size in the closed-loop rounds (default 1e-3, the "
+                   "series-parallel one)")
     p.add_argument("--pca-variance", type=float, default=0.90, metavar="SHARE",
                    help="keep the fewest principal components reaching this share of the "
                    "variance (0.90 to 1; default 0.90)")
@@ -54,7 +54,7 @@ def add_fit_args(p: argparse.ArgumentParser) -> None:
                    help="average K networks fitted from seeds NET_SEED … NET_SEED+K-1 inside each "
                    "NARX graph (PCA and no-PCA alike; default 1: one network)")
     p.add_argument("--net-seed", type=seed_int, default=None, metavar="N",
-                   help="first seed of the networks (default: --seed, which also seeds the "
+                   help="first seed of the networks (default --seed's, which also seeds the "
                    "estimator's replays; changing only this reuses the cached replays)")
     p.add_argument("--feedback", choices=("member", "ensemble"), default="member",
                    help="closed-loop rounds of an ensemble on each member's own feedback (default) "
@@ -65,14 +65,16 @@ def add_fit_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--high-flow-weight", type=positive_number, default=1.0, metavar="W",
                    help="loss weight of the training rows whose target is above the targets' 90th "
                    "percentile, the others 1 (default 1: unweighted)")
+    # a metavar: the five choices in the usage line made it 86 columns wide
     p.add_argument("--target", choices=("identity", "sqrt", "log1p", "opening", "mixed"),
-                   default="identity",
-                   help="what the NARX networks learn and feed back: the flow (default), its square "
-                   "root, log(1 + flow) or the effective opening flow / D (D: the ventilation "
-                   "driver of III.31 from wind and T_in - T_out); the graph inverts it (flows in, "
-                   "flow out). mixed: an ensemble (--ensemble 2 or more) whose even network seeds "
-                   "learn the flow and odd seeds the opening, each fitted as in a one-target "
-                   "ensemble, averaged as flows in the graph")
+                   default="identity", metavar="KIND",
+                   help="what the NARX networks learn and feed back: identity, the flow "
+                   "(default identity); sqrt, its square root; log1p, log(1 + flow); opening, the "
+                   "effective opening flow / D (D: the ventilation driver of III.31 from wind and "
+                   "T_in - T_out); the graph inverts it (flows in, flow out). mixed: an "
+                   "ensemble (--ensemble 2 or more) whose even network seeds learn the flow and "
+                   "odd seeds the opening, each fitted as in a one-target ensemble, averaged as "
+                   "flows in the graph")
     from gateway.vsensor.features import EXTRAS  # the one list of the derived inputs
 
     p.add_argument("--extra-features", nargs="+", default=[], metavar="NAME",

@@ -17,7 +17,7 @@ from typing import Any
 
 from gateway.protocol import STATUS_NAMES
 from gateway.status import snapshot as S
-from gateway.store import open_readonly
+from gateway.store import StoreError, open_readonly
 from gateway.store.aggregate import QC_MISSING, QC_SPIKE, QC_STUCK
 from gateway.store.board_health import BoardReport
 from gateway.store.live import device_health, findings, outbox_backlog, read_status
@@ -34,6 +34,11 @@ class StoreSource:
         self.path = Path(path)
         self.bins = bins
         self.conn = open_readonly(self.path)
+        version = self.conn.execute("PRAGMA user_version").fetchone()[0]
+        if version < 5:  # no estimates_latest yet; a reader cannot migrate
+            self.conn.close()
+            raise StoreError(f"{self.path}: store schema version {version}: start the gateway "
+                             "once to migrate it to version 5 (docs/store.md)")
         self._bounds: dict[str, tuple[list[str], list[float | None], list[float | None]]] = {}
         self._no_sensor: dict[str, str] = {}  # greenhouse → why no shipped sensor fits it
 
@@ -168,8 +173,8 @@ class StoreSource:
 
     def _temperature(self, gh: str, end: float, span: float) -> S.Temperature:
         c = self.conn
-        t = c.execute("SELECT max(t) FROM estimates WHERE greenhouse=? AND name='t_in_next'",
-                      (gh,)).fetchone()[0]
+        t = c.execute("SELECT max(t) FROM estimates_latest WHERE greenhouse=? AND "
+                      "name='t_in_next'", (gh,)).fetchone()[0]
         if t is None:
             return S.Temperature()
         at = {(src, name): (v, info) for src, name, v, info in c.execute(
@@ -196,8 +201,8 @@ class StoreSource:
         names, lo, hi = self._model_bounds(gh, model, cfg)
         out = []
         for i, name in enumerate(names):
-            r = self.conn.execute("SELECT value, unit FROM estimates WHERE greenhouse=? AND name=? "
-                                  "AND source='online' ORDER BY t DESC LIMIT 1", (gh, name)).fetchone()
+            r = self.conn.execute("SELECT value, unit FROM estimates_latest WHERE greenhouse=? "
+                                  "AND name=? AND source='online'", (gh, name)).fetchone()
             if r is not None and r[0] is not None:
                 out.append(S.Parameter(name, r[0], r[1], lo[i], hi[i]))
         return tuple(out)
@@ -216,8 +221,8 @@ class StoreSource:
                 lo, hi = m.bounds(g)
                 self._bounds[gh] = (list(m.names), lo.tolist(), hi.tolist())
             except Exception:  # a file gone or changed: show the values without bounds
-                t = self.conn.execute("SELECT max(t) FROM estimates WHERE greenhouse=? AND "
-                                      "name='t_in_next'", (gh,)).fetchone()[0]
+                t = self.conn.execute("SELECT max(t) FROM estimates_latest WHERE greenhouse=? "
+                                      "AND name='t_in_next'", (gh,)).fetchone()[0]
                 names = [r[0] for r in self.conn.execute(
                     "SELECT name FROM estimates WHERE greenhouse=? AND t=? AND source='online' "
                     "AND name<>'t_in_next' ORDER BY id", (gh, t))]
@@ -242,7 +247,7 @@ class StoreSource:
         got = {}
         for name in ("ventilation_flow", "ventilation_heat_loss"):
             got[name] = self.conn.execute(
-                "SELECT t, value, info FROM estimates WHERE greenhouse=? AND name=? "
+                "SELECT t, value, info FROM estimates_latest WHERE greenhouse=? AND name=? "
                 "ORDER BY t DESC LIMIT 1", (gh, name)).fetchone()
         flow, loss = got["ventilation_flow"], got["ventilation_heat_loss"]
         if flow is None:

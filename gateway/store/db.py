@@ -22,7 +22,8 @@ class StoreError(RuntimeError):
 # The tables every Serra store has had since schema version 1: a file without them is not ours.
 SERRA_TABLES = frozenset({"samples", "devices", "minute", "meta"})
 _OURS = frozenset(re.findall(r"CREATE TABLE IF NOT EXISTS (\w+)",
-                             schema.DDL_V1 + schema.DDL_V2_TABLES + schema.DDL_V3_TABLES)) | {
+                             schema.DDL_V1 + schema.DDL_V2_TABLES + schema.DDL_V3_TABLES
+                             + schema.DDL_V4_TABLES + schema.DDL_V5_LATEST)) | {
     "sqlite_sequence"}  # SQLite's own, for AUTOINCREMENT
 
 

@@ -134,10 +134,8 @@ def read_status(conn: sqlite3.Connection) -> dict[str, tuple[Any, float]]:
 def latest_estimates(conn: sqlite3.Connection, greenhouse: str
                      ) -> dict[tuple[str, str], EstimateRow]:
     """(source, name) → the newest row of each, for one greenhouse."""
-    rows = conn.execute(
-        "SELECT e.t, e.source, e.name, e.value, e.unit, e.info FROM estimates e JOIN "
-        "(SELECT name, max(t) AS t FROM estimates WHERE greenhouse=? GROUP BY name) m "
-        "ON e.name = m.name AND e.t = m.t WHERE e.greenhouse=?", (greenhouse, greenhouse))
+    rows = conn.execute("SELECT t, source, name, value, unit, info FROM estimates_latest "
+                        "WHERE greenhouse=?", (greenhouse,))
     return {(r[1], r[2]): EstimateRow(greenhouse, *r) for r in rows}
 
 

@@ -44,12 +44,16 @@ def _delete_older(conn: sqlite3.Connection, table: str, col: str, before: float)
 def apply(conn: sqlite3.Connection, policy: Policy, now: float | None = None) -> dict[str, int]:
     now = time.time() if now is None else now
     day = 86400.0
-    return {
+    cut = now - policy.estimates_days * day
+    out = {
         "samples": _delete_older(conn, "samples", "t", now - policy.samples_days * day),
         "minute": _delete_older(conn, "minute", "minute", now - policy.minute_days * day),
-        "estimates": _delete_older(conn, "estimates", "t", now - policy.estimates_days * day),
+        "estimates": _delete_older(conn, "estimates", "t", cut),
         "outbox": _delete_older(conn, "outbox", "sent", now - policy.outbox_sent_days * day),
     }
+    # A newest row older than the cut is the last of its name: its rows above are gone too.
+    conn.execute("DELETE FROM estimates_latest WHERE t < ?", (cut,))
+    return out
 
 
 def capacity_alarms(db_path: str | Path, policy: Policy) -> list[str]:

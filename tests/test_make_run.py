@@ -155,7 +155,7 @@ def test_a_signal_during_the_set_up_stops_it_exits_128_plus_its_number_and_leave
         proc = subprocess.Popen([sys.executable, "-m", "training", "run", "--minutes", "1440",
                                  "--scale", "300", "--no-calibrate", "--out", str(out)], cwd=tmp_path,
                                 stdout=stdout, stderr=subprocess.STDOUT, text=True,
-                                stdin=subprocess.DEVNULL)
+                                stdin=subprocess.DEVNULL, preexec_fn=sigint_as_at_a_terminal)
     groups: set[int] = set()
     try:
         up = wait_for(lambda: "gateway ready" in log.read_text() or proc.poll() is not None, 300,
@@ -167,15 +167,7 @@ def test_a_signal_during_the_set_up_stops_it_exits_128_plus_its_number_and_leave
         assert proc.wait(180) == 128 + signum, log.read_text()
         left = [g for g in groups if not group_gone(g)], pids_mentioning(out)  # before our kill
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(60)
-        for pgid in groups:  # a failed test leaves nothing behind either
-            if not group_gone(pgid):
-                os.killpg(pgid, signal.SIGKILL)
-        for pid in pids_mentioning(out):
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(pid, signal.SIGKILL)
+        kill_what_is_left(proc, groups, out)
     text = log.read_text()
     assert f"stopped: {said}" in text and "Traceback" not in text, text
     if "kit 7 started" not in text:  # stopped in the set-up: nothing ran, nothing to sum up
@@ -194,7 +186,7 @@ def test_ctrl_c_again_while_stopping_kills_the_children_and_exits_130(tmp_path: 
         proc = subprocess.Popen([sys.executable, "-m", "training", "run", "--minutes", "1440",
                                  "--scale", "300", "--no-calibrate", "--out", str(out)], cwd=tmp_path,
                                 stdout=stdout, stderr=subprocess.STDOUT, text=True,
-                                stdin=subprocess.DEVNULL)
+                                stdin=subprocess.DEVNULL, preexec_fn=sigint_as_at_a_terminal)
     groups: set[int] = set()
     try:
         up = wait_for(lambda: "subscriber ready" in log.read_text() or proc.poll() is not None,
@@ -210,18 +202,31 @@ def test_ctrl_c_again_while_stopping_kills_the_children_and_exits_130(tmp_path: 
         assert proc.wait(180) == 130, log.read_text()
         left = [g for g in groups if not group_gone(g)], pids_mentioning(out)  # before our kill
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(60)
-        for pgid in groups:  # a failed test leaves nothing behind either
-            if not group_gone(pgid):
-                os.killpg(pgid, signal.SIGKILL)
-        for pid in pids_mentioning(out):
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(pid, signal.SIGKILL)
+        kill_what_is_left(proc, groups, out)
     text = log.read_text()
     assert "Traceback" not in text, text
     assert left == ([], []), f"a process of the run survived the second Ctrl-C: {left}"
+
+
+def sigint_as_at_a_terminal() -> None:
+    """In the child before exec: SIGINT back to its default. A suite started in the background
+    by a shell without job control (``make test &`` in a script, a CI runner) inherits SIGINT
+    ignored, and a Python started so never raises KeyboardInterrupt: the Ctrl-C these tests
+    send would do nothing (measured: the run ended by itself, exit 0, or ran on past 180 s)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def kill_what_is_left(proc: subprocess.Popen, groups: set[int], out: Path) -> None:
+    """A failed test leaves nothing behind either: the run, its groups, anything naming ``out``."""
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait(60)
+    for pgid in groups:
+        if not group_gone(pgid):
+            os.killpg(pgid, signal.SIGKILL)
+    for pid in pids_mentioning(out):
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
 
 
 def pids_mentioning(folder: Path) -> list[int]:

@@ -25,6 +25,8 @@ New columns are appended, so a migrated file and a new one have the same tables.
 from __future__ import annotations
 
 import sqlite3
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 from gateway.protocol import CHANNELS
 
@@ -137,11 +139,23 @@ def _columns(conn: sqlite3.Connection, table: str) -> list[str]:
     return [r[1] for r in conn.execute(f"PRAGMA table_info({table})")]
 
 
+@contextmanager
+def _migration(conn: sqlite3.Connection, version: int) -> Iterator[None]:
+    """One migration step in one transaction that ends at ``version``: all of it or nothing."""
+    conn.execute("BEGIN IMMEDIATE")
+    try:
+        yield
+        conn.execute(f"PRAGMA user_version = {version}")
+    except BaseException:
+        conn.execute("ROLLBACK")
+        raise
+    conn.execute("COMMIT")
+
+
 def migrate_v1_v2(conn: sqlite3.Connection) -> None:
     """Version 1 → 2 in one transaction: columns appended, v1 outbox rows get the idempotency
     key ``v1:<id>``; no row is changed otherwise, none is removed."""
-    conn.execute("BEGIN IMMEDIATE")
-    try:
+    with _migration(conn, 2):
         for table, col, decl in _V2_COLUMNS:
             if col not in _columns(conn, table):
                 conn.execute(f"ALTER TABLE {table} ADD COLUMN {col} {decl}")
@@ -149,11 +163,6 @@ def migrate_v1_v2(conn: sqlite3.Connection) -> None:
         for stmt in DDL_V2_TABLES.split(";"):
             if stmt.strip():
                 conn.execute(stmt)
-        conn.execute("PRAGMA user_version = 2")
-    except BaseException:
-        conn.execute("ROLLBACK")
-        raise
-    conn.execute("COMMIT")
 
 
 DDL_V3_TABLES = """
@@ -180,8 +189,7 @@ def migrate_v2_v3(conn: sqlite3.Connection) -> None:
     """Version 2 → 3 in one transaction: the loss tables. Each device's latest boot is settled
     up to its oldest stored seq (what came before may have gone to retention, or to a store
     this one replaced: not counted); earlier boots are not counted."""
-    conn.execute("BEGIN IMMEDIATE")
-    try:
+    with _migration(conn, 3):
         for stmt in DDL_V3_TABLES.split(";"):
             if stmt.strip():
                 conn.execute(stmt)
@@ -189,11 +197,6 @@ def migrate_v2_v3(conn: sqlite3.Connection) -> None:
             "INSERT OR IGNORE INTO boot_losses (device_id, boot, final_seq, lost) "
             "SELECT d.device_id, d.boot, coalesce((SELECT min(seq) FROM samples s WHERE "
             "s.device_id = d.device_id AND s.boot = d.boot), 0), 0 FROM devices d")
-        conn.execute("PRAGMA user_version = 3")
-    except BaseException:
-        conn.execute("ROLLBACK")
-        raise
-    conn.execute("COMMIT")
 
 
 DDL_V4_TABLES = """
@@ -219,17 +222,11 @@ CREATE TABLE IF NOT EXISTS board_health (
 
 def migrate_v3_v4(conn: sqlite3.Connection) -> None:
     """Version 3 → 4 in one transaction: the health table, empty (filled by the next packets)."""
-    conn.execute("BEGIN IMMEDIATE")
-    try:
+    with _migration(conn, 4):
         conn.execute(DDL_V4_TABLES)
-        conn.execute("PRAGMA user_version = 4")
-    except BaseException:
-        conn.execute("ROLLBACK")
-        raise
-    conn.execute("COMMIT")
 
 
-# value: the status screen's day series read the index alone (without it 3-4x slower than v3's
+# value: the status screen's day series read the index alone (without it 3-4x slower than v4's
 # estimates_gh; with it < 2x, tests/bench/estimates_layout.py)
 DDL_V5_INDEX = ("CREATE INDEX IF NOT EXISTS estimates_tgn ON estimates(t, greenhouse, name, "
                 "value)")
@@ -264,19 +261,13 @@ def migrate_v4_v5(conn: sqlite3.Connection) -> None:
     """Version 4 → 5 in one transaction: ``estimates_latest`` filled from ``estimates``, its two
     indexes replaced by ``estimates_tgn``. No row of another table is touched; the dropped
     indexes' pages go to the free list, which the file's growth reuses."""
-    conn.execute("BEGIN IMMEDIATE")
-    try:
+    with _migration(conn, 5):
         conn.execute(DDL_V5_LATEST)
         conn.execute(V5_FILL_LATEST)
         conn.execute(DDL_V5_TRIGGER)
         conn.execute("DROP INDEX IF EXISTS estimates_gh")
         conn.execute("DROP INDEX IF EXISTS estimates_t")
         conn.execute(DDL_V5_INDEX)
-        conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
-    except BaseException:
-        conn.execute("ROLLBACK")
-        raise
-    conn.execute("COMMIT")
 
 
 def create(conn: sqlite3.Connection) -> None:

@@ -163,8 +163,9 @@ class Demo:
             code = code or 1
         if self.hurried:  # a Ctrl-C during the summary too
             return 130
-        # ended by a signal, not by its minutes or the screen's quit: not the run asked for
-        return code or (128 + self.signalled if self.signalled else 0)
+        # ended by a signal, not by its minutes or the screen's quit: not the run asked for; its
+        # status wins over the sweep's (a child started in the signal's race, stopped by it)
+        return 128 + self.signalled if self.signalled else code
 
     def _signal(self, signum: int, _frame) -> None:
         self.why = signal.Signals(signum).name

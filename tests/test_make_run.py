@@ -149,13 +149,7 @@ def test_a_signal_during_the_set_up_stops_it_exits_128_plus_its_number_and_leave
     asked, so the exit status says so (128 + the signal's number, as a shell reports it: 130,
     143), and every child is gone. Both exited 0; SIGTERM even went on to start the kit and
     wrote a summary. A day of minutes (288 s at 300x): the run cannot end by itself first."""
-    out, log = tmp_path / "run", tmp_path / "stdout.txt"
-    gateway = f"{sys.executable} -m gateway run --config {out / 'gateway.toml'}"
-    with log.open("w") as stdout:
-        proc = subprocess.Popen([sys.executable, "-m", "training", "run", "--minutes", "1440",
-                                 "--scale", "300", "--no-calibrate", "--out", str(out)], cwd=tmp_path,
-                                stdout=stdout, stderr=subprocess.STDOUT, text=True,
-                                stdin=subprocess.DEVNULL, preexec_fn=sigint_as_at_a_terminal)
+    proc, out, log, gateway = start_a_day_run(tmp_path)
     groups: set[int] = set()
     try:
         up = wait_for(lambda: "gateway ready" in log.read_text() or proc.poll() is not None, 300,
@@ -180,13 +174,7 @@ def test_ctrl_c_again_while_stopping_kills_the_children_and_exits_130(tmp_path: 
     middle of the wait for one of them, so the run died of SIGINT with a traceback and left the
     subscriber (or the gateway) running in its process group. Now it kills the group at once.
     A day of minutes (288 s at 300x): the run cannot end by itself before the first Ctrl-C."""
-    out, log = tmp_path / "run", tmp_path / "stdout.txt"
-    gateway = f"{sys.executable} -m gateway run --config {out / 'gateway.toml'}"
-    with log.open("w") as stdout:
-        proc = subprocess.Popen([sys.executable, "-m", "training", "run", "--minutes", "1440",
-                                 "--scale", "300", "--no-calibrate", "--out", str(out)], cwd=tmp_path,
-                                stdout=stdout, stderr=subprocess.STDOUT, text=True,
-                                stdin=subprocess.DEVNULL, preexec_fn=sigint_as_at_a_terminal)
+    proc, out, log, gateway = start_a_day_run(tmp_path)
     groups: set[int] = set()
     try:
         up = wait_for(lambda: "subscriber ready" in log.read_text() or proc.poll() is not None,
@@ -214,6 +202,19 @@ def sigint_as_at_a_terminal() -> None:
     ignored, and a Python started so never raises KeyboardInterrupt: the Ctrl-C these tests
     send would do nothing (measured: the run ended by itself, exit 0, or ran on past 180 s)."""
     signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def start_a_day_run(tmp_path: Path) -> tuple[subprocess.Popen, Path, Path, str]:
+    """``training run`` headless for a day of minutes (288 s at 300x: it cannot end by itself
+    before a test's signal), SIGINT as at a terminal; (the process, its --out, its log, the
+    gateway's command line)."""
+    out, log = tmp_path / "run", tmp_path / "stdout.txt"
+    with log.open("w") as stdout:
+        proc = subprocess.Popen([sys.executable, "-m", "training", "run", "--minutes", "1440",
+                                 "--scale", "300", "--no-calibrate", "--out", str(out)], cwd=tmp_path,
+                                stdout=stdout, stderr=subprocess.STDOUT, text=True,
+                                stdin=subprocess.DEVNULL, preexec_fn=sigint_as_at_a_terminal)
+    return proc, out, log, f"{sys.executable} -m gateway run --config {out / 'gateway.toml'}"
 
 
 def kill_what_is_left(proc: subprocess.Popen, groups: set[int], out: Path) -> None:

@@ -1,4 +1,4 @@
-"""Step 1 of the bg rule (issue 10; /work/notes/bg-rule.txt; docs/effects.md, "A bagged base"):
+"""Step 1 of the bg rule (issue 10; the rule is stated in docs/effects.md, "A bagged base"):
 the base's held-out free-run MAE on the dev generators' effect-free windows (refsim, twonode x
 the suite's 10 windows, seed 1), main's calibration and a bagged one side by side in one
 process on the same code.

@@ -1,5 +1,5 @@
-"""Step 1 of the drift-humidity rule (/work/notes/dh-rule.txt, docs/effects.md "The drift's start
-on the humidity"): the start the search reports for ``sensor_drift`` on the six dev drift cases
+"""Step 1 of the drift-humidity rule (stated in docs/effects.md "The drift's start on the
+humidity"): the start the search reports for ``sensor_drift`` on the six dev drift cases
 (``effect_fit.fit_effect`` on all the data after the calibrated base, as tau_profile.py reports
 it), with the night vapour balance off and on (``humidity.DRIFT_EVIDENCE``), and the evidence's
 ΔBIC at the truth and at each start. Never the held-out generator.

@@ -9,7 +9,9 @@ the detector reads the data alone (no calibration), so no diagnosis is run here.
   ``kit_data``) on the autumn and winter windows at 12 and 15 °C;
 - ``unheated``: refsim and twonode on the suite's 10 effect-free windows (cases.py's
   ``window``: the three main ones and EXTRA_WINDOWS), and the heated study's unheated CSVs
-  (``--lead-dir``: heated-{autumn,winter}-0.csv) if given;
+  (``--lead-dir``: heated-{autumn,winter}-0.csv) if given, from a folder the reader fills
+  (heated_study.py writes its CSVs to a temporary folder only; the copies behind the verdict's
+  22 unheated runs were scratch, not kept);
 - ``report``: refsim and twonode ``heater`` and ``night_heater`` (25 W m-2 from day 6.4) on
   autumn and winter (not scored);
 - the detector's time per run (best of ``REPEATS``).
@@ -17,7 +19,7 @@ the detector reads the data alone (no calibration), so no diagnosis is run here.
 The held-out generator (vanthoor) is never run here.
 
     nice -n 5 .venv/bin/python tests/generality/heated_hint_study.py --json out/hh.json \
-        --lead-dir /work/notes/lead
+        --lead-dir out/hh-lead
 """
 
 from __future__ import annotations

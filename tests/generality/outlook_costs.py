@@ -1,5 +1,5 @@
 """What each driver of the weather outlook costs, and the outlook's candidate changes, on the
-kept dev replays (issue 10, item 3; the rule /work/notes/ol-rule.txt, docs/effects.md "The
+kept dev replays (issue 10, item 3; the ol rule is stated in docs/effects.md "The
 outlook's drivers, one at a time").
 
 The estimator's loop never reads the outlook (gateway/estimate/replay.py builds the blocks after

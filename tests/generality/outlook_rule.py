@@ -1,4 +1,4 @@
-"""The ol rule (/work/notes/ol-rule.txt, docs/effects.md "The outlook's drivers, one at a time")
+"""The ol rule (stated in docs/effects.md "The outlook's drivers, one at a time")
 on two results files of tests/generality/forecasts.py (main, candidate) over the dev windows.
 
 (a) the outlook goals met (``corrected_outlook`` ≤ 0.8 × persistence at 30 and 60 min) and the

@@ -8,8 +8,8 @@ effect-free windows quiet per generator (x of 10), the passing cases. The seed n
 arm (its runs over seeds, a figure, not a decision): per window the range of the kinds count,
 and the cases whose pass/fail is not the same on every seed. Over the pairs (A, B on one
 seed): the kinds passing summed over the windows and seeds, B − A; the fewest quiet windows of
-B in one generator-seed; the quiet total, B − A (the terms of the rule in /work/notes/sd-rule.txt,
-issue 10).
+B in one generator-seed; the quiet total, B − A (the terms of the rule stated in docs/effects.md,
+"The suite's seed noise", issue 10).
 """
 
 from __future__ import annotations

@@ -86,7 +86,7 @@ MORE_TEST = (
     Run("biskra-spring-controller-3", "sim", "biskra", "2019-05-05", 5, "controller", 45),
 )
 """More draws of the test site and season (Biskra, spring), fixed before any was scored
-(2026-11-28, /work/notes/bs-rule.txt; docs/vsensor.md "More Biskra spring files"): ``TEST`` is one
+(2026-11-28; the rule is stated in docs/vsensor.md "More Biskra spring files"): ``TEST`` is one
 5-day file per vent kind, one draw of the weather and of the grower's visits. Opt-in
 (``corpus --more-test``); no sensor is trained or chosen on them."""
 OTHER = (

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from gateway.cli import main
-from tests.cli_mistakes_common import one_error_line
+from tests.cli_mistakes_common import help_pages, lines_too_wide_or_broken, one_error_line
 
 
 @pytest.mark.parametrize("text,message", [
@@ -125,6 +125,20 @@ def test_every_numeric_option_with_a_default_shows_it_in_help():
     run_parser(sub)
     parsers = [build_parser(), ingest_parser(), vsensor_parser(), training]
     assert [o for p in parsers for o in _numeric_options_without_default(p)] == []
+
+
+def test_every_gateway_help_page_fits_80_columns_unbroken(monkeypatch):
+    """At 80 columns the command list broke 'PCA-NARX' at its hyphen (and replay's example
+    'almeria-palmerillas'); subscribe's, certs' and router's raw texts ran to 96 columns and
+    status's usage to 92 (argparse never splits a group of exclusive options)."""
+    from gateway.cli import build_parser
+    from gateway.ingest.service import build_parser as ingest_parser
+
+    monkeypatch.setenv("COLUMNS", "80")  # what argparse wraps to
+    pages = {**help_pages(build_parser()), **help_pages(ingest_parser())}
+    assert len(pages) == 1 + 12 + 3 + 1  # the tool, its commands, keys' actions, ingest's service
+    assert lines_too_wide_or_broken(pages) == []
+    assert "(PCA-NARX, ONNX)" in pages["python -m gateway"]
 
 
 def test_subscribe_says_its_counters_in_words(capsys, tmp_path):

@@ -12,6 +12,8 @@ import logging
 import os
 import sys
 
+from gateway.cli.helpformat import ArgumentParser
+
 COMMANDS = {
     "calibrate": "gateway.cli.calibrate",
     "replay": "gateway.cli.replay",
@@ -47,7 +49,7 @@ class ConfigFileError(CliError):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(  # its commands' parsers are of its class: no hyphen breaks
         prog="python -m gateway",
         description="Serra gateway tools: calibrate, replay and diagnose greenhouse climate models "
         "on kit CSV data (docs/data-format.md); ingest kit packets, manage device keys and export what "

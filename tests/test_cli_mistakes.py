@@ -197,6 +197,26 @@ def test_verbose_is_taken_after_the_command_too(capsys, tmp_path):
     assert f"{missing}: cannot read the keys file" in one_error_line(capsys)
 
 
+
+@pytest.mark.parametrize("before,after", [(["-q"], []), ([], ["-q"]), (["-q", "-v"], []),
+                                          (["--verbose"], ["--quiet"])])
+def test_quiet_is_taken_before_or_after_every_command(capsys, tmp_path, before, after):
+    """'-q ingest ...' was "unrecognized arguments: --db ... --keys ..." (only -v before ingest
+    reached the service's parser), 'ingest ... -q' "unrecognized arguments: -q"."""
+    from gateway.cli import build_parser
+
+    parser = build_parser()
+    base = ["calibrate", "--data", "k.csv", "--greenhouse", "biskra-prototype", "--model",
+            "prototype"]
+    args = parser.parse_args([*before, *base, *after])
+    assert args.quiet and args.verbose == ("-v" in before or "--verbose" in before)
+    assert parser.parse_args([*before, "keys", "list", "--keys", "k.txt", *after]).quiet
+    missing = tmp_path / "none.txt"  # refused before the service listens: the service's line
+    ingest = ["ingest", "--db", str(tmp_path / "s.db"), "--keys", str(missing)]
+    assert main([*before, *ingest, *after]) == os.EX_CONFIG
+    assert f"{missing}: cannot read the keys file" in one_error_line(capsys)
+
+
 def _defaults_not_called_default(parser: argparse.ArgumentParser, prefix: str = ""):
     for action in parser._actions:
         if isinstance(action, argparse._SubParsersAction):

@@ -248,3 +248,21 @@ def test_every_help_page_fits_80_columns_unbroken(monkeypatch):
     assert lines_too_wide_or_broken(pages) == []
     lines = [(name, line) for name, text in pages.items() for line in text.splitlines()]
     assert [nl for nl in lines if "(default:" in nl[1]] == []
+
+
+@pytest.mark.parametrize("before,after", [([], []), (["-q"], []), ([], ["-q"]),
+                                          (["--quiet"], ["--quiet"])])
+def test_vsensor_quiet_is_taken_before_or_after_the_command(capsys, tmp_path, before, after):
+    """'python -m training.vsensor -q corpus ...' was "unrecognized arguments: -q": only each
+    command had it, after the command."""
+    from training.vsensor.cli import build_parser
+
+    parser = build_parser()
+    quiet = bool(before or after)
+    for command in ([*TRAIN, "--data", "k.csv", "--out", "m.onnx"], ["corpus", "--out", "c"],
+                    ["score", "--data", "k.csv", *TRAIN[1:], "--sensor", "m.onnx"]):
+        assert parser.parse_args([*before, *command, *after]).quiet is quiet
+    # through main: the corpus's own refusal of --only, not argparse's of -q
+    argv = [*before, "corpus", "--out", str(tmp_path), "--only", "nowhere", *after]
+    assert vsensor_main(argv) == 2
+    assert "error: --only: no run named nowhere" in capsys.readouterr().err

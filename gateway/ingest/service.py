@@ -234,6 +234,9 @@ def build_parser(prog: str = "python -m gateway.ingest.service") -> argparse.Arg
                          "writes; acks are delayed as much; default %(default)g)")
     ap.add_argument("--maintenance-every", type=float, default=10.0, help=argparse.SUPPRESS)
     ap.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    ap.add_argument("-q", "--quiet", action="store_true",  # python -m gateway -q ingest ...
+                    help="nothing to silence: the service shows no progress (taken as the "
+                    "gateway's other commands take it)")
     return ap
 
 

@@ -199,7 +199,7 @@ def test_verbose_is_taken_after_the_command_too(capsys, tmp_path):
 
 
 @pytest.mark.parametrize("before,after", [(["-q"], []), ([], ["-q"]), (["-q", "-v"], []),
-                                          (["--verbose"], ["--quiet"])])
+                                          (["--verbose"], ["--quiet"]), (["-vq"], [])])
 def test_quiet_is_taken_before_or_after_every_command(capsys, tmp_path, before, after):
     """'-q ingest ...' was "unrecognized arguments: --db ... --keys ..." (only -v before ingest
     reached the service's parser), 'ingest ... -q' "unrecognized arguments: -q"."""
@@ -209,7 +209,7 @@ def test_quiet_is_taken_before_or_after_every_command(capsys, tmp_path, before, 
     base = ["calibrate", "--data", "k.csv", "--greenhouse", "biskra-prototype", "--model",
             "prototype"]
     args = parser.parse_args([*before, *base, *after])
-    assert args.quiet and args.verbose == ("-v" in before or "--verbose" in before)
+    assert args.quiet and args.verbose == any(a in before for a in ("-v", "--verbose", "-vq"))
     assert parser.parse_args([*before, "keys", "list", "--keys", "k.txt", *after]).quiet
     missing = tmp_path / "none.txt"  # refused before the service listens: the service's line
     ingest = ["ingest", "--db", str(tmp_path / "s.db"), "--keys", str(missing)]

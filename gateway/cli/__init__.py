@@ -10,6 +10,7 @@ import argparse
 import importlib
 import logging
 import os
+import re
 import sys
 
 from gateway.cli.helpformat import ArgumentParser
@@ -125,7 +126,8 @@ def after_the_command_too(parser: argparse.ArgumentParser, options: tuple[str, .
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     lead = 0  # the flags before the command, which the ingest service takes after it
-    while argv[lead:lead + 1] and argv[lead] in ("-v", "--verbose", "-q", "--quiet"):
+    while argv[lead:lead + 1] and (argv[lead] in ("--verbose", "--quiet")
+                                   or re.fullmatch(r"-[vq]+", argv[lead])):  # -v, -q, -vq
         lead += 1
     if argv[lead:lead + 1] == ["ingest"]:  # the service has its own parser: hand it all
         from gateway.ingest.service import main as ingest_main

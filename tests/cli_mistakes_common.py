@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 import numpy as np
@@ -26,3 +27,21 @@ def one_error_line(capsys) -> str:
     line = err.splitlines()[-1]
     assert line.startswith("error: ")
     return line
+
+
+def help_pages(parser: argparse.ArgumentParser) -> dict[str, str]:
+    """``--help`` of ``parser`` and of each of its subcommands, by prog."""
+    pages = {parser.prog: parser.format_help()}
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for child in action.choices.values():
+                pages.update(help_pages(child))
+    return pages
+
+
+def lines_too_wide_or_broken(pages: dict[str, str]) -> list[tuple[str, str]]:
+    """(prog, line) of every line wider than 80 columns or ending in a word broken at a hyphen
+    (what argparse's default wrapping does to 'PCA-NARX' or 'almeria-palmerillas')."""
+    lines = [(name, line) for name, text in pages.items() for line in text.splitlines()]
+    return [(n, line) for n, line in lines
+            if len(line) > 80 or (line.endswith("-") and line[-2:-1].isalpha())]

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from gateway.cli import main
-from tests.cli_mistakes_common import one_error_line
+from tests.cli_mistakes_common import help_pages, lines_too_wide_or_broken, one_error_line
 
 
 @pytest.mark.parametrize("text,message", [
@@ -127,6 +127,20 @@ def test_every_numeric_option_with_a_default_shows_it_in_help():
     assert [o for p in parsers for o in _numeric_options_without_default(p)] == []
 
 
+def test_every_gateway_help_page_fits_80_columns_unbroken(monkeypatch):
+    """At 80 columns the command list broke 'PCA-NARX' at its hyphen (and replay's example
+    'almeria-palmerillas'); subscribe's, certs' and router's raw texts ran to 96 columns and
+    status's usage to 92 (argparse never splits a group of exclusive options)."""
+    from gateway.cli import build_parser
+    from gateway.ingest.service import build_parser as ingest_parser
+
+    monkeypatch.setenv("COLUMNS", "80")  # what argparse wraps to
+    pages = {**help_pages(build_parser()), **help_pages(ingest_parser())}
+    assert len(pages) == 1 + 12 + 3 + 1  # the tool, its commands, keys' actions, ingest's service
+    assert lines_too_wide_or_broken(pages) == []
+    assert "(PCA-NARX, ONNX)" in pages["python -m gateway"]
+
+
 def test_subscribe_says_its_counters_in_words(capsys, tmp_path):
     assert main(["subscribe", "--connect", "tcp/127.0.0.1:1", "--db", str(tmp_path / "c.db"),
                  "--duration", "0.3"]) == 0
@@ -180,6 +194,26 @@ def test_verbose_is_taken_after_the_command_too(capsys, tmp_path):
     assert '"device_id": 7' in capsys.readouterr().out
     missing = tmp_path / "none.txt"  # refused before the service listens
     assert main(["-v", "ingest", "--db", str(tmp_path / "s.db"), "--keys", str(missing)]) == os.EX_CONFIG
+    assert f"{missing}: cannot read the keys file" in one_error_line(capsys)
+
+
+
+@pytest.mark.parametrize("before,after", [(["-q"], []), ([], ["-q"]), (["-q", "-v"], []),
+                                          (["--verbose"], ["--quiet"]), (["-vq"], [])])
+def test_quiet_is_taken_before_or_after_every_command(capsys, tmp_path, before, after):
+    """'-q ingest ...' was "unrecognized arguments: --db ... --keys ..." (only -v before ingest
+    reached the service's parser), 'ingest ... -q' "unrecognized arguments: -q"."""
+    from gateway.cli import build_parser
+
+    parser = build_parser()
+    base = ["calibrate", "--data", "k.csv", "--greenhouse", "biskra-prototype", "--model",
+            "prototype"]
+    args = parser.parse_args([*before, *base, *after])
+    assert args.quiet and args.verbose == any(a in before for a in ("-v", "--verbose", "-vq"))
+    assert parser.parse_args([*before, "keys", "list", "--keys", "k.txt", *after]).quiet
+    missing = tmp_path / "none.txt"  # refused before the service listens: the service's line
+    ingest = ["ingest", "--db", str(tmp_path / "s.db"), "--keys", str(missing)]
+    assert main([*before, *ingest, *after]) == os.EX_CONFIG
     assert f"{missing}: cannot read the keys file" in one_error_line(capsys)
 
 

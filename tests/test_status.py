@@ -21,6 +21,7 @@ from gateway.protocol import CHANNELS
 from gateway.publish import payloads as P
 from gateway.status import render
 from gateway.status import snapshot as S
+from gateway.status.formats import sparkline
 from gateway.status.messages import Messages
 from gateway.status.snapshot import Link, attention
 from gateway.status.store_source import DROP
@@ -175,9 +176,9 @@ def test_the_measured_range_is_of_the_measurements_alone(store: Filled) -> None:
     # the sparklines share one scale, the bins' of both as drawn (36 at 78 columns), for drawing
     measured, forecast = t.measured_series.rebinned(36), t.forecast_series.rebinned(36)
     scale = (min(measured.lo, forecast.lo), max(measured.hi, forecast.hi))
-    assert render.sparkline(measured, *scale) in line
+    assert sparkline(measured, *scale) in line
     ahead = next(x for x in lines if x.startswith("+60 min "))
-    assert render.sparkline(forecast, *scale) in ahead
+    assert sparkline(forecast, *scale) in ahead
 
 
 def test_the_ventilation_estimate_when_a_virtual_sensor_is_set(store: Filled) -> None:

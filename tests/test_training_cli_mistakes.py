@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.cli_mistakes_common import help_pages, lines_too_wide_or_broken
 from training.__main__ import main as training_main
 from training.vsensor.cli import main as vsensor_main
 
@@ -234,16 +235,6 @@ def test_vsensor_errors_names_an_only_that_matches_no_file(capsys, tmp_path):
 
 
 
-def _pages(parser: argparse.ArgumentParser) -> dict[str, str]:
-    """``--help`` of ``parser`` and of each of its subcommands, by prog."""
-    pages = {parser.prog: parser.format_help()}
-    for action in parser._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            for child in action.choices.values():
-                pages.update(_pages(child))
-    return pages
-
-
 def test_every_help_page_fits_80_columns_unbroken(monkeypatch):
     """At 80 columns: train's --target choices made its usage 86 wide, simulate's raw
     description and effects ran to 120, and argparse broke 'almeria-palmerillas' and
@@ -252,9 +243,26 @@ def test_every_help_page_fits_80_columns_unbroken(monkeypatch):
     from training.vsensor.cli import build_parser as vsensor_parser
 
     monkeypatch.setenv("COLUMNS", "80")  # what argparse wraps to
-    pages = {**_pages(training_parser()), **_pages(vsensor_parser())}
+    pages = {**help_pages(training_parser()), **help_pages(vsensor_parser())}
     assert len(pages) == 2 + 3 + 7  # the two tools, simulate/demo/run, the sensor's seven
+    assert lines_too_wide_or_broken(pages) == []
     lines = [(name, line) for name, text in pages.items() for line in text.splitlines()]
-    assert [nl for nl in lines if len(nl[1]) > 80] == []
-    assert [nl for nl in lines if nl[1][-2:-1].isalpha() and nl[1].endswith("-")] == []
     assert [nl for nl in lines if "(default:" in nl[1]] == []
+
+
+@pytest.mark.parametrize("before,after", [([], []), (["-q"], []), ([], ["-q"]),
+                                          (["--quiet"], ["--quiet"])])
+def test_vsensor_quiet_is_taken_before_or_after_the_command(capsys, tmp_path, before, after):
+    """'python -m training.vsensor -q corpus ...' was "unrecognized arguments: -q": only each
+    command had it, after the command."""
+    from training.vsensor.cli import build_parser
+
+    parser = build_parser()
+    quiet = bool(before or after)
+    for command in ([*TRAIN, "--data", "k.csv", "--out", "m.onnx"], ["corpus", "--out", "c"],
+                    ["score", "--data", "k.csv", *TRAIN[1:], "--sensor", "m.onnx"]):
+        assert parser.parse_args([*before, *command, *after]).quiet is quiet
+    # through main: the corpus's own refusal of --only, not argparse's of -q
+    argv = [*before, "corpus", "--out", str(tmp_path), "--only", "nowhere", *after]
+    assert vsensor_main(argv) == 2
+    assert "error: --only: no run named nowhere" in capsys.readouterr().err

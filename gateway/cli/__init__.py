@@ -10,7 +10,10 @@ import argparse
 import importlib
 import logging
 import os
+import re
 import sys
+
+from gateway.cli.helpformat import ArgumentParser
 
 COMMANDS = {
     "calibrate": "gateway.cli.calibrate",
@@ -47,7 +50,7 @@ class ConfigFileError(CliError):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(  # its commands' parsers are of its class: no hyphen breaks
         prog="python -m gateway",
         description="Serra gateway tools: calibrate, replay and diagnose greenhouse climate models "
         "on kit CSV data (docs/data-format.md); ingest kit packets, manage device keys and export what "
@@ -67,8 +70,7 @@ def build_parser() -> argparse.ArgumentParser:
                 raise
             continue  # a command still being written is simply not offered
         mod.add_parser(sub)
-    for command in sub.choices.values():
-        _verbose_anywhere(command)
+    after_the_command_too(parser, ("-v", "-q"))
     return parser
 
 
@@ -101,29 +103,36 @@ def _version() -> str:
         return "(not installed: run from a source tree)"
 
 
-def _verbose_anywhere(parser: argparse.ArgumentParser) -> None:
-    """``-v`` and ``-q`` after the command too (``calibrate ... -v``, where people add it), not
-    only before it; SUPPRESS leaves the value given before the command when it is not repeated
-    after."""
-    if "-v" not in parser._option_string_actions:
-        parser.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS,
-                            help="log details to stderr")
-    if "-q" not in parser._option_string_actions:
-        parser.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
-                            help=QUIET_HELP)
+def after_the_command_too(parser: argparse.ArgumentParser, options: tuple[str, ...]) -> None:
+    """``parser``'s flags ``options`` (``-v``, ``-q``: given before the command) taken by every
+    (sub)command too: ``calibrate ... -v``, where people add it, was "unrecognized arguments".
+    A command's copy defaults to SUPPRESS, so that leaving it out after the command keeps what
+    was given before it (a command's own default would overwrite the namespace's)."""
+    flags = [parser._option_string_actions[o] for o in options]
     for action in parser._actions:
         if isinstance(action, argparse._SubParsersAction):
             for child in action.choices.values():
-                _verbose_anywhere(child)
+                for flag in flags:
+                    own = child._option_string_actions.get(flag.option_strings[0])
+                    if own is None:
+                        child.add_argument(*flag.option_strings, dest=flag.dest,
+                                           action="store_true", default=argparse.SUPPRESS,
+                                           help=flag.help)
+                    else:
+                        own.default = argparse.SUPPRESS
+                after_the_command_too(child, options)  # keys' actions
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
-    verbose = argv[:1] in (["-v"], ["--verbose"])
-    if argv[verbose:verbose + 1] == ["ingest"]:  # the service has its own parser: hand it all
+    lead = 0  # the flags before the command, which the ingest service takes after it
+    while argv[lead:lead + 1] and (argv[lead] in ("--verbose", "--quiet")
+                                   or re.fullmatch(r"-[vq]+", argv[lead])):  # -v, -q, -vq
+        lead += 1
+    if argv[lead:lead + 1] == ["ingest"]:  # the service has its own parser: hand it all
         from gateway.ingest.service import main as ingest_main
 
-        return ingest_main(argv[1 + verbose:] + ["-v"] * verbose, prog="python -m gateway ingest")
+        return ingest_main(argv[lead + 1:] + argv[:lead], prog="python -m gateway ingest")
     parser = build_parser()
     args = parser.parse_args(argv)
     setup_cli_logging(args.verbose)

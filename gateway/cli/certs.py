@@ -8,14 +8,18 @@ import re
 from pathlib import Path
 
 from gateway.cli import CliError
+from gateway.cli.helpformat import ExamplesHelpFormatter
 
 DESCRIPTION = "Make the fleet's CA and its router, gateway and client certificates (EC P-256)."
 EPILOG = """\
 examples:
   python -m gateway certs --out certs --router cloud=cloud.example.org \\
-      --router region-1=10.0.0.5 --gateway farm-a --gateway farm-b --client cloud-store
-  python -m gateway certs --out certs --gateway farm-c      # later: the same CA signs farm-c
-  python -m gateway certs --out certs --sign gateway:farm-d.csr   # a request made on the device
+      --router region-1=10.0.0.5 --gateway farm-a --gateway farm-b \\
+      --client cloud-store
+  # later, the same CA signs farm-c:
+  python -m gateway certs --out certs --gateway farm-c
+  # a request made on the device:
+  python -m gateway certs --out certs --sign gateway:farm-d.csr
 
 The CA (ca.pem, ca.key) is made on the first run and reused after. A gateway's certificate has
 its farm as common name: the routers' access control lets it speak only under serra/<farm>/**.
@@ -27,7 +31,7 @@ only ca.pem and that machine's own .pem and .key (docs/fleet.md).
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("certs", help="make the fleet CA and router/gateway/client certificates",
                        description=DESCRIPTION, epilog=EPILOG,
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
+                       formatter_class=ExamplesHelpFormatter)
     p.add_argument("--out", required=True, metavar="DIR", help="folder for ca.pem and the certificates")
     p.add_argument("--router", action="append", default=[], metavar="NAME[=HOST,...]",
                    help="a router certificate; its SAN holds 127.0.0.1, localhost and the HOSTs "

@@ -30,6 +30,27 @@ class RawDescriptionHelpFormatter(HelpFormatter):
         return "".join(indent + line for line in text.splitlines(keepends=True))
 
 
+class ExamplesHelpFormatter(HelpFormatter):
+    """Options as :class:`HelpFormatter`; in the description and epilog an indented line (an
+    example command, its continuation) is kept as written and the unindented lines between them
+    are prose, wrapped at spaces to the page's width."""
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        lines: list[str] = []
+        prose: list[str] = []
+        for line in [*text.splitlines(), ""]:
+            if line[:1].strip():  # an unindented line: prose, wrapped with its neighbours
+                prose.append(line)
+                continue
+            if prose:
+                lines += textwrap.wrap(" ".join(" ".join(prose).split()), width,
+                                       initial_indent=indent, subsequent_indent=indent,
+                                       break_on_hyphens=False)
+                prose = []
+            lines.append(indent + line if line.strip() else "")
+        return "\n".join(lines[:-1])
+
+
 class ArgumentParser(argparse.ArgumentParser):
     """An ``ArgumentParser`` whose ``formatter_class`` defaults to :class:`HelpFormatter`
     (``add_subparsers`` makes the subcommands' parsers of the same class)."""

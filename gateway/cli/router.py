@@ -9,6 +9,7 @@ import signal
 import threading
 
 from gateway.cli import CliError, ConfigFileError
+from gateway.cli.helpformat import ExamplesHelpFormatter
 
 DESCRIPTION = "Run a Zenoh router: TLS endpoints, mutual TLS, access control, links to upstream routers."
 EPILOG = """\
@@ -24,7 +25,7 @@ terminal only), Serra's own lines to stderr. RUST_LOG, when set, overrides route
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("router", help="run a Zenoh router (TLS, access control, upstream links)",
                        description=DESCRIPTION, epilog=EPILOG,
-                       formatter_class=argparse.RawDescriptionHelpFormatter)
+                       formatter_class=ExamplesHelpFormatter)
     p.add_argument("--config", required=True, metavar="ROUTER.toml", help="router configuration")
     p.add_argument("--check", action="store_true",
                    help="validate the configuration, print the Zenoh config it makes, and exit")

@@ -30,8 +30,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "exit status 1 when something needs attention); "
         "python -m gateway status --connect tcp/192.168.1.20:7447 (from another machine)")
     where = p.add_mutually_exclusive_group()
-    where.add_argument("--db", type=Path, metavar="serra.db", help="the gateway's store (read-only)")
-    where.add_argument("--config", type=Path, metavar="gateway.toml",
+    # metavars short enough for the group's usage to fit 80 columns (argparse never splits it)
+    where.add_argument("--db", type=Path, metavar="DB",
+                       help="the gateway's store, e.g. serra.db (read-only)")
+    where.add_argument("--config", type=Path, metavar="TOML",
                        help=f"read the store the gateway config names (default: {DEFAULT_CONFIG} "
                        "when neither --db nor --connect is given)")
     where.add_argument("--connect", action="append", metavar="ENDPOINT",

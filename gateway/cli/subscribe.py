@@ -5,23 +5,25 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
-import textwrap
 import threading
 import time
 from pathlib import Path
 
 from gateway.cli import CliError, ConfigFileError
 from gateway.cli.common import check_output, writing
+from gateway.cli.helpformat import ExamplesHelpFormatter
 
 EPILOG = """\
 examples:
   python -m gateway subscribe --connect tcp/192.168.1.20:7447 --db cloud.db
   python -m gateway subscribe --db cloud.db --export csv/          # export only
-  python -m gateway subscribe --mode client --connect tls/cloud-1.example.org:7447 \\
-      --tls-ca certs/ca.pem --tls-cert certs/client-cloud-store.pem \\
+  python -m gateway subscribe --mode client \\
+      --connect tls/cloud-1.example.org:7447 --tls-ca certs/ca.pem \\
+      --tls-cert certs/client-cloud-store.pem \\
       --tls-key certs/client-cloud-store.key --farm farm-a --farm farm-b \\
       --dsn 'host=/run/postgresql dbname=serra user=serra' --history
-  python -m gateway subscribe --config /etc/serra/subscriber.toml  # the same, from a file
+  # the same, from a file:
+  python -m gateway subscribe --config /etc/serra/subscriber.toml
 
 Behind the routers' access control, subscribe per farm (--farm, or farms/access in the file):
 a gateway is only told of subscriptions inside its own farm. Options given here override the
@@ -42,13 +44,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "subscribe",
         help="play the cloud: store what the gateways publish (dropping repeats), export kit CSVs",
-        description=textwrap.fill(  # the raw formatter (for the epilog) does not wrap it
+        description=(
             "Subscribe to Serra messages over Zenoh and store each one once, in SQLite "
             "(the default) or PostgreSQL (--dsn); repeats are dropped by idempotency key, and what "
             "was missed is recovered from the publishers' caches. With --history, answer history "
             "queries for the farms from the store. With --export, write a kit CSV per greenhouse "
-            "from the stored measurements (without an endpoint: export only).", 95),
-        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+            "from the stored measurements (without an endpoint: export only)."),
+        epilog=EPILOG, formatter_class=ExamplesHelpFormatter)
     p.add_argument("--config", type=Path, metavar="SUBSCRIBER.toml",
                    help="settings file ([subscribe], [tls]; docs/examples/subscriber.toml)")
     p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",

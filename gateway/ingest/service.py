@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from gateway.cli.helpformat import ArgumentParser
 from gateway.ingest.core import IngestCore
 from gateway.ingest.keys_watch import KeysWatch
 from gateway.ingest.udp import UdpServer
@@ -203,7 +204,7 @@ def bounded(kind: type, lo: float, hi: float | None = None) -> Callable[[str], f
 
 
 def build_parser(prog: str = "python -m gateway.ingest.service") -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
+    ap = ArgumentParser(
         prog=prog,
         description="Serra ingest: kit packets in over UDP and/or a serial port, validated, "
         "stored durably in SQLite (WAL), then acknowledged. See docs/wire-format.md.",
@@ -233,6 +234,9 @@ def build_parser(prog: str = "python -m gateway.ingest.service") -> argparse.Arg
                          "writes; acks are delayed as much; default %(default)g)")
     ap.add_argument("--maintenance-every", type=float, default=10.0, help=argparse.SUPPRESS)
     ap.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    ap.add_argument("-q", "--quiet", action="store_true",  # python -m gateway -q ingest ...
+                    help="nothing to silence: the service shows no progress (taken as the "
+                    "gateway's other commands take it)")
     return ap
 
 

@@ -1,8 +1,9 @@
 """What the status screen shows, as plain data: one :class:`Snapshot` of the farm at an instant.
 
 A snapshot is built from the store (``store_source.py``) or from the gateway's messages over
-Zenoh (``zenoh_source.py``); the renderers (``render.py``) and the widgets (``app.py``) only read
-it. All times are unix seconds on the gateway clock (a scaled clock in tests and demos).
+Zenoh (``zenoh_source.py``); the renderers (``render.py`` and its panels) and the widgets
+(``app.py``) only read it. All times are unix seconds on the gateway clock (a scaled clock in
+tests and demos).
 """
 
 from __future__ import annotations

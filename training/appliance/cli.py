@@ -31,7 +31,7 @@ from pathlib import Path
 
 from training.appliance.files import DEVICE, GREENHOUSE, MODEL, calibrate_command, write_config
 from training.appliance.procs import ChildError, Group
-from training.appliance.summary import count, delivery, summarise
+from training.appliance.summary import EstimateCount, count, delivery, summarise
 
 START = "2009-11-01T08:00:00Z"  # the simulated weather's morning (Bleiswijk, real)
 FILES = ("serra.db", "serra.db-wal", "serra.db-shm", "cloud.db", "cloud.db-wal", "cloud.db-shm",
@@ -119,6 +119,7 @@ class Demo:
         self.tty_fd = out.fileno() if out is not None and out.isatty() else -1
         self.epoch = float(__import__("numpy").datetime64(START.rstrip("Z"), "s").astype("int64"))
         self.clock = KitClock(scale, self.epoch)  # anchored again once the set-up is done
+        self.estimated = EstimateCount(self.out / "serra.db", GREENHOUSE, "t_in_next")
 
     def say(self, text: str) -> None:
         try:
@@ -279,8 +280,7 @@ class Demo:
         stamp = time.strftime("%H:%MZ", time.gmtime(self.clock.now()))
         published, received = delivery(db, cloud)
         self.say(f"  {stamp}  stored {count(db, 'SELECT count(*) FROM samples')} records · "
-                 f"{count(db, 'SELECT count(*) FROM estimates WHERE name=?', ('t_in_next',))} "
-                 f"minutes estimated · published {published} · received {received}")
+                 f"{self.estimated()} minutes estimated · published {published} · received {received}")
 
     def screen(self) -> None:
         from gateway.status.app import StatusApp
@@ -350,15 +350,15 @@ class Demo:
         deadline = time.monotonic() + timeout
         while ("gateway" in self.group.procs and self.group.procs["gateway"].poll() is None
                and time.monotonic() < deadline
-               and count(db, "SELECT count(*) FROM estimates WHERE name=?", ("t_in_next",))
-               < count(db, "SELECT count(*) FROM minute") - lag):
+               and self.estimated() < count(db, "SELECT count(*) FROM minute") - lag):
             time.sleep(0.2)
 
     def report(self) -> None:
         assert self.start_t is not None
         kit_records = len(self.kit.records()) if self.kit is not None else 0
         s = summarise(self.out / "serra.db", self.out / "cloud.db", kit_records, self.start_t,
-                      min(self.clock.now(), self.end_t()), self.scale, GREENHOUSE, DEVICE)
+                      min(self.clock.now(), self.end_t()), self.scale, GREENHOUSE, DEVICE,
+                      self.estimated())
         s.write_json(self.out / "summary.json")
         for line in s.lines():
             self.say(line)

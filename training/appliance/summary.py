@@ -100,9 +100,44 @@ def delivery(gateway_db: Path, cloud_db: Path) -> tuple[int, int]:
     return published, received
 
 
+class EstimateCount:
+    """The estimate rows of ``greenhouse`` named ``name`` in the store ``db``, counted as a run
+    goes: each call reads only the rows stored since the call before (``id`` above the last one
+    seen), by the table's primary key. Store v5's one index leads with the time, so
+    ``count(*) ... WHERE name=?`` walks all of it at every call (the settling polls 5 times a
+    second). The same number while no estimate row is deleted (a run is far inside
+    ``estimates_days``): a row committed after a call gets an id above every id it saw."""
+
+    SQL = ("SELECT count(CASE WHEN greenhouse=? AND name=? THEN 1 END), max(id) FROM estimates "
+           "WHERE id>?")
+
+    def __init__(self, db: Path, greenhouse: str, name: str) -> None:
+        self.db, self.greenhouse, self.name = db, greenhouse, name
+        self.rows, self.last_id = 0, 0
+
+    def __call__(self) -> int:
+        """The count now; the one before when the store or its table is not there (yet)."""
+        if not self.db.exists():
+            return self.rows
+        try:
+            conn = sqlite3.connect(f"file:{self.db}?mode=ro", uri=True, timeout=30)
+            try:  # one statement: the count and the last id of the same commit
+                n, top = conn.execute(self.SQL, (self.greenhouse, self.name,
+                                                 self.last_id)).fetchone()
+            finally:
+                conn.close()
+        except sqlite3.Error:
+            return self.rows
+        if top is not None:
+            self.rows, self.last_id = self.rows + n, top
+        return self.rows
+
+
 def summarise(gateway_db: Path, cloud_db: Path, kit_records: int, start: float, end: float,
-              scale: float, greenhouse: str, device: int) -> Summary:
-    s = Summary(start, end, scale, kit_records=kit_records)
+              scale: float, greenhouse: str, device: int, estimated: int) -> Summary:
+    """``estimated``: the greenhouse's ``t_in_next`` rows, the minutes its estimator stepped
+    (:class:`EstimateCount`, kept by the caller as the run went)."""
+    s = Summary(start, end, scale, kit_records=kit_records, estimated=estimated)
     try:
         conn = open_readonly(gateway_db)
     except StoreError:
@@ -110,15 +145,13 @@ def summarise(gateway_db: Path, cloud_db: Path, kit_records: int, start: float, 
     try:
         q = conn.execute
         s.stored = q("SELECT count(*) FROM samples WHERE device_id=?", (device,)).fetchone()[0]
-        s.estimated = q("SELECT count(*) FROM estimates WHERE greenhouse=? AND name='t_in_next'",
-                        (greenhouse,)).fetchone()[0]
         s.made = q("SELECT count(*) FROM outbox").fetchone()[0]
         s.published = q("SELECT count(*) FROM outbox WHERE sent IS NOT NULL").fetchone()[0]
         s.measurements = q("SELECT count(*) FROM outbox WHERE sent IS NOT NULL AND kind LIKE "
                            "'measurement/%'").fetchone()[0]
         s.pending = s.made - s.published
-        horizons = sorted(int(n[5:-3]) for (n,) in q(
-            "SELECT DISTINCT name FROM estimates WHERE greenhouse=? AND source='forecast'",
+        horizons = sorted(int(n[5:-3]) for (n,) in q(  # one row a name: not a scan of estimates
+            "SELECT name FROM estimates_latest WHERE greenhouse=? AND source='forecast'",
             (greenhouse,)))
         s.skill = [forecast_skill(conn, greenhouse, h) for h in horizons]
         s.findings = [f"{e} since {time.strftime('%H:%MZ', time.gmtime(st)) if st else 'the start'}"

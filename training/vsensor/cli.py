@@ -21,7 +21,7 @@ import sys
 import time
 from pathlib import Path
 
-from gateway.cli import QUIET_HELP, CliError, setup_cli_logging
+from gateway.cli import QUIET_HELP, CliError, after_the_command_too, setup_cli_logging
 from gateway.cli.common import seed_int
 from gateway.cli.helpformat import ArgumentParser
 from gateway.greenhouse import GreenhouseError, list_presets, load_greenhouse
@@ -58,6 +58,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = ArgumentParser(prog="python -m training.vsensor",
                             description="The PCA-NARX virtual ventilation sensor, offline "
                             "(thesis §IV.3). See docs/vsensor.md.")
+    parser.add_argument("-q", "--quiet", action="store_true", help=QUIET_HELP)
     sub = parser.add_subparsers(dest="command", title="commands", metavar="COMMAND")
     c = sub.add_parser("corpus", help="generate the training and test kit CSVs",
                        description="Simulate the corpus's runs (training/vsensor/corpus.py) into "
@@ -71,14 +72,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also the opt-in HOT_DRY runs (Sevilla, a third climate) in DIR/hot-dry")
     c.add_argument("--more-test", action="store_true",
                    help="also the opt-in MORE_TEST runs (more Biskra spring files) in DIR/more-test")
-    c.add_argument("-q", "--quiet", action="store_true", help=QUIET_HELP)
     c.set_defaults(func=_corpus)
     d = sub.add_parser("dataset", help="run the adaptive model with and without vents, cache",
                        description="Replay each file with and without its vent signal and keep "
                        "the products in --cache: what train, tune, errors and score do first "
                        "(one process per file can run in parallel).")
     _data_args(d)
-    d.add_argument("-q", "--quiet", action="store_true", help=QUIET_HELP)
     d.set_defaults(func=_dataset)
     from training.vsensor.train_cli import add_train_parser
 
@@ -98,7 +97,6 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--above", type=float, default=30.0, metavar="M3_S",
                    help="a peak is a minute with G above this [m3 s-1] (default 30)")
     r.add_argument("--json", action="store_true", help="print the studies as JSON")
-    r.add_argument("-q", "--quiet", action="store_true", help=QUIET_HELP)
     r.set_defaults(func=_reference)
     e = sub.add_parser("errors", help="where a model's closed-loop validation error comes from",
                        description="Run MODEL in closed loop over the training files and split its "
@@ -108,7 +106,6 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--sensor", dest="onnx", required=True, metavar="MODEL.onnx",
                    help="the written sensor to study (e.g. gateway/vsensor/models/almeria.onnx)")
     e.add_argument("--only", metavar="TEXT", help="the breakdowns over files whose name has TEXT")
-    e.add_argument("-q", "--quiet", action="store_true", help=QUIET_HELP)
     e.set_defaults(func=_errors)
     s = sub.add_parser("score", help="written sensors side by side on held-out files (cached)",
                        description="Run every MODEL in closed loop over each file (the gateway's "
@@ -121,8 +118,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true", help="print the scores as JSON")
     s.add_argument("--clamp-inputs", action="store_true",
                    help="the sensors clamp their inputs to the padded training ranges")
-    s.add_argument("-q", "--quiet", action="store_true", help=QUIET_HELP)
     s.set_defaults(func=_score)
+    after_the_command_too(parser, ("-q",))  # every command's -q, before or after it
     return parser
 
 

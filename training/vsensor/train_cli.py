@@ -35,9 +35,6 @@ def add_train_parser(sub: argparse._SubParsersAction, data_args) -> None:
 
 def add_fit_args(p: argparse.ArgumentParser) -> None:
     """The fit's settings, shared by ``train`` and ``tune`` (same defaults: same figure)."""
-    from gateway.cli import QUIET_HELP
-
-    p.add_argument("-q", "--quiet", action="store_true", help=QUIET_HELP)
     p.add_argument("--hidden", default="30,50,20", metavar="N,N,N",
                    help="hidden layer sizes (default 30,50,20, the thesis's)")
     p.add_argument("--epochs", type=positive_int, default=100, metavar="N",

@@ -12,6 +12,9 @@ CHECKOUT_PTH = -c 'import os, sysconfig; open(os.path.join(sysconfig.get_path("p
 	"serra-checkout.pth"), "w").write(os.getcwd() + "\n")'
 
 $(STAMP): pyproject.toml
+	@echo "make: creating $(VENV) (once, and again when pyproject.toml changes): the gateway," \
+	      "training, test and cloud packages (~700 MB installed); pip works quietly:" \
+	      "~30 s from cached wheels, minutes when it downloads them"
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[dev,training,cloud]'

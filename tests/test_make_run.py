@@ -196,6 +196,36 @@ def test_ctrl_c_again_while_stopping_kills_the_children_and_exits_130(tmp_path: 
     assert left == ([], []), f"a process of the run survived the second Ctrl-C: {left}"
 
 
+def test_ctrl_c_mid_run_sums_up_the_span_the_kit_ran_not_the_stopping(tmp_path: Path) -> None:
+    """A Ctrl-C mid-run (headless; the screen's quit ends the same way): exit 130 and a summary
+    whose span ends where the stop began. It ended when the summary was written, after the
+    gateway and the subscriber had stopped: seconds the kit no longer ran, two simulated minutes
+    each at 120× (148 minutes against 137 records). The gateway, stopped after the kit, writes
+    its clock as it stops (gateway_status): the span must end before it."""
+    proc, out, log, gateway = start_a_day_run(tmp_path)
+    groups: set[int] = set()
+    try:
+        going = wait_for(lambda: " stored " in log.read_text() or proc.poll() is not None, 300,
+                         "the run's first progress line")
+        assert going is True and proc.poll() is None, log.read_text()
+        groups = {process_group_of(pid) for pid in pids_of(gateway)}
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(180) == 130, log.read_text()
+    finally:
+        kill_what_is_left(proc, groups, out)
+    text = log.read_text()
+    assert "stopped: interrupted" in text and "summary:" in text, text
+    s = json.loads((out / "summary.json").read_text())
+    conn = sqlite3.connect(f"file:{out / 'serra.db'}?mode=ro", uri=True)
+    try:
+        (row,) = conn.execute("SELECT value FROM gateway_status WHERE name='gateway'").fetchone()
+    finally:
+        conn.close()
+    gw = json.loads(row)
+    assert gw["stopped"] is not None and s["kit_records"] > 0, (gw, s)
+    assert s["start"] < s["end"] <= gw["clock_now"], (s, gw)
+
+
 def sigint_as_at_a_terminal() -> None:
     """In the child before exec: SIGINT back to its default. A suite started in the background
     by a shell without job control (``make test &`` in a script, a CI runner) inherits SIGINT

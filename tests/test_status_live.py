@@ -98,5 +98,8 @@ def test_status_over_zenoh_with_nobody_there() -> None:
     assert r.returncode == 1, r.stderr
     assert r.stdout.startswith("ATTENTION: no gateway answers over Zenoh\nATTENTION: the Zenoh link")
     assert "this screen: nobody reachable at tcp/127.0.0.1:9" in r.stdout
+    # the endpoint is the one it dials, not one anybody listens on; there is no store either
+    assert "listening on" not in r.stdout and "No greenhouse yet." in r.stdout, r.stdout
+    assert "in this store" not in r.stdout, r.stdout
     assert "no message from a gateway yet" in r.stdout
     assert Messages().snapshot("x", 0.0, None, Link()).greenhouses == ()

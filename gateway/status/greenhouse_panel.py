@@ -56,7 +56,8 @@ def _spark(series: S.Series | None, columns: int, lo: float | None = None,
 
 def _greenhouse_lines(snap: S.Snapshot, index: int, columns: int = 36) -> list[Text]:
     if not snap.greenhouses:
-        return [_line(("No greenhouse in this store yet.", WARN))] + [_line(n) for n in snap.notes]
+        where = " in this store" if snap.source.startswith("store") else ""  # over Zenoh: none heard of
+        return [_line((f"No greenhouse{where} yet.", WARN))] + [_line(n) for n in snap.notes]
     g = snap.greenhouses[index % len(snap.greenhouses)]
     state = g.state or "?"
     # worded to fit 78 columns with the default model and "waiting for data" (with the word

@@ -73,18 +73,17 @@ class ZenohSource:
                                           (f"a query failed: {self.error}",) if self.error else ())
 
     def _link(self, replies: int) -> S.Link:
+        # no endpoints: a Link's are where the gateway listens, which this screen cannot know;
+        # the ones it dials are in its own words here and on the Source line
         info = self.session.info
         peers, routers = len(info.peers_zid()), len(info.routers_zid())
         if peers + routers == 0:
-            words = f"this screen: nobody reachable at {', '.join(self.connect)}"
-            return S.Link(True, False, words, tuple(self.connect))
+            return S.Link(True, False, f"this screen: nobody reachable at {', '.join(self.connect)}")
         who = f"{peers} peer{'s' * (peers != 1)}" + (f", {routers} router{'s' * (routers != 1)}"
                                                     if routers else "")
         if replies:
-            return S.Link(True, True, f"this screen: connected ({who}), the gateway answers",
-                          tuple(self.connect))
-        return S.Link(True, None, f"this screen: connected ({who}), no gateway answers",
-                      tuple(self.connect))
+            return S.Link(True, True, f"this screen: connected ({who}), the gateway answers")
+        return S.Link(True, None, f"this screen: connected ({who}), no gateway answers")
 
 
 def _iso(t: float) -> str:

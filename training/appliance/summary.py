@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import sqlite3
 import textwrap
 import time
@@ -68,9 +69,13 @@ class Summary:
         return out
 
     def write_json(self, path: Path) -> None:
+        """The summary as strict JSON: a horizon not scored yet (its MAE NaN) is ``null``, not
+        the ``NaN`` that Python's json writes and JSON parsers (JavaScript's, jq 1.6) refuse."""
         d = asdict(self)
         d["minutes"] = self.minutes
-        path.write_text(json.dumps(d, indent=1, default=str))
+        d["skill"] = [{k: None if isinstance(v, float) and math.isnan(v) else v for k, v in s.items()}
+                      for s in d["skill"]]
+        path.write_text(json.dumps(d, indent=1, default=str, allow_nan=False))
 
 
 def count(db: Path, sql: str, args: tuple = ()) -> int:

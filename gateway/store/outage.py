@@ -36,7 +36,7 @@ from gateway.store.db import StoreError, StoreGone
 log = logging.getLogger("serra.store")
 
 RETRY_FIRST_S = 1.0  # [s] first retry after a failed write
-RETRY_MAX_S = 30.0  # [s] the backoff's ceiling: a healed disk is used again within this
+RETRY_MAX_S = 10.0  # [s] the backoff's ceiling: a healed disk is used again within this
 REMIND_S = 600.0  # [s] between "still failing" lines
 LOW_FREE_BYTES = 1 << 20  # an I/O error with less free than this is taken for a full disk
 

@@ -1,0 +1,206 @@
+"""A store that cannot be written, for real: the running service's file-size limit is lowered
+(``prlimit`` RLIMIT_FSIZE, soft limit only so that the test can raise it again; CPython ignores
+SIGXFSZ, so every write past the limit fails with EFBIG and SQLite says ``disk I/O error``), then
+raised again. Both services that write the store — ``gateway.ingest.service`` and ``gateway
+run`` — must say it in one line naming the file and the cause, ack nothing that was not
+committed (the kit keeps its records and resends), keep running, tell systemd (STATUS=), and once
+writes succeed say so and store every record exactly once; the live gateway's estimator steps
+every minute once, none skipped. The logs come through pipes: a log file would hit the limit too.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import signal
+import sqlite3
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+from gateway.store.keys import write_keys
+from tests.gateway_harness import EPOCH, GatewayProcess, PyKit, sim_trace, wait_for, write_config
+from tests.test_ingest_crash import KEY, WINDOW, Sender
+from tests.test_sdnotify import NotifySocket
+from training.kitsim import KitClock
+
+DEADLINE = 120.0  # [s] for any one wait on a loaded machine
+LIMIT = 1024  # [bytes] below every file of the store: each write of a page fails
+RATE = 200  # [records s-1] sent to the ingest service
+
+
+def limit_writes(pid: int, limit: int | None) -> None:
+    """Lower (``limit`` bytes) or lift (None) the process's file-size limit, soft only."""
+    hard = resource.prlimit(pid, resource.RLIMIT_FSIZE)[1]
+    resource.prlimit(pid, resource.RLIMIT_FSIZE,
+                     (resource.RLIM_INFINITY if limit is None else limit, hard))
+
+
+def q(db: Path, sql: str) -> list[tuple]:
+    with sqlite3.connect(db) as c:
+        return c.execute(sql).fetchall()
+
+
+class Statuses:
+    """Every STATUS= a service sent to its notify socket (read as the test goes)."""
+
+    def __init__(self, sock: NotifySocket) -> None:
+        self.sock, self.seen = sock, []
+
+    def read(self) -> list[str]:
+        while msg := self.sock.next(0):
+            if "STATUS" in msg:
+                self.seen.append(msg["STATUS"])
+        return self.seen
+
+
+class CountingSocket:
+    """The sender's socket, counting the packets sent per record (seq)."""
+
+    def __init__(self, sock, counts: dict[int, int]) -> None:
+        self.sock, self.counts = sock, counts
+
+    def sendto(self, data: bytes, addr: tuple[str, int]) -> int:
+        seq = int.from_bytes(data[12:16], "big")
+        self.counts[seq] = self.counts.get(seq, 0) + 1
+        return self.sock.sendto(data, addr)
+
+    def __getattr__(self, name: str):
+        return getattr(self.sock, name)
+
+
+def one_line(lines: list[str], needle: str) -> str:
+    [line] = [x for x in lines if needle in x]
+    return line
+
+
+def test_ingest_holds_the_kits_records_while_the_store_cannot_be_written(tmp_path: Path) -> None:
+    db, keys = tmp_path / "g.db", tmp_path / "keys"
+    write_keys(keys, {7: KEY})
+    sock = NotifySocket(str(tmp_path / "notify"))
+    statuses = Statuses(sock)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "gateway.ingest.service", "--db", str(db), "--keys", str(keys),
+         "--listen", "127.0.0.1:0", "--maintenance-every", "0.3"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "NOTIFY_SOCKET": sock.name})
+    lines: list[str] = []
+    assert proc.stderr is not None and proc.stdout is not None
+    reader = threading.Thread(target=lambda: lines.extend(x.rstrip() for x in proc.stderr),
+                              daemon=True)
+    reader.start()
+    s = Sender()
+    sends: dict[int, int] = {}  # seq -> packets sent
+    s.sock = CountingSocket(s.sock, sends)  # type: ignore[assignment]
+    try:
+        host, port = proc.stdout.readline().split()[-1].rsplit(":", 1)
+        addr = (host, int(port))
+        wait_for(lambda: len(s.acked) >= 100 or s.pump(addr, 0.05, rate=RATE), DEADLINE,
+                 "100 records acked")
+
+        limit_writes(proc.pid, LIMIT)
+        wait_for(lambda: any("file size limit" in x for x in lines) or s.pump(addr, 0.05,
+                 rate=RATE), DEADLINE, "the store's failure in the log")
+        # The kit's window fills; every record in it is resent 10 times (over 3 s: the held
+        # batch is retried after 1 s and 2 s meanwhile): none is acked.
+        wait_for(lambda: s.next - min(s.unacked, default=s.next) >= WINDOW
+                 or s.pump(addr, 0.05, rate=RATE), DEADLINE, "the kit's window full")
+        acked_in_outage, held = set(s.acked), set(s.unacked)
+        sends.clear()
+        wait_for(lambda: all(sends.get(q, 0) >= 10 for q in held) or s.pump(addr, 0.05),
+                 DEADLINE, "every held record resent 10 times")
+        assert s.acked == acked_in_outage and set(s.unacked) == held
+        stored = {r[0] for r in q(db, "SELECT seq FROM samples")}
+        assert s.acked <= stored, f"acked, not stored: {sorted(s.acked - stored)[:10]}"
+        assert proc.poll() is None, "\n".join(lines)
+        wait_for(lambda: any(x.startswith("STORE FAILING") for x in statuses.read()), DEADLINE,
+                 "STATUS= to say the store fails")
+
+        limit_writes(proc.pid, None)
+        wait_for(lambda: s.pump(addr, 0.05) or (not s.unacked and s.acked >= set(range(s.next))),
+                 DEADLINE, "every held record acked")
+        wait_for(lambda: any(": back, writes succeed again" in x for x in lines), DEADLINE,
+                 "the back line")
+        wait_for(lambda: statuses.read()[-1] == f"udp {host}:{port}", DEADLINE,
+                 "STATUS= back to what it serves")
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        code = proc.wait(timeout=DEADLINE)
+        reader.join(timeout=DEADLINE)
+        s.sock.close()
+        sock.close()
+    assert code == 0, "\n".join(lines)
+    failed = one_line(lines, "file size limit")
+    assert f"ERROR serra.store: {db}: file size limit reached (RLIMIT_FSIZE {LIMIT} bytes; " \
+           "SQLite: disk I/O error) — records not acked, the kits keep them; retrying with " \
+           "backoff (1 s doubling to every 10 s)" in failed
+    one_line(lines, "back, writes succeed again")
+    assert not [x for x in lines if "Traceback" in x or "store write of" in x], lines
+    rows = q(db, "SELECT seq, count(*) FROM samples GROUP BY seq")
+    assert {seq for seq, _ in rows} == set(range(s.next)) and {n for _, n in rows} == {1}
+    assert q(db, "PRAGMA integrity_check") == [("ok",)]
+
+
+def test_live_gateway_waits_out_the_store_and_its_estimator_skips_no_minute(
+        tmp_path: Path) -> None:
+    clock = KitClock(300.0, EPOCH)
+    db = tmp_path / "gw.db"
+    cfg = write_config(tmp_path, anchor=clock.anchor, scale=300.0)
+    sock = NotifySocket(str(tmp_path / "notify"))
+    statuses = Statuses(sock)
+    gw = GatewayProcess(cfg, log_pipe=True, env={"NOTIFY_SOCKET": sock.name})
+    kit = PyKit(7, sim_trace(), clock.now)
+    try:
+        gw.start()
+        assert gw.proc is not None
+        wait_for(lambda: (q(db, "SELECT max(minute) FROM estimator_state") or [(None,)])[0][0]
+                 or kit.pump(gw.udp), DEADLINE, "the estimator to save its state")
+
+        limit_writes(gw.proc.pid, LIMIT)
+        wait_for(lambda: any("file size limit" in x for x in gw.lines) or kit.pump(gw.udp),
+                 DEADLINE, "the store's failure in the log")
+        acked = set(kit.acked)
+        first_held = kit.next
+        # 20 records (20 simulated minutes) made and sent while it fails: none acked
+        wait_for(lambda: kit.next >= first_held + 20 or kit.pump(gw.udp), DEADLINE,
+                 "20 more records sent")
+        stored = {r[0] for r in q(db, "SELECT seq FROM samples")}
+        assert kit.acked <= stored and not (kit.acked - acked) - stored
+        assert not {s for s in kit.acked if s >= first_held}, "acked while the store fails"
+        assert gw.proc.poll() is None, gw.log_tail()
+        wait_for(lambda: any(x.startswith("STORE FAILING") for x in statuses.read()), DEADLINE,
+                 "STATUS= to say the store fails")
+
+        limit_writes(gw.proc.pid, None)
+        last = kit.next
+        wait_for(lambda: kit.acked >= set(range(last)) or kit.pump(gw.udp), DEADLINE,
+                 "every held record acked")
+        wait_for(lambda: any(": back, writes succeed again" in x for x in gw.lines), DEADLINE,
+                 "the back line")
+        wait_for(lambda: (q(db, "SELECT max(minute) FROM estimator_state") or [(0,)])[0][0]
+                 >= EPOCH + 60 * (last - 2) or kit.pump(gw.udp), DEADLINE,
+                 "the estimator to catch up")
+        wait_for(lambda: not statuses.read()[-1].startswith("STORE FAILING"), DEADLINE,
+                 "STATUS= without the store's failure")
+        assert gw.stop() == 0
+    finally:
+        gw.kill()
+        kit.close()
+        sock.close()
+    failed = one_line(gw.lines, "file size limit")
+    assert f"ERROR serra.store: {db}: file size limit reached (RLIMIT_FSIZE {LIMIT} bytes; " \
+           "SQLite: disk I/O error) — records not acked, the kits keep them; the estimators " \
+           "and the messages wait; retrying with backoff" in failed
+    one_line(gw.lines, "back, writes succeed again")
+    assert not [x for x in gw.lines if "Traceback" in x or "stopped:" in x], gw.lines
+    rows = q(db, "SELECT seq, count(*) FROM samples GROUP BY seq")
+    assert {seq for seq, _ in rows} >= set(range(last)) and {n for _, n in rows} == {1}
+    # the estimator: each minute stepped once, none skipped, from its first to its last
+    minutes = [t for (t,) in q(db, "SELECT DISTINCT t FROM estimates WHERE source='online' "
+                                   "ORDER BY t")]
+    assert minutes == [minutes[0] + 60 * k for k in range(len(minutes))]
+    assert minutes[-1] >= EPOCH + 60 * (last - 2)
+    assert q(db, "SELECT count(*) FROM (SELECT t, name FROM estimates WHERE source='online' "
+                 "GROUP BY t, name HAVING count(*) > 1)") == [(0,)]
+    assert q(db, "PRAGMA integrity_check") == [("ok",)]

@@ -70,6 +70,15 @@ class CountingSocket:
         return getattr(self.sock, name)
 
 
+def alive(proc: subprocess.Popen | None, lines: list[str]) -> bool:
+    """False, so that a wait goes on; an AssertionError with its log once the service exited
+    (what the services did before they waited out a failing store)."""
+    if proc is None or proc.poll() is not None:
+        code = None if proc is None else proc.returncode
+        raise AssertionError(f"the service exited ({code}):\n" + "\n".join(lines[-20:]))
+    return False
+
+
 def one_line(lines: list[str], needle: str) -> str:
     [line] = [x for x in lines if needle in x]
     return line
@@ -100,16 +109,16 @@ def test_ingest_holds_the_kits_records_while_the_store_cannot_be_written(tmp_pat
                  "100 records acked")
 
         limit_writes(proc.pid, LIMIT)
-        wait_for(lambda: any("file size limit" in x for x in lines) or s.pump(addr, 0.05,
-                 rate=RATE), DEADLINE, "the store's failure in the log")
+        wait_for(lambda: any("file size limit" in x for x in lines) or alive(proc, lines)
+                 or s.pump(addr, 0.05, rate=RATE), DEADLINE, "the store's failure in the log")
         # The kit's window fills; every record in it is resent 10 times (over 3 s: the held
         # batch is retried after 1 s and 2 s meanwhile): none is acked.
         wait_for(lambda: s.next - min(s.unacked, default=s.next) >= WINDOW
                  or s.pump(addr, 0.05, rate=RATE), DEADLINE, "the kit's window full")
         acked_in_outage, held = set(s.acked), set(s.unacked)
         sends.clear()
-        wait_for(lambda: all(sends.get(q, 0) >= 10 for q in held) or s.pump(addr, 0.05),
-                 DEADLINE, "every held record resent 10 times")
+        wait_for(lambda: all(sends.get(q, 0) >= 10 for q in held) or alive(proc, lines)
+                 or s.pump(addr, 0.05), DEADLINE, "every held record resent 10 times")
         assert s.acked == acked_in_outage and set(s.unacked) == held
         stored = {r[0] for r in q(db, "SELECT seq FROM samples")}
         assert s.acked <= stored, f"acked, not stored: {sorted(s.acked - stored)[:10]}"
@@ -158,13 +167,14 @@ def test_live_gateway_waits_out_the_store_and_its_estimator_skips_no_minute(
                  or kit.pump(gw.udp), DEADLINE, "the estimator to save its state")
 
         limit_writes(gw.proc.pid, LIMIT)
-        wait_for(lambda: any("file size limit" in x for x in gw.lines) or kit.pump(gw.udp),
-                 DEADLINE, "the store's failure in the log")
+        wait_for(lambda: any("file size limit" in x for x in gw.lines)
+                 or alive(gw.proc, gw.lines) or kit.pump(gw.udp), DEADLINE,
+                 "the store's failure in the log")
         acked = set(kit.acked)
         first_held = kit.next
         # 20 records (20 simulated minutes) made and sent while it fails: none acked
-        wait_for(lambda: kit.next >= first_held + 20 or kit.pump(gw.udp), DEADLINE,
-                 "20 more records sent")
+        wait_for(lambda: kit.next >= first_held + 20 or alive(gw.proc, gw.lines)
+                 or kit.pump(gw.udp), DEADLINE, "20 more records sent")
         stored = {r[0] for r in q(db, "SELECT seq FROM samples")}
         assert kit.acked <= stored and not (kit.acked - acked) - stored
         assert not {s for s in kit.acked if s >= first_held}, "acked while the store fails"
@@ -204,3 +214,9 @@ def test_live_gateway_waits_out_the_store_and_its_estimator_skips_no_minute(
     assert q(db, "SELECT count(*) FROM (SELECT t, name FROM estimates WHERE source='online' "
                  "GROUP BY t, name HAVING count(*) > 1)") == [(0,)]
     assert q(db, "PRAGMA integrity_check") == [("ok",)]
+    # the status screen says what the store went through
+    screen = subprocess.run([sys.executable, "-m", "gateway", "status", "--db", str(db),
+                             "--panel", "gateway", "--once"], capture_output=True, text=True,
+                            timeout=DEADLINE)
+    [note] = [x for x in screen.stdout.splitlines() if "store unwritable" in x]
+    assert note.startswith("Note       store unwritable ") and ": file size limit reached" in note

@@ -220,3 +220,42 @@ def test_live_gateway_waits_out_the_store_and_its_estimator_skips_no_minute(
                             timeout=DEADLINE)
     [note] = [x for x in screen.stdout.splitlines() if "store unwritable" in x]
     assert note.startswith("Note       store unwritable ") and ": file size limit reached" in note
+
+
+def test_ingest_stops_when_its_store_file_is_deleted_and_acks_nothing_after(
+        tmp_path: Path) -> None:
+    """SQLite writes on into a deleted file (its commits lost when the process ends): the
+    service checks the file after each commit, before the acks, and stops with one line."""
+    (tmp_path / "state").mkdir()
+    db, keys = tmp_path / "state" / "g.db", tmp_path / "keys"
+    write_keys(keys, {7: KEY})
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "gateway.ingest.service", "--db", str(db), "--keys", str(keys),
+         "--listen", "127.0.0.1:0", "--maintenance-every", "0.3"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert proc.stdout is not None and proc.stderr is not None
+    s = Sender()
+    try:
+        host, port = proc.stdout.readline().split()[-1].rsplit(":", 1)
+        addr = (host, int(port))
+        wait_for(lambda: len(s.acked) >= 50 or s.pump(addr, 0.05, rate=RATE), DEADLINE,
+                 "50 records acked")
+        wait_for(lambda: not s.unacked or s.pump(addr, 0.05, rate=0), DEADLINE,
+                 "every record sent acked (no new one sent)")
+        acked = set(s.acked)
+        db.unlink()
+        # new records: the service stops, or (before the check) acks one of them
+        wait_for(lambda: proc.poll() is not None or s.acked != acked
+                 or s.pump(addr, 0.05, rate=RATE), DEADLINE, "the service to stop")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        _, err = proc.communicate(timeout=DEADLINE)
+        s.sock.close()
+    assert proc.returncode == 1, err
+    lines = err.splitlines()
+    line = one_line(lines, "deleted or replaced")
+    assert f"ERROR serra.store: {db}: the store file was deleted or replaced while open: " \
+           "stopping, nothing more is acknowledged" in line
+    assert not [x for x in lines if "Traceback" in x], err
+    assert s.acked == acked, f"acked after the deletion: {sorted(s.acked - acked)[:10]}"

@@ -328,8 +328,11 @@ def main(argv: list[str] | None = None, prog: str = "python -m gateway.ingest.se
     except ListenError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    except StoreDamaged:  # said in the log; restarting would not mend it
+    except StoreDamaged:  # said in the log
         return 1
+    except sqlite3.Error as e:  # the start's first writes (boot bases): as the open's, exit 2
+        print(f"error: cannot write the store {cfg.db}: {e}", file=sys.stderr)
+        return 2
     return 0
 
 

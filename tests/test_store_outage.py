@@ -252,10 +252,10 @@ def test_ingest_stops_when_its_store_file_is_deleted_and_acks_nothing_after(
             proc.kill()
         _, err = proc.communicate(timeout=DEADLINE)
         s.sock.close()
+    assert s.acked == acked, f"acked after the deletion: {sorted(s.acked - acked)[:10]}"
     assert proc.returncode == 1, err
     lines = err.splitlines()
     line = one_line(lines, "deleted or replaced")
     assert f"ERROR serra.store: {db}: the store file was deleted or replaced while open: " \
            "stopping, nothing more is acknowledged" in line
     assert not [x for x in lines if "Traceback" in x], err
-    assert s.acked == acked, f"acked after the deletion: {sorted(s.acked - acked)[:10]}"

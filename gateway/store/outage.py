@@ -17,6 +17,7 @@ gateway's worker and publisher) hands its failed write to one shared ``Outage``:
 SQLite names no errno: a write refused with EFBIG (a file-size limit) or EIO is the same
 ``disk I/O error`` (``SQLITE_IOERR_WRITE``) and only ENOSPC is ``database or disk is full``, so
 the cause is completed from the file system (free space, the file's existence, RLIMIT_FSIZE).
+What was tried, and what each service then does: docs/gateway.md, "A full or failing store".
 """
 
 from __future__ import annotations

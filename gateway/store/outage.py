@@ -73,9 +73,11 @@ def cause(e: BaseException, path: Path) -> str | None:
         return None
     said = f"SQLite: {e}"
     free = _free_bytes(path)
-    if name == "SQLITE_FULL" or (name.startswith("SQLITE_IOERR") and free is not None
-                                 and free < LOW_FREE_BYTES):
-        return f"disk full ({said}{f'; {free} bytes free' if free is not None else ''})"
+    if (name == "SQLITE_FULL" or name.startswith("SQLITE_IOERR")) and (
+            free is not None and free < LOW_FREE_BYTES):
+        return f"disk full ({said}; {free} bytes free)"
+    if name == "SQLITE_FULL":  # ENOSPC with room: a quota, a file system's size limit
+        return f"no room ({said}; {free} bytes free on its disk: a quota or a size limit?)"
     if not path.parent.is_dir():
         return f"its folder {path.parent} is gone ({said})"
     if name.startswith("SQLITE_IOERR"):

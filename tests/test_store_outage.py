@@ -19,8 +19,11 @@ import sys
 import threading
 from pathlib import Path
 
+from gateway.cloud.store import SqliteCloudStore
+from gateway.cloud.subscriber import Subscriber
 from gateway.store.keys import write_keys
 from tests.gateway_harness import EPOCH, GatewayProcess, PyKit, sim_trace, wait_for, write_config
+from tests.tcpcut import TcpCut
 from tests.test_ingest_crash import KEY, WINDOW, Sender
 from tests.test_sdnotify import NotifySocket
 from training.kitsim import KitClock
@@ -151,34 +154,54 @@ def test_ingest_holds_the_kits_records_while_the_store_cannot_be_written(tmp_pat
     assert q(db, "PRAGMA integrity_check") == [("ok",)]
 
 
+def unsent(db: Path) -> int:
+    return q(db, "SELECT count(*) FROM outbox WHERE sent IS NULL")[0][0]
+
+
+def estimated_to(db: Path) -> float:
+    return (q(db, "SELECT max(minute) FROM estimator_state") or [(None,)])[0][0] or 0.0
+
+
 def test_live_gateway_waits_out_the_store_and_its_estimator_skips_no_minute(
         tmp_path: Path) -> None:
+    """The cloud's link is cut before the store fails and restored while it fails: the
+    publisher then puts the messages it held and cannot mark them sent, so it meets the
+    failing store too (the cloud gets them while the outbox still holds them)."""
     clock = KitClock(300.0, EPOCH)
     db = tmp_path / "gw.db"
-    cfg = write_config(tmp_path, anchor=clock.anchor, scale=300.0)
+    cloud = SqliteCloudStore(tmp_path / "cloud.db")
     sock = NotifySocket(str(tmp_path / "notify"))
     statuses = Statuses(sock)
-    gw = GatewayProcess(cfg, log_pipe=True, env={"NOTIFY_SOCKET": sock.name})
     kit = PyKit(7, sim_trace(), clock.now)
+    gw = GatewayProcess(write_config(tmp_path, anchor=clock.anchor, scale=300.0), log_pipe=True,
+                        env={"NOTIFY_SOCKET": sock.name})
+    proxy = sub = None
     try:
         gw.start()
         assert gw.proc is not None
-        wait_for(lambda: (q(db, "SELECT max(minute) FROM estimator_state") or [(None,)])[0][0]
-                 or kit.pump(gw.udp), DEADLINE, "the estimator to save its state")
+        proxy = TcpCut(int(gw.zenoh.rsplit(":", 1)[1]))
+        sub = Subscriber(cloud, [proxy.endpoint])
+        sub.start()
+        wait_for(lambda: (estimated_to(db) and cloud.count() >= 5) or kit.pump(gw.udp),
+                 DEADLINE, "the estimator's state saved, messages in the cloud")
+        proxy.cut()
+        wait_for(lambda: unsent(db) >= 5 or kit.pump(gw.udp), DEADLINE, "messages held")
 
         limit_writes(gw.proc.pid, LIMIT)
         wait_for(lambda: any("file size limit" in x for x in gw.lines)
                  or alive(gw.proc, gw.lines) or kit.pump(gw.udp), DEADLINE,
                  "the store's failure in the log")
-        acked = set(kit.acked)
-        first_held = kit.next
-        # 20 records (20 simulated minutes) made and sent while it fails: none acked
-        wait_for(lambda: kit.next >= first_held + 20 or alive(gw.proc, gw.lines)
-                 or kit.pump(gw.udp), DEADLINE, "20 more records sent")
-        stored = {r[0] for r in q(db, "SELECT seq FROM samples")}
-        assert kit.acked <= stored and not (kit.acked - acked) - stored
+        acked, first_held, held = set(kit.acked), kit.next, unsent(db)
+        in_cloud = cloud.count()
+        proxy.restore()
+        # 20 records (20 simulated minutes) sent while it fails: none acked; the held messages
+        # reach the cloud, the outbox cannot say so
+        wait_for(lambda: (kit.next >= first_held + 20 and cloud.count() > in_cloud)
+                 or alive(gw.proc, gw.lines) or kit.pump(gw.udp), DEADLINE,
+                 "20 more records sent, held messages in the cloud")
+        assert kit.acked - acked <= {r[0] for r in q(db, "SELECT seq FROM samples")}
         assert not {s for s in kit.acked if s >= first_held}, "acked while the store fails"
-        assert gw.proc.poll() is None, gw.log_tail()
+        assert unsent(db) == held
         wait_for(lambda: any(x.startswith("STORE FAILING") for x in statuses.read()), DEADLINE,
                  "STATUS= to say the store fails")
 
@@ -188,24 +211,42 @@ def test_live_gateway_waits_out_the_store_and_its_estimator_skips_no_minute(
                  "every held record acked")
         wait_for(lambda: any(": back, writes succeed again" in x for x in gw.lines), DEADLINE,
                  "the back line")
-        wait_for(lambda: (q(db, "SELECT max(minute) FROM estimator_state") or [(0,)])[0][0]
-                 >= EPOCH + 60 * (last - 2) or kit.pump(gw.udp), DEADLINE,
-                 "the estimator to catch up")
+        wait_for(lambda: estimated_to(db) >= EPOCH + 60 * (last - 2) or kit.pump(gw.udp),
+                 DEADLINE, "the estimator to catch up")
         wait_for(lambda: not statuses.read()[-1].startswith("STORE FAILING"), DEADLINE,
                  "STATUS= without the store's failure")
+        wait_for(lambda: not unsent(db) or kit.pump(gw.udp), DEADLINE, "the outbox to drain")
         assert gw.stop() == 0
+        outbox = {r[0] for r in q(db, "SELECT idem FROM outbox")}
+        wait_for(lambda: sub.wait_idle(1.0) and cloud.count() >= len(outbox), DEADLINE,
+                 "the cloud to have every message")
     finally:
         gw.kill()
+        if sub is not None:
+            sub.stop()
+        if proxy is not None:
+            proxy.close()
         kit.close()
         sock.close()
-    failed = one_line(gw.lines, "file size limit")
+    messages = list(cloud.messages())
+    cloud.close()
+    # every message once (the repeats of those put again dropped), each sample's measurement
+    assert {m.idem for m in messages} == outbox and len(messages) == len(outbox)
+    measured = {m.idem for m in messages if m.kind == "measurement/inside"}
+    check_gateway_after(db, gw.lines, last, len(measured))
+
+
+def check_gateway_after(db: Path, lines: list[str], last: int, measured: int) -> None:
+    """The gateway's log, store and status screen once it has stopped."""
+    failed = one_line(lines, "file size limit")
     assert f"ERROR serra.store: {db}: file size limit reached (RLIMIT_FSIZE {LIMIT} bytes; " \
            "SQLite: disk I/O error) — records not acked, the kits keep them; the estimators " \
            "and the messages wait; retrying with backoff" in failed
-    one_line(gw.lines, "back, writes succeed again")
-    assert not [x for x in gw.lines if "Traceback" in x or "stopped:" in x], gw.lines
+    one_line(lines, "back, writes succeed again")
+    assert not [x for x in lines if "Traceback" in x or "stopped:" in x], lines
     rows = q(db, "SELECT seq, count(*) FROM samples GROUP BY seq")
     assert {seq for seq, _ in rows} >= set(range(last)) and {n for _, n in rows} == {1}
+    assert measured == len(rows)
     # the estimator: each minute stepped once, none skipped, from its first to its last
     minutes = [t for (t,) in q(db, "SELECT DISTINCT t FROM estimates WHERE source='online' "
                                    "ORDER BY t")]

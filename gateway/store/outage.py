@@ -141,6 +141,7 @@ class Outage:
         why = cause(e, self.path)
         if why is None:
             return None
+        log.debug("%s: a write of the %s failed: %s", self.path, part, e)
         say: str | None = None
         with self._lock:
             now = self.clock()

@@ -17,10 +17,13 @@ import sqlite3
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 from gateway.cloud.store import SqliteCloudStore
 from gateway.cloud.subscriber import Subscriber
+from gateway.status import snapshot as S
+from gateway.status.messages import Messages
 from gateway.store.keys import write_keys
 from tests.gateway_harness import EPOCH, GatewayProcess, PyKit, sim_trace, wait_for, write_config
 from tests.tcpcut import TcpCut
@@ -215,6 +218,9 @@ def test_live_gateway_waits_out_the_store_and_its_estimator_skips_no_minute(
                  DEADLINE, "the estimator to catch up")
         wait_for(lambda: not statuses.read()[-1].startswith("STORE FAILING"), DEADLINE,
                  "STATUS= without the store's failure")
+        wait_for(lambda: q(db, "SELECT count(*) FROM outbox WHERE key LIKE '%/status' AND "
+                           "payload LIKE '%storeLastFailure%'")[0][0] or kit.pump(gw.udp),
+                 DEADLINE, "a status message that tells of the failure")
         wait_for(lambda: not unsent(db) or kit.pump(gw.udp), DEADLINE, "the outbox to drain")
         assert gw.stop() == 0
         outbox = {r[0] for r in q(db, "SELECT idem FROM outbox")}
@@ -234,6 +240,13 @@ def test_live_gateway_waits_out_the_store_and_its_estimator_skips_no_minute(
     assert {m.idem for m in messages} == outbox and len(messages) == len(outbox)
     measured = {m.idem for m in messages if m.kind == "measurement/inside"}
     check_gateway_after(db, gw.lines, last, len(measured))
+    # the status screen over Zenoh reads the same from the messages
+    screen = Messages()
+    for m in messages:
+        screen.add(m.key, m.payload)
+    notes = screen.snapshot("zenoh", time.time(), True, S.Link()).notes
+    [note] = [n for n in notes if n.startswith("store unwritable ")]
+    assert ": file size limit reached (RLIMIT_FSIZE" in note
 
 
 def check_gateway_after(db: Path, lines: list[str], last: int, measured: int) -> None:

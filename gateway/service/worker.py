@@ -32,6 +32,10 @@ MAX_BATCHES = 4  # estimator batches per greenhouse per pass: records keep flowi
 PUBLISH_FIRST_S = 0.05  # [wall s] the longest the estimators wait for new records to be put
 
 
+def _utc(t: float) -> str:
+    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(t))
+
+
 class Worker:
     def __init__(self, cfg: GatewayConfig, resources: list[GreenhouseResources], clock: Clock,
                  wake_publisher: Callable[[float], None],
@@ -199,7 +203,9 @@ class Worker:
     def _service_state(self) -> dict[str, Any]:
         """What the status screen shows of the gateway itself, for one that reads it over Zenoh
         (docs/cloud.md, ``status``): uptime [s], store and disk [bytes], Zenoh peers, ingest
-        counters, whether the daily diagnosis is on (off: the screen shows no last run)."""
+        counters, whether the daily diagnosis is on (off: the screen shows no last run), the
+        store's latest failure to be written since the start (wall clock; it cannot be
+        published while it lasts: the messages wait in the store)."""
         db = self.cfg.db
         size = sum(os.path.getsize(f) for f in (db, f"{db}-wal") if os.path.exists(f))
         try:
@@ -209,10 +215,16 @@ class Worker:
             disk = {}
         extra = self.status_extra()
         z = extra.get("zenoh", {})
-        return {"gatewayUptime": round(time.time() - self.started, 1), "storeSize": size, **disk,
-                "zenohPeers": z.get("peers", 0), "zenohRouters": z.get("routers", 0),
-                "ingestCounters": extra.get("ingest", {}),
-                "diagnosisEnabled": self.cfg.diagnosis.enabled}
+        out = {"gatewayUptime": round(time.time() - self.started, 1), "storeSize": size, **disk,
+               "zenohPeers": z.get("peers", 0), "zenohRouters": z.get("routers", 0),
+               "ingestCounters": extra.get("ingest", {}),
+               "diagnosisEnabled": self.cfg.diagnosis.enabled}
+        last = self.outage.last
+        if last is not None:
+            out["storeLastFailure"] = {"cause": last["cause"], "since": _utc(last["since"]),
+                                       "until": _utc(last["until"]),
+                                       "failedWrites": last["failures"]}
+        return out
 
     def _report_unassigned(self, conn) -> None:
         known = self.cfg.devices()

@@ -208,20 +208,7 @@ def test_live_gateway_waits_out_the_store_and_its_estimator_skips_no_minute(
         wait_for(lambda: any(x.startswith("STORE FAILING") for x in statuses.read()), DEADLINE,
                  "STATUS= to say the store fails")
 
-        limit_writes(gw.proc.pid, None)
-        last = kit.next
-        wait_for(lambda: kit.acked >= set(range(last)) or kit.pump(gw.udp), DEADLINE,
-                 "every held record acked")
-        wait_for(lambda: any(": back, writes succeed again" in x for x in gw.lines), DEADLINE,
-                 "the back line")
-        wait_for(lambda: estimated_to(db) >= EPOCH + 60 * (last - 2) or kit.pump(gw.udp),
-                 DEADLINE, "the estimator to catch up")
-        wait_for(lambda: not statuses.read()[-1].startswith("STORE FAILING"), DEADLINE,
-                 "STATUS= without the store's failure")
-        wait_for(lambda: q(db, "SELECT count(*) FROM outbox WHERE key LIKE '%/status' AND "
-                           "payload LIKE '%storeLastFailure%'")[0][0] or kit.pump(gw.udp),
-                 DEADLINE, "a status message that tells of the failure")
-        wait_for(lambda: not unsent(db) or kit.pump(gw.udp), DEADLINE, "the outbox to drain")
+        last = heal(gw, kit, db, statuses)
         assert gw.stop() == 0
         outbox = {r[0] for r in q(db, "SELECT idem FROM outbox")}
         wait_for(lambda: sub.wait_idle(1.0) and cloud.count() >= len(outbox), DEADLINE,
@@ -247,6 +234,28 @@ def test_live_gateway_waits_out_the_store_and_its_estimator_skips_no_minute(
     notes = screen.snapshot("zenoh", time.time(), True, S.Link()).notes
     [note] = [n for n in notes if n.startswith("store unwritable ")]
     assert ": file size limit reached (RLIMIT_FSIZE" in note
+
+
+def heal(gw: GatewayProcess, kit: PyKit, db: Path, statuses: Statuses) -> int:
+    """Lift the limit; wait for every record sent so far (returned: how many) to be acked, the
+    back line, the estimator to catch up, STATUS= back, a status message that tells of the
+    failure, the outbox drained."""
+    assert gw.proc is not None
+    limit_writes(gw.proc.pid, None)
+    last = kit.next
+    wait_for(lambda: kit.acked >= set(range(last)) or kit.pump(gw.udp), DEADLINE,
+             "every held record acked")
+    wait_for(lambda: any(": back, writes succeed again" in x for x in gw.lines), DEADLINE,
+             "the back line")
+    wait_for(lambda: estimated_to(db) >= EPOCH + 60 * (last - 2) or kit.pump(gw.udp),
+             DEADLINE, "the estimator to catch up")
+    wait_for(lambda: not statuses.read()[-1].startswith("STORE FAILING"), DEADLINE,
+             "STATUS= without the store's failure")
+    wait_for(lambda: q(db, "SELECT count(*) FROM outbox WHERE key LIKE '%/status' AND "
+                       "payload LIKE '%storeLastFailure%'")[0][0] or kit.pump(gw.udp),
+             DEADLINE, "a status message that tells of the failure")
+    wait_for(lambda: not unsent(db) or kit.pump(gw.udp), DEADLINE, "the outbox to drain")
+    return last
 
 
 def check_gateway_after(db: Path, lines: list[str], last: int, measured: int) -> None:

@@ -76,10 +76,15 @@ anchor = {anchor}
 
 
 class GatewayProcess:
-    """``python -m gateway run`` in a subprocess; ``udp``/``zenoh`` from its ready line."""
+    """``python -m gateway run`` in a subprocess; ``udp``/``zenoh`` from its ready line. With
+    ``log_pipe`` its log comes through a pipe (``lines``, and gateway.log written by the test:
+    a child whose file writes are made to fail still logs); ``env``: added to its environment."""
 
-    def __init__(self, config: Path) -> None:
+    def __init__(self, config: Path, log_pipe: bool = False, env: dict[str, str] | None = None
+                 ) -> None:
         self.config = config
+        self.log_pipe, self.env = log_pipe, env or {}
+        self.lines: list[str] = []
         self.argv = [sys.executable, "-m", "gateway", "run", "--config", str(config)]
         self.proc: subprocess.Popen | None = None
         self.udp: tuple[str, int] = ("", 0)
@@ -90,9 +95,14 @@ class GatewayProcess:
         log = open(self.config.parent / "gateway.log", "a")  # noqa: SIM115 - kept by the child
         # its temporary folders in the test's folder: a gateway the test kills leaves its
         # work folder behind (systemd's PrivateTmp clears it on a farm)
-        env = {**os.environ, "TMPDIR": str(self.config.parent)}
+        env = {**os.environ, "TMPDIR": str(self.config.parent), **self.env}
         self.proc = subprocess.Popen(self.argv, cwd=self.config.parent, stdout=subprocess.PIPE,
-                                     stderr=log, text=True, env=env)
+                                     stderr=subprocess.PIPE if self.log_pipe else log, text=True,
+                                     env=env)
+        if self.log_pipe:
+            threading.Thread(target=self._keep_log, args=(self.proc, log), daemon=True).start()
+        else:
+            log.close()
         self.starts += 1
         lines: queue.Queue[str] = queue.Queue()
         threading.Thread(target=self._read, args=(self.proc, lines), daemon=True).start()
@@ -111,6 +121,14 @@ class GatewayProcess:
         host, port = parts[parts.index("udp") + 1].rsplit(":", 1)
         self.udp = (host, int(port))
         self.zenoh = parts[parts.index("zenoh") + 1] if "zenoh" in parts else ""
+
+    def _keep_log(self, proc: subprocess.Popen, log) -> None:
+        assert proc.stderr is not None
+        with log:
+            for line in proc.stderr:
+                log.write(line)
+                log.flush()
+                self.lines.append(line.rstrip("\n"))
 
     @staticmethod
     def _read(proc: subprocess.Popen, lines: queue.Queue) -> None:

@@ -79,6 +79,7 @@ async def _main(cfg, resources) -> int:
     from gateway.ingest.service import ListenError
     from gateway.service.config import ConfigError
     from gateway.service.run import run_gateway
+    from gateway.store.outage import StoreDamaged
 
     log = logging.getLogger("serra.gateway")
     stop = asyncio.Event()
@@ -93,6 +94,8 @@ async def _main(cfg, resources) -> int:
     except ListenError as e:  # exit 2, not 78: a port held or an address not up yet may pass
         log.error("%s", e)
         return 2
+    except StoreDamaged:  # a damaged or deleted store: said where it was met
+        return 1
     except (OSError, sqlite3.Error, RuntimeError) as e:  # expected faults: one line, no traceback
         log.error("%s", e)
         return 1

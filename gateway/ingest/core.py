@@ -29,8 +29,10 @@ from typing import TypeVar
 
 from gateway import protocol as p
 from gateway.ingest.counters import Counters, RateLimitedLog
+from gateway.ingest.reports import KeysReloaded, Refusal, peer_text, spans
 from gateway.store import Store, losses
 from gateway.store.keys import key_id
+from gateway.store.outage import Outage, cause
 
 log = logging.getLogger("serra.ingest")
 
@@ -41,25 +43,6 @@ T = TypeVar("T")
 # unacknowledged records (128), so a genuine resend is always inside the window.
 WINDOW = 1024
 _HEADER = p.MAGIC + bytes([p.VERSION, p.TYPE_RECORD])
-
-
-def _spans(keys: list[tuple[int, int, int]]) -> str:
-    """The records of a batch as a log line names them: ``device 7 seq 3-5, device 9 seq 12``
-    (keys are (device, boot, seq); the seqs' range per device)."""
-    seqs: dict[int, list[int]] = {}
-    for dev, _, seq in keys:
-        seqs.setdefault(dev, []).append(seq)
-    return ", ".join(f"device {d} seq {min(v)}" + (f"-{max(v)}" if max(v) > min(v) else "")
-                     for d, v in sorted(seqs.items()))
-
-
-def peer_text(peer: Hashable) -> str:
-    """Where a packet came from, as a log line says it: ``192.168.4.7:5683`` for a UDP
-    (host, port), ``[fe80::1]:5683`` for IPv6, the port's name for serial."""
-    if isinstance(peer, tuple) and len(peer) >= 2 and isinstance(peer[0], str):
-        host = f"[{peer[0]}]" if ":" in peer[0] else peer[0]
-        return f"{host}:{peer[1]}"
-    return str(peer)
 
 
 @dataclass(slots=True)
@@ -73,20 +56,6 @@ class _Dev:
 
 
 @dataclass(slots=True)
-class Refusal:
-    """A device whose packets are refused as a whole, for the status screen and the logs;
-    kept in IngestCore.refused until the device starts a boot newer than the latest stored."""
-
-    device_id: int
-    reason: str  # "replay_old_boot"
-    count: int  # packets refused since the gateway started
-    boot: int  # boot counter of the latest refused packet, as the board sent it
-    latest: int  # the latest boot stored, in the board's counting (its key's)
-    last: float  # unix time of the latest refused packet
-    recovery: str  # the command that takes the board back
-
-
-@dataclass(slots=True)
 class _Pending:
     rec: p.Record
     t_recv: float
@@ -94,34 +63,20 @@ class _Pending:
     dev: _Dev  # the device state (key, boot base) the record was authenticated with
 
 
-@dataclass(frozen=True)
-class KeysReloaded:
-    """What ``IngestCore.reload_keys`` changed (device ids)."""
-
-    added: tuple[int, ...]
-    rotated: tuple[int, ...]
-    removed: tuple[int, ...]
-
-    def __bool__(self) -> bool:
-        return bool(self.added or self.rotated or self.removed)
-
-    def __str__(self) -> str:
-        parts = [f"{what} {', '.join(map(str, ids))}" for what, ids in
-                 (("added", self.added), ("new key for", self.rotated),
-                  ("removed", self.removed)) if ids]
-        return "; ".join(parts) or "no change"
-
-
 class IngestCore:
     def __init__(self, store: Store, keys: dict[int, bytes], *, max_pending: int = 50_000,
                  batch_delay: float = 0.0, alarm_fraction: float = 0.8,
                  keys_path: str | Path | None = None,
                  clock: Callable[[], float] = time.time,
-                 on_commit: Callable[[int], None] | None = None) -> None:
+                 on_commit: Callable[[int], None] | None = None,
+                 outage: Outage | None = None) -> None:
         """``keys_path``: the keys file (named in the refusal's recovery command); ``clock``:
         receive time [unix s] (the live gateway's clock); ``on_commit(n)``: called on the event
-        loop after each batch of n records is durable."""
+        loop after each batch of n records is durable; ``outage``: where a store that cannot be
+        written is said (gateway/store/outage.py)."""
         self.store = store
+        self.outage = outage or Outage(store.path, "records not acked, the kits keep them")
+        self.retry_s: float | None = None  # a batch is held: the writer tries again after this
         self.clock = clock
         self.on_commit = on_commit
         self.counters = Counters()
@@ -254,7 +209,8 @@ class IngestCore:
         pend = self._pending.get(k)
         if pend is not None:  # resent while its batch is being committed: ack after commit
             self.counters["duplicate"] += 1
-            pend.waiters.append((send, peer))
+            if (send, peer) not in pend.waiters:  # a held batch hears many resends
+                pend.waiters.append((send, peer))
             return None
         if len(self._pending) >= self.max_pending:
             # No ack: the firmware keeps the record and resends it later.
@@ -309,8 +265,8 @@ class IngestCore:
     def _note_health(self, h: p.BoardHealth, boot: int, t: float) -> None:
         try:
             self.store.note_health(h, boot, t)
-        except Exception:  # the next packet carries the same totals
-            log.exception("could not keep the health packet of device %d", h.device_id)
+        except Exception as e:  # the next packet carries the same totals
+            self._note_failed(e, f"the health packet of device {h.device_id}")
 
     def _send(self, send: Send, peer: Hashable, pkt: bytes) -> None:
         try:
@@ -324,9 +280,15 @@ class IngestCore:
         try:
             # counted on the event loop at the next commit (deque.append is thread-safe)
             self._rejected.append(self.store.note_rejected(dev_id, boot, seq, reason, t))
-        except Exception:  # at worst the record is later counted lost
-            log.exception("could not keep rejected record device %d boot %d seq %d", dev_id,
-                          boot, seq)
+        except Exception as e:  # at worst the record is later counted lost
+            self._note_failed(e, f"rejected record device {dev_id} boot {boot} seq {seq}")
+
+    def _note_failed(self, e: Exception, what: str) -> None:
+        """A note that could not be kept: a store fault is the outage's (one line for all)."""
+        if cause(e, self.store.path) is not None:
+            self.outage.failed("ingest", e)
+        else:  # (a damaged file: the next batch's write stops the service)
+            log.error("could not keep %s: %s: %s", what, type(e).__name__, e)
 
     def _lost(self, report: losses.Report) -> None:
         """Count and log the records the boards lost that have just become final."""
@@ -344,6 +306,9 @@ class IngestCore:
                 await asyncio.sleep(self.batch_delay)  # let a batch build up: fewer commits
             self._wake.clear()
             await self._commit(loop)
+            if self.retry_s is not None:  # the store failed: the held batch is tried again
+                await asyncio.sleep(self.retry_s)
+                self._wake.set()
 
     async def _commit(self, loop: asyncio.AbstractEventLoop) -> None:
         keys, self._queue = self._queue, []
@@ -352,15 +317,22 @@ class IngestCore:
         items = [(self._pending[k].rec, self._pending[k].t_recv) for k in keys]
         report = losses.Report()
         try:
-            await loop.run_in_executor(self._exec, self.store.write_batch, items, report)
+            await loop.run_in_executor(self._exec, self._write, items, report)
         except Exception as e:
             # Nothing acknowledged, nothing lost: the senders still hold these records.
             self.counters["store_error"] += len(keys)
+            # a damaged or deleted file raises StoreDamaged here: the service stops
+            self.retry_s = self.outage.failed("ingest", e)
+            if self.retry_s is not None:  # held (a resend joins it), written after the backoff
+                self._queue = keys + self._queue
+                return
             log.error("store write of %d records failed (%s): %s; none acknowledged, the boards "
-                      "keep them and resend", len(keys), _spans(keys), e)
+                      "keep them and resend", len(keys), spans(keys), e)
             for k in keys:
                 self._pending.pop(k, None)
             return
+        self.retry_s = None
+        self.outage.ok("ingest")
         self.counters["stored"] += len(keys)
         while self._rejected:
             self._lost(self._rejected.popleft())
@@ -381,6 +353,12 @@ class IngestCore:
                 self.on_commit(len(keys))
             except Exception:  # a listener's bug must not stop ingest
                 log.exception("on_commit listener failed")
+
+    def _write(self, items: list[tuple[p.Record, float]], report: losses.Report) -> None:
+        """On the store's thread: the batch, committed in the file that was opened (checked
+        before any ack: a deleted store would swallow it)."""
+        self.store.write_batch(items, report)
+        self.store.check_file()
 
     async def drain(self) -> None:
         """Commit whatever is queued (graceful shutdown)."""

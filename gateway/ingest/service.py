@@ -28,6 +28,7 @@ from gateway.ingest.udp import UdpServer
 from gateway.sdnotify import Notifier
 from gateway.store import Store, StoreError, aggregate, retention
 from gateway.store.keys import KeyFileError, load_keys
+from gateway.store.outage import Outage, StoreDamaged
 
 if TYPE_CHECKING:
     from gateway.ingest.serial import SerialTransport
@@ -52,6 +53,8 @@ class IngestConfig:
     # The live gateway (gateway/service/run.py): its clock and a callback after each durable batch.
     clock: Callable[[], float] = time.time
     on_commit: Callable[[int], None] | None = None
+    # Where a store that cannot be written is said (the live gateway shares one with its parts).
+    outage: Outage | None = None
 
 
 class ListenError(OSError):
@@ -121,7 +124,7 @@ async def serve(config: IngestConfig,
     store = Store(config.db)
     core = IngestCore(store, keys, max_pending=config.max_pending,
                       batch_delay=config.batch_delay, keys_path=config.keys,
-                      clock=config.clock, on_commit=config.on_commit)
+                      clock=config.clock, on_commit=config.on_commit, outage=config.outage)
     transports: list = []
     started = False
     try:
@@ -141,15 +144,10 @@ async def serve(config: IngestConfig,
         loop = asyncio.get_running_loop()
         t_stats = loop.time()
         while True:
-            await asyncio.sleep(config.maintenance_every)
+            await asyncio.wait({writer}, timeout=config.maintenance_every)
             if writer.done():
-                writer.result()  # surface a writer crash
-            await core.run_in_store_thread(_maintenance, store, config.policy, config.clock())
-            new_keys = watch.changed_keys()
-            if new_keys is not None:
-                changed = await core.reload_keys(new_keys)
-                log.info("keys file %s read again: %s (%d devices)", config.keys, changed,
-                         len(new_keys))
+                writer.result()  # surface a writer crash (a damaged store: StoreDamaged)
+            await _maintain(core, store, watch, config)
             if loop.time() - t_stats >= config.stats_every:
                 t_stats = loop.time()
                 log.info("ingest counters %s%s", core.counters.snapshot(), _refused(core))
@@ -162,6 +160,30 @@ async def serve(config: IngestConfig,
         store.close()
         if started:
             log.info("ingest stopped; counters %s%s", core.counters.snapshot(), _refused(core))
+
+
+async def _maintain(core: IngestCore, store: Store, watch: KeysWatch,
+                    config: IngestConfig) -> None:
+    """A maintenance round and the keys file read again if it changed. A store that cannot be
+    written skips the round (the outage is said once; the next round tries again)."""
+    try:
+        await core.run_in_store_thread(_maintenance, store, config.policy, config.clock())
+        core.outage.ok("maintenance")
+    except Exception as e:
+        if core.outage.failed("maintenance", e) is None:  # not the store's: the service stops
+            raise
+    stamp = watch.stamp
+    new_keys = watch.changed_keys()
+    if new_keys is None:
+        return
+    try:
+        changed = await core.reload_keys(new_keys)
+    except Exception as e:  # the new keys' boot bases are written to the store
+        if core.outage.failed("maintenance", e) is None:
+            raise
+        watch.stamp = stamp  # read again next round
+        return
+    log.info("keys file %s read again: %s (%d devices)", config.keys, changed, len(new_keys))
 
 
 def _open_serial(core: IngestCore, url: str, baudrate: int) -> SerialTransport:
@@ -244,10 +266,18 @@ async def _run_until_signal(cfg: IngestConfig) -> None:
     """serve() until SIGTERM/SIGINT; under systemd (Type=notify, $NOTIFY_SOCKET) READY=1 once
     every transport is open, STOPPING=1 at the signal."""
     notify = Notifier()
+    serving = ""
 
     def ready(r: Running) -> None:
+        nonlocal serving
         where = [f"udp {_where(*r.udp_address)}"] if r.udp_address else []
-        notify.ready(", ".join(where + ([f"serial {cfg.serial}"] if cfg.serial else [])))
+        serving = ", ".join(where + ([f"serial {cfg.serial}"] if cfg.serial else []))
+        notify.ready(serving)
+
+    def store_changed() -> None:  # STATUS= says a failing store until it is back
+        notify.status("; ".join(filter(None, (outage.status_line(), serving))))
+
+    outage = cfg.outage = Outage(cfg.db, "records not acked, the kits keep them", store_changed)
 
     def stop() -> None:
         notify.stopping()
@@ -301,6 +331,11 @@ def main(argv: list[str] | None = None, prog: str = "python -m gateway.ingest.se
         return os.EX_CONFIG
     except ListenError as e:
         print(f"error: {e}", file=sys.stderr)
+        return 2
+    except StoreDamaged:  # said in the log
+        return 1
+    except sqlite3.Error as e:  # the start's first writes (boot bases): as the open's, exit 2
+        print(f"error: cannot write the store {cfg.db}: {e}", file=sys.stderr)
         return 2
     return 0
 

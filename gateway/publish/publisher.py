@@ -29,6 +29,7 @@ import zenoh
 from zenoh.ext import CacheConfig, MissDetectionConfig, declare_advanced_publisher
 
 from gateway.store.db import close_db, open_db
+from gateway.store.outage import Outage
 from gateway.store.outbox import Outbox, Pending
 
 log = logging.getLogger("serra.publish")
@@ -80,7 +81,11 @@ class OutboxPublisher:
 
     def __init__(self, session: zenoh.Session, db: Path, *, cache: int = 16, resend_s: float = 0.0,
                  clock: Callable[[], float] = time.time, mode: str = "peer",
-                 max_rows: int = 100_000, alarm_fraction: float = 0.8) -> None:
+                 max_rows: int = 100_000, alarm_fraction: float = 0.8,
+                 outage: Outage | None = None) -> None:
+        """``outage``: the service's, told when the outbox cannot be marked sent (the messages
+        already put are put again once it can: the cloud drops repeats)."""
+        self.outage = outage
         self.session, self.db, self.cache, self.resend_s, self.clock = session, db, cache, resend_s, clock
         self.max_rows, self.alarm_fraction = max_rows, alarm_fraction
         self.keys: dict[str, _Key] = {}
@@ -133,18 +138,35 @@ class OutboxPublisher:
                              "restart (the cloud drops repeats)", len(self.resend), self.resend_s)
             self._ready.set()
             while not self._stop.is_set():
-                waiting = self.drain(outbox)
+                try:
+                    waiting = self.drain(outbox)
+                except Exception as e:  # a store that cannot be written: put again later
+                    delay = self.outage.failed("publisher", e) if self.outage else None
+                    if delay is None:
+                        raise
+                    self._stop.wait(delay)
+                    continue
+                if self.outage is not None:
+                    self.outage.ok("publisher")
                 self.drained.set()
                 # Nobody listens on some key: look again soon (a subscriber may have come).
                 self.wake.wait(0.2 if waiting else 1.0)
                 self.wake.clear()
-            self.drain(outbox, final=True)  # what the service made while stopping
+            self._final_drain(outbox)
         except BaseException as e:  # surfaced by the service, which stops
             self._error = e
             log.error("publisher stopped: %s", e)
         finally:
             self._ready.set()
             close_db(conn)
+
+    def _final_drain(self, outbox: Outbox) -> None:
+        """What the service made while stopping; a store failing then is the outage's."""
+        try:
+            self.drain(outbox, final=True)
+        except Exception as e:
+            if self.outage is None or self.outage.failed("publisher", e) is None:
+                raise
 
     def _key(self, key: str) -> _Key:
         k = self.keys.get(key)

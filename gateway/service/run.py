@@ -25,6 +25,7 @@ from gateway.service.settings import GatewayConfig
 from gateway.service.worker import Worker
 from gateway.store import Store, retention
 from gateway.store.live import save_greenhouses
+from gateway.store.outage import Outage, StoreDamaged
 
 log = logging.getLogger("serra.gateway")
 READY = "serra-gateway ready"
@@ -63,15 +64,18 @@ class Gateway:
         self.running: Running | None = None
         self.ingest_counters: dict[str, int] = {}
         self.diagnosis: DiagnosisScheduler | None = None
+        # one for the service: its parts' write failures are said once, waited out together
+        self.outage = Outage(cfg.db, "records not acked, the kits keep them; the estimators and "
+                             "the messages wait")
         self.worker = Worker(cfg, resources, self.clock, self._wake_publisher, self._status_extra,
-                             publish=cfg.zenoh.enabled)
+                             publish=cfg.zenoh.enabled, outage=self.outage)
 
     def _wake_publisher(self, wait: float = 0.0) -> None:
         if self.publisher is not None:
             self.publisher.kick(wait)
 
     def _status_extra(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"ingest": dict(self.ingest_counters)}
+        out: dict[str, Any] = {"ingest": dict(self.ingest_counters), "store": self.outage.status()}
         if self.running is not None:  # kits refused as a whole (a reflashed board), for the screen
             out["refused"] = {str(d): asdict(r) for d, r in self.running.core.refused.items()}
         if self.publisher is not None:
@@ -127,7 +131,7 @@ class Gateway:
         self.publisher = OutboxPublisher(
             self.session, self.cfg.db, cache=z.cache, resend_s=z.resend_on_start_s * self.clock.scale,
             clock=self.clock.now, mode=z.mode, max_rows=self.cfg.outbox_max,
-            alarm_fraction=self.cfg.outbox_alarm)
+            alarm_fraction=self.cfg.outbox_alarm, outage=self.outage)
         self.publisher.start()
         self.history = HistoryQueryable(self.session, self.cfg.db, self.cfg.farm)
 
@@ -173,7 +177,7 @@ async def run_gateway(cfg: GatewayConfig, resources: list[GreenhouseResources],
         policy=retention.Policy(samples_days=cfg.retention_days, outbox_sent_days=cfg.history_days,
                                 estimates_days=cfg.estimates_days,
                                 max_db_bytes=int(cfg.max_db_mb * 2**20)),
-        clock=gw.clock.now, on_commit=lambda n: gw.worker.wake.set())
+        clock=gw.clock.now, on_commit=lambda n: gw.worker.wake.set(), outage=gw.outage)
     tasks: list[asyncio.Task] = []
     with tempfile.TemporaryDirectory(prefix="serra-") as tmp:
         try:
@@ -237,8 +241,10 @@ def _announce(gw: Gateway) -> None:
 
 
 def systemd_status(gw: Gateway) -> str:
-    """The line ``systemctl status`` shows (STATUS=): greenhouses, kits, ports, Zenoh's link."""
-    parts = [f"{_n(len(gw.cfg.greenhouses), 'greenhouse')}, {_n(len(gw.cfg.devices()), 'kit')}"]
+    """The line ``systemctl status`` shows (STATUS=): a store that cannot be written, first;
+    greenhouses, kits, ports, Zenoh's link."""
+    parts = [gw.outage.status_line()] if gw.outage.failing else []
+    parts.append(f"{_n(len(gw.cfg.greenhouses), 'greenhouse')}, {_n(len(gw.cfg.devices()), 'kit')}")
     if gw.running is not None and gw.running.udp_address:
         parts.append(f"udp {gw.running.udp_address[0]}:{gw.running.udp_address[1]}")
     if gw.cfg.serial:
@@ -274,6 +280,8 @@ async def _supervise(gw: Gateway, tasks: list[asyncio.Task], stop: asyncio.Event
             if t.done():
                 t.result()  # a task that ended by itself failed: raise it
         err = gw.failure()
+        if isinstance(err, StoreDamaged):
+            raise err
         if err is not None:
             raise RuntimeError(f"a gateway part stopped: {type(err).__name__}: {err}")
         if gw.running is not None:

@@ -22,6 +22,7 @@ from gateway.service.settings import GatewayConfig
 from gateway.store.aggregate import aggregate
 from gateway.store.db import close_db, open_db
 from gateway.store.live import outbox_backlog, set_status
+from gateway.store.outage import Outage, StoreDamaged
 from gateway.store.outbox import Outbox
 
 log = logging.getLogger("serra.gateway")
@@ -31,11 +32,19 @@ MAX_BATCHES = 4  # estimator batches per greenhouse per pass: records keep flowi
 PUBLISH_FIRST_S = 0.05  # [wall s] the longest the estimators wait for new records to be put
 
 
+def _utc(t: float) -> str:
+    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(t))
+
+
 class Worker:
     def __init__(self, cfg: GatewayConfig, resources: list[GreenhouseResources], clock: Clock,
                  wake_publisher: Callable[[float], None],
-                 status_extra: Callable[[], dict[str, Any]] = dict, publish: bool = True) -> None:
-        """``publish``: make messages (False with Zenoh off: the estimators still run and store)."""
+                 status_extra: Callable[[], dict[str, Any]] = dict, publish: bool = True,
+                 outage: Outage | None = None) -> None:
+        """``publish``: make messages (False with Zenoh off: the estimators still run and store);
+        ``outage``: the service's, told of a store that cannot be written (then waited out)."""
+        self.outage = outage or Outage(cfg.db, "the estimators wait")
+        self._resumed: list[str] = []  # the estimators' resume lines after a failed write
         self.cfg, self.resources, self.clock, self.publish = cfg, resources, clock, publish
         self.wake_publisher, self.status_extra = wake_publisher, status_extra
         self.wake = threading.Event()
@@ -63,9 +72,13 @@ class Worker:
         if self._thread.ident is not None:  # started
             self._thread.join(timeout)
 
-    def _setup(self, conn) -> None:
+    def _setup(self, conn, again: bool = False) -> None:
+        """The estimators resumed from the store, the outbox and the producers; ``again`` after
+        a failed write (the warnings said at start are not said again, the resume lines kept
+        for when the store writes again)."""
         est = self.cfg.estimator
         infos = {}
+        self.pipelines, self._resumed = [], []
         for r in self.resources:
             s = r.settings
             p = GreenhousePipeline(s.name, r.gh, r.model, s.inside, s.outside, r.theta0,
@@ -73,9 +86,13 @@ class Worker:
                                    gap_s=est.gap_s, history_min=est.history_min,
                                    ventilation=r.ventilation, forecast=est.forecast,
                                    snapshot_every_min=est.snapshot_every_min)
-            for line in r.warnings:  # what run --check printed: said once, as the estimator is made
+            for line in [] if again else r.warnings:  # what run --check printed: said once
                 log.warning("%s", line)
-            log.info(p.resume(conn))
+            said = p.resume(conn)
+            if again:
+                self._resumed.append(said)
+            else:
+                log.info(said)
             self.pipelines.append(p)
             lo, hi = r.model.bounds(r.gh)
             assert s.latitude is not None and s.longitude is not None
@@ -90,25 +107,61 @@ class Worker:
         try:
             self._setup(conn)
             self._ready.set()
-            last_status = -STATUS_EVERY
-            more = True
-            while True:
-                stopping = self._stop.is_set()
-                if not more and not stopping:
-                    self.wake.wait(TICK)
-                    self.wake.clear()
+            self._loop(conn)
+        except BaseException as e:
+            self.error = e
+            if not isinstance(e, StoreDamaged):  # that one is said where it is met
+                log.error("gateway worker stopped: %s: %s", type(e).__name__, e)
+        finally:
+            self._ready.set()
+            close_db(conn)
+
+    def _loop(self, conn) -> None:
+        last_status = -STATUS_EVERY
+        more = True
+        while True:
+            stopping = self._stop.is_set()
+            if not more and not stopping:
+                self.wake.wait(TICK)
+                self.wake.clear()
+            try:
                 more = self._pass(conn)
                 if time.monotonic() - last_status >= STATUS_EVERY or stopping:
                     last_status = time.monotonic()
                     self._write_status(conn, stopped=stopping)
-                if stopping:
-                    return
-        except BaseException as e:
-            self.error = e
-            log.error("gateway worker stopped: %s: %s", type(e).__name__, e)
-        finally:
-            self._ready.set()
-            close_db(conn)
+            except Exception as e:
+                if not self._failed(conn, e):
+                    return  # stopping while it fails: the last status row cannot be written
+                more = True
+                continue
+            if self._resumed:  # the first pass that wrote after a failure
+                for line in self._resumed:
+                    log.info("after the store's failure: %s", line)
+                self._resumed = []
+            self.outage.ok("worker")
+            if stopping:
+                return
+
+    def _failed(self, conn, e: Exception) -> bool:
+        """A pass whose write failed: the estimators may have stepped minutes whose rows and
+        state were not committed, so after the backoff they are made again from the store (as
+        a restart would) and step those minutes again. False when the service stops meanwhile;
+        raises what is no store fault."""
+        counts = self.producers.counts if self.producers is not None else None
+        while True:
+            delay = self.outage.failed("worker", e)  # a damaged store raises: the service stops
+            if delay is None:
+                raise e
+            if self._stop.wait(delay):
+                return False
+            try:
+                self._setup(conn, again=True)
+            except Exception as again:  # the store cannot even be read yet
+                e = again
+                continue
+            if counts is not None and self.producers is not None:  # counted since the start
+                self.producers.counts = counts
+            return True
 
     def _pass(self, conn) -> bool:
         """One round; True when an estimator still has minutes to catch up on."""
@@ -150,7 +203,9 @@ class Worker:
     def _service_state(self) -> dict[str, Any]:
         """What the status screen shows of the gateway itself, for one that reads it over Zenoh
         (docs/cloud.md, ``status``): uptime [s], store and disk [bytes], Zenoh peers, ingest
-        counters, whether the daily diagnosis is on (off: the screen shows no last run)."""
+        counters, whether the daily diagnosis is on (off: the screen shows no last run), the
+        store's latest failure to be written since the start (wall clock; it cannot be
+        published while it lasts: the messages wait in the store)."""
         db = self.cfg.db
         size = sum(os.path.getsize(f) for f in (db, f"{db}-wal") if os.path.exists(f))
         try:
@@ -160,10 +215,16 @@ class Worker:
             disk = {}
         extra = self.status_extra()
         z = extra.get("zenoh", {})
-        return {"gatewayUptime": round(time.time() - self.started, 1), "storeSize": size, **disk,
-                "zenohPeers": z.get("peers", 0), "zenohRouters": z.get("routers", 0),
-                "ingestCounters": extra.get("ingest", {}),
-                "diagnosisEnabled": self.cfg.diagnosis.enabled}
+        out = {"gatewayUptime": round(time.time() - self.started, 1), "storeSize": size, **disk,
+               "zenohPeers": z.get("peers", 0), "zenohRouters": z.get("routers", 0),
+               "ingestCounters": extra.get("ingest", {}),
+               "diagnosisEnabled": self.cfg.diagnosis.enabled}
+        last = self.outage.last
+        if last is not None:
+            out["storeLastFailure"] = {"cause": last["cause"], "since": _utc(last["since"]),
+                                       "until": _utc(last["until"]),
+                                       "failedWrites": last["failures"]}
+        return out
 
     def _report_unassigned(self, conn) -> None:
         known = self.cfg.devices()

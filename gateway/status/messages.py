@@ -163,7 +163,7 @@ class Messages:
         kits = self._kits(now)
         status = [doc for (gh, kind), (_, doc) in self.latest.items() if kind == "status"]
         gw = self._gateway(status, answered, link)
-        more = list(notes)
+        more = list(notes) + _store_failure(status)
         if not self.count:
             more.append("no message from a gateway yet")
         return S.Snapshot(source, now, wall, self.farm, tuple(views), tuple(kits), gw, tuple(more))
@@ -275,6 +275,17 @@ class Messages:
             if kind == "diagnosis" and _value(status, "diagnosisEnabled") is not False:
                 out[gh] = S.diagnosis_of(_run_row(t, doc))
         return out
+
+
+def _store_failure(status: list[dict[str, Any]]) -> list[str]:
+    """The note of the store's latest failure to be written, as the newest ``status`` that
+    tells of one says it (``storeLastFailure``, times in UTC)."""
+    told = [d for d in status if isinstance(_value(d, "storeLastFailure"), dict)]
+    if not told:
+        return []
+    f = _value(max(told, key=lambda d: doc_time(d) or 0.0), "storeLastFailure")
+    return [f"store unwritable {f.get('since')}–{f.get('until')}: {f.get('cause')}; nothing "
+            "acknowledged was lost (the kits held their records)"]
 
 
 def _roles(roles: set[str]) -> tuple[str, ...]:

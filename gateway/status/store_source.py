@@ -21,6 +21,7 @@ from gateway.store import StoreError, open_readonly
 from gateway.store.aggregate import QC_MISSING, QC_SPIKE, QC_STUCK
 from gateway.store.board_health import BoardReport
 from gateway.store.live import device_health, findings, outbox_backlog, read_status
+from gateway.store.outage import LOW_FREE_BYTES
 
 DROP = QC_MISSING | QC_SPIKE | QC_STUCK  # as the export drops them
 SIDES = {"inside": ("t_in", "rh_in"), "outside": ("t_out", "rh_out", "i_glob", "wind", "rain")}
@@ -90,6 +91,7 @@ class StoreSource:
             now = float(g["clock_now"])
         if running is False:
             notes.append(f"the gateway is not running: last heartbeat {_ago(age)} ago")
+        notes += _store_notes(status.get("store", ({}, 0.0))[0], running, self._disk(), wall)
         z = status.get("zenoh", ({}, 0.0))[0]
         ob = status.get("outbox", ({}, 0.0))[0]
         pending, oldest = outbox_backlog(self.conn)
@@ -325,6 +327,35 @@ def _finding(f) -> S.Finding:
     d = f.detail if isinstance(f.detail, dict) else {}
     return S.Finding(f.id, f.effect, str(d.get("summary") or f.effect), f.start, f.first_seen,
                      f.last_seen, f.revision)
+
+
+def _store_notes(store: Any, running: bool | None, disk: S.Disk, wall: float) -> list[str]:
+    """A store the gateway could not write (gateway/store/outage.py): as its status row says
+    (written once writes succeed again: a failure in progress shows as a stale heartbeat, said
+    with the disk's free space when that is the cause) and its latest failure for a day."""
+    out = []
+    if running is False and disk.free_bytes is not None and disk.free_bytes < LOW_FREE_BYTES:
+        out.append(f"the store's disk is full ({disk.free_bytes} bytes free): a running gateway "
+                   "cannot write its heartbeat and holds the kits' records unacknowledged")
+    if not isinstance(store, dict):
+        return out
+    if store.get("failing"):
+        out.append(f"store unwritable since {_wall(store.get('since'), wall)}: "
+                   f"{store.get('cause')}")
+    last = store.get("last")
+    if isinstance(last, dict) and wall - float(last.get("until") or 0.0) < 86400:
+        out.append(f"store unwritable {_wall(last.get('since'), wall)}–"
+                   f"{_wall(last.get('until'), wall)}: {last.get('cause')}; nothing acknowledged "
+                   "was lost (the kits held their records)")
+    return out
+
+
+def _wall(t: Any, wall: float) -> str:
+    """A wall time [unix s] as HH:MM, with the date unless it is today's."""
+    if not t:
+        return "?"
+    same_day = time.localtime(float(t))[:3] == time.localtime(wall)[:3]
+    return time.strftime("%H:%M" if same_day else "%Y-%m-%d %H:%M", time.localtime(float(t)))
 
 
 def _ago(s: float | None) -> str:

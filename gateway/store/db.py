@@ -19,6 +19,11 @@ class StoreError(RuntimeError):
     """A file that cannot serve as the store, named with the reason (one line for the user)."""
 
 
+class StoreGone(StoreError):
+    """The store's file was deleted or replaced while open: SQLite writes on into a file no one
+    will open again, so what it commits is lost when the process ends."""
+
+
 # The tables every Serra store has had since schema version 1: a file without them is not ours.
 SERRA_TABLES = frozenset({"samples", "devices", "minute", "meta"})
 _OURS = frozenset(re.findall(r"CREATE TABLE IF NOT EXISTS (\w+)",
@@ -171,6 +176,20 @@ class Store:
     def __init__(self, path: str | Path, *, durable: bool = True) -> None:
         self.path = Path(path)
         self.conn = open_db(path, durable=durable)
+        self._ident = self._identity()
+
+    def _identity(self) -> tuple[int, int] | None:
+        try:
+            st = os.stat(self.path)
+        except OSError:
+            return None
+        return st.st_dev, st.st_ino
+
+    def check_file(self) -> None:
+        """Raise StoreGone when the file at ``path`` is no longer the one opened (deleted, its
+        folder removed, or replaced): call after a commit, before anything is acknowledged."""
+        if self._identity() != self._ident:
+            raise StoreGone(f"{self.path}: the store file was deleted or replaced while open")
 
     def close(self) -> None:
         close_db(self.conn)

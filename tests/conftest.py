@@ -15,7 +15,10 @@ import pytest
 
 from gateway.greenhouse import load_greenhouse
 from gateway.series import Series
+from gateway.vsensor.ort import telemetry_off
 from training.weather import load_bleiswijk, to_minutes
+
+telemetry_off()  # before any test imports onnxruntime (gateway/vsensor/ort.py)
 
 
 def _terminate_as_interrupt(signum: int, frame: object) -> None:

@@ -90,7 +90,9 @@ class VentSensor:
         """``model_kind``: the model whose fluxes will be fed (a model trained on another kind
         is refused); None: the kind the model was trained on (its metadata's ``model_kind``),
         for a caller that feeds whatever the model reads (gateway/service/ventilation.py)."""
-        import onnxruntime as ort
+        from gateway.vsensor.ort import load
+
+        ort = load()
 
         opts = ort.SessionOptions()
         opts.intra_op_num_threads = threads

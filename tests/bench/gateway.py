@@ -33,8 +33,11 @@ import zenoh  # noqa: E402
 from _common import no_arguments, write_result  # noqa: E402
 
 from gateway.publish import zconfig  # noqa: E402
+from gateway.vsensor.ort import telemetry_off  # noqa: E402
 from tests.gateway_harness import EPOCH, GatewayProcess, PyKit, sim_trace, write_config  # noqa: E402
 from training.kitsim import KitClock  # noqa: E402
+
+telemetry_off()  # the gateway and bare interpreters this bench starts import onnxruntime
 
 LAUNCH_WITH_ONNX = """
 import sys, numpy as np

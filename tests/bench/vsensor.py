@@ -97,7 +97,9 @@ def _sklearn_peer(kind: str) -> tuple:
 
 
 def timing(kind: str = "almeria") -> dict:
-    import onnxruntime as ort
+    from gateway.vsensor.ort import load
+
+    ort = load()
 
     gh = load_greenhouse("almeria-palmerillas")  # the house both shipped sensors learnt
     from gateway.vsensor import VentSensor

@@ -48,7 +48,9 @@ class Breakdown:
 
 def onnx_predict(model: str | Path):
     """``predict(u, y_past)`` of a written model (the graph's inputs ``u`` and ``y_past``)."""
-    import onnxruntime as ort
+    from gateway.vsensor.ort import load
+
+    ort = load()
 
     opts = ort.SessionOptions()
     opts.intra_op_num_threads = 1

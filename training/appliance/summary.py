@@ -57,9 +57,13 @@ class Summary:
                + (f" · {self.pending} still in the outbox" if self.pending else "")]
         scored = [s for s in self.skill if s.n]
         if scored:
+            # one n when every horizon has as many scored forecasts, else each its own (a short
+            # run scores more 15-min forecasts than 60-min ones)
+            one = len({s.n for s in scored}) == 1
             out.append("  forecast  MAE " + " · ".join(
-                f"{s.horizon_min} min {s.mae:.2f} °C (persistence {s.persistence_mae:.2f})"
-                for s in scored) + f", n = {scored[-1].n}")
+                f"{s.horizon_min} min {s.mae:.2f} °C (persistence {s.persistence_mae:.2f}"
+                + ("" if one else f", n={s.n}") + ")" for s in scored)  # "n=": never wrapped
+                + (f", n={scored[-1].n}" if one else ""))
         else:
             out.append("  forecast  no forecast scored yet (a forecast is scored once its time "
                        "has come: run longer)")

@@ -78,10 +78,8 @@ anchor = {anchor}
 class GatewayProcess:
     """``python -m gateway run`` in a subprocess; ``udp``/``zenoh`` from its ready line."""
 
-    def __init__(self, config: Path, tmpdir: Path | None = None) -> None:
-        """``tmpdir``: its $TMPDIR (default: the config's folder)."""
+    def __init__(self, config: Path) -> None:
         self.config = config
-        self.tmpdir = tmpdir or config.parent
         self.argv = [sys.executable, "-m", "gateway", "run", "--config", str(config)]
         self.proc: subprocess.Popen | None = None
         self.udp: tuple[str, int] = ("", 0)
@@ -91,8 +89,8 @@ class GatewayProcess:
     def start(self, timeout: float = 90.0) -> None:
         log = open(self.config.parent / "gateway.log", "a")  # noqa: SIM115 - kept by the child
         # its temporary folders in the test's folder: a gateway the test kills leaves its
-        # work folder behind, until a gateway starts there (gateway/service/workdir.py)
-        env = {**os.environ, "TMPDIR": str(self.tmpdir)}
+        # work folder behind (systemd's PrivateTmp clears it on a farm)
+        env = {**os.environ, "TMPDIR": str(self.config.parent)}
         self.proc = subprocess.Popen(self.argv, cwd=self.config.parent, stdout=subprocess.PIPE,
                                      stderr=log, text=True, env=env)
         self.starts += 1

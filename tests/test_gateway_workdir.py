@@ -38,33 +38,41 @@ def others(tmp: Path) -> set[Path]:
     return made
 
 
+def gateway_in(folder: Path, name: str) -> GatewayProcess:
+    """Gateway ``name`` (its config, store and keys ``name``.*) in ``folder``, its $TMPDIR
+    (GatewayProcess's: the config's folder), shared by every gateway of the test, as is the log
+    gateway.log."""
+    toml = write_config(folder, anchor=time.time())
+    (folder / "keys.txt").rename(folder / f"{name}.keys")
+    toml.rename(folder / f"{name}.toml")
+    text = (folder / f"{name}.toml").read_text()
+    (folder / f"{name}.toml").write_text(text.replace('db = "gw.db"', f'db = "{name}.db"')
+                                         .replace('keys = "keys.txt"', f'keys = "{name}.keys"'))
+    return GatewayProcess(folder / f"{name}.toml")
+
+
 def test_a_killed_gateways_work_folder_goes_when_the_next_one_starts(tmp_path: Path) -> None:
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
-    kept = others(tmp)
-    gws = {}
-    for name in ("running", "killed", "next"):
-        (tmp_path / name).mkdir()
-        gws[name] = GatewayProcess(write_config(tmp_path / name, anchor=time.time()), tmp)
+    kept = others(tmp_path)
+    gws = {name: gateway_in(tmp_path, name) for name in ("running", "killed", "next")}
     try:
         gws["running"].start()
-        (running,) = work_folders(tmp) - kept
+        (running,) = work_folders(tmp_path) - kept
         gws["killed"].start()
-        (killed,) = work_folders(tmp) - kept - {running}
+        (killed,) = work_folders(tmp_path) - kept - {running}
         gws["killed"].kill()  # SIGKILL: nothing of it runs to remove its folder
         assert killed.is_dir()
-        gws["next"].start()  # its sweep runs before it is ready
-        assert not killed.exists()
-        (new,) = work_folders(tmp) - kept - {running}
+        gws["next"].start()  # its sweep runs before it is ready (the running one's ran before
+        assert not killed.exists()  # the killed one was there)
+        (new,) = work_folders(tmp_path) - kept - {running}
         assert running.is_dir() and all((d / "data").read_text() == "kept" for d in kept)
         assert gws["running"].stop() == 0 and gws["next"].stop() == 0
     finally:
         for gw in gws.values():
             gw.kill()
-    assert set(tmp.iterdir()) == kept  # each stopped gateway removed its own
-    log = (tmp_path / "next" / "gateway.log").read_text()
+    assert set(tmp_path.glob("serra-*")) == kept  # each stopped gateway removed its own
+    log = (tmp_path / "gateway.log").read_text()
+    assert log.count("removed the work folder") == 1, log
     assert f"removed the work folder(s) of gateways that were killed: {killed}" in log
-    assert "removed the work folder" not in (tmp_path / "running" / "gateway.log").read_text()
 
 
 def dead_gateways_folder(tmp: Path, name: str) -> Path:
@@ -152,22 +160,20 @@ def test_a_stop_mid_diagnosis_removes_the_work_folder_and_ends_the_subprocess(
     exported minutes from the work folder: the gateway kills it, removes the folder, exits 0."""
     src, end = diagnosable_store
     copy_store(src, tmp_path / "gw.db")
-    tmp = tmp_path / "tmp"
-    tmp.mkdir()
     cfg = write_config(tmp_path, anchor=time.time() - (end - EPOCH), scale=1.0,
                        diagnosis="every_hours = 24\ndays = 2.0\nmin_days = 1.5\ntimeout_s = 600")
-    gw = GatewayProcess(cfg, tmp)
+    gw = GatewayProcess(cfg)  # its $TMPDIR: tmp_path
     try:
         gw.start()
         assert gw.proc is not None
         pid = gw.proc.pid
         (child,) = wait_for(lambda: children_running(pid, "gateway diagnose"), 120,
                             "the diagnosis subprocess")
-        (folder,) = work_folders(tmp)
+        (folder,) = work_folders(tmp_path)
         assert (folder / "diagnosis-north.csv").is_file()  # what the subprocess reads
         gw.proc.send_signal(signum)
         assert gw.proc.wait(timeout=60) == 0
         wait_for(lambda: gone(child), 60, "the diagnosis subprocess to end")
     finally:
         gw.kill()
-    assert list(tmp.iterdir()) == []
+    assert list(tmp_path.glob("serra-*")) == []

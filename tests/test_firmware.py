@@ -17,6 +17,7 @@ from tests.mcu_fakes.hostenv import (
     MCU,
     ROOT,
     TICKS_START,
+    fast_clock,
     micropython,
     mpy_env,
     run_mpy,
@@ -296,6 +297,31 @@ def test_firmware_runs_read_the_boards_clock_whatever_the_hosts_uptime(
         assert t0 <= first < later
     else:
         assert later < ran_ms  # 20 ms past a start 5 ms below 2**30: wrapped to 0
+
+
+FAST_CLOCK_MPY = r"""
+import time
+own = time._t.ticks_us  # the interpreter's own clock [us], under the fake
+a0 = own(); b0 = time.ticks_ms(); c0 = own()
+time.sleep_ms(160)
+c1 = own(); b1 = time.ticks_ms(); a1 = own()
+print(a0, c0, b0, b1, c1, a1)
+"""
+
+
+@pytest.mark.skipif(micropython() is None, reason="micropython not installed")
+def test_a_fast_board_clock_runs_its_rate_times_the_interpreters_own(tmp_path: Path) -> None:
+    """fast_clock(8), the outage tests' clock: the board's ms run 8 times the interpreter's own
+    (to the ms either way, between readings taken just outside and just inside), and a
+    sleep_ms(160) lasts 160 board ms (20 of the host's)."""
+    script = tmp_path / "fast.py"
+    script.write_text(FAST_CLOCK_MPY)
+    r = run_mpy(script, env=fast_clock(8), timeout=60)
+    assert r.returncode == 0, r.stdout + r.stderr
+    a0, c0, b0, b1, c1, a1 = map(int, r.stdout.split())
+    board = (b1 - b0) % (1 << 30)
+    assert 8 * (c1 - c0) // 1000 - 1 <= board <= 8 * (a1 - a0) // 1000 + 1
+    assert board >= 160
 
 
 @pytest.mark.skipif(micropython() is None, reason="micropython not installed")

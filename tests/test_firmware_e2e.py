@@ -26,7 +26,7 @@ import pytest
 
 from gateway import protocol as p
 from gateway.store.keys import write_keys
-from tests.mcu_fakes.hostenv import MCU, micropython, mpy_env
+from tests.mcu_fakes.hostenv import MCU, fast_clock, micropython, mpy_env
 
 T = TypeVar("T")
 
@@ -261,9 +261,12 @@ def test_firmware_delivers_every_record_exactly_once_over_lossy_udp(tmp_path: Pa
         "sample_ms": 25, "period_s": 0.1, "ack_timeout_ms": 100, "wdt_ms": 5000,
         "pins": {"dht_in": 4, "dht_out": 16, "pyranometer": 34, "anemometer": 35, "rain": 27}}))
     n = 120
+    # The board's clock at 4x; its watchdog stays 5000 board ms (1.25 s of the host's): that no
+    # Wi-Fi backoff or outage blocks the loop is this test's point
+    clock = fast_clock(4)
     try:
         # First boot: Wi-Fi fails twice before connecting (backoff, no reboot).
-        fw = Firmware(dev, trace, wifi="fail,fail,ok")
+        fw = Firmware(dev, trace, wifi="fail,fail,ok", env=clock)
         try:
             recs = run_until_delivered(fw, db, 0, n, timeout=120)
         finally:
@@ -274,7 +277,7 @@ def test_firmware_delivers_every_record_exactly_once_over_lossy_udp(tmp_path: Pa
         check_exactly_once(recs, rows, n)
         # Second boot: the flash counter moves on, sequence numbers restart at 0, still unique.
         # The access point vanishes for 2 s mid-stream: records wait in the ring, no reset.
-        fw2 = Firmware(dev, trace, outage="1000:2000")
+        fw2 = Firmware(dev, trace, outage="1000:2000", env=clock)
         try:
             recs2 = run_until_delivered(fw2, db, 1, 40, timeout=90)
         finally:
@@ -289,7 +292,7 @@ def test_firmware_delivers_every_record_exactly_once_over_lossy_udp(tmp_path: Pa
         first = stored(db, 0)
         for f in dev.glob("boot.cnt*"):
             f.unlink()
-        fw3 = Firmware(dev, trace)
+        fw3 = Firmware(dev, trace, env=clock)
         try:
             line = wait_for_line(gw_log, "device 7 refused", fw3, timeout=60)
         finally:
@@ -301,7 +304,7 @@ def test_firmware_delivers_every_record_exactly_once_over_lossy_udp(tmp_path: Pa
         gw.send_signal(signal.SIGTERM)
         gw.wait(timeout=30)
         gw, proxy.gw = start_gateway(db, keys, gw_log)
-        fw4 = Firmware(dev, trace)
+        fw4 = Firmware(dev, trace, env=clock)
         try:
             recs4 = run_until_delivered(fw4, db, 2, 20, timeout=90)  # stored after boot 1
         finally:

@@ -16,7 +16,7 @@ import pytest
 from gateway import protocol as p
 from gateway.store.keys import write_keys
 from gateway.store.losses import RING_MAX_SPAN
-from tests.mcu_fakes.hostenv import micropython
+from tests.mcu_fakes.hostenv import FAST, fast_clock, micropython
 from tests.test_firmware_e2e import KEY, Firmware, LossyProxy, make_trace, start_gateway, wait_for_line
 from tests.test_firmware_outage import RING, losses, mem_lines
 
@@ -54,9 +54,9 @@ def test_the_boards_drop_count_arrives_in_a_health_packet(tmp_path: Path) -> Non
     (dev / "config.json").write_text(json.dumps({
         "device_id": 7, "key": KEY.hex(), "wifi": {"ssid": "serra", "password": "pw"},
         "gateway": {"host": "127.0.0.1", "port": proxy.port}, "sample_ms": 25,
-        "period_s": 0.1, "ack_timeout_ms": 100, "wdt_ms": 5000, "ring_size": RING,
+        "period_s": 0.1, "ack_timeout_ms": 100, "wdt_ms": 5000 * FAST, "ring_size": RING,
         "health_s": 1, "pins": {"dht_in": 4, "dht_out": 16}}))
-    fw = Firmware(dev, trace)
+    fw = Firmware(dev, trace, env=fast_clock())  # see board() in test_firmware_outage
     cli = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
         fw.wait(lambda: len(mem_lines(fw)) >= 4, 180, "200 records")

@@ -13,7 +13,7 @@ import pytest
 
 from gateway.store.keys import write_keys
 from gateway.store.losses import RING_MAX_SPAN
-from tests.mcu_fakes.hostenv import micropython
+from tests.mcu_fakes.hostenv import FAST, fast_clock, micropython
 from tests.test_firmware_e2e import (
     KEY,
     Firmware,
@@ -54,13 +54,15 @@ def wait_until(fw: Firmware, cond, what: str, timeout: float) -> list[dict[str, 
     return fw.wait(met, timeout, what)
 
 
-def board(tmp_path: Path, port: int, host: str = "127.0.0.1") -> Path:
+def board(tmp_path: Path, port: int, host: str = "127.0.0.1", rate: int = FAST) -> Path:
+    """The board's folder, for a run with ``fast_clock(rate)``: its watchdog still bites after
+    5 s of the host's time (a stalled interpreter on a loaded machine), not 5/rate s."""
     dev = tmp_path / "board"
     dev.mkdir()
     (dev / "config.json").write_text(json.dumps({
         "device_id": 7, "key": KEY.hex(), "wifi": {"ssid": "serra", "password": "pw"},
         "gateway": {"host": host, "port": port},
-        "sample_ms": 25, "period_s": 0.1, "ack_timeout_ms": 100, "wdt_ms": 5000,
+        "sample_ms": 25, "period_s": 0.1, "ack_timeout_ms": 100, "wdt_ms": 5000 * rate,
         "ring_size": RING,
         "pins": {"dht_in": 4, "dht_out": 16, "pyranometer": 34, "anemometer": 35, "rain": 27}}))
     return dev
@@ -75,7 +77,7 @@ def test_gateway_away_longer_than_the_ring_then_back(tmp_path: Path) -> None:
     make_trace(trace)
     gw, addr = start_gateway(db, keys, tmp_path / "gateway.log")
     proxy = LossyProxy(addr, loss=1.0, seed=3)  # the gateway is away
-    fw = Firmware(board(tmp_path, proxy.port), trace)
+    fw = Firmware(board(tmp_path, proxy.port), trace, env=fast_clock())
     try:
         away = wait_until(fw, lambda m: len(m) >= 6, "300 records", timeout=180)
         full = [m for m in away if m["records"] > RING]
@@ -121,7 +123,7 @@ def test_the_records_the_ring_dropped_are_counted_lost_by_the_gateway(tmp_path: 
     gw, addr = start_gateway(db, keys, log)
     proxy = LossyProxy(addr, loss=1.0, seed=5)  # the gateway is away
     dev = board(tmp_path, proxy.port)
-    fw = Firmware(dev, trace)
+    fw = Firmware(dev, trace, env=fast_clock())
     try:
         wait_until(fw, lambda m: len(m) >= 4, "200 records", timeout=180)
         proxy.loss = 0.0  # back
@@ -136,7 +138,7 @@ def test_the_records_the_ring_dropped_are_counted_lost_by_the_gateway(tmp_path: 
         assert losses(db) == {0: dropped}
         assert min(stored(db, 0)) == dropped
         fw.stop()
-        fw = Firmware(dev, trace)  # a plain restart: boot 1
+        fw = Firmware(dev, trace, env=fast_clock())  # a plain restart: boot 1
         run_until_delivered(fw, db, 1, 20, timeout=120)
     finally:
         fw.stop()
@@ -162,8 +164,10 @@ def test_records_made_before_the_tick_wrap_and_sent_after_it_are_dated_right(
     make_trace(trace)
     gw, addr = start_gateway(db, keys, tmp_path / "gateway.log")
     proxy = LossyProxy(addr, loss=1.0, seed=4)  # away until after the wrap
-    clock = {"SERRA_TICKS_BITS": str(bits), "SERRA_TICKS_START": str(edge - 3000)}
-    fw = Firmware(board(tmp_path, proxy.port), trace, env=clock)
+    # 4x: the board boots (~40 ms of the host's time) well inside the 3 s before the wrap
+    clock = {"SERRA_TICKS_BITS": str(bits), "SERRA_TICKS_START": str(edge - 3000),
+             **fast_clock(4)}
+    fw = Firmware(board(tmp_path, proxy.port, rate=4), trace, env=clock)
     n = 60
     try:
         fw.wait(lambda: len(fw.records()) >= 45, 120, "45 records")  # 4.5 s: past the wrap
@@ -187,7 +191,8 @@ def test_records_made_before_the_tick_wrap_and_sent_after_it_are_dated_right(
     t = [r[1] for r in rows]
     steps = [b - a for a, b in zip(t, t[1:], strict=False)]
     # a wrapped age is days off (2**30 ms is 12.4 d); 30 s leaves room for a loaded machine's
-    # delays between the board stamping an age and the gateway reading its clock
+    # delays between the board stamping an age and the gateway reading its clock, and for the
+    # board's ms running 4x the gateway's (a record A board ms old is dated 3/4 A early: <5 s)
     assert all(abs(s - 0.1) < 30.0 for s in steps), steps
     assert abs(t[-1] - t[0] - 0.1 * (n - 1)) < 30.0
 
@@ -200,7 +205,7 @@ def test_a_gateway_name_that_does_not_resolve_is_looked_up_with_backoff(
     The name has a 70-byte label, which the resolver refuses without asking any server."""
     trace = tmp_path / "trace"
     make_trace(trace)
-    fw = Firmware(board(tmp_path, 5683, host="a" * 70 + ".invalid"), trace)
+    fw = Firmware(board(tmp_path, 5683, host="a" * 70 + ".invalid"), trace, env=fast_clock())
     try:
         mem = wait_until(fw, lambda m: len(m) >= 2, "100 records", timeout=120)
     finally:

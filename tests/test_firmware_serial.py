@@ -19,7 +19,7 @@ import pytest
 
 from gateway.store.keys import write_keys
 from tests.gateway_harness import wait_for
-from tests.mcu_fakes.hostenv import micropython, run_mpy
+from tests.mcu_fakes.hostenv import fast_clock, micropython, run_mpy
 from tests.test_firmware_e2e import (
     KEY,
     ROOT,
@@ -88,7 +88,7 @@ def test_firmware_over_uart_with_a_noisy_cable(tmp_path: Path) -> None:
     board.mkdir()
     (board / "config.json").write_text(json.dumps({
         "device_id": 7, "key": KEY.hex(), "transport": "uart", "uart": {"id": 1},
-        "sample_ms": 50, "period_s": 0.2, "ack_timeout_ms": 300, "wdt_ms": 5000, "health_s": 1,
+        "sample_ms": 50, "period_s": 0.2, "ack_timeout_ms": 300, "wdt_ms": 5000 * 4, "health_s": 1,
         "pins": {"dht_in": 4, "dht_out": 16, "pyranometer": 34, "anemometer": 35, "rain": 27}}))
     os.environ["SERRA_UART_1"] = board_tty
     n = 40
@@ -96,7 +96,7 @@ def test_firmware_over_uart_with_a_noisy_cable(tmp_path: Path) -> None:
         assert gw.stdout is not None
         assert select.select([gw.stdout], [], [], 60)[0], "gateway did not start"
         assert "listening serial" in gw.stdout.readline()
-        fw = Firmware(board, trace)
+        fw = Firmware(board, trace, env=fast_clock(4))  # 4x; its watchdog 5 s of the host's
         try:
             recs = run_until_delivered(fw, db, 0, n, timeout=120)
             # health packets (74-byte frames) go over the UART too: one a second here

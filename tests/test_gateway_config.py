@@ -215,7 +215,8 @@ def test_a_port_in_use_is_one_line_naming_it(tmp_path: Path) -> None:
         port = busy.getsockname()[1]
         cfg.write_text(cfg.read_text().replace('listen = "127.0.0.1:0"', f'listen = "127.0.0.1:{port}"'))
         r = subprocess.run([sys.executable, "-m", "gateway", "run", "--config", str(cfg)],
-                           capture_output=True, text=True, timeout=120, cwd=tmp_path)
+                           capture_output=True, text=True, timeout=120, cwd=tmp_path,
+                           env={**os.environ, "TMPDIR": str(tmp_path)})
     finally:
         busy.close()
     assert r.returncode == 2 != os.EX_CONFIG  # a held port may free up: the units restart on 2

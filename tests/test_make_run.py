@@ -1,7 +1,8 @@
 """``make run`` (``python -m training run``): the whole kit on loopback, the real firmware under
-MicroPython at 300×. Without a terminal it runs a bounded time and prints a summary whose numbers
-hold together; on a terminal (tmux, 80×24) it shows the status screen and Ctrl-C stops
-everything. Either way no process of the run survives it."""
+MicroPython at 300× (600× for the bounded run: its 75 minutes in 7.5 s). Without a terminal it
+runs a bounded time and prints a summary whose numbers hold together; on a terminal (tmux,
+80×24) it shows the status screen and Ctrl-C stops everything. Either way no process of the run
+survives it."""
 
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ from pathlib import Path
 
 import pytest
 
+from gateway.service.workdir import PREFIX
 from tests.gateway_harness import wait_for
 from training.kitsim import micropython
 
@@ -73,15 +75,28 @@ def on_loopback(a: ipaddress.IPv4Address | ipaddress.IPv6Address) -> bool:
     return a.is_loopback or bool(mapped and mapped.is_loopback)
 
 
+def run_env(tmp_path: Path, **extra: str) -> dict[str, str]:
+    """The run's environment: $TMPDIR the test's ``tmp`` folder (made here), so that the
+    gateway's work folder (gateway/service/workdir.py) lands there, not in /tmp: a run whose
+    gateway is killed (a second Ctrl-C, a failed test's clean-up) leaves it behind."""
+    (tmp_path / "tmp").mkdir(exist_ok=True)
+    return {**os.environ, "TMPDIR": str(tmp_path / "tmp"), **extra}
+
+
+def in_tmp(tmp_path: Path) -> list[str]:
+    """What the run has in its $TMPDIR (``run_env``): the running gateway's work folder."""
+    return [PREFIX if p.name.startswith(PREFIX) else p.name for p in (tmp_path / "tmp").iterdir()]
+
+
 def test_bounded_run_without_a_terminal_prints_a_consistent_summary(tmp_path: Path) -> None:
     out, log = tmp_path / "run", tmp_path / "stdout.txt"
     # a user's shell, where `python` is not the venv's (make run calls .venv/bin/python)
     venv_bin = os.path.dirname(sys.executable)
-    env = {**os.environ, "PATH": os.pathsep.join(d for d in os.environ.get("PATH", "").split(os.pathsep)
-                                                 if os.path.abspath(d) != venv_bin)}
+    env = run_env(tmp_path, PATH=os.pathsep.join(d for d in os.environ.get("PATH", "").split(os.pathsep)
+                                                 if os.path.abspath(d) != venv_bin))
     with log.open("w") as stdout:
         proc = subprocess.Popen([sys.executable, "-m", "training", "run", "--minutes", "75", "--scale",
-                                 "300", "--no-calibrate", "--out", str(out)], cwd=tmp_path,
+                                 "600", "--no-calibrate", "--out", str(out)], cwd=tmp_path,
                                 stdout=stdout, stderr=subprocess.STDOUT, text=True,
                                 stdin=subprocess.DEVNULL, env=env)
     try:
@@ -91,6 +106,7 @@ def test_bounded_run_without_a_terminal_prints_a_consistent_summary(tmp_path: Pa
         assert started is not True, log.read_text()
         listening = listening_tcp(int(started[1]))
         assert listening and all(map(on_loopback, listening)), listening
+        assert in_tmp(tmp_path) == [PREFIX]  # in the test's folder, not in /tmp
         assert proc.wait(600) == 0, log.read_text()
     finally:
         if proc.poll() is None:
@@ -100,6 +116,7 @@ def test_bounded_run_without_a_terminal_prints_a_consistent_summary(tmp_path: Pa
     assert "\x1b" not in text
     pgid = int(re.search(r"process group (\d+)", text)[1])
     assert group_gone(pgid), "a process of the run survived it"
+    assert list((tmp_path / "tmp").iterdir()) == []  # the gateway stopped: its folder gone
     s = json.loads((out / "summary.json").read_text())
     # every record the gateway stored was made by the kit; each became an inside and an outside
     # measurement (kit 7 is both sides); everything made was published, and received once
@@ -108,7 +125,8 @@ def test_bounded_run_without_a_terminal_prints_a_consistent_summary(tmp_path: Pa
     assert s["made"] == s["published"] == s["received"] > s["measurements"]
     assert s["pending"] == 0
     # the estimator steps once per stored minute; records drifting 57-63 s apart (a loaded
-    # machine at 300×) put two in some minutes: 74 records, 69 minutes in one busy run
+    # machine at 300×; twice that at 600×) put two in some minutes: 74 records, 69 minutes in
+    # one busy run at 300×
     minutes = count_rows(out / "serra.db", "minute")
     assert 50 <= minutes <= s["stored"]  # every stored minute holds a record or more
     assert minutes - 3 <= s["estimated"] <= minutes
@@ -157,6 +175,7 @@ def test_a_signal_during_the_set_up_stops_it_exits_128_plus_its_number_and_leave
         assert up is True and proc.poll() is None, log.read_text()
         groups = {process_group_of(pid) for pid in pids_of(gateway)}
         assert groups, "the gateway is not running"
+        assert in_tmp(tmp_path) == [PREFIX]  # in the test's folder, not in /tmp
         proc.send_signal(signum)
         assert proc.wait(180) == 128 + signum, log.read_text()
         left = [g for g in groups if not group_gone(g)], pids_mentioning(out)  # before our kill
@@ -167,6 +186,7 @@ def test_a_signal_during_the_set_up_stops_it_exits_128_plus_its_number_and_leave
     if "kit 7 started" not in text:  # stopped in the set-up: nothing ran, nothing to sum up
         assert "summary:" not in text and not (out / "summary.json").exists()
     assert left == ([], []), f"a process of the run survived the Ctrl-C: {left}"
+    assert list((tmp_path / "tmp").iterdir()) == []  # the gateway stopped: its folder gone
 
 
 def test_ctrl_c_again_while_stopping_kills_the_children_and_exits_130(tmp_path: Path) -> None:
@@ -243,7 +263,8 @@ def start_a_day_run(tmp_path: Path) -> tuple[subprocess.Popen, Path, Path, str]:
         proc = subprocess.Popen([sys.executable, "-m", "training", "run", "--minutes", "1440",
                                  "--scale", "300", "--no-calibrate", "--out", str(out)], cwd=tmp_path,
                                 stdout=stdout, stderr=subprocess.STDOUT, text=True,
-                                stdin=subprocess.DEVNULL, preexec_fn=sigint_as_at_a_terminal)
+                                stdin=subprocess.DEVNULL, preexec_fn=sigint_as_at_a_terminal,
+                                env=run_env(tmp_path))
     return proc, out, log, f"{sys.executable} -m gateway run --config {out / 'gateway.toml'}"
 
 
@@ -279,7 +300,7 @@ def test_on_a_terminal_the_status_screen_shows_and_ctrl_c_stops_everything(tmp_p
     cmd = (f"{sys.executable} -m training run --scale 300 --no-calibrate --out {out}; "
            f"echo EXIT=$?; sleep 600")
     subprocess.run([*tmux, "new-session", "-d", "-s", name, "-x", "80", "-y", "24", "-c",
-                    str(tmp_path), cmd], check=True, timeout=60)
+                    str(tmp_path), cmd], check=True, timeout=60, env=run_env(tmp_path))
 
     def screen() -> str:
         return subprocess.run([*tmux, "capture-pane", "-p", "-t", name], capture_output=True,
@@ -290,6 +311,7 @@ def test_on_a_terminal_the_status_screen_shows_and_ctrl_c_stops_everything(tmp_p
                         "the status screen with a scored forecast")
         lines = shot.splitlines()
         assert "farm demo-farm · greenhouse north (1/1)" in lines[0] and "×300" in lines[0]
+        assert in_tmp(tmp_path) == [PREFIX]  # in the test's folder, not in /tmp
         assert "q quit" in lines[-1] and len(lines) <= 24
         print("\n--- make run, 80x24 ---\n" + shot)
         subprocess.run([*tmux, "send-keys", "-t", name, "C-c"], check=True, timeout=60)
@@ -307,6 +329,7 @@ def test_on_a_terminal_the_status_screen_shows_and_ctrl_c_stops_everything(tmp_p
         time.sleep(0.1)
     s = json.loads((out / "summary.json").read_text())
     assert s["published"] == s["received"] and s["stored"] > 0
+    assert list((tmp_path / "tmp").iterdir()) == []  # the gateway stopped: its folder gone
 
 
 def private_tmux(folder: Path) -> list[str]:
@@ -339,7 +362,7 @@ def test_a_terminal_that_hangs_up_under_a_session_leader_that_waits_stops_the_ru
     argv = f"{sys.executable} -m training run --scale 300 --no-calibrate --out {out}"
     cmd = f"trap '' HUP; {argv}; true"  # `; true`: the shell waits, it does not exec the run
     subprocess.run([*tmux, "new-session", "-d", "-s", name, "-x", "80", "-y", "24", "-c",
-                    str(tmp_path), cmd], check=True, timeout=60)
+                    str(tmp_path), cmd], check=True, timeout=60, env=run_env(tmp_path))
     run = gw = []
     try:
         wait_for(lambda: "farm demo-farm" in subprocess.run(
@@ -348,6 +371,7 @@ def test_a_terminal_that_hangs_up_under_a_session_leader_that_waits_stops_the_ru
         run = pids_of(argv)
         gw = pids_of(f"{sys.executable} -m gateway run --config {out / 'gateway.toml'}")
         assert len(run) == 1 and len(gw) == 1, (run, gw)
+        assert in_tmp(tmp_path) == [PREFIX]  # in the test's folder, not in /tmp
         subprocess.run([*tmux, "kill-session", "-t", name], timeout=60)  # the terminal hangs up
         wait_for(lambda: not pids_of(argv) and group_gone(gw[0]), 180,
                  "the run and every process of its group to stop")
@@ -361,3 +385,4 @@ def test_a_terminal_that_hangs_up_under_a_session_leader_that_waits_stops_the_ru
                 os.killpg(pgid, signal.SIGKILL)
     s = json.loads((out / "summary.json").read_text())
     assert s["published"] == s["received"] and s["stored"] > 0
+    assert list((tmp_path / "tmp").iterdir()) == []  # the gateway stopped: its folder gone

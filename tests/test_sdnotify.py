@@ -68,11 +68,13 @@ class NotifySocket:
 @contextmanager
 def service(argv: list[str], cwd: Path, notify: str,
             **env: str) -> Iterator[tuple[subprocess.Popen, NotifySocket]]:
-    """A service process told to notify ``notify``; killed if the test left it running."""
+    """A service process told to notify ``notify``; killed if the test left it running (its
+    temporary folders in ``cwd``: a killed gateway leaves its work folder)."""
     sock = NotifySocket(notify)
     with (cwd / "service.stderr").open("w") as err:
         proc = subprocess.Popen(argv, cwd=cwd, stdout=subprocess.PIPE, stderr=err,
-                                env={**os.environ, "NOTIFY_SOCKET": notify, **env})
+                                env={**os.environ, "NOTIFY_SOCKET": notify, "TMPDIR": str(cwd),
+                                     **env})
     try:
         yield proc, sock
     finally:

@@ -10,10 +10,8 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import tempfile
 from collections.abc import Callable
 from dataclasses import asdict
-from pathlib import Path
 from typing import Any
 
 from gateway.ingest.service import IngestConfig, ListenError, Running, serve
@@ -22,6 +20,7 @@ from gateway.service.clock import Clock, make_clock
 from gateway.service.diagnosis import DiagnosisScheduler
 from gateway.service.resources import GreenhouseResources
 from gateway.service.settings import GatewayConfig
+from gateway.service.workdir import work_folder
 from gateway.service.worker import Worker
 from gateway.store import Store, retention
 from gateway.store.live import save_greenhouses
@@ -179,7 +178,7 @@ async def run_gateway(cfg: GatewayConfig, resources: list[GreenhouseResources],
                                 max_db_bytes=int(cfg.max_db_mb * 2**20)),
         clock=gw.clock.now, on_commit=lambda n: gw.worker.wake.set(), outage=gw.outage)
     tasks: list[asyncio.Task] = []
-    with tempfile.TemporaryDirectory(prefix="serra-") as tmp:
+    with work_folder() as tmp:  # removed at the end, or at a later start if this one is killed
         try:
             if cfg.zenoh.enabled:
                 await asyncio.to_thread(gw.start_zenoh)
@@ -199,7 +198,7 @@ async def run_gateway(cfg: GatewayConfig, resources: list[GreenhouseResources],
                 _ingest_failed(ingest, cfg)
             if cfg.diagnosis.enabled:  # it reads its kept runs from the store: off the loop
                 gw.diagnosis = await asyncio.to_thread(
-                    DiagnosisScheduler, cfg, resources, gw.clock.now, Path(tmp), gw.worker.wake.set)
+                    DiagnosisScheduler, cfg, resources, gw.clock.now, tmp, gw.worker.wake.set)
                 tasks.append(asyncio.create_task(gw.diagnosis.run_forever(), name="diagnosis"))
             _announce(gw)
             notify.ready(systemd_status(gw))

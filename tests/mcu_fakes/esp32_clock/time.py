@@ -9,6 +9,10 @@ the interpreter starts), and the clock runs at the real rate from there, whateve
 $SERRA_TICKS_BITS sets the period (30, the ESP32's and every 32-bit port's, unless set; 62:
 the unix port's own, to run the firmware as the unix port would on a host up that long, with
 the port's own ticks_add and ticks_diff).
+$SERRA_TICKS_RATE (an integer, 1 unless set) runs the board's clock that many times faster than
+the host's, and shortens sleep_ms() and sleep_us() as much: a test whose point is a count of
+records (an outage longer than the ring, the gateway's 512-record span) need not wait a real
+0.1 s for each. (time() stays the host's: the firmware reads only ticks.)
 Everything else is the real module.
 """
 
@@ -19,7 +23,7 @@ _path = sys.path
 sys.path = []  # import the built-in module this file shadows
 try:
     import time as _t
-    from time import sleep, sleep_ms, sleep_us, time, time_ns  # noqa: F401  (re-exported)
+    from time import sleep, time, time_ns  # noqa: F401  (re-exported)
 finally:
     sys.path = _path
 
@@ -27,11 +31,20 @@ _BITS = int(os.getenv("SERRA_TICKS_BITS") or "30")
 _MASK = (1 << _BITS) - 1
 _HALF = 1 << (_BITS - 1)
 _START = int(os.getenv("SERRA_TICKS_START") or "0")
-_T0 = _t.ticks_ms()
+_RATE = int(os.getenv("SERRA_TICKS_RATE") or "1")
+_T0 = _t.ticks_us()
 
 
 def ticks_ms():
-    return (_t.ticks_diff(_t.ticks_ms(), _T0) + _START) & _MASK
+    return (_t.ticks_diff(_t.ticks_us(), _T0) * _RATE // 1000 + _START) & _MASK
+
+
+def sleep_us(us):
+    _t.sleep_us(us // _RATE)
+
+
+def sleep_ms(ms):
+    _t.sleep_us(ms * 1000 // _RATE)
 
 
 def ticks_add(t, delta):

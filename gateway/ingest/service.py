@@ -27,6 +27,7 @@ from gateway.ingest.keys_watch import KeysWatch
 from gateway.ingest.udp import UdpServer
 from gateway.sdnotify import Notifier
 from gateway.store import Store, StoreError, aggregate, retention
+from gateway.store.capacity import CapacityWatch
 from gateway.store.keys import KeyFileError, load_keys
 from gateway.store.outage import Outage, StoreDamaged
 
@@ -96,10 +97,12 @@ def _open_udp(core: IngestCore, host: str, port: int) -> UdpServer:
         raise ListenError(f"cannot listen on {_where(host, port)}: {why}") from None
 
 
-def _maintenance(store: Store, policy: retention.Policy, now: float) -> None:
+def _maintenance(store: Store, policy: retention.Policy, now: float, watch: CapacityWatch
+                 ) -> None:
+    # measured first: a full disk fails the writes below, and is then what most needs saying
+    retention.watch_capacity(watch, store.path, policy)
     aggregate.aggregate(store.conn)
     retention.apply(store.conn, policy, now)
-    retention.capacity_alarms(store.path, policy)
 
 
 @dataclass
@@ -115,6 +118,7 @@ async def serve(config: IngestConfig,
                 on_ready: Callable[[Running], None] | None = None) -> None:
     """Run until cancelled. Prints one 'listening' line per transport (tests read the port)."""
     watch = KeysWatch(config.keys)
+    capacity = CapacityWatch()  # its alarms said once, not every round
     keys = load_keys(config.keys)
     if not keys:
         log.warning("keys file %s lists no device: every packet will be refused as "
@@ -147,7 +151,7 @@ async def serve(config: IngestConfig,
             await asyncio.wait({writer}, timeout=config.maintenance_every)
             if writer.done():
                 writer.result()  # surface a writer crash (a damaged store: StoreDamaged)
-            await _maintain(core, store, watch, config)
+            await _maintain(core, store, watch, config, capacity)
             if loop.time() - t_stats >= config.stats_every:
                 t_stats = loop.time()
                 log.info("ingest counters %s%s", core.counters.snapshot(), _refused(core))
@@ -163,11 +167,12 @@ async def serve(config: IngestConfig,
 
 
 async def _maintain(core: IngestCore, store: Store, watch: KeysWatch,
-                    config: IngestConfig) -> None:
+                    config: IngestConfig, capacity: CapacityWatch) -> None:
     """A maintenance round and the keys file read again if it changed. A store that cannot be
     written skips the round (the outage is said once; the next round tries again)."""
     try:
-        await core.run_in_store_thread(_maintenance, store, config.policy, config.clock())
+        await core.run_in_store_thread(_maintenance, store, config.policy, config.clock(),
+                                       capacity)
         core.outage.ok("maintenance")
     except Exception as e:
         if core.outage.failed("maintenance", e) is None:  # not the store's: the service stops

@@ -29,7 +29,7 @@ from gateway.sdnotify import Notifier
 from gateway.store import Store, StoreError, aggregate, retention
 from gateway.store.capacity import CapacityWatch
 from gateway.store.keys import KeyFileError, load_keys
-from gateway.store.outage import Outage, StoreDamaged
+from gateway.store.outage import Outage, StoreCorrupt, StoreDamaged, damaged, exit_status
 
 if TYPE_CHECKING:
     from gateway.ingest.serial import SerialTransport
@@ -310,7 +310,8 @@ def main(argv: list[str] | None = None, prog: str = "python -m gateway.ingest.se
                                 max_db_bytes=int(args.max_db_mb * 2**20)))
     # The keys file is the service's configuration: a wrong one exits 78 (EX_CONFIG), which the
     # unit's RestartPreventExitStatus= keeps from restarting; the store, the address and the serial
-    # port exit 2 (a disk, a port or a USB cable can come right by themselves: systemd retries).
+    # port exit 2 (a disk, a port or a USB cable can come right by themselves: systemd retries);
+    # a damaged store file exits 65 (EX_DAMAGED), not restarted either: it does not mend itself.
     try:
         load_keys(cfg.keys)  # fail early with a clear message
     except KeyFileError as e:
@@ -326,6 +327,10 @@ def main(argv: list[str] | None = None, prog: str = "python -m gateway.ingest.se
         print(f"error: {e}", file=sys.stderr)
         return 2
     except (sqlite3.Error, RuntimeError, OSError) as e:
+        bad = damaged(e, cfg.db)  # a damaged file: not restarted (EX_DAMAGED)
+        if isinstance(bad, StoreCorrupt):
+            print(f"error: {bad}", file=sys.stderr)
+            return exit_status(bad)
         print(f"error: cannot open the store {cfg.db}: {e}", file=sys.stderr)
         return 2
 
@@ -337,9 +342,13 @@ def main(argv: list[str] | None = None, prog: str = "python -m gateway.ingest.se
     except ListenError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    except StoreDamaged:  # said in the log
-        return 1
+    except StoreDamaged as e:  # said in the log
+        return exit_status(e)
     except sqlite3.Error as e:  # the start's first writes (boot bases): as the open's, exit 2
+        bad = damaged(e, cfg.db)
+        if isinstance(bad, StoreCorrupt):
+            print(f"error: {bad}", file=sys.stderr)
+            return exit_status(bad)
         print(f"error: cannot write the store {cfg.db}: {e}", file=sys.stderr)
         return 2
     return 0

@@ -156,10 +156,15 @@ async def serve(config: IngestConfig,
                 t_stats = loop.time()
                 log.info("ingest counters %s%s", core.counters.snapshot(), _refused(core))
     finally:
+        # nothing new taken in, what is queued or held committed and acked, then the transports
+        # closed: closed first, the drain's acks failed ("ack ... failed") and the kits resent
+        # records already stored to the next start
         for t in transports:
-            t.close()
+            t.pause()
         with contextlib.suppress(Exception):
             await core.drain()
+        for t in transports:
+            t.close()
         core.close()
         store.close()
         if started:

@@ -62,14 +62,19 @@ def test_the_ingest_service_says_its_store_near_its_limit_once_worse_and_cleared
     def reloads() -> int:
         return len([x for x in lines if "read again" in x])
 
+    def said() -> list[str]:
+        return [x.split(": ", 1)[1] for x in lines if "serra.store.retention" in x]
+
     try:
         assert "listening" in proc.stdout.readline()  # its keys read: a change is seen
         rounds(6)
+        assert len(said()) == 1, said()
         pad(db, "pad2", 120_000)  # 11 % of the limit more: a step worse
         wait_for(lambda: any("(worse)" in x for x in lines) or proc.poll() is not None,
                  DEADLINE, "the worse line")
         rounds(6)
-        pad(db, "", None)
+        assert len(said()) == 2, said()
+        pad(db, "", None)  # (VACUUM copies the store into the WAL first: worse for a moment)
         wait_for(lambda: any("again" in x and "limit" in x for x in lines)
                  or proc.poll() is not None, DEADLINE, "the cleared line")
         rounds(3)
@@ -79,12 +84,13 @@ def test_the_ingest_service_says_its_store_near_its_limit_once_worse_and_cleared
         reader.join(timeout=DEADLINE)
         proc.stdout.close()
     assert code == 0, "\n".join(lines)
-    said = [x.split(": ", 1)[1] for x in lines if "serra.store.retention" in x]
-    assert len(said) == 3, said
-    assert said[0].startswith(f"database {db} is ") and said[0].endswith(
-        " % of its limit: shorten retention"), said
-    assert said[1].endswith(" % of its limit: shorten retention (worse)"), said
-    assert said[2] == f"database {db} is below 80 % of its limit (1 MB) again", said
+    lines_said = said()
+    assert lines_said[0].startswith(f"database {db} is ") and lines_said[0].endswith(
+        " % of its limit: shorten retention"), lines_said
+    assert all(x.endswith(" % of its limit: shorten retention (worse)")
+               for x in lines_said[1:-1]), lines_said
+    assert lines_said[-1] == f"database {db} is below 80 % of its limit (1 MB) again", lines_said
+    assert len(lines_said) <= 4, lines_said  # the VACUUM's moment at most
 
 
 def test_a_free_space_alarm_is_said_at_start_halved_every_10_min_and_cleared(

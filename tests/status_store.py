@@ -15,7 +15,7 @@ from gateway import protocol as p
 from gateway.greenhouse import load_greenhouse
 from gateway.model import build_model
 from gateway.publish.payloads import Place
-from gateway.service.diagnosis import store_findings
+from gateway.service.findings import store_findings
 from gateway.service.pipeline import GreenhousePipeline
 from gateway.service.producers import GreenhouseInfo, Producers
 from gateway.store import Store

@@ -17,7 +17,7 @@ from gateway.model import build_model
 from gateway.protocol import BoardHealth
 from gateway.publish import validate
 from gateway.publish.payloads import Place
-from gateway.service.diagnosis import store_findings
+from gateway.service.findings import store_findings
 from gateway.service.pipeline import GreenhousePipeline, StepReport
 from gateway.service.producers import GreenhouseInfo, Producers
 from gateway.store import Store

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 
+from gateway.store.outage import EX_DAMAGED
 from tests.images_common import build, read_unit
 from tests.mcu_fakes.hostenv import FAKE_PATH, MCU, ROOT, micropython, mpy_env
 
@@ -60,17 +61,25 @@ def test_units_run_the_documented_commands_hardened(bundles: Path) -> None:
     assert sub["Wants"] == ["network-online.target"]
 
 
-def test_units_stop_on_a_config_error_and_restart_on_any_other_failure(bundles: Path) -> None:
+def test_units_stop_on_a_config_error_or_a_damaged_store_and_restart_on_any_other_failure(
+        bundles: Path) -> None:
     """Exit 78 (EX_CONFIG: what run, router, subscribe and the ingest service exit on a wrong
-    config, see test_images.py and tests/fleet/test_subscribe_systemd.py) is the one status
-    systemd does not restart on: a wrong config would fail every 5 s for ever, a store error, a
-    PostgreSQL not answering at start or a crash (exit 1, 2, a signal) may not. No
+    config, see test_images.py and tests/fleet/test_subscribe_systemd.py) and, for the two
+    services that keep the store, 65 (EX_DATAERR: a damaged store file) are the statuses
+    systemd does not restart on: a wrong config or a damaged file would fail every 5 s for ever,
+    a store that cannot be opened, a deleted one, a PostgreSQL not answering at start or a crash
+    (exit 1, 2, a signal) may not. No
     ExecStartPre=: systemd applies RestartPreventExitStatus= to the main process only
     (systemd#11868), so a --check there that fails would still be restarted."""
     for name in UNITS:
         unit = read_unit(bundles / "gateway" / name)
         assert unit["Restart"] == ["on-failure"] and unit["RestartSec"] == ["5"], name
-        assert unit["RestartPreventExitStatus"] == [str(os.EX_CONFIG)] == ["78"], name
+        # the services that keep the store stop on a damaged store file too (65, EX_DATAERR:
+        # tests/test_store_damaged.py): it would fail the same way every 5 s for ever
+        keeps_store = name in ("serra-gateway.service", "serra-ingest.service")
+        prevent = f"{os.EX_CONFIG} {EX_DAMAGED}" if keeps_store else str(os.EX_CONFIG)
+        assert unit["RestartPreventExitStatus"] == [prevent] == [
+            "78 65" if keeps_store else "78"], name
         assert "ExecStartPre" not in unit and "ExecCondition" not in unit, name
         assert "SuccessExitStatus" not in unit, name  # 78 stays a failure: the unit shows failed
 

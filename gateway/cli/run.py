@@ -79,7 +79,7 @@ async def _main(cfg, resources) -> int:
     from gateway.ingest.service import ListenError
     from gateway.service.config import ConfigError
     from gateway.service.run import run_gateway
-    from gateway.store.outage import StoreDamaged
+    from gateway.store.outage import StoreCorrupt, StoreDamaged, damaged, exit_status
 
     log = logging.getLogger("serra.gateway")
     stop = asyncio.Event()
@@ -94,9 +94,13 @@ async def _main(cfg, resources) -> int:
     except ListenError as e:  # exit 2, not 78: a port held or an address not up yet may pass
         log.error("%s", e)
         return 2
-    except StoreDamaged:  # a damaged or deleted store: said where it was met
-        return 1
+    except StoreDamaged as e:  # a damaged or deleted store: said where it was met
+        return exit_status(e)
     except (OSError, sqlite3.Error, RuntimeError) as e:  # expected faults: one line, no traceback
+        bad = damaged(e, cfg.db)  # the start met a damaged file: not restarted (EX_DAMAGED)
+        if isinstance(bad, StoreCorrupt):
+            log.error("%s", bad)
+            return exit_status(bad)
         log.error("%s", e)
         return 1
     return 0

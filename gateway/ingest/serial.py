@@ -53,8 +53,12 @@ class SerialTransport:
         self.core.counters["framing"] += 1
         self.core.rlog.warning("framing", "serial %s: bad frame: %s", self.url, e)
 
-    def close(self) -> None:
+    def pause(self) -> None:
+        """Take no more frames (a shutdown): the port stays open for the final drain's acks."""
         self._stop.set()
         if self._thread:
             self._thread.join(timeout=2)
+
+    def close(self) -> None:
+        self.pause()
         self.port.close()

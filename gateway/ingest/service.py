@@ -27,8 +27,9 @@ from gateway.ingest.keys_watch import KeysWatch
 from gateway.ingest.udp import UdpServer
 from gateway.sdnotify import Notifier
 from gateway.store import Store, StoreError, aggregate, retention
+from gateway.store.capacity import CapacityWatch
 from gateway.store.keys import KeyFileError, load_keys
-from gateway.store.outage import Outage, StoreDamaged
+from gateway.store.outage import Outage, StoreCorrupt, StoreDamaged, damaged, exit_status
 
 if TYPE_CHECKING:
     from gateway.ingest.serial import SerialTransport
@@ -96,10 +97,12 @@ def _open_udp(core: IngestCore, host: str, port: int) -> UdpServer:
         raise ListenError(f"cannot listen on {_where(host, port)}: {why}") from None
 
 
-def _maintenance(store: Store, policy: retention.Policy, now: float) -> None:
+def _maintenance(store: Store, policy: retention.Policy, now: float, watch: CapacityWatch
+                 ) -> None:
+    # measured first: a full disk fails the writes below, and is then what most needs saying
+    retention.watch_capacity(watch, store.path, policy)
     aggregate.aggregate(store.conn)
     retention.apply(store.conn, policy, now)
-    retention.capacity_alarms(store.path, policy)
 
 
 @dataclass
@@ -115,6 +118,7 @@ async def serve(config: IngestConfig,
                 on_ready: Callable[[Running], None] | None = None) -> None:
     """Run until cancelled. Prints one 'listening' line per transport (tests read the port)."""
     watch = KeysWatch(config.keys)
+    capacity = CapacityWatch()  # its alarms said once, not every round
     keys = load_keys(config.keys)
     if not keys:
         log.warning("keys file %s lists no device: every packet will be refused as "
@@ -147,15 +151,20 @@ async def serve(config: IngestConfig,
             await asyncio.wait({writer}, timeout=config.maintenance_every)
             if writer.done():
                 writer.result()  # surface a writer crash (a damaged store: StoreDamaged)
-            await _maintain(core, store, watch, config)
+            await _maintain(core, store, watch, config, capacity)
             if loop.time() - t_stats >= config.stats_every:
                 t_stats = loop.time()
                 log.info("ingest counters %s%s", core.counters.snapshot(), _refused(core))
     finally:
+        # nothing new taken in, what is queued or held committed and acked, then the transports
+        # closed: closed first, the drain's acks failed ("ack ... failed") and the kits resent
+        # records already stored to the next start
         for t in transports:
-            t.close()
+            t.pause()
         with contextlib.suppress(Exception):
             await core.drain()
+        for t in transports:
+            t.close()
         core.close()
         store.close()
         if started:
@@ -163,11 +172,12 @@ async def serve(config: IngestConfig,
 
 
 async def _maintain(core: IngestCore, store: Store, watch: KeysWatch,
-                    config: IngestConfig) -> None:
+                    config: IngestConfig, capacity: CapacityWatch) -> None:
     """A maintenance round and the keys file read again if it changed. A store that cannot be
     written skips the round (the outage is said once; the next round tries again)."""
     try:
-        await core.run_in_store_thread(_maintenance, store, config.policy, config.clock())
+        await core.run_in_store_thread(_maintenance, store, config.policy, config.clock(),
+                                       capacity)
         core.outage.ok("maintenance")
     except Exception as e:
         if core.outage.failed("maintenance", e) is None:  # not the store's: the service stops
@@ -305,7 +315,8 @@ def main(argv: list[str] | None = None, prog: str = "python -m gateway.ingest.se
                                 max_db_bytes=int(args.max_db_mb * 2**20)))
     # The keys file is the service's configuration: a wrong one exits 78 (EX_CONFIG), which the
     # unit's RestartPreventExitStatus= keeps from restarting; the store, the address and the serial
-    # port exit 2 (a disk, a port or a USB cable can come right by themselves: systemd retries).
+    # port exit 2 (a disk, a port or a USB cable can come right by themselves: systemd retries);
+    # a damaged store file exits 65 (EX_DAMAGED), not restarted either: it does not mend itself.
     try:
         load_keys(cfg.keys)  # fail early with a clear message
     except KeyFileError as e:
@@ -321,6 +332,10 @@ def main(argv: list[str] | None = None, prog: str = "python -m gateway.ingest.se
         print(f"error: {e}", file=sys.stderr)
         return 2
     except (sqlite3.Error, RuntimeError, OSError) as e:
+        bad = damaged(e, cfg.db)  # a damaged file: not restarted (EX_DAMAGED)
+        if isinstance(bad, StoreCorrupt):
+            print(f"error: {bad}", file=sys.stderr)
+            return exit_status(bad)
         print(f"error: cannot open the store {cfg.db}: {e}", file=sys.stderr)
         return 2
 
@@ -332,9 +347,13 @@ def main(argv: list[str] | None = None, prog: str = "python -m gateway.ingest.se
     except ListenError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    except StoreDamaged:  # said in the log
-        return 1
+    except StoreDamaged as e:  # said in the log
+        return exit_status(e)
     except sqlite3.Error as e:  # the start's first writes (boot bases): as the open's, exit 2
+        bad = damaged(e, cfg.db)
+        if isinstance(bad, StoreCorrupt):
+            print(f"error: {bad}", file=sys.stderr)
+            return exit_status(bad)
         print(f"error: cannot write the store {cfg.db}: {e}", file=sys.stderr)
         return 2
     return 0

@@ -61,9 +61,13 @@ class UdpServer:
                 return
             handle(data, addr, send)
 
-    def close(self) -> None:
+    def pause(self) -> None:
+        """Take no more packets (a shutdown): the socket stays open for the final drain's acks."""
         try:
             asyncio.get_running_loop().remove_reader(self.sock.fileno())
         except RuntimeError:
             pass
+
+    def close(self) -> None:
+        self.pause()
         self.sock.close()

@@ -34,15 +34,15 @@ import numpy as np
 
 from gateway.kitcsv import write_kit_csv
 from gateway.model import PROTOTYPES
+from gateway.service.diagnosis_hold import RoundHold, settled
+from gateway.service.findings import merge_findings
 from gateway.service.minutes import KIT_COLUMNS, read_minutes
 from gateway.service.resources import GreenhouseResources
 from gateway.service.settings import GatewayConfig, GreenhouseSettings
 from gateway.store.db import open_db, transaction
+from gateway.store.outage import Outage
 
 log = logging.getLogger("serra.gateway")
-MATCH_S = 12 * 3600.0
-MOVE_S = 3600.0
-CHANGE_REL = 0.10
 
 
 def export_window(conn: sqlite3.Connection, r: GreenhouseResources, start: float, end: float,
@@ -112,68 +112,6 @@ def named_data(notes: list[dict[str, Any]], path: Path, label: str) -> list[dict
             if isinstance(n, dict) and isinstance(n.get("message"), str) else n for n in notes]
 
 
-def _parse(start: str | None) -> float | None:
-    if not start:
-        return None
-    return float(np.datetime64(start.rstrip("Z"), "s").astype("int64"))
-
-
-def _amplitude(f: dict[str, Any]) -> float:
-    return next((float(v) for k, v in f.get("params", {}).items()
-                 if k != "unit" and isinstance(v, int | float)), 0.0)
-
-
-def store_findings(conn: sqlite3.Connection, greenhouse: str, found: list[dict[str, Any]],
-                   now: float) -> list[str]:
-    """Merge a diagnosis run's findings into the store; returns a line per new or changed one."""
-    notes = []
-    with transaction(conn):
-        known = conn.execute("SELECT id, effect, start, revision, detail FROM findings "
-                             "WHERE greenhouse=?", (greenhouse,)).fetchall()
-        for f in found:
-            effect, start = f["effect"], _parse(f.get("start"))
-            same = [k for k in known if k[1] == effect and (
-                (k[2] is None and start is None) or
-                (k[2] is not None and start is not None and abs(k[2] - start) <= MATCH_S))]
-            detail = json.dumps(f)
-            if not same:
-                stamp = time.strftime("%Y%m%dT%H%MZ", time.gmtime(start)) if start is not None else "before"
-                fid = f"{greenhouse}:{effect}-{stamp}"
-                conn.execute("INSERT OR IGNORE INTO findings (id, greenhouse, effect, start, "
-                             "first_seen, last_seen, revision, detail) VALUES (?, ?, ?, ?, ?, ?, 1, ?)",
-                             (fid, greenhouse, effect, start, now, now, detail))
-                known.append((fid, effect, start, 1, detail))
-                notes.append(f"greenhouse {greenhouse}: new finding {effect} ({f.get('summary', '')})")
-                continue
-            fid, _, old_start, rev, old = same[0]
-            old_amp, amp = _amplitude(json.loads(old)), _amplitude(f)
-            moved = (start is not None and old_start is not None and abs(start - old_start) > MOVE_S)
-            changed = moved or abs(amp - old_amp) > CHANGE_REL * max(abs(old_amp), 1e-12)
-            if changed:
-                conn.execute("UPDATE findings SET revision=?, start=?, last_seen=?, detail=? "
-                             "WHERE id=?", (rev + 1, start, now, detail, fid))
-                notes.append(f"greenhouse {greenhouse}: finding {fid} changed (revision {rev + 1})")
-            else:
-                conn.execute("UPDATE findings SET last_seen=? WHERE id=?", (now, fid))
-    return notes
-
-
-async def _settled(fn: Callable[..., Any], *args: Any) -> Any:
-    """``fn(*args)`` in a worker thread; when the caller is cancelled meanwhile, the thread is
-    let finish before the cancellation goes on: the connection it uses is closed right after,
-    and closing a SQLite connection under a running statement crashes the process."""
-    fut = asyncio.ensure_future(asyncio.to_thread(fn, *args))
-    try:
-        return await asyncio.shield(fut)
-    except asyncio.CancelledError:
-        while not fut.done():
-            try:
-                await asyncio.wait([fut])
-            except asyncio.CancelledError:
-                continue
-        raise
-
-
 def _save_last(conn: sqlite3.Connection, t: float) -> None:
     conn.execute("INSERT OR REPLACE INTO meta (name, value) VALUES ('diagnosis_last', ?)", (repr(t),))
 
@@ -207,6 +145,19 @@ def save_run(conn: sqlite3.Connection, run: DiagnosisRun) -> None:
     """Keep ``run`` as its greenhouse's last run (replacing the one before)."""
     conn.execute("INSERT OR REPLACE INTO meta (name, value) VALUES (?, ?)",
                  (RUN_META + run.greenhouse, json.dumps(run.row())))
+
+
+def keep_run(conn: sqlite3.Connection, run: DiagnosisRun, found: list[dict[str, Any]],
+             last: float | None) -> list[str]:
+    """A run's findings, the run and (``last``, the round's time, with its last greenhouse) the
+    round, in one transaction: a store failing meanwhile leaves none of them half-written.
+    Returns a line per new or changed finding."""
+    with transaction(conn):
+        notes = merge_findings(conn, run.greenhouse, found, run.when)
+        save_run(conn, run)
+        if last is not None:
+            _save_last(conn, last)
+    return notes
 
 
 def read_run(greenhouse: str, value: str) -> DiagnosisRun:
@@ -263,11 +214,15 @@ class DiagnosisScheduler:
     publishes each kept run once (kind ``diagnosis``)."""
 
     def __init__(self, cfg: GatewayConfig, resources: list[GreenhouseResources],
-                 clock: Callable[[], float], workdir: Path, on_stored: Callable[[], None]) -> None:
+                 clock: Callable[[], float], workdir: Path, on_stored: Callable[[], None],
+                 outage: Outage | None = None) -> None:
         """``on_stored``: called after each run is kept (with its findings), so the worker makes
-        their messages (``finding``, ``diagnosis``: gateway/service/producers.py)."""
+        their messages (``finding``, ``diagnosis``: gateway/service/producers.py); ``outage``:
+        the service's, told of a store that cannot be written (the round waits it out:
+        gateway/service/diagnosis_hold.py)."""
         self.cfg, self.resources, self.clock = cfg, resources, clock
         self.workdir, self.on_stored = workdir, on_stored
+        self.hold = RoundHold(outage or Outage(cfg.db, "the diagnosis waits"))
         self.last: dict[str, DiagnosisRun] = self._kept()
         self.proc: asyncio.subprocess.Process | None = None
 
@@ -283,37 +238,47 @@ class DiagnosisScheduler:
         return {g: r.row() for g, r in self.last.items()}
 
     async def run_forever(self, tick: float = 5.0) -> None:
-        d = self.cfg.diagnosis
-        conn = await _settled(open_db, self.cfg.db)
+        conn = await settled(open_db, self.cfg.db)
         try:
-            row = await _settled(
+            row = await self.hold.store(
                 lambda: conn.execute("SELECT value FROM meta WHERE name='diagnosis_last'").fetchone())
             last = float(row[0]) if row else None
             if last is None:  # first start: the first run comes one period from now
                 last = self.clock()
-                await _settled(_save_last, conn, last)
+                await self.hold.store(_save_last, conn, last)
             while True:
                 now = self.clock()
-                if now - last >= d.every_hours * 3600:
-                    for r in self.resources:
-                        run = await self.run_one(conn, r, now)
-                        await _settled(save_run, conn, run)
-                        self.last[r.settings.name] = run
-                        self.on_stored()  # its findings and the run itself: messages to make
+                if now - last >= self.cfg.diagnosis.every_hours * 3600:
+                    await self._round(conn, now)
                     last = now
-                    await _settled(_save_last, conn, last)
                 await asyncio.sleep(tick)
         finally:
             conn.close()
 
-    async def run_one(self, conn: sqlite3.Connection, r: GreenhouseResources, now: float) -> DiagnosisRun:
+    async def _round(self, conn: sqlite3.Connection, now: float) -> None:
+        """Each greenhouse's run, kept as it ends; the round's time with the last one."""
+        if not self.resources:
+            await self.hold.store(_save_last, conn, now)
+        for i, r in enumerate(self.resources):
+            run, found = await self.run_one(conn, r, now)
+            last = now if i == len(self.resources) - 1 else None
+            held = f"greenhouse {r.settings.name}: the diagnosis run ({run.note})"
+            for n in await self.hold.store(keep_run, conn, run, found, last, held=held):
+                log.info(n)
+            self.last[r.settings.name] = run
+            self.on_stored()  # its findings and the run itself: messages to make
+
+    async def run_one(self, conn: sqlite3.Connection, r: GreenhouseResources, now: float
+                      ) -> tuple[DiagnosisRun, list[dict[str, Any]]]:
+        """A greenhouse's run and its findings (for :func:`keep_run`)."""
         d, name = self.cfg.diagnosis, r.settings.name
         path = self.workdir / f"diagnosis-{name}.csv"
-        rows = await _settled(export_window, conn, r, now - d.days * 86400, now, path)
+        rows = await self.hold.data(name, path, export_window, conn, r, now - d.days * 86400,
+                                    now, path)
         if rows < d.min_days * 1440:
             note = f"diagnosis skipped, {rows / 1440:.1f} days of data (needs {d.min_days:g})"
             log.info("greenhouse %s: %s", name, note)
-            return DiagnosisRun(name, now, True, note)
+            return DiagnosisRun(name, now, True, note), []
         cmd = diagnose_command(r.settings, path)
         t0 = time.monotonic()
         self.proc = proc = await asyncio.create_subprocess_exec(
@@ -329,33 +294,31 @@ class DiagnosisScheduler:
             await proc.wait()
             note = f"diagnosis abandoned after {d.timeout_s:g} s"
             log.warning("greenhouse %s: %s", name, note)
-            return DiagnosisRun(name, now, False, note)
+            return DiagnosisRun(name, now, False, note), []
         finally:
             self.proc = None
         if proc.returncode != 0:
             msg = err.decode(errors="replace").strip().splitlines()[-1:] or ["no message"]
             note = f"diagnosis failed (exit {proc.returncode}): {msg[0]}"
             log.warning("greenhouse %s: %s", name, note)
-            return DiagnosisRun(name, now, False, note)
+            return DiagnosisRun(name, now, False, note), []
         try:
             result = diagnose_result(out)
         except ValueError as e:  # a failed run, as a crash is: the gateway goes on
             note = f"diagnosis output unreadable: {e}"
             log.warning("greenhouse %s: %s", name, note)
-            return DiagnosisRun(name, now, False, note)
+            return DiagnosisRun(name, now, False, note), []
         data_notes = (named_data(result.get("notes", []), path, f"{name}'s last {rows / 1440:.1f} days")
                       + model_hint_notes(r.settings.model, result))
         for said in data_notes:  # each once per run; a warning: the figures are likely wrong
             log.log(logging.WARNING if said.get("level") == "warning" else logging.INFO,
                     "greenhouse %s: diagnosis %s: %s [%s]", name, said.get("level", "note"),
                     said.get("message", ""), said.get("code", "?"))
-        notes = await _settled(store_findings, conn, name, result["findings"], now)
-        for n in notes:
-            log.info(n)
         note = (f"diagnosis of {rows / 1440:.1f} days in {time.monotonic() - t0:.0f} s: "
                 f"{len(result['findings'])} finding(s)")
         log.info("greenhouse %s: %s", name, note)
-        return DiagnosisRun(name, now, True, note, len(result["findings"]), data_notes)
+        return (DiagnosisRun(name, now, True, note, len(result["findings"]), data_notes),
+                result["findings"])
 
     def kill(self) -> None:
         if self.proc is not None and self.proc.returncode is None:

@@ -198,7 +198,8 @@ async def run_gateway(cfg: GatewayConfig, resources: list[GreenhouseResources],
                 _ingest_failed(ingest, cfg)
             if cfg.diagnosis.enabled:  # it reads its kept runs from the store: off the loop
                 gw.diagnosis = await asyncio.to_thread(
-                    DiagnosisScheduler, cfg, resources, gw.clock.now, tmp, gw.worker.wake.set)
+                    DiagnosisScheduler, cfg, resources, gw.clock.now, tmp, gw.worker.wake.set,
+                    gw.outage)
                 tasks.append(asyncio.create_task(gw.diagnosis.run_forever(), name="diagnosis"))
             _announce(gw)
             notify.ready(systemd_status(gw))

@@ -23,6 +23,7 @@ What was tried, and what each service then does: docs/gateway.md, "A full or fai
 from __future__ import annotations
 
 import logging
+import os
 import resource
 import shutil
 import sqlite3
@@ -46,8 +47,20 @@ _RETRIED = ("SQLITE_FULL", "SQLITE_IOERR", "SQLITE_READONLY", "SQLITE_CANTOPEN",
             "SQLITE_LOCKED", "SQLITE_PROTOCOL")
 
 
+EX_DAMAGED = os.EX_DATAERR
+"""65, sysexits' EX_DATAERR: the exit of a service whose store file is damaged (at start or
+while it runs). It does not mend by itself: each restart would read the same bytes and fail
+the same way, every 5 s for ever, so the units list it in RestartPreventExitStatus= and stay
+failed with this one line until a person recovers, restores or moves the file aside. A store
+deleted or replaced while open stays exit 1: a restart opens it anew, which is the remedy."""
+
+
 class StoreDamaged(StoreError):
     """The store's file is damaged or gone: the service stops with this one line."""
+
+
+class StoreCorrupt(StoreDamaged):
+    """The store's file is damaged (SQLite: SQLITE_CORRUPT*, SQLITE_NOTADB): exit EX_DAMAGED."""
 
 
 def _errorname(e: sqlite3.Error) -> str:
@@ -98,10 +111,16 @@ def damaged(e: BaseException, path: Path) -> StoreDamaged | None:
         return StoreDamaged(f"{e}: stopping, nothing more is acknowledged; a restart opens the "
                             "store anew at that path")
     if isinstance(e, sqlite3.Error) and _errorname(e).startswith(_DAMAGED):
-        return StoreDamaged(f"{path}: the store is damaged (SQLite: {e}): stopping, nothing more "
+        return StoreCorrupt(f"{path}: the store is damaged (SQLite: {e}): stopping, nothing more "
                             f"is acknowledged; check it (sqlite3 {path} 'PRAGMA "
-                            "integrity_check'), then recover it ('.recover') or restore a copy")
+                            "integrity_check'), then recover it ('.recover') or restore a copy, "
+                            "or move it aside (a new store is made), and start the service again")
     return None
+
+
+def exit_status(e: StoreDamaged) -> int:
+    """The exit of a service stopped by ``e``: EX_DAMAGED for a damaged file, else 1."""
+    return EX_DAMAGED if isinstance(e, StoreCorrupt) else 1
 
 
 class Outage:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import logging
 import os
 import shutil
 import sqlite3
@@ -10,7 +9,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-log = logging.getLogger("serra.store.retention")
+from gateway.store.capacity import Alarm, CapacityWatch, cleared_lines
 
 MIN_DAYS = 1.0
 """Shortest age [d] a table may be kept for: less would delete samples before the day's
@@ -56,17 +55,29 @@ def apply(conn: sqlite3.Connection, policy: Policy, now: float | None = None) ->
     return out
 
 
-def capacity_alarms(db_path: str | Path, policy: Policy) -> list[str]:
-    """Human-readable alarms; empty when the store has room."""
+def measure(db_path: str | Path, policy: Policy) -> list[Alarm]:
+    """The store's capacity alarms now; empty when it has room."""
     db_path = Path(db_path)
     size = sum(os.path.getsize(p) for p in (db_path, Path(f"{db_path}-wal")) if p.exists())
     alarms = []
     if size >= policy.alarm_fraction * policy.max_db_bytes:
-        alarms.append(f"database {db_path} is {size / 1e6:.0f} MB, "
-                      f"{100 * size / policy.max_db_bytes:.0f} % of its limit: shorten retention")
+        alarms.append(Alarm("size", size / policy.max_db_bytes,
+                            f"database {db_path} is {size / 1e6:.0f} MB, "
+                            f"{100 * size / policy.max_db_bytes:.0f} % of its limit: shorten "
+                            "retention"))
     free = shutil.disk_usage(db_path.parent).free
     if free < policy.min_free_bytes:
-        alarms.append(f"only {free / 1e6:.0f} MB free on the disk of {db_path}")
-    for a in alarms:
-        log.warning(a)
+        alarms.append(Alarm("free", free, f"only {free / 1e6:.0f} MB free on the disk of {db_path}"))
     return alarms
+
+
+def capacity_alarms(db_path: str | Path, policy: Policy) -> list[str]:
+    """Human-readable alarms; empty when the store has room (said in the log by a
+    :class:`CapacityWatch`, not here: the maintenance measures every 10 s)."""
+    return [a.text for a in measure(db_path, policy)]
+
+
+def watch_capacity(watch: CapacityWatch, db_path: str | Path, policy: Policy) -> None:
+    """A maintenance round's measure, said by ``watch`` (start, reminder, worse, cleared)."""
+    watch.check(measure(db_path, policy), cleared_lines(
+        Path(db_path), policy.max_db_bytes, policy.alarm_fraction, policy.min_free_bytes))

@@ -350,29 +350,32 @@ def format_time(t: np.datetime64) -> str:
 
 
 def write_kit_csv(
-    path: str | Path | TextIO, time: np.ndarray, columns: Mapping[str, np.ndarray], digits: int = 6
+    path: str | Path | TextIO, time: np.ndarray, columns: Mapping[str, np.ndarray], digits: int = 6,
+    header: bool = True,
 ) -> Path:
     """Write a kit CSV; NaN becomes an empty cell. Only kit columns are accepted. ``path`` may be
-    an open text stream (``export --out -``: stdout), returned as ``Path("-")``."""
+    an open text stream (``export --out -``: stdout), returned as ``Path("-")``; ``header``
+    False: the rows only, to go on a file written in parts (the same columns each time)."""
     unknown = [c for c in columns if c not in COLUMNS]
     if unknown:
         raise ValueError(f"not kit CSV columns: {', '.join(unknown)} (see docs/data-format.md)")
     if not isinstance(path, str | Path):
-        _write_rows(path, time, columns, digits)
+        _write_rows(path, time, columns, digits, header)
         return Path("-")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("w", newline="", encoding="utf-8") as handle:
-        _write_rows(handle, time, columns, digits)
+        _write_rows(handle, time, columns, digits, header)
     return path
 
 
 def _write_rows(handle: TextIO, time: np.ndarray, columns: Mapping[str, np.ndarray],
-                digits: int) -> None:
+                digits: int, header: bool = True) -> None:
     names = [c for c in COLUMNS if c in columns]
     data = [np.asarray(columns[c], dtype=float) for c in names]
     out = csv.writer(handle, lineterminator="\n")
-    out.writerow(["time", *names])
+    if header:
+        out.writerow(["time", *names])
     for i, stamp in enumerate(np.asarray(time, dtype="datetime64[s]")):
         out.writerow(
             [str(stamp) + "Z"]

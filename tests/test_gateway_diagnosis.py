@@ -19,7 +19,13 @@ import pytest
 
 from gateway import protocol as p
 from gateway.service.config import parse_config
-from gateway.service.diagnosis import DiagnosisRun, DiagnosisScheduler, diagnose_command
+from gateway.service.diagnosis import (
+    EXPORT_PART_S,
+    DiagnosisRun,
+    DiagnosisScheduler,
+    diagnose_command,
+    export_window,
+)
 from gateway.service.resources import prepare
 from gateway.status.snapshot import attention
 from gateway.status.store_source import StoreSource
@@ -341,6 +347,35 @@ def test_a_gateway_without_the_diagnosis_leaves_no_earlier_run_on_the_status(
         src.close()
     assert snap.gateway.diagnosis == {}
     assert not [a for a in attention(snap) if "diagnosis" in a]
+
+
+def test_the_window_exported_a_day_at_a_time_is_the_window_exported_at_once(
+        tmp_path: Path) -> None:
+    """The diagnosis's export reads and writes a day of minutes at a time (the gateway's heap
+    keeps its high-water mark: the whole window at once stepped its RSS up with every day
+    exported); the file is the one the whole window makes, byte for byte, over parts that do not
+    start on a minute or a day."""
+    import numpy as np
+
+    from gateway.kitcsv import write_kit_csv
+    from gateway.service.minutes import KIT_COLUMNS, read_minutes
+    from gateway.store.db import open_db
+
+    db = tmp_path / "gw.db"
+    end = shifted_kit(db)  # 42 h of minutes
+    cfg = north_config(tmp_path, db, 10, 2)
+    (r,) = prepare(cfg)
+    start = end - 2 * 86400 - 17.5  # before the first minute, off the grid: three parts
+    with closing(open_db(db)) as conn:
+        n = export_window(conn, r, start, end, tmp_path / "parts.csv")
+        whole = read_minutes(conn, 7, 7, int(start), int(end))
+        assert export_window(conn, r, end, end + 86400, tmp_path / "none.csv") == 0
+    assert n == len(whole) == 42 * 60 and end - start > 2 * EXPORT_PART_S
+    t = np.array([m.minute for m in whole], dtype="int64").astype("datetime64[s]")
+    write_kit_csv(tmp_path / "whole.csv", t,
+                  {c: np.array([m.values[c] for m in whole]) for c in KIT_COLUMNS})
+    assert (tmp_path / "parts.csv").read_bytes() == (tmp_path / "whole.csv").read_bytes()
+    assert not (tmp_path / "none.csv").exists()
 
 
 def test_a_vented_greenhouse_is_diagnosed_with_the_prototype(tmp_path: Path) -> None:

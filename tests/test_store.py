@@ -168,6 +168,20 @@ def test_retention_and_capacity(tmp_path: Path) -> None:
     assert "limit" in retention.capacity_alarms(tmp_path / "g.db", tiny)[0]
 
 
+def test_retention_deletes_rejected_records_as_old_as_the_samples_it_deletes(tmp_path: Path) -> None:
+    """The ``rejected`` table (records acknowledged as rejected) had no retention: a kit whose
+    firmware sends an out-of-range record a minute would grow it without bound, for as long as
+    the gateway runs. It is kept as long as the raw samples."""
+    s = Store(tmp_path / "g.db")
+    s.write_batch([(rec(i), T0 - 86400 * 10 + 60 * i) for i in range(3)] + [(rec(10), T0)])
+    for seq, t in ((3, T0 - 86400 * 10 + 200), (4, T0 - 86400 * 10 + 260), (11, T0 - 60)):
+        s.note_rejected(7, 1, seq, "out_of_range", t)
+    out = retention.apply(s.conn, retention.Policy(samples_days=5), now=T0)
+    assert out["samples"] == 3 and out["rejected"] == 2
+    assert s.conn.execute("SELECT seq FROM rejected").fetchall() == [(11,)]
+    s.close()
+
+
 def test_aggregation_works_through_a_backlog_in_bounded_steps(tmp_path: Path) -> None:
     s = Store(tmp_path / "g.db")
     s.write_batch([(rec(i), T0 + 60 * i + 1) for i in range(50)])

@@ -46,6 +46,9 @@ def apply(conn: sqlite3.Connection, policy: Policy, now: float | None = None) ->
     cut = now - policy.estimates_days * day
     out = {
         "samples": _delete_older(conn, "samples", "t", now - policy.samples_days * day),
+        # records acknowledged as rejected are kept as long as the records stored: without a
+        # cut a kit rejecting a record a minute would grow the table for as long as it runs
+        "rejected": _delete_older(conn, "rejected", "t_recv", now - policy.samples_days * day),
         "minute": _delete_older(conn, "minute", "minute", now - policy.minute_days * day),
         "estimates": _delete_older(conn, "estimates", "t", cut),
         "outbox": _delete_older(conn, "outbox", "sent", now - policy.outbox_sent_days * day),

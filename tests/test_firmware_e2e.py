@@ -246,6 +246,14 @@ def reflash(dev: Path, keys: Path) -> None:
     (dev / "config.json").write_text(json.dumps(cfg))
 
 
+E2E_RATE = 4
+"""The board's clock rate (``fast_clock``) in the lossy-UDP test, whose watchdog is 5000 board ms
+times it: 5 s of the host's, as before the fast clock. At 5000 board ms a 1.25 s stall of the
+interpreter on a loaded machine reset the board mid-test ("firmware exited"); the loop never
+blocks (it feeds the watchdog every pass, <= 10 board ms apart) and the longest Wi-Fi backoff
+there is 2 board s, so 5000 caught nothing the longer one does not."""
+
+
 def test_firmware_delivers_every_record_exactly_once_over_lossy_udp(tmp_path: Path) -> None:
     db, keys, trace = tmp_path / "g.db", tmp_path / "keys", tmp_path / "trace"
     gw_log = tmp_path / "gateway.log"
@@ -257,16 +265,10 @@ def test_firmware_delivers_every_record_exactly_once_over_lossy_udp(tmp_path: Pa
     dev.mkdir()
     (dev / "config.json").write_text(json.dumps({
         "device_id": 7, "key": KEY.hex(), "wifi": {"ssid": "serra", "password": "pw"},
-        "gateway": {"host": "127.0.0.1", "port": proxy.port},
-        "sample_ms": 25, "period_s": 0.1, "ack_timeout_ms": 100, "wdt_ms": 5000 * 4,
+        "gateway": {"host": "127.0.0.1", "port": proxy.port}, "sample_ms": 25, "period_s": 0.1,
+        "ack_timeout_ms": 100, "wdt_ms": 5000 * E2E_RATE,
         "pins": {"dht_in": 4, "dht_out": 16, "pyranometer": 34, "anemometer": 35, "rain": 27}}))
-    n = 120
-    # The board's clock at 4x, its watchdog 4 x 5000 board ms: 5 s of the host's, as before the
-    # fast clock. At 5000 board ms a 1.25 s stall of the interpreter on a loaded machine reset the
-    # board mid-test ("firmware exited"); the loop never blocks for long (it feeds the watchdog
-    # every pass, <= 10 board ms apart) and the longest Wi-Fi backoff here is 2 board s, so 5000
-    # caught nothing 20000 does not.
-    clock = fast_clock(4)
+    n, clock = 120, fast_clock(E2E_RATE)
     try:
         # First boot: Wi-Fi fails twice before connecting (backoff, no reboot).
         fw = Firmware(dev, trace, wifi="fail,fail,ok", env=clock)

@@ -112,10 +112,11 @@ def losses(db: Path) -> dict[int, int]:
 
 
 def test_the_records_the_ring_dropped_are_counted_lost_by_the_gateway(tmp_path: Path) -> None:
-    """After an outage longer than the ring, the gateway counts as lost exactly the records the
-    board's console says it dropped, once the board has made a record RING_MAX_SPAN (512) above
-    the last of them (before that the ring might still hold one), and logs the gap in one line;
-    a plain restart of the board (a new boot, seqs from 0 again) adds no loss."""
+    """After an outage longer than the ring, the gateway counts as lost exactly the records it
+    never got, among those the board's console says it dropped, once the board has made a
+    record RING_MAX_SPAN (512) above the last of them (before that the ring might still hold
+    one), and logs them; a plain restart of the board (a new boot, seqs from 0 again) adds no
+    loss."""
     db, keys, trace = tmp_path / "g.db", tmp_path / "keys", tmp_path / "trace"
     log = tmp_path / "gateway.log"
     write_keys(keys, {7: KEY})
@@ -132,11 +133,18 @@ def test_the_records_the_ring_dropped_are_counted_lost_by_the_gateway(tmp_path: 
                            "512 records past the dropped ones", timeout=240)
         dropped = after[-1]["dropped"]
         assert dropped > 0 and all(m["dropped"] == dropped for m in after[-3:]), after
-        line = wait_for_line(log, "lost on the board", fw, timeout=60)
-        assert line.endswith(f"device 7 boot 0: records 0–{dropped - 1} lost on the board "
-                             "(dropped from its ring: overflow or too old)"), line
-        assert losses(db) == {0: dropped}
-        assert min(stored(db, 0)) == dropped
+        wait_for_line(log, "lost on the board", fw, timeout=60)
+        rows = stored(db, 0)
+        missing = set(range(max(rows) + 1)) - set(rows)
+        # The gateway counts what it never got; the board what its full ring pushed out, the
+        # oldest first (seqs 0 up). That can include records sent as the gateway came back,
+        # stored, and pushed out by a newer record before their ack arrived (an ack slower than
+        # a board period, 25 ms of the host's at 4x, on a loaded machine, or the gateway
+        # stalled): the board's count is then larger, never smaller.
+        assert missing and missing <= set(range(dropped)), (sorted(missing)[-5:], dropped)
+        assert said_lost(log) == missing
+        assert losses(db) == {0: len(missing)}
+        said = sum(1 for x in log.read_text().splitlines() if "lost on the board" in x)
         fw.stop()
         fw = Firmware(dev, trace, env=fast_clock())  # a plain restart: boot 1
         run_until_delivered(fw, db, 1, 20, timeout=120)
@@ -145,8 +153,23 @@ def test_the_records_the_ring_dropped_are_counted_lost_by_the_gateway(tmp_path: 
         proxy.close()
         gw.send_signal(signal.SIGTERM)
         gw.wait(timeout=30)
-    assert losses(db).get(0) == dropped and losses(db).get(1, 0) == 0, losses(db)
-    assert sum(1 for x in log.read_text().splitlines() if "lost on the board" in x) == 1
+    assert losses(db).get(0) == len(missing) and losses(db).get(1, 0) == 0, losses(db)
+    assert sum(1 for x in log.read_text().splitlines() if "lost on the board" in x) == said
+
+
+def said_lost(log: Path) -> set[int]:
+    """The seqs of boot 0 the gateway's log lines say were lost on the board (``records 0–79,
+    85 lost on the board (...)``)."""
+    seqs: set[int] = set()
+    for line in log.read_text().splitlines():
+        if "device 7 boot 0: record" not in line or "lost on the board" not in line:
+            continue
+        text = line.split("device 7 boot 0: record", 1)[1].lstrip("s ").split(" lost on ")[0]
+        assert "more ranges" not in text, line
+        for part in text.split(", "):
+            first, _, last = part.partition("–")
+            seqs.update(range(int(first), int(last or first) + 1))
+    return seqs
 
 
 @pytest.mark.parametrize("bits, edge", [(30, 1 << 30), (62, 1 << 31)],
@@ -164,10 +187,13 @@ def test_records_made_before_the_tick_wrap_and_sent_after_it_are_dated_right(
     make_trace(trace)
     gw, addr = start_gateway(db, keys, tmp_path / "gateway.log")
     proxy = LossyProxy(addr, loss=1.0, seed=4)  # away until after the wrap
-    # 4x: the board boots (~40 ms of the host's time) well inside the 3 s before the wrap
+    # 2x, not more: the test needs the board in run() before the wrap (3000 board ms after its
+    # clock starts: 1.5 s of the host's) and the gateway back before the ring (120 records) is
+    # full, 75 records (3.75 s of the host's) after the 45th. At 4x those were 0.75 s and
+    # 1.9 s: a stall of the loaded host that long failed the test.
     clock = {"SERRA_TICKS_BITS": str(bits), "SERRA_TICKS_START": str(edge - 3000),
-             **fast_clock(4)}
-    fw = Firmware(board(tmp_path, proxy.port, rate=4), trace, env=clock)
+             **fast_clock(2)}
+    fw = Firmware(board(tmp_path, proxy.port, rate=2), trace, env=clock)
     n = 60
     try:
         fw.wait(lambda: len(fw.records()) >= 45, 120, "45 records")  # 4.5 s: past the wrap
@@ -192,7 +218,7 @@ def test_records_made_before_the_tick_wrap_and_sent_after_it_are_dated_right(
     steps = [b - a for a, b in zip(t, t[1:], strict=False)]
     # a wrapped age is days off (2**30 ms is 12.4 d); 30 s leaves room for a loaded machine's
     # delays between the board stamping an age and the gateway reading its clock, and for the
-    # board's ms running 4x the gateway's (a record A board ms old is dated 3/4 A early: <5 s)
+    # board's ms running 2x the gateway's (a record A board ms old is dated A/2 early: <4 s)
     assert all(abs(s - 0.1) < 30.0 for s in steps), steps
     assert abs(t[-1] - t[0] - 0.1 * (n - 1)) < 30.0
 

@@ -228,3 +228,25 @@ def test_a_failed_commit_acks_nothing_loses_nothing_and_the_resends_are_stored_o
             assert r.core.counters["stored"] == 6 and len(r.errors) == 1
 
     asyncio.run(go())
+
+
+def test_the_shutdown_drain_waits_for_the_commit_in_flight_and_its_acks(tmp_path: Path) -> None:
+    """serve()'s stop drains, then closes the transports: a drain that found the queue empty
+    because the writer had just taken it returned at once, the transports were closed, and the
+    writer's acks of a batch it committed a moment later were never sent (the board resent
+    records already stored to the next start). The drain now waits for that commit and its
+    acks. (The test releases the COMMIT only once the drain has run: a drain that does not wait
+    is already done then.)"""
+    async def go() -> None:
+        async with Rig(tmp_path) as r:
+            r.gate.armed = True
+            r.send(0)
+            await asyncio.wait_for(r.gate.entered.wait(), DEADLINE)  # the writer took the queue
+            drain = asyncio.create_task(r.core.drain())
+            for _ in range(3):
+                await asyncio.sleep(0)
+            r.gate.release.set()
+            await asyncio.wait_for(drain, DEADLINE)
+            assert r.board.got == [(0, STORED, True)], "the drain did not wait for the commit"
+
+    asyncio.run(go())

@@ -93,6 +93,8 @@ class IngestCore:
         self._pending: dict[tuple[int, int, int], _Pending] = {}
         self._queue: list[tuple[int, int, int]] = []
         self._wake = asyncio.Event()
+        # held by each commit, its acks included: the shutdown's drain waits for the one in flight
+        self._committing = asyncio.Lock()
         # SQLite work runs in one dedicated thread so the event loop keeps receiving.
         self._exec = ThreadPoolExecutor(1, thread_name_prefix="serra-store")
         self.alarm = False
@@ -311,6 +313,10 @@ class IngestCore:
                 self._wake.set()
 
     async def _commit(self, loop: asyncio.AbstractEventLoop) -> None:
+        async with self._committing:
+            await self._commit_queue(loop)
+
+    async def _commit_queue(self, loop: asyncio.AbstractEventLoop) -> None:
         keys, self._queue = self._queue, []
         if not keys:
             return
@@ -361,7 +367,8 @@ class IngestCore:
         self.store.check_file()
 
     async def drain(self) -> None:
-        """Commit whatever is queued (graceful shutdown)."""
+        """Commit whatever is queued (graceful shutdown), after the writer's commit in flight
+        and its acks: the transports are closed next."""
         await self._commit(asyncio.get_running_loop())
 
     def run_in_store_thread(self, fn: Callable[..., T], *args: object) -> asyncio.Future[T]:
